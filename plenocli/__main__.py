@@ -1,0 +1,3 @@
+from plenocli.cli.main import cli
+
+cli()

@@ -1,0 +1,28 @@
+import click
+
+from plenocli.cli import options
+
+
+@click.command(short_help="Decode a raw capture into a frames TIFF.")
+@options.input_arg
+@options.output_opt
+@click.option("--camera", type=click.Choice(["auto", "canon-dp", "dng", "image"]), default="auto",
+              show_default=True, help="Input kind; auto looks at the file's first bytes.")
+@click.option("--frames", default=None, help="Names for the frames, comma separated (e.g. S,A).")
+@click.option("--black", type=float, default=None, help="Black level (DN) when the file has none.")
+@click.option("--white", type=float, default=None, help="White (clipping) level in DN.")
+@click.option("--cfa", default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
+@options.preview_opt
+@options.stage_command
+def decode(**params):
+    """Decode INPUT (Canon dual-pixel CR2, DNG, TIFF/PNG/BMP) into frames with metadata.
+
+    Over-scan areas are kept; CFA pattern, levels and frame names go into the metadata.
+
+    \b
+    Example:
+      plenocli decode IMG_0001.CR2 -o frames.tif --preview frames.png
+    """
+    from plenocli.pipeline.stages.decode import run
+
+    run(**params)

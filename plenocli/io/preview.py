@@ -1,0 +1,52 @@
+"""PNG previews: a quick look at a result, never an input to another stage."""
+
+from __future__ import annotations
+
+import os
+
+import cv2
+import numpy as np
+
+from plenocli.io.atomic import atomic_path
+
+
+def cfa_to_rgb(frame: np.ndarray, cfa: str) -> np.ndarray:
+    """Half-size RGB of a Bayer frame: each 2 x 2 cell gives one pixel (greens averaged).
+
+    Returns (rows // 2, cols // 2, 3) float32. No interpolation: good enough to look at.
+    """
+    rows, cols = (frame.shape[0] // 2) * 2, (frame.shape[1] // 2) * 2
+    f = frame[:rows, :cols].astype(np.float32, copy=False)
+    planes: dict[str, list[np.ndarray]] = {"R": [], "G": [], "B": []}
+    for k, colour in enumerate(cfa.upper()):
+        planes[colour].append(f[k // 2::2, k % 2::2])
+    return np.dstack([np.mean(planes[c], axis=0) for c in "RGB"])
+
+
+def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
+               gamma: float = 2.2) -> np.ndarray:
+    """Stretch an image to uint8 between two percentiles, with a display gamma; NaN shows black."""
+    finite = image[np.isfinite(image)]
+    if finite.size == 0:
+        return np.zeros(image.shape, np.uint8)
+    lo, hi = np.percentile(finite, [low, high])
+    scaled = np.clip((np.nan_to_num(image, nan=lo) - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+    return np.round(255.0 * scaled ** (1.0 / gamma)).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
+              max_side: int = 2048, protect: tuple = ()) -> None:
+    """Write a display PNG of a 2-D frame (Bayer if ``cfa``) or an (rows, cols, 3) RGB image."""
+    img = cfa_to_rgb(image, cfa) if cfa and image.ndim == 2 else image
+    img = to_display(np.asarray(img, dtype=np.float32))
+    scale = max(img.shape[:2]) / max_side
+    if scale > 1:
+        size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
+        img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    if img.ndim == 3:
+        img = img[..., ::-1]  # OpenCV writes BGR
+    with atomic_path(path, protect=protect) as tmp:
+        ok, buf = cv2.imencode(".png", img)
+        if not ok:
+            raise OSError(f"could not encode PNG for {path}")
+        tmp.write_bytes(buf.tobytes())

@@ -1,0 +1,275 @@
+"""Decoding sensor captures into frames (views, rows, cols) with the metadata later stages need.
+
+Supported inputs:
+
+- Canon dual-pixel raw (5D Mark IV DPRAW, ``.CR2``): LibRaw (rawpy) reads frame 0 (A+B sum, "S")
+  and frame 1 (A). Frame selection is verified: the two frames must differ.
+- DNG with one or more raw IFDs (top level or SubIFDs): read IFD by IFD with tifffile, because
+  LibRaw returns only one of them whatever ``shot_select`` says (checked by the test suite).
+- Plain sensor images (TIFF, PNG, BMP; 8 or 16 bit; mono, Bayer or RGB) with levels given by the
+  caller.
+
+Frames keep their over-scan (masked) areas; ``active_area`` and ``masked_areas`` say where they are.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import tifffile
+
+from plenocli.errors import InputError
+
+CAMERAS = ("auto", "canon-dp", "dng", "image")
+CFA_LETTERS = "RGBG"  # DNG CFAPattern codes 0, 1, 2 (3 would be a second green)
+PHOTOMETRIC_CFA = 32803
+PHOTOMETRIC_LINEAR_RAW = 34892
+
+# Canon 5D Mark IV optical-black geometry (DESIGN.md): the first columns and rows of the raw are
+# not usable, even inside the margins; keep off them.
+CANON_OB_FIRST = 2
+
+
+def sniff(path: str | os.PathLike) -> str:
+    """Guess the kind of a capture from its first bytes: canon-dp, dng, image or unknown."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    with open(p, "rb") as fh:
+        head = fh.read(16)
+    if head[:4] in (b"II*\x00", b"MM\x00*"):
+        if head[8:10] == b"CR":
+            return "canon-dp"
+        try:
+            with tifffile.TiffFile(p) as tif:
+                if 50706 in tif.pages[0].tags:  # DNGVersion
+                    return "dng"
+        except (tifffile.TiffFileError, ValueError, OSError, IndexError) as err:
+            raise InputError(f"{p}: a TIFF header but an unreadable file ({err}); "
+                             "is it truncated?") from err
+        return "image"
+    if head[:8] == b"\x89PNG\r\n\x1a\n" or head[:2] == b"BM":
+        return "image"
+    return "unknown"
+
+
+def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[str] | None = None,
+           black: float | None = None, white: float | None = None,
+           cfa: str | None = None) -> tuple[np.ndarray, dict]:
+    """Decode a capture.
+
+    Returns
+    -------
+    frames : ndarray, (frames, rows, cols)
+        The raw data as stored (uint16 for raws), margins included.
+    meta : dict
+        ``views``, ``cfa``, ``origin``, ``black_level`` (per view, per 2 x 2 position, DN),
+        ``white_level`` (per view, DN), ``active_area``, ``masked_areas``, ``camera``.
+    """
+    if camera not in CAMERAS:
+        raise InputError(f"unknown camera {camera!r}; choose one of {', '.join(CAMERAS)}")
+    kind = sniff(path) if camera == "auto" else camera
+    if kind == "unknown":
+        raise InputError(f"{path}: not a raw capture or sensor image plenocli can read "
+                         "(expected CR2, DNG, TIFF, PNG or BMP)")
+    if kind == "canon-dp":
+        frames, meta = _decode_canon(path, require_dual=camera == "canon-dp")
+    elif kind == "dng":
+        frames, meta = _decode_dng(path)
+    else:
+        frames, meta = _decode_image(path, cfa=cfa)
+    if frame_names:
+        if len(frame_names) != frames.shape[0]:
+            raise InputError(f"{path}: {len(frame_names)} frame names given "
+                             f"({','.join(frame_names)}) for {frames.shape[0]} frames")
+        meta["views"] = list(frame_names)
+    if cfa:
+        meta["cfa"] = _check_cfa(cfa)
+    n = frames.shape[0]
+    if black is not None:
+        meta["black_level"] = [[float(black)] * 4 for _ in range(n)]
+    if white is not None:
+        meta["white_level"] = [float(white)] * n
+    if meta.get("black_level") is None:
+        meta["black_level"] = [[0.0] * 4 for _ in range(n)]
+    if meta.get("white_level") is None:
+        meta["white_level"] = [float(np.iinfo(frames.dtype).max)
+                               if frames.dtype.kind in "ui" else float("inf")] * n
+    meta["camera"] = kind
+    return frames, meta
+
+
+def _check_cfa(cfa: str) -> str:
+    pattern = cfa.upper()
+    if len(pattern) != 4 or set(pattern) - set("RGB") or pattern.count("G") != 2:
+        raise InputError(f"CFA pattern {cfa!r} is not a 2 x 2 Bayer pattern "
+                         "(one of RGGB, BGGR, GRBG, GBRG)")
+    return pattern
+
+
+def _decode_canon(path, *, require_dual: bool) -> tuple[np.ndarray, dict]:
+    import rawpy  # imported here: only raw files need LibRaw
+
+    frames, blacks, meta = [], [], {}
+    for shot in (0, 1):
+        try:
+            with rawpy.imread(str(path), shot_select=shot) as raw:
+                frames.append(raw.raw_image.copy())  # only valid while the file is open
+                blacks.append(_black_by_position(raw))
+                if shot == 0:
+                    meta = _rawpy_meta(raw)
+        except (rawpy.LibRawError, OSError, ValueError) as err:
+            if shot == 0:
+                raise InputError(f"{path}: LibRaw cannot read this raw ({err}); "
+                                 "the file may be truncated or not a raw") from err
+            break
+    dual = len(frames) == 2 and not np.array_equal(frames[0], frames[1])
+    if not dual:
+        if require_dual:
+            raise InputError(f"{path}: LibRaw returned the same frame for frame 0 and frame 1; "
+                             "this is not a dual-pixel (DPRAW) file: use --camera auto")
+        frames = frames[:1]
+    meta["black_level"] = blacks[: len(frames)]
+    meta["white_level"] = meta["white_level"] * len(frames)
+    meta["views"] = ["S", "A"] if dual else ["S"]
+    return np.stack(frames), meta
+
+
+def _black_by_position(raw) -> list[float]:
+    """LibRaw's black level for each 2 x 2 position (it is indexed by colour, not position)."""
+    per_channel = raw.black_level_per_channel
+    pattern = raw.raw_pattern
+    return [float(per_channel[int(pattern[k // 2][k % 2])]) for k in range(4)]
+
+
+def _rawpy_meta(raw) -> dict:
+    sizes = raw.sizes
+    desc = raw.color_desc.decode("ascii")
+    pattern = raw.raw_pattern
+    cfa = "".join(desc[int(pattern[k // 2][k % 2])] for k in range(4))
+    top, left = int(sizes.top_margin), int(sizes.left_margin)
+    bottom, right = top + int(sizes.height), left + int(sizes.width)
+    masked = []
+    if left - CANON_OB_FIRST >= 8:
+        masked.append([top, CANON_OB_FIRST, bottom, left])
+    if top - CANON_OB_FIRST >= 8:
+        masked.append([CANON_OB_FIRST, left, top, right])
+    return {
+        "cfa": cfa if set(cfa) <= set("RGB") and cfa.count("G") == 2 else None,
+        "origin": [0, 0],
+        "white_level": [float(raw.white_level)],
+        "active_area": [top, left, bottom, right],
+        "masked_areas": masked,
+    }
+
+
+def _raw_pages(tif: tifffile.TiffFile):
+    for page in tif.pages:
+        yield page
+        if page.subifds:
+            yield from page.pages
+
+
+def _tag(page, code, default=None):
+    tag = page.tags.get(code)
+    return default if tag is None else tag.value
+
+
+def _decode_dng(path) -> tuple[np.ndarray, dict]:
+    try:
+        with tifffile.TiffFile(path) as tif:
+            raws = [pg for pg in _raw_pages(tif)
+                    if pg.photometric in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
+                    and not (int(pg.subfiletype) & 1)]
+            if not raws:
+                raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
+            frames, blacks, whites, names = [], [], [], []
+            for k, page in enumerate(raws):
+                try:
+                    data = page.asarray()
+                except ValueError as err:  # e.g. a codec tifffile lacks
+                    raise InputError(f"{path}: cannot decode raw IFD {k} ({err}); for compressed "
+                                     "DNGs install imagecodecs (pip install imagecodecs)") from err
+                if data.ndim != 2:
+                    raise InputError(f"{path}: raw IFD {k} has shape {data.shape}; "
+                                     "plenocli reads one-sample raw (CFA or mono) DNGs")
+                frames.append(data)
+                blacks.append(_dng_black(page))
+                white = _tag(page, 50717, None)
+                whites.append(float(np.max(white)) if white is not None
+                              else float(np.iinfo(data.dtype).max))
+                desc = page.description.strip() if page.description else ""
+                names.append(desc if desc and len(desc) <= 16 and " " not in desc else f"frame{k}")
+            first = raws[0]
+            shape = frames[0].shape
+            if any(f.shape != shape for f in frames):
+                raise InputError(f"{path}: raw IFDs of different sizes "
+                                 f"{sorted({f.shape for f in frames})}; cannot stack them")
+            cfa = None
+            if first.photometric == PHOTOMETRIC_CFA:
+                dims = tuple(_tag(first, 33421, (2, 2)))
+                codes = _tag(first, 33422, None)
+                if dims == (2, 2) and codes is not None:
+                    codes = bytes(codes) if not isinstance(codes, (bytes, tuple, list)) else codes
+                    cfa = "".join(CFA_LETTERS[int(c)] for c in codes)
+            active = _tag(first, 50829, None)
+            active = [int(v) for v in active] if active is not None else [0, 0, *shape]
+            masked_flat = _tag(first, 50830, None)
+            masked = ([[int(v) for v in masked_flat[i:i + 4]] for i in range(0, len(masked_flat), 4)]
+                      if masked_flat is not None else [])
+    except (tifffile.TiffFileError, OSError, EOFError, IndexError, KeyError) as err:
+        raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
+    except ValueError as err:
+        raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
+    if len(set(names)) != len(names):
+        names = [f"frame{k}" for k in range(len(names))]
+    return np.stack(frames), {
+        "cfa": cfa, "origin": [0, 0], "black_level": blacks, "white_level": whites,
+        "active_area": active, "masked_areas": masked, "views": names,
+    }
+
+
+def _dng_black(page) -> list[float]:
+    """DNG BlackLevel per 2 x 2 position (the tag repeats over BlackLevelRepeatDim)."""
+    values = _tag(page, 50714, None)
+    if values is None:
+        return [0.0] * 4
+    values = np.atleast_1d(np.asarray(values, dtype=np.float64)).ravel()
+    dims = tuple(_tag(page, 50713, (1, 1)))
+    if dims == (2, 2) and values.size >= 4:
+        return [float(v) for v in values[:4]]
+    return [float(values[0])] * 4
+
+
+def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
+    p = Path(path)
+    data = None
+    if p.suffix.lower() in (".tif", ".tiff"):
+        try:
+            data = tifffile.imread(p)
+        except (tifffile.TiffFileError, ValueError, OSError, EOFError) as err:
+            raise InputError(f"{p}: unreadable TIFF ({err}); the file may be truncated") from err
+    else:
+        import cv2
+
+        data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if data is None:
+            raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")
+        if data.ndim == 3:
+            data = data[..., 2::-1] if data.shape[2] >= 3 else data  # BGR(A) -> RGB
+    if data.ndim == 2:
+        frames, views = data[np.newaxis], ["raw"]
+    elif data.ndim == 3 and data.shape[-1] in (3, 4):
+        frames, views = np.moveaxis(data[..., :3], -1, 0), ["R", "G", "B"]
+        if cfa:
+            raise InputError(f"{p}: an RGB image cannot carry a CFA pattern; drop --cfa")
+    else:
+        raise InputError(f"{p}: image of shape {data.shape}; expected (rows, cols) or RGB")
+    rows, cols = frames.shape[1:]
+    return np.ascontiguousarray(frames), {
+        "cfa": None, "origin": [0, 0], "black_level": None, "white_level": None,
+        "active_area": [0, 0, rows, cols], "masked_areas": [], "views": views,
+        "color": "rgb" if views == ["R", "G", "B"] else "mono",
+    }

@@ -1,0 +1,136 @@
+"""The micro-lens grid: a hexagonal (or square) lattice of micro-image centres.
+
+Coordinates are pixel coordinates of the image the grid belongs to: ``x`` is the column, ``y``
+the row (pointing down), and the centre of pixel (row r, col c) is at (x, y) = (c, r).
+Lens (i, j) of the lattice sits at::
+
+    centre(i, j) = offset_xy + i * b1 + j * b2
+    b1 = pitch_px * (cos a, sin a)
+    b2 = pitch_px * (cos(a + 60 deg), sin(a + 60 deg))   hexagonal lattice
+    b2 = pitch_px * (cos(a + 90 deg), sin(a + 90 deg))   square lattice
+
+with ``a = angle_rad`` measured from +x towards +y. ``centres_xy`` optionally holds the refined
+centre of each lens (the real array is not a perfect lattice), with its ``indices`` (i, j).
+``sensor_origin`` is the (row, col) of pixel (0, 0) in full-sensor coordinates, so a grid
+calibrated on one crop can be used on another.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+LATTICES = {"hex": np.pi / 3, "square": np.pi / 2}
+
+
+@dataclass(frozen=True)
+class LensGrid:
+    pitch_px: float
+    angle_rad: float
+    offset_xy: tuple[float, float]
+    lattice: str = "hex"
+    image_shape: tuple[int, int] | None = None
+    sensor_origin: tuple[int, int] = (0, 0)
+    centres_xy: np.ndarray | None = field(default=None, compare=False, repr=False)
+    indices: np.ndarray | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self):
+        if self.lattice not in LATTICES:
+            raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {self.lattice!r}")
+        if not self.pitch_px > 0:
+            raise ValueError(f"pitch_px must be positive, got {self.pitch_px}")
+        if (self.centres_xy is None) != (self.indices is None):
+            raise ValueError("centres_xy and indices go together")
+
+    def basis(self) -> np.ndarray:
+        """(2, 2) array whose rows are the lattice vectors b1, b2 in pixels (x, y)."""
+        a, step = self.angle_rad, LATTICES[self.lattice]
+        return self.pitch_px * np.array([[np.cos(a), np.sin(a)],
+                                         [np.cos(a + step), np.sin(a + step)]])
+
+    def lattice_xy(self, i, j) -> np.ndarray:
+        """Ideal lattice centres of lenses (i, j) (broadcast), shape (..., 2)."""
+        i, j = np.asarray(i, float), np.asarray(j, float)
+        b = self.basis()
+        return (np.asarray(self.offset_xy)
+                + i[..., None] * b[0] + j[..., None] * b[1])
+
+    def nearest_index(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice index (i, j) of the ideal centre nearest to each point (x, y)."""
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        b = self.basis()
+        inv = np.linalg.inv(b.T)
+        dx, dy = x - self.offset_xy[0], y - self.offset_xy[1]
+        u = inv[0, 0] * dx + inv[0, 1] * dy
+        v = inv[1, 0] * dx + inv[1, 1] * dy
+        i0, j0 = np.floor(u), np.floor(v)
+        best_i, best_j = i0, j0
+        best_d = np.full(np.broadcast(x, y).shape, np.inf)
+        for di in (0, 1):  # the nearest lattice point is a corner of the enclosing cell
+            for dj in (0, 1):
+                ci, cj = i0 + di, j0 + dj
+                px = self.offset_xy[0] + ci * b[0, 0] + cj * b[1, 0]
+                py = self.offset_xy[1] + ci * b[0, 1] + cj * b[1, 1]
+                d = (x - px) ** 2 + (y - py) ** 2
+                closer = d < best_d
+                best_d = np.where(closer, d, best_d)
+                best_i = np.where(closer, ci, best_i)
+                best_j = np.where(closer, cj, best_j)
+        return best_i.astype(np.int64), best_j.astype(np.int64)
+
+    def lens_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(indices (K, 2), centres (K, 2)): the refined centres, or the ideal lattice centres
+        of every lens whose centre falls inside ``image_shape``."""
+        if self.centres_xy is not None:
+            return np.asarray(self.indices), np.asarray(self.centres_xy)
+        if self.image_shape is None:
+            raise ValueError("a grid without centres needs image_shape to list its lenses")
+        rows, cols = self.image_shape
+        corners_x = np.array([0, cols - 1, 0, cols - 1], float)
+        corners_y = np.array([0, 0, rows - 1, rows - 1], float)
+        inv = np.linalg.inv(self.basis().T)
+        uv = inv @ np.vstack([corners_x - self.offset_xy[0], corners_y - self.offset_xy[1]])
+        lo, hi = np.floor(uv.min(axis=1)) - 1, np.ceil(uv.max(axis=1)) + 1
+        ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1),
+                             indexing="ij")
+        xy = self.lattice_xy(ii.ravel(), jj.ravel())
+        inside = ((xy[:, 0] >= 0) & (xy[:, 0] <= cols - 1)
+                  & (xy[:, 1] >= 0) & (xy[:, 1] <= rows - 1))
+        idx = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)[inside]
+        return idx, xy[inside]
+
+    def to_dict(self) -> dict:
+        """Human-readable, YAML-ready description (centres as lists)."""
+        out = {
+            "lattice": self.lattice,
+            "pitch_px": float(self.pitch_px),
+            "angle_rad": float(self.angle_rad),
+            "angle_deg": float(np.degrees(self.angle_rad)),
+            "offset_xy": [float(v) for v in self.offset_xy],
+            "image_shape": list(self.image_shape) if self.image_shape else None,
+            "sensor_origin": [int(v) for v in self.sensor_origin],
+        }
+        if self.centres_xy is not None:
+            out["lenses"] = {
+                "count": int(len(self.centres_xy)),
+                "columns": ["i", "j", "x", "y"],
+                "rows": [[int(i), int(j), round(float(x), 5), round(float(y), 5)]
+                         for (i, j), (x, y) in zip(self.indices, self.centres_xy, strict=True)],
+            }
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> LensGrid:
+        lenses = data.get("lenses")
+        centres = indices = None
+        if lenses:
+            table = np.asarray(lenses["rows"], float).reshape(-1, 4)
+            indices, centres = table[:, :2].astype(np.int64), table[:, 2:]
+        shape = data.get("image_shape")
+        return cls(pitch_px=float(data["pitch_px"]), angle_rad=float(data["angle_rad"]),
+                   offset_xy=tuple(float(v) for v in data["offset_xy"]),
+                   lattice=data.get("lattice", "hex"),
+                   image_shape=tuple(int(v) for v in shape) if shape else None,
+                   sensor_origin=tuple(int(v) for v in data.get("sensor_origin", (0, 0))),
+                   centres_xy=centres, indices=indices)

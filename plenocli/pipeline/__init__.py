@@ -1,0 +1,1 @@
+"""Stages (file in, file out, with provenance), their registry, YAML configs and the runner."""

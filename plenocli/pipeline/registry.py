@@ -1,0 +1,40 @@
+"""The stage registry: every stage a config can name, with which parameters are files.
+
+A stage is a plain function ``run(**params)`` in ``plenocli.pipeline.stages.<name>``; its keyword
+names are the command's long option names (and positional argument names), so the CLI, YAML
+configs and ``--set`` all speak the same words. ``inputs`` and ``outputs`` name the parameters that
+are file paths, which is what the make-style runner needs.
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    run: Callable[..., Any]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+
+    def parameters(self) -> dict[str, Any]:
+        """Parameter names and defaults (``inspect.Parameter.empty`` when required)."""
+        return {n: p.default for n, p in inspect.signature(self.run).parameters.items()}
+
+
+def _stages() -> dict[str, Stage]:
+    from plenocli.pipeline.stages import decode
+
+    table = [
+        Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+    ]
+    return {s.name: s for s in table}
+
+
+def get_stages() -> dict[str, Stage]:
+    """All registered stages by name."""
+    return _stages()

@@ -1,0 +1,1 @@
+"""One module per stage: read the inputs, call the processing function, write with provenance."""

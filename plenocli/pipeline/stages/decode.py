@@ -1,0 +1,29 @@
+"""Stage ``decode``: a raw capture or sensor image -> frames TIFF (margins kept)."""
+
+from __future__ import annotations
+
+from plenocli.io import raw, tiffio
+from plenocli.cfa import shift_pattern
+from plenocli.io.preview import write_png
+from plenocli.provenance import stage_record
+from plenocli.progress import log
+
+
+def run(input: str, output: str, *, camera: str = "auto", frames: str | None = None,
+        black: float | None = None, white: float | None = None, cfa: str | None = None,
+        preview: str | None = None) -> None:
+    """Decode ``input`` into ``output`` (one page per frame, uint16 for raws)."""
+    names = [n.strip() for n in frames.split(",")] if frames else None
+    data, meta = raw.decode(input, camera=camera, frame_names=names, black=black, white=white,
+                            cfa=cfa)
+    params = dict(camera=camera, frames=frames, black=black, white=white, cfa=cfa)
+    record = stage_record("decode", params, {"input": input})
+    tiffio.write_image(output, data, tiffio.derived_meta(meta, record), protect=(input,))
+    log.info("decode: %s -> %s (%s, %d frame(s) %s of %d x %d, CFA %s)", input, output,
+             meta["camera"], data.shape[0], ",".join(meta["views"]), data.shape[2], data.shape[1],
+             meta.get("cfa") or "none")
+    if preview:
+        top, left, bottom, right = meta["active_area"]
+        write_png(preview, data[0, top:bottom, left:right].astype("float32"),
+                  cfa=shift_pattern(meta.get("cfa"), top, left), protect=(input,))
+

@@ -1,0 +1,42 @@
+"""Messages and progress on stderr. Silent with -q; progress bars only on a terminal."""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from collections.abc import Iterable, Iterator
+from typing import TypeVar
+
+log = logging.getLogger("plenocli")
+T = TypeVar("T")
+
+
+def configure(verbosity: int) -> None:
+    """-1 quiet (errors only), 0 normal, 1 verbose (-v), 2 debug (-vv)."""
+    level = {-1: logging.ERROR, 0: logging.INFO, 1: logging.DEBUG}.get(
+        max(-1, min(verbosity, 1)), logging.INFO)
+    log.setLevel(level)
+    if not log.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("%(message)s"))
+        log.addHandler(handler)
+    log.propagate = False
+
+
+def progress(items: Iterable[T], label: str, *, total: int | None = None) -> Iterator[T]:
+    """Yield ``items``, drawing a one-line bar on stderr when it is a terminal and not quiet."""
+    show = sys.stderr.isatty() and log.isEnabledFor(logging.INFO)
+    if total is None and hasattr(items, "__len__"):
+        total = len(items)  # type: ignore[arg-type]
+    start, last = time.monotonic(), 0.0
+    for k, item in enumerate(items, 1):
+        yield item
+        now = time.monotonic()
+        if show and (now - last > 0.2 or k == total) and now - start > 1.0:
+            last = now
+            frac = f"{k}/{total}" if total else str(k)
+            sys.stderr.write(f"\r{label}: {frac}  ({now - start:.1f} s)")
+            sys.stderr.flush()
+    if show and time.monotonic() - start > 1.0:
+        sys.stderr.write("\n")

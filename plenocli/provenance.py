@@ -1,0 +1,63 @@
+"""Provenance: every output records the plenocli version, the stage, its parameters and the
+sha256 of its inputs, so a result can be traced and reproduced."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+from plenocli import __version__
+
+
+def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
+    """Hex sha256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _plain(value: Any) -> Any:
+    """Parameters as JSON/YAML-friendly values (paths as strings, tuples as lists)."""
+    if isinstance(value, os.PathLike):
+        return str(value)
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if hasattr(value, "item") and callable(value.item):  # numpy scalars
+        return value.item()
+    return value
+
+
+def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
+    """The provenance record of one stage run.
+
+    ``inputs`` maps a role (``input``, ``white``, ...) to a path or a list of paths; each file is
+    hashed. Parameters that are paths are kept as given (the hashes identify the content).
+    """
+    hashed: list[dict] = []
+    for role, value in inputs.items():
+        paths = value if isinstance(value, (list, tuple)) else [value]
+        for p in paths:
+            if p is None:
+                continue
+            hashed.append({"role": role, "path": str(p), "sha256": sha256_file(p),
+                           "name": Path(p).name})
+    return {
+        "software": "plenocli",
+        "version": __version__,
+        "stage": stage,
+        "parameters": _plain(parameters),
+        "inputs": hashed,
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+    }
+
+
+def parameters_of(record: dict | None) -> dict | None:
+    """The parameters stored in a provenance record (None when there is no record)."""
+    return None if not record else record.get("parameters")
