@@ -1,0 +1,19 @@
+"""Shared test fixtures: the real-data folder (skipped when absent) and temp outputs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+REALDATA = (ROOT / ".." / "shared" / "realdata").resolve()
+FIXTURES = ROOT / "fixtures"
+
+
+@pytest.fixture
+def realdata() -> Path:
+    """Path of ../shared/realdata; the test is skipped when the folder is absent."""
+    if not REALDATA.is_dir():
+        pytest.skip(f"real captures not found at {REALDATA}")
+    return REALDATA
