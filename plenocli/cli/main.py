@@ -3,7 +3,11 @@
 import click
 
 from plenocli import __version__
+from plenocli.cli.bias import bias
 from plenocli.cli.decode import decode
+from plenocli.cli.flat import flat
+from plenocli.cli.run import run
+from plenocli.cli.simulate import simulate
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -15,5 +19,5 @@ def cli():
     """
 
 
-for command in (decode,):
+for command in (decode, bias, flat, run, simulate):
     cli.add_command(command)

@@ -217,8 +217,8 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             active = _tag(first, 50829, None)
             active = [int(v) for v in active] if active is not None else [0, 0, *shape]
             masked_flat = _tag(first, 50830, None)
-            masked = ([[int(v) for v in masked_flat[i:i + 4]] for i in range(0, len(masked_flat), 4)]
-                      if masked_flat is not None else [])
+            masked_flat = [int(v) for v in masked_flat] if masked_flat is not None else []
+            masked = [masked_flat[i:i + 4] for i in range(0, len(masked_flat), 4)]
     except (tifffile.TiffFileError, OSError, EOFError, IndexError, KeyError) as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     except ValueError as err:

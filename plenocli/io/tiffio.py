@@ -3,7 +3,7 @@
 Any TIFF reader opens these files (one grey page per view). The first page's ImageDescription
 holds a JSON object with everything later stages need:
 
-``views``         names of the pages, e.g. ``["S", "A"]`` after decode, ``["A", "B", "S"]`` after bias
+``views``         names of the pages: ``["S", "A"]`` after decode, ``["A", "B", "S"]`` after bias
 ``cfa``           2 x 2 colour pattern at pixel (0, 0) of this array, e.g. ``"RGGB"``; null if none
 ``origin``        ``[row, col]`` of pixel (0, 0) in full-sensor coordinates (margins included), so
                   that grid coordinates stay true after crops

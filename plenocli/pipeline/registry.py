@@ -27,10 +27,13 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import decode
+    from plenocli.pipeline.stages import bias, decode, flat
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("flat", flat.run, inputs=("input", "white", "gain"),
+              outputs=("output", "save_gain", "preview")),
     ]
     return {s.name: s for s in table}
 

@@ -1,0 +1,178 @@
+"""Bias (black level) from the sensor's over-scan (optical black) areas.
+
+Like astropy ccdproc's ``subtract_overscan``, but per CFA colour and per row: for each row, the
+robust level of that row's masked pixels of each column phase (with a Bayer mosaic the row and the
+column phase together fix the colour). A top over-scan gives per-column levels the same way.
+Inputs are never modified; functions return new arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+OVERSCAN_MODES = ("auto", "left", "top", "both", "none")
+
+
+def row_levels(frame: np.ndarray, cols: tuple[int, int], *, period: int = 2,
+               smooth_rows: int = 0) -> np.ndarray:
+    """Bias of every row, for each column phase, from over-scan columns ``cols``.
+
+    Parameters
+    ----------
+    frame : ndarray, (rows, cols)
+        Raw frame in DN, margins included.
+    cols : (start, stop)
+        Over-scan columns (half-open), absolute column numbers of ``frame``.
+    period : int
+        CFA period: 2 for Bayer (levels per column parity), 1 for mono.
+    smooth_rows : int
+        Running-mean length, in rows of the same colour (same row parity), applied to the
+        per-row medians; 0 or 1 keeps them as they are.
+
+    Returns
+    -------
+    ndarray, (rows, period)
+        ``levels[r, p]`` is the bias (DN) of row ``r`` at columns ``c % period == p``.
+    """
+    start, stop = cols
+    if stop - start < 2 * period:
+        raise ValueError(f"over-scan columns {cols} are too few for a CFA period of {period}")
+    levels = np.empty((frame.shape[0], period), np.float64)
+    for p in range(period):
+        first = start + (p - start) % period
+        levels[:, p] = np.median(frame[:, first:stop:period], axis=1)
+    return _smooth(levels, smooth_rows, period, axis=0)
+
+
+def column_levels(frame: np.ndarray, rows: tuple[int, int], *, period: int = 2,
+                  smooth_cols: int = 0) -> np.ndarray:
+    """Bias of every column, for each row phase, from over-scan rows ``rows``.
+
+    Returns ``levels[p, c]``, shape (period, cols): the bias (DN) of column ``c`` at rows
+    ``r % period == p``. See :func:`row_levels` for the other parameters.
+    """
+    return row_levels(frame.T, rows, period=period, smooth_rows=smooth_cols).T
+
+
+def _smooth(levels: np.ndarray, length: int, period: int, *, axis: int) -> np.ndarray:
+    if length <= 1:
+        return levels
+    out = levels.copy()
+    for phase in range(period):  # rows of one parity share a colour: smooth each on its own
+        sel = [slice(None)] * levels.ndim
+        sel[axis] = slice(phase, None, period)
+        out[tuple(sel)] = uniform_filter1d(levels[tuple(sel)], size=length, axis=axis,
+                                           mode="nearest")
+    return out
+
+
+def subtract_overscan(frame: np.ndarray, *, active_area, masked_areas, overscan: str = "auto",
+                      period: int = 2, smooth: int = 0, guard: int = 2,
+                      black_level=None) -> tuple[np.ndarray, dict]:
+    """Bias-subtract ``frame`` and crop it to its active area.
+
+    Parameters
+    ----------
+    frame : ndarray, (rows, cols)
+        Raw frame (DN) with its margins.
+    active_area, masked_areas
+        ``[top, left, bottom, right]`` rectangles, as in the frame's metadata.
+    overscan : {"auto", "left", "top", "both", "none"}
+        Which over-scan to use. ``left``: per-row levels from the masked columns left of the
+        active area; ``top``: per-column levels from the masked rows above it; ``both``: per-row
+        levels plus the column pattern of the top area (its per-colour median removed); ``none``:
+        the constant ``black_level`` per 2 x 2 position. ``auto``: left, else top, else none.
+    smooth : int
+        Running mean along rows (``left``) or columns (``top``), in pixels of the same colour.
+    guard : int
+        Pixels dropped at each edge of a masked area (edges of optical black are not dark).
+    black_level : sequence of 4 floats
+        Per 2 x 2 position black levels, used by ``none``.
+
+    Returns
+    -------
+    corrected : ndarray float32, (active rows, active cols)
+    levels : dict
+        ``mode``, and the estimated levels (``row_levels`` per row and phase, ``column_levels``),
+        with their mean per colour position.
+    """
+    if overscan not in OVERSCAN_MODES:
+        raise ValueError(f"overscan must be one of {OVERSCAN_MODES}, got {overscan!r}")
+    top, left, bottom, right = (int(v) for v in active_area)
+    left_area = _area_beside(masked_areas, active_area, side="left", guard=guard)
+    top_area = _area_beside(masked_areas, active_area, side="top", guard=guard)
+    mode = overscan
+    if mode == "auto":
+        mode = "left" if left_area else "top" if top_area else "none"
+    if mode in ("left", "both") and not left_area:
+        raise ValueError("no usable over-scan columns left of the active area "
+                         "(use --overscan top or none)")
+    if mode in ("top", "both") and not top_area:
+        raise ValueError("no usable over-scan rows above the active area "
+                         "(use --overscan left or none)")
+
+    out = frame[top:bottom, left:right].astype(np.float32)
+    info: dict = {"mode": mode}
+    if mode == "none":
+        black = np.asarray(black_level if black_level is not None else [0.0] * 4, np.float64)
+        pattern = black.reshape(2, 2) if period == 2 else black[:1].reshape(1, 1)
+        rr = (np.arange(top, bottom) % period)[:, None]
+        cc = (np.arange(left, right) % period)[None, :]
+        out -= pattern[rr, cc].astype(np.float32)
+        info["black_level"] = black.tolist()
+        return out, info
+    if mode in ("left", "both"):
+        r0, r1 = left_area[0], left_area[2]
+        levels = np.full((frame.shape[0], period), np.nan)
+        levels[r0:r1] = row_levels(frame[r0:r1], (left_area[1], left_area[3]), period=period,
+                                   smooth_rows=smooth)
+        levels = _fill_edges(levels, r0, r1)
+        for p in range(period):  # in place, one column phase at a time: no full-size map
+            first = (p - left) % period
+            out[:, first::period] -= levels[top:bottom, p, None].astype(np.float32)
+        info["row_levels"] = levels[top:bottom]
+    if mode in ("top", "both"):
+        c0, c1 = top_area[1], top_area[3]
+        levels_c = np.full((period, frame.shape[1]), np.nan)
+        levels_c[:, c0:c1] = column_levels(frame[:, c0:c1], (top_area[0], top_area[2]),
+                                           period=period, smooth_cols=smooth)
+        levels_c = _fill_edges(levels_c.T, c0, c1).T
+        if mode == "both":  # only the column pattern: the level comes from the rows
+            for p in range(period):
+                for q in range(period):
+                    levels_c[p, q::period] -= np.median(levels_c[p, q::period])
+        for p in range(period):
+            first = (p - top) % period
+            out[first::period, :] -= levels_c[p, None, left:right].astype(np.float32)
+        info["column_levels"] = levels_c[:, left:right]
+    return out, info
+
+
+def _fill_edges(levels: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Rows outside the over-scan's span take the level of its nearest row of the same phase."""
+    period = levels.shape[1] if levels.ndim == 2 else 1
+    for r in range(0, start):
+        levels[r] = levels[start + (r - start) % period]
+    for r in range(stop, levels.shape[0]):
+        levels[r] = levels[stop - period + (r - stop) % period]
+    return levels
+
+
+def _area_beside(masked_areas, active_area, *, side: str, guard: int):
+    """The masked rectangle left of (or above) the active area, shrunk by ``guard``; or None."""
+    top, left, bottom, right = (int(v) for v in active_area)
+    best = None
+    for area in masked_areas or []:
+        t, lft, b, r = (int(v) for v in area)
+        if side == "left" and r <= left and b > t:
+            cand = (t + guard, lft + guard, b - guard, r - guard)
+        elif side == "top" and b <= top and r > lft:
+            cand = (t + guard, lft + guard, b - guard, r - guard)
+        else:
+            continue
+        if cand[2] - cand[0] >= 4 and cand[3] - cand[1] >= 4:
+            size = (cand[2] - cand[0]) * (cand[3] - cand[1])
+            if best is None or size > best[0]:
+                best = (size, cand)
+    return None if best is None else best[1]

@@ -1,0 +1,50 @@
+import inspect
+
+import click
+
+from plenocli.cli import options
+from plenocli.errors import ConfigError
+
+
+def _kind_names():
+    from plenocli.synth import kinds
+
+    return sorted(kinds())
+
+
+@click.command(short_help="Write synthetic captures with ground truth.")
+@click.argument("kind", type=click.Choice(_kind_names()))
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
+              help="Folder for the capture files and truth.json.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--pixels", default=None, help="Sensor size, ROWSxCOLS or one number.")
+@click.option("--rays", type=int, default=None, help="Rays per pixel (optical kinds).")
+@click.option("--no-prisms", is_flag=True, default=None, help="Remove the prisms (optical kinds).")
+@click.option("--param", "extra", multiple=True, metavar="KEY=VALUE",
+              help="Another option of the kind (repeatable), e.g. --param noise=0.")
+@options.stage_command
+def simulate(kind, output, extra, **given):
+    """Write a synthetic capture set of KIND into a folder, with its ground truth.
+
+    \b
+    Example:
+      plenocli simulate dualpixel -o fixtures/dualpixel --seed 1
+    """
+    import yaml
+
+    from plenocli.synth import kinds
+
+    writer = kinds()[kind]
+    kwargs = {k: v for k, v in given.items() if v is not None}
+    for item in extra:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ConfigError(f"--param {item!r}: expected KEY=VALUE")
+        kwargs[key.replace("-", "_")] = yaml.safe_load(value)
+    accepted = inspect.signature(writer).parameters
+    for key in kwargs:
+        if key not in accepted:
+            names = ", ".join(k for k in accepted if k != "out_dir")
+            raise ConfigError(f"simulate {kind} does not take {key!r}; it takes: {names}")
+    writer(output, **kwargs)
+    click.echo(f"simulate {kind}: wrote {output}", err=True)

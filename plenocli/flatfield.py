@@ -1,0 +1,87 @@
+"""Vignetting correction from a white image (paper sections 5.2 and 6).
+
+The white image is median filtered, normalised by its maximum (or a high percentile, more robust
+to hot pixels) and inverted into a per-pixel gain. With a Bayer mosaic each colour plane is
+filtered and normalised on its own, so the gain also balances the colours of the white target.
+Where the white image is darker than ``floor`` times the reference, the gain is NaN (masked)
+rather than a huge factor that would multiply noise.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.ndimage import median_filter
+
+from plenocli.cfa import positions
+
+REFERENCES = ("max", "percentile")
+
+
+def white_gain(white: np.ndarray, *, cfa: str | None = None, median_px: int = 5,
+               reference: str = "max", percentile: float = 99.5,
+               floor: float = 0.05) -> np.ndarray:
+    """Per-pixel gain that flattens ``white``.
+
+    Parameters
+    ----------
+    white : ndarray, (rows, cols)
+        Bias-corrected white image (DN); NaN pixels (clipped) are ignored.
+    cfa : str or None
+        2 x 2 Bayer pattern at pixel (0, 0); each colour plane is handled separately.
+    median_px : int
+        Median filter size in pixels of one colour plane (odd; 1 disables it).
+    reference : {"max", "percentile"}
+        Normalise by the maximum of the filtered plane (the paper) or by a percentile.
+    percentile : float
+        The percentile used with ``reference="percentile"``.
+    floor : float
+        Pixels whose filtered white is below ``floor * reference`` get a NaN gain.
+
+    Returns
+    -------
+    ndarray float32, (rows, cols)
+        ``gain = reference / median_filtered(white)``, >= 1 where defined.
+    """
+    if reference not in REFERENCES:
+        raise ValueError(f"reference must be one of {REFERENCES}, got {reference!r}")
+    if median_px < 1 or median_px % 2 == 0:
+        raise ValueError(f"median_px must be a positive odd number, got {median_px}")
+    if not 0 <= floor < 1:
+        raise ValueError(f"floor must be in [0, 1), got {floor}")
+    gain = np.full(white.shape, np.nan, np.float32)
+    step = 2 if cfa else 1
+    for r, c in positions(cfa):
+        plane = np.asarray(white[r::step, c::step], np.float32)
+        smooth = _median(plane, median_px)
+        finite = smooth[np.isfinite(smooth)]
+        if finite.size == 0:
+            raise ValueError("the white image has no valid pixel")
+        ref = finite.max() if reference == "max" else np.percentile(finite, percentile)
+        if not ref > 0:
+            raise ValueError("the white image is not brighter than its black level")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g = np.where(smooth >= floor * ref, ref / smooth, np.nan)
+        gain[r::step, c::step] = g
+    return gain
+
+
+def _median(plane: np.ndarray, size: int) -> np.ndarray:
+    bad = ~np.isfinite(plane)
+    if bad.any():  # median filters do not skip NaN: fill, filter, re-mark
+        plane = np.where(bad, np.nanmedian(plane), plane).astype(np.float32)
+    if size == 1:
+        out = plane.copy()
+    elif size in (3, 5):
+        out = cv2.medianBlur(np.ascontiguousarray(plane), size)  # float32 fast path
+    else:
+        out = median_filter(plane, size=size, mode="nearest")
+    out[bad] = np.nan
+    return out
+
+
+def apply_gain(frame: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """``frame * gain`` as float32; NaN where the gain is masked."""
+    if frame.shape != gain.shape:
+        raise ValueError(f"frame {frame.shape} and gain {gain.shape} differ in shape")
+    return np.multiply(frame, gain, dtype=np.float32)

@@ -1,0 +1,106 @@
+"""The make-style runner: run the steps of a config in order, skipping up-to-date ones.
+
+A step is up to date when all its outputs exist, are newer than all its inputs, the parameters
+recorded in its first output's provenance equal the step's parameters now, and no step before it
+in this run was (or would be) rerun to make one of its inputs.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from plenocli.errors import ConfigError, PlenocliError
+from plenocli.io.tiffio import read_meta
+from plenocli.pipeline.config import Step
+from plenocli.progress import log
+from plenocli.provenance import _plain
+
+
+@dataclass(frozen=True)
+class Decision:
+    step: Step
+    run: bool
+    reason: str
+
+
+def plan(steps: list[Step], *, force: bool = False) -> list[Decision]:
+    """Decide, without running anything, which steps must run and why."""
+    decisions: list[Decision] = []
+    will_make: set[Path] = set()
+    for step in steps:
+        reason = "forced" if force else _stale(step, will_make)
+        if reason:
+            will_make.update(p.resolve() for p in step.output_paths())
+        decisions.append(Decision(step, bool(reason), reason or "up to date"))
+        for p in step.input_paths():
+            if not p.exists() and p.resolve() not in will_make:
+                raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
+                                  "step makes it")
+    return decisions
+
+
+def run_pipeline(steps: list[Step], *, force: bool = False,
+                 dry_run: bool = False) -> list[Decision]:
+    """Run what :func:`plan` says must run; return the decisions."""
+    decisions = plan(steps, force=force)
+    for d in decisions:
+        if dry_run:
+            log.info("%-9s %-16s (%s) %s", "would run" if d.run else "skip", d.step.name,
+                     d.step.stage.name, d.reason)
+            continue
+        if not d.run:
+            log.info("skip     %-16s up to date", d.step.name)
+            continue
+        log.info("run      %-16s (%s: %s)", d.step.name, d.step.stage.name, d.reason)
+        start = time.monotonic()
+        try:
+            d.step.stage.run(**d.step.params)
+        except PlenocliError as err:
+            raise type(err)(f"step {d.step.name!r}: {err}") from err
+        log.debug("         %-16s %.2f s", d.step.name, time.monotonic() - start)
+    return decisions
+
+
+def _stale(step: Step, will_make: set[Path]) -> str | None:
+    outputs = step.output_paths()
+    missing = [p for p in outputs if not p.exists()]
+    if missing:
+        return f"{missing[0].name} missing"
+    inputs = step.input_paths()
+    for p in inputs:
+        if p.resolve() in will_make:
+            return f"{p.name} is being remade"
+    newest_input = max((p.stat().st_mtime for p in inputs if p.exists()), default=0.0)
+    oldest_output = min((p.stat().st_mtime for p in outputs), default=0.0)
+    if newest_input > oldest_output:
+        return "an input is newer than the outputs"
+    recorded = _recorded_parameters(outputs[0]) if outputs else None
+    if recorded is not None:
+        current = _plain({k: v for k, v in step.params.items()
+                          if k not in step.stage.inputs and k not in step.stage.outputs})
+        changed = [k for k in recorded if k in current and current[k] != recorded[k]]
+        if changed:
+            return f"parameter {changed[0]} changed"
+    return None
+
+
+def _recorded_parameters(path: Path) -> dict | None:
+    """Parameters from an output's provenance (TIFF metadata, or YAML/JSON 'provenance')."""
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".tif", ".tiff"):
+            record = read_meta(path).get("provenance")
+        elif suffix in (".yaml", ".yml"):
+            record = (yaml.safe_load(path.read_text()) or {}).get("provenance")
+        elif suffix == ".json":
+            record = json.loads(path.read_text()).get("provenance")
+        else:
+            return None
+    except (OSError, ValueError, yaml.YAMLError, AttributeError):
+        return None
+    return record.get("parameters") if isinstance(record, dict) else None

@@ -1,0 +1,100 @@
+"""Stage ``bias``: frames with over-scan -> bias-corrected views of the active area.
+
+Each frame is corrected with its own over-scan. For a dual-pixel capture (frames named S and A)
+the output views are A, B = S - A and S; values derived from clipped raw pixels are NaN.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli import bias as bias_lib
+from plenocli.cfa import period, shift_pattern
+from plenocli.dualpixel import split_views
+from plenocli.errors import InputError
+from plenocli.io import tiffio
+from plenocli.io.preview import write_png
+from plenocli.progress import log
+from plenocli.provenance import stage_record
+
+
+def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, guard: int = 2,
+        crop: str | None = None, preview: str | None = None) -> None:
+    """Bias-correct the frames of ``input`` (from decode) and crop them to the active area."""
+    frames, meta = tiffio.read_image(input)
+    if "active_area" not in meta:
+        raise InputError(f"{input}: not a decoded frames file (no active_area in its metadata); "
+                         "run plenocli decode first")
+    if meta.get("provenance", {}).get("stage") != "decode":
+        raise InputError(f"{input}: made by stage {meta.get('provenance', {}).get('stage')!r}, "
+                         "but bias needs the output of plenocli decode")
+    cfa = meta.get("cfa")
+    names = list(meta["views"])
+    corrected, levels, clipped = [], [], []
+    for k, frame in enumerate(frames):
+        try:
+            out, info = bias_lib.subtract_overscan(
+                frame, active_area=meta["active_area"], masked_areas=meta.get("masked_areas"),
+                overscan=overscan, period=period(cfa), smooth=smooth, guard=guard,
+                black_level=meta["black_level"][k])
+        except ValueError as err:
+            raise InputError(f"{input}: frame {names[k]}: {err}") from err
+        top, left, bottom, right = meta["active_area"]
+        clip = frame[top:bottom, left:right] >= meta["white_level"][k]
+        out[clip] = np.nan
+        corrected.append(out)
+        clipped.append(clip)
+        levels.append(_summary(info, names[k]))
+    top, left = meta["active_area"][:2]
+    views = np.stack(corrected)
+    if names[:2] == ["S", "A"]:
+        views = split_views(corrected[0], corrected[1], sum_clipped=clipped[0],
+                            a_clipped=clipped[1])
+        names = ["A", "B", "S"]
+    row0, col0 = 0, 0
+    if crop:
+        views, row0, col0 = _central_crop(views, crop, even=bool(cfa))
+    origin0 = meta.get("origin", [0, 0])
+    origin = [origin0[0] + top + row0, origin0[1] + left + col0]
+    new_cfa = shift_pattern(cfa, top + row0, left + col0)
+    params = dict(overscan=overscan, smooth=smooth, guard=guard, crop=crop)
+    record = stage_record("bias", params, {"input": input})
+    rows, cols = views.shape[1:]
+    out_meta = tiffio.derived_meta(meta, record, views=names, cfa=new_cfa, origin=origin,
+                                   active_area=[0, 0, rows, cols], masked_areas=[],
+                                   black_level=[[0.0] * 4] * len(names),
+                                   bias_levels=levels,
+                                   clipped_pixels=int(np.isnan(views).any(axis=0).sum()))
+    tiffio.write_image(output, views, out_meta, protect=(input,))
+    log.info("bias: %s -> %s (%s, views %s, %d x %d, %d clipped pixels masked)", input, output,
+             levels[0]["mode"], ",".join(names), cols, rows, out_meta["clipped_pixels"])
+    if preview:
+        write_png(preview, views[0], cfa=new_cfa, protect=(input,))
+
+
+def _summary(info: dict, name: str) -> dict:
+    """Levels in the metadata: per-colour-position means, and per-row values (compact)."""
+    out = {"frame": name, "mode": info["mode"]}
+    if "row_levels" in info:
+        rows = info["row_levels"]
+        out["row_levels_mean"] = [round(float(v), 3) for v in rows.mean(axis=0)]
+        out["row_levels"] = np.round(rows, 3).tolist()
+    if "column_levels" in info:
+        out["column_levels_mean"] = [round(float(v), 3) for v in info["column_levels"].mean(axis=1)]
+    if "black_level" in info:
+        out["black_level"] = info["black_level"]
+    return out
+
+
+def _central_crop(views: np.ndarray, crop: str, *, even: bool):
+    try:
+        rows, cols = (int(v) for v in crop.lower().split("x"))
+    except ValueError as err:
+        raise InputError(f"crop {crop!r} is not ROWSxCOLS (e.g. 2000x2000)") from err
+    height, width = views.shape[1:]
+    if not (0 < rows <= height and 0 < cols <= width):
+        raise InputError(f"crop {crop} does not fit the {height}x{width} active area")
+    r0, c0 = (height - rows) // 2, (width - cols) // 2
+    if even:  # keep the CFA phase
+        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+    return views[:, r0:r0 + rows, c0:c0 + cols].copy(), r0, c0

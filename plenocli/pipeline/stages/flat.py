@@ -1,0 +1,71 @@
+"""Stage ``flat``: vignetting correction with a gain map from a white image (or a saved gain)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli.errors import InputError
+from plenocli.flatfield import apply_gain, white_gain
+from plenocli.io import tiffio
+from plenocli.io.preview import write_png
+from plenocli.progress import log
+from plenocli.provenance import stage_record
+
+
+def run(input: str, output: str, *, white: str | None = None, gain: str | None = None,
+        median: int = 5, reference: str = "max", percentile: float = 99.5, floor: float = 0.05,
+        save_gain: str | None = None, preview: str | None = None) -> None:
+    """Correct the views of ``input`` with a gain from ``white`` (or a saved ``gain`` file)."""
+    if (white is None) == (gain is None):
+        raise InputError("give exactly one of --white (a bias-corrected white image) "
+                         "or --gain (a gain map saved with --save-gain)")
+    views, meta = tiffio.read_image(input)
+    source = white if white is not None else gain
+    ref, ref_meta = tiffio.read_image(source)
+    _check_match(input, meta, views, source, ref_meta, ref)
+    if white is not None:
+        gains = np.empty(ref.shape, np.float32)
+        for k, plane in enumerate(ref):
+            try:
+                gains[k] = white_gain(plane, cfa=meta.get("cfa"), median_px=median,
+                                      reference=reference, percentile=percentile, floor=floor)
+            except ValueError as err:
+                raise InputError(f"{white}: view {ref_meta.get('views', ['?'] * 99)[k]}: {err}") \
+                    from err
+    else:
+        if ref_meta.get("provenance", {}).get("stage") != "flat-gain":
+            raise InputError(f"{gain}: not a gain map; make one with plenocli flat --save-gain")
+        gains = ref.astype(np.float32, copy=False)
+    corrected = np.stack([apply_gain(v, g) for v, g in zip(views, gains, strict=True)])
+    params = dict(median=median, reference=reference, percentile=percentile, floor=floor)
+    inputs = {"input": input, "white": white, "gain": gain}
+    record = stage_record("flat", params, inputs)
+    masked = int(np.isnan(gains).any(axis=0).sum())
+    tiffio.write_image(output, corrected, tiffio.derived_meta(meta, record, gain_masked=masked),
+                       protect=(input, source))
+    log.info("flat: %s -> %s (gain from %s, %d pixels masked by the floor)", input, output,
+             source, masked)
+    if save_gain:
+        gain_record = stage_record("flat-gain", params, {"white": source})
+        gain_meta = tiffio.derived_meta(ref_meta, gain_record)
+        tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source))
+    if preview:
+        write_png(preview, corrected[0], cfa=meta.get("cfa"), protect=(input, source))
+
+
+def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:
+    """The white image (or gain) must be the same geometry, CFA and views as the frames."""
+    what = "white image" if ref_meta.get("provenance", {}).get("stage") != "flat-gain" else "gain"
+    if ref.shape[1:] != views.shape[1:]:
+        raise InputError(f"{ref_path}: {what} is {ref.shape[2]}x{ref.shape[1]} but {path} is "
+                         f"{views.shape[2]}x{views.shape[1]}; use a {what} processed with the "
+                         "same bias/crop settings")
+    if ref_meta.get("cfa") != meta.get("cfa"):
+        raise InputError(f"{ref_path}: {what} has CFA {ref_meta.get('cfa')} but {path} has "
+                         f"{meta.get('cfa')}; they must come from the same sensor and crop")
+    if ref_meta.get("origin", [0, 0]) != meta.get("origin", [0, 0]):
+        raise InputError(f"{ref_path}: {what} crop origin {ref_meta.get('origin')} differs from "
+                         f"{path}'s {meta.get('origin')}; crop both the same way")
+    names, ref_names = meta.get("views"), ref_meta.get("views")
+    if ref.shape[0] != views.shape[0] or (names and ref_names and names != ref_names):
+        raise InputError(f"{ref_path}: {what} views {ref_names} do not match {path}'s {names}")

@@ -1,0 +1,169 @@
+"""Canon-like dual-pixel captures (5D Mark IV DPRAW layout) with ground truth.
+
+A capture is a two-frame raw: frame 0 is the sum S = A + B, frame 1 the left half-pixel A. Both
+carry a left over-scan (columns ``[0, left)``) and a top over-scan (rows ``[0, top)``) whose bias
+varies per row and per CFA colour exactly as in the active area. The A/S split varies across the
+frame (left-right falloff, colour-dependent), as on the real camera; a main-lens vignetting darkens
+the corners; bright spots clip S. With ``noise=0`` everything is integer-valued and exact.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from plenocli.io.atomic import atomic_path, write_text
+from plenocli.io.dng import write_dng
+
+COLOUR_GAIN = {"R": 0.55, "G": 1.0, "B": 0.7}  # white target seen through the CFA
+SPLIT_SLOPE = {"R": 0.16, "G": 0.12, "B": 0.09}  # A/S change from the left to the right edge
+CFA_OFFSET = {"R": 6, "G": 0, "B": -4}  # per-colour bias offsets (DN)
+
+
+def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: int = 16,
+                      left: int = 64, scene: str = "chart", cfa: str = "RGGB",
+                      black: tuple[int, int] = (2048, 2036), bias_amplitude: float = 9.0,
+                      white_level: int = 15000, signal: float = 6000.0,
+                      noise: float = 2.0) -> tuple[np.ndarray, dict]:
+    """One dual-pixel raw and its truth.
+
+    Parameters
+    ----------
+    rows, cols : active area size (pixels, even); ``top``, ``left``: over-scan margins (even,
+        so that the CFA phase of the active area is the one of the raw).
+    scene : "chart" (texture, edges and clipping highlights) or "white" (a uniform target).
+    black : bias level (DN) of frame 0 and frame 1, before the per-row, per-colour variation.
+    signal : mean level (DN) of the sum S at the centre of the white target.
+    noise : read noise (DN, Gaussian) per frame; 0 gives a noiseless, integer-exact capture
+        (photon noise is on whenever ``noise > 0``).
+
+    Returns
+    -------
+    raw : ndarray uint16, (2, top + rows, left + cols)
+        Frame 0 = S, frame 1 = A, with over-scan.
+    truth : dict
+        Arrays ``A``, ``B``, ``S`` (active area, DN above black, NaN where clipped),
+        ``row_bias`` (2, top + rows, 2): bias of each frame, row and column phase (DN),
+        ``split`` (A/S of the active area), ``vignetting``, masks ``clipped_S``, ``clipped_A``,
+        and the geometry.
+    """
+    if rows % 2 or cols % 2 or top % 2 or left % 2:
+        raise ValueError("rows, cols, top and left must be even to keep the CFA phase")
+    rng = np.random.default_rng(seed)
+    height, width = top + rows, left + cols
+    colour = np.array([[cfa[0], cfa[1]], [cfa[2], cfa[3]]])
+    rr, cc = np.mgrid[0:rows, 0:cols]
+    col_letter = colour[rr % 2, cc % 2]
+    gain = np.vectorize(COLOUR_GAIN.get)(col_letter)
+    slope = np.vectorize(SPLIT_SLOPE.get)(col_letter)
+
+    xn = (cc - (cols - 1) / 2) / (cols / 2)
+    yn = (rr - (rows - 1) / 2) / (rows / 2)
+    vignetting = 1.0 - 0.3 * (xn**2 + yn**2) / 2
+    split = 0.5 - slope * xn + 0.02 * yn  # A is brighter on the left of the frame
+
+    if scene == "white":
+        radiance = np.ones((rows, cols))
+    elif scene == "chart":
+        texture = gaussian_filter(rng.standard_normal((rows, cols)), 3.0)
+        radiance = 0.9 + 0.35 * texture / texture.std()
+        radiance[rows // 4: rows // 2, cols // 5: cols // 3] *= 0.3  # a dark patch with edges
+        for _ in range(6):  # highlights that clip S (and sometimes A)
+            r0, c0 = rng.integers(4, rows - 8), rng.integers(4, cols - 8)
+            radiance[r0:r0 + 4, c0:c0 + 4] = 3.2
+        radiance = np.clip(radiance, 0.05, None)
+    else:
+        raise ValueError(f"scene must be 'chart' or 'white', got {scene!r}")
+
+    s_mean = signal * radiance * vignetting * gain
+    a_mean = split * s_mean
+    b_mean = s_mean - a_mean
+    if noise > 0:
+        a_sig = rng.poisson(a_mean).astype(np.float64)
+        b_sig = rng.poisson(b_mean).astype(np.float64)
+    else:
+        a_sig, b_sig = np.round(a_mean), np.round(b_mean)
+
+    row_bias = np.empty((2, height, 2))
+    raw = np.empty((2, height, width), np.uint16)
+    clipped = []
+    for f, (sig, level) in enumerate(((a_sig + b_sig, black[0]), (a_sig, black[1]))):
+        phase = rng.uniform(0, 2 * np.pi)
+        wave = np.round(bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 97.0 + phase))
+        for p in range(2):
+            offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
+            row_bias[f, :, p] = level + wave + offs
+        bias_full = row_bias[f][:, np.arange(width) % 2]
+        frame = bias_full.copy()
+        frame[top:, left:] += sig
+        if noise > 0:
+            frame += rng.normal(0.0, noise, frame.shape)
+        frame = np.round(frame)
+        clipped.append(frame[top:, left:] >= white_level)
+        raw[f] = np.clip(frame, 0, white_level).astype(np.uint16)
+
+    clipped_s, clipped_a = clipped
+    s_true = (a_sig + b_sig).astype(np.float32)
+    a_true = a_sig.astype(np.float32)
+    b_true = b_sig.astype(np.float32)
+    s_true[clipped_s] = np.nan
+    a_true[clipped_a] = np.nan
+    b_true[clipped_s | clipped_a] = np.nan
+    truth = {
+        "A": a_true, "B": b_true, "S": s_true, "row_bias": row_bias,
+        "split": split.astype(np.float32), "vignetting": vignetting.astype(np.float32),
+        "clipped_S": clipped_s, "clipped_A": clipped_a,
+        "geometry": {"rows": rows, "cols": cols, "top": top, "left": left, "cfa": cfa,
+                     "active_area": [top, left, height, width],
+                     "masked_areas": [[0, 0, height, left], [0, left, top, width]]},
+        "params": {"seed": seed, "scene": scene, "black": list(black),
+                   "bias_amplitude": bias_amplitude, "white_level": white_level,
+                   "signal": signal, "noise": noise},
+    }
+    return raw, truth
+
+
+def write_dualpixel_raw(path, raw: np.ndarray, truth: dict) -> None:
+    """Write a capture from :func:`dualpixel_capture` as a two-frame DNG (frames S, A)."""
+    geo = truth["geometry"]
+    write_dng(path, raw, cfa=geo["cfa"], black_levels=truth["params"]["black"],
+              white_level=truth["params"]["white_level"], active_area=geo["active_area"],
+              masked_areas=geo["masked_areas"], frame_names=["S", "A"],
+              model="plenocli synthetic Canon EOS 5D Mark IV (dual pixel)")
+
+
+def write_capture_set(out_dir, *, seed: int = 0, pixels: str | None = None,
+                      noise: float = 2.0) -> dict:
+    """``plenocli simulate dualpixel``: capture.dng, white.dng and their truth in ``out_dir``.
+
+    ``pixels`` is the active size as ``ROWSxCOLS`` (default 192x256); full size is 4480x6720
+    with Canon's margins (top 42, left 136 would break nothing: margins here are kept even).
+    Truth: ``truth.json`` (parameters, geometry) and ``truth.npz`` (per-row bias, A, B, S, split,
+    vignetting and clipping masks of each capture, prefixed ``capture_`` / ``white_``).
+    """
+    rows, cols = (192, 256) if not pixels else (int(v) for v in str(pixels).lower().split("x"))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    full = rows >= 2000
+    margins = {"top": 42, "left": 136} if full else {"top": 16, "left": 64}
+    arrays, summary = {}, {}
+    for name, scene, s in (("capture", "chart", seed), ("white", "white", seed + 1)):
+        raw, truth = dualpixel_capture(seed=s, rows=rows, cols=cols, scene=scene, noise=noise,
+                                       **margins)
+        write_dualpixel_raw(out / f"{name}.dng", raw, truth)
+        for key in ("A", "B", "S", "row_bias", "split", "vignetting", "clipped_S", "clipped_A"):
+            arrays[f"{name}_{key}"] = truth[key]
+        summary[name] = {"file": f"{name}.dng", "geometry": truth["geometry"],
+                         "params": truth["params"],
+                         "clipped_S_pixels": int(truth["clipped_S"].sum())}
+    with atomic_path(out / "truth.npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    doc = {"kind": "dualpixel", "frames": ["S", "A"], "captures": summary,
+           "arrays": "truth.npz (A, B, S in DN above black of the active area; row_bias "
+                     "(frame, row, column phase) in DN over the full raw height)"}
+    write_text(out / "truth.json", json.dumps(doc, indent=2))
+    return doc
