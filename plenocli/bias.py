@@ -1,15 +1,15 @@
 """Bias (black level) from the sensor's over-scan (optical black) areas.
 
 Like astropy ccdproc's ``subtract_overscan``, but per CFA colour and per row: for each row, the
-robust level of that row's masked pixels of each column phase (with a Bayer mosaic the row and the
-column phase together fix the colour). A top over-scan gives per-column levels the same way.
+robust (outlier-clipped) mean of that row's masked pixels of each column phase (with a Bayer
+mosaic the row and the column phase together fix the colour). A top over-scan gives per-column levels the same way.
 Inputs are never modified; functions return new arrays.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
+from scipy.signal import savgol_filter
 
 OVERSCAN_MODES = ("auto", "left", "top", "both", "none")
 
@@ -23,7 +23,9 @@ def row_levels(frame: np.ndarray, cols: tuple[int, int], *, period: int = 2,
     frame : ndarray, (rows, cols)
         Raw frame in DN, margins included.
     cols : (start, stop)
-        Over-scan columns (half-open), absolute column numbers of ``frame``.
+        Over-scan columns (half-open), absolute column numbers of ``frame``. The level of a
+        row is the mean of its masked pixels of one phase after dropping outliers (beyond 4
+        robust sigmas of the row's median).
     period : int
         CFA period: 2 for Bayer (levels per column parity), 1 for mono.
     smooth_rows : int
@@ -41,8 +43,22 @@ def row_levels(frame: np.ndarray, cols: tuple[int, int], *, period: int = 2,
     levels = np.empty((frame.shape[0], period), np.float64)
     for p in range(period):
         first = start + (p - start) % period
-        levels[:, p] = np.median(frame[:, first:stop:period], axis=1)
+        levels[:, p] = _clipped_mean(frame[:, first:stop:period])
     return _smooth(levels, smooth_rows, period, axis=0)
+
+
+def _clipped_mean(strip: np.ndarray, *, k: float = 4.0) -> np.ndarray:
+    """Per-row mean of ``strip`` (rows, n) without outliers beyond ``k`` robust sigmas.
+
+    Robust like a median (hot or dead over-scan pixels are dropped) but without its
+    quantisation on integer data and with a smaller variance. Sigma is the MAD of the whole
+    strip, which is steadier than a per-row estimate from a few dozen pixels.
+    """
+    x = strip.astype(np.float64)
+    med = np.median(x, axis=1, keepdims=True)
+    sigma = 1.4826 * np.median(np.abs(x - med))
+    keep = np.abs(x - med) <= max(k * sigma, 0.5)
+    return np.sum(np.where(keep, x, 0.0), axis=1) / np.maximum(keep.sum(axis=1), 1)
 
 
 def column_levels(frame: np.ndarray, rows: tuple[int, int], *, period: int = 2,
@@ -56,14 +72,18 @@ def column_levels(frame: np.ndarray, rows: tuple[int, int], *, period: int = 2,
 
 
 def _smooth(levels: np.ndarray, length: int, period: int, *, axis: int) -> np.ndarray:
+    """Running mean over ``length`` samples of one phase; near the ends, a straight-line fit
+    over the first (last) ``length`` samples instead of padding, which would bias a drift."""
     if length <= 1:
         return levels
     out = levels.copy()
     for phase in range(period):  # rows of one parity share a colour: smooth each on its own
         sel = [slice(None)] * levels.ndim
         sel[axis] = slice(phase, None, period)
-        out[tuple(sel)] = uniform_filter1d(levels[tuple(sel)], size=length, axis=axis,
-                                           mode="nearest")
+        seq = levels[tuple(sel)]
+        window = min(length + (length + 1) % 2, seq.shape[axis] - (seq.shape[axis] + 1) % 2)
+        if window >= 3:
+            out[tuple(sel)] = savgol_filter(seq, window, 1, axis=axis, mode="interp")
     return out
 
 
@@ -165,10 +185,11 @@ def _area_beside(masked_areas, active_area, *, side: str, guard: int):
     best = None
     for area in masked_areas or []:
         t, lft, b, r = (int(v) for v in area)
+        # the guard only trims across the area: every row of a left area is a row's bias
         if side == "left" and r <= left and b > t:
-            cand = (t + guard, lft + guard, b - guard, r - guard)
+            cand = (t, lft + guard, b, r - guard)
         elif side == "top" and b <= top and r > lft:
-            cand = (t + guard, lft + guard, b - guard, r - guard)
+            cand = (t + guard, lft, b - guard, r)
         else:
             continue
         if cand[2] - cand[0] >= 4 and cand[3] - cand[1] >= 4:

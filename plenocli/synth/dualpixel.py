@@ -55,10 +55,9 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     rng = np.random.default_rng(seed)
     height, width = top + rows, left + cols
     colour = np.array([[cfa[0], cfa[1]], [cfa[2], cfa[3]]])
-    rr, cc = np.mgrid[0:rows, 0:cols]
-    col_letter = colour[rr % 2, cc % 2]
-    gain = np.vectorize(COLOUR_GAIN.get)(col_letter)
-    slope = np.vectorize(SPLIT_SLOPE.get)(col_letter)
+    rr, cc = np.ogrid[0:rows, 0:cols]
+    gain = np.vectorize(COLOUR_GAIN.get)(colour)[rr % 2, cc % 2]  # per-pixel via the 2 x 2 cell
+    slope = np.vectorize(SPLIT_SLOPE.get)(colour)[rr % 2, cc % 2]
 
     xn = (cc - (cols - 1) / 2) / (cols / 2)
     yn = (rr - (rows - 1) / 2) / (rows / 2)
@@ -92,7 +91,9 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     clipped = []
     for f, (sig, level) in enumerate(((a_sig + b_sig, black[0]), (a_sig, black[1]))):
         phase = rng.uniform(0, 2 * np.pi)
-        wave = np.round(bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 97.0 + phase))
+        wave = bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 400.0 + phase)
+        if noise == 0:  # integer bias: a noiseless capture is then exact in DN
+            wave = np.round(wave)
         for p in range(2):
             offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
             row_bias[f, :, p] = level + wave + offs

@@ -1,0 +1,124 @@
+"""Decoding: frames really are the file's frames, metadata is right, bad files are refused."""
+
+import numpy as np
+import pytest
+import rawpy
+import tifffile
+
+from plenocli.errors import InputError
+from plenocli.io import raw as rawio
+from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+
+
+@pytest.fixture
+def capture(tmp_path):
+    raw, truth = dualpixel_capture(seed=3, rows=64, cols=96, top=8, left=32)
+    path = tmp_path / "capture.dng"
+    write_dualpixel_raw(path, raw, truth)
+    return path, raw, truth
+
+
+def test_second_frame_is_the_files_second_frame(capture):
+    path, raw, _ = capture
+    assert not np.array_equal(raw[0], raw[1])  # the fixture's frames differ
+    frames, meta = rawio.decode(path)
+    assert meta["views"] == ["S", "A"]
+    np.testing.assert_array_equal(frames[0], raw[0])
+    np.testing.assert_array_equal(frames[1], raw[1])  # frame 1 (A), not frame 0 again
+
+
+def test_libraw_agrees_on_the_first_frame(capture):
+    path, raw, _ = capture
+    with rawpy.imread(str(path)) as r:
+        np.testing.assert_array_equal(r.raw_image, raw[0])
+
+
+def test_metadata_carries_geometry_cfa_and_levels(capture):
+    path, _, truth = capture
+    _, meta = rawio.decode(path)
+    geo = truth["geometry"]
+    assert meta["cfa"] == "RGGB"
+    assert meta["active_area"] == geo["active_area"]
+    assert meta["masked_areas"] == geo["masked_areas"]
+    assert meta["white_level"] == [15000.0, 15000.0]
+    assert meta["black_level"][1] == [2036.0] * 4
+
+
+def test_canon_path_refuses_a_raw_whose_frames_are_the_same(monkeypatch, tmp_path):
+    """LibRaw may return frame 0 for shot_select=1: decode must notice, not trust it."""
+    data = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96)
+
+    class FakeRaw:
+        raw_image = data
+        raw_pattern = np.array([[0, 1], [3, 2]])
+        color_desc = b"RGBG"
+        black_level_per_channel = [512, 512, 512, 512]
+        white_level = 15000
+        sizes = type("S", (), {"top_margin": 8, "left_margin": 32, "height": 56, "width": 64})
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+    monkeypatch.setattr(rawpy, "imread", lambda path, shot_select=0: FakeRaw())
+    path = tmp_path / "IMG.CR2"
+    path.write_bytes(b"II*\x00\x10\x00\x00\x00CR\x02\x00" + bytes(100))
+    with pytest.raises(InputError, match="same frame for frame 0 and frame 1"):
+        rawio.decode(path, camera="canon-dp")
+    frames, meta = rawio.decode(path)  # auto: one frame, honestly reported
+    assert frames.shape[0] == 1 and meta["views"] == ["S"]
+
+
+def test_rawpy_black_levels_mapped_by_colour_not_position():
+    class R:
+        black_level_per_channel = [100, 200, 300, 400]  # indexed by colour R, G, B, G2
+        raw_pattern = np.array([[1, 0], [2, 3]])  # GRBG
+    assert rawio._black_by_position(R) == [200, 100, 300, 400]
+
+
+def test_truncated_dng_is_refused(capture, tmp_path):
+    path, _, _ = capture
+    cut = tmp_path / "cut.dng"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 3])
+    with pytest.raises(InputError, match="truncated"):
+        rawio.decode(cut)
+
+
+def test_not_a_raw_is_refused(tmp_path):
+    path = tmp_path / "notes.txt"
+    path.write_text("hello")
+    with pytest.raises(InputError, match="not a raw capture"):
+        rawio.decode(path)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_plain_tiff_and_png_with_given_levels(tmp_path, dtype):
+    import cv2
+
+    data = np.random.default_rng(0).integers(0, 200, (20, 30)).astype(dtype)
+    tifffile.imwrite(tmp_path / "x.tif", data)
+    cv2.imwrite(str(tmp_path / "x.png"), data)
+    for name in ("x.tif", "x.png"):
+        frames, meta = rawio.decode(tmp_path / name, black=16, white=250, cfa="grbg")
+        np.testing.assert_array_equal(frames[0], data)
+        assert meta["black_level"] == [[16.0] * 4] and meta["white_level"] == [250.0]
+        assert meta["cfa"] == "GRBG" and meta["camera"] == "image"
+
+
+def test_rgb_png_gives_three_views(tmp_path):
+    import cv2
+
+    rgb = np.zeros((8, 10, 3), np.uint8)
+    rgb[..., 0] = 200  # red
+    cv2.imwrite(str(tmp_path / "c.png"), rgb[..., ::-1])
+    frames, meta = rawio.decode(tmp_path / "c.png")
+    assert meta["views"] == ["R", "G", "B"]
+    assert frames[0].max() == 200 and frames[2].max() == 0
+
+
+def test_bad_cfa_is_refused(tmp_path):
+    tifffile.imwrite(tmp_path / "x.tif", np.zeros((4, 4), np.uint16))
+    with pytest.raises(InputError, match="not a 2 x 2 Bayer pattern"):
+        rawio.decode(tmp_path / "x.tif", cfa="RGGX")

@@ -1,0 +1,100 @@
+"""The make-style runner: skip up-to-date steps, rerun what an input or a parameter changed."""
+
+import os
+import re
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from plenocli.errors import ConfigError
+from plenocli.pipeline.config import load_config
+from plenocli.pipeline.runner import plan, run_pipeline
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def project(tmp_path):
+    """A copy of the demo config and fixture in a temp folder (outputs land there too)."""
+    (tmp_path / "configs").mkdir()
+    shutil.copy(ROOT / "configs" / "demo_dualpixel.yaml", tmp_path / "configs")
+    shutil.copytree(ROOT / "fixtures" / "dualpixel", tmp_path / "fixtures" / "dualpixel")
+    return tmp_path / "configs" / "demo_dualpixel.yaml"
+
+
+def ran(decisions):
+    return [d.step.name for d in decisions if d.run]
+
+
+def test_runs_everything_then_nothing(project):
+    steps = load_config(project)
+    assert ran(run_pipeline(steps)) == ["decode_white", "bias_white", "decode", "bias", "flat"]
+    out = project.parent.parent / "out" / "demo" / "dualpixel"
+    assert (out / "views.tif").is_file() and (out / "view_A.png").is_file()
+    assert ran(run_pipeline(load_config(project))) == []
+
+
+def test_changed_input_reruns_it_and_what_depends_on_it(project):
+    run_pipeline(load_config(project))
+    capture = project.parent.parent / "fixtures" / "dualpixel" / "capture.dng"
+    later = time.time() + 5
+    os.utime(capture, (later, later))
+    assert ran(run_pipeline(load_config(project))) == ["decode", "bias", "flat"]
+
+
+def test_changed_parameter_reruns(project):
+    run_pipeline(load_config(project))
+    steps = load_config(project, ["bias.smooth=3"])
+    assert ran(plan(steps)) == ["bias", "flat"]
+
+
+def test_force_and_dry_run(project):
+    decisions = run_pipeline(load_config(project), dry_run=True)
+    assert len(ran(decisions)) == 5
+    assert not (project.parent.parent / "out").exists()  # a dry run writes nothing
+    run_pipeline(load_config(project))
+    assert len(ran(plan(load_config(project), force=True))) == 5
+
+
+def test_relative_paths_resolve_against_the_config_folder(project, monkeypatch, tmp_path):
+    monkeypatch.chdir(tmp_path / "fixtures")
+    step = load_config(project)[0]
+    assert Path(step.params["input"]) == (project.parent.parent / "fixtures" / "dualpixel"
+                                          / "white.dng").resolve()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("steps:\n  flat:\n    input: a.tif\n    output: b.tif\n    mediam: 3\n",
+     "unknown key 'mediam' for stage flat (did you mean 'median'?)"),
+    ("steps:\n  x:\n    stage: biass\n    input: a\n    output: b\n",
+     "unknown stage 'biass' (did you mean 'bias'?)"),
+    ("step:\n  bias: {}\n", "a config needs a 'steps:' mapping"),
+    ("steps:\n  bias:\n    output: b.tif\n", "missing input"),
+    ("steps: [unclosed\n", "not valid YAML"),
+])
+def test_config_errors_name_the_problem(tmp_path, text, message):
+    path = tmp_path / "c.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        load_config(path)
+
+
+def test_unknown_top_level_key_and_bad_set(project):
+    text = project.read_text().replace("description:", "descripton:")
+    bad = project.with_name("bad.yaml")
+    bad.write_text(text)
+    with pytest.raises(ConfigError, match="did you mean 'description'"):
+        load_config(bad)
+    with pytest.raises(ConfigError, match="has no step 'bais'.*did you mean 'bias'"):
+        load_config(project, ["bais.smooth=3"])
+    with pytest.raises(ConfigError, match="expected STEP.PARAM=VALUE"):
+        load_config(project, ["smooth=3"])
+
+
+def test_missing_input_that_no_step_makes(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("steps:\n  bias:\n    input: nowhere.tif\n    output: b.tif\n")
+    with pytest.raises(ConfigError, match="nowhere.tif does not exist"):
+        plan(load_config(path))

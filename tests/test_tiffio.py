@@ -1,0 +1,70 @@
+import numpy as np
+import pytest
+import tifffile
+from PIL import Image
+
+from plenocli.errors import InputError
+from plenocli.io import tiffio
+from plenocli.io.atomic import atomic_path
+from plenocli.provenance import sha256_file, stage_record
+
+
+def test_round_trip_keeps_views_nan_and_metadata(tmp_path):
+    views = np.random.default_rng(0).random((3, 10, 12)).astype(np.float32)
+    views[1, 2, 3] = np.nan
+    src = tmp_path / "in.bin"
+    src.write_bytes(b"abc")
+    record = stage_record("bias", {"smooth": 9}, {"input": src})
+    meta = tiffio.derived_meta({"views": ["A", "B", "S"], "cfa": "RGGB"}, record)
+    tiffio.write_image(tmp_path / "x.tif", views, meta)
+    data, back = tiffio.read_image(tmp_path / "x.tif")
+    np.testing.assert_array_equal(data, views)
+    assert back["views"] == ["A", "B", "S"] and back["cfa"] == "RGGB"
+    prov = back["provenance"]
+    assert prov["stage"] == "bias" and prov["parameters"] == {"smooth": 9}
+    assert prov["inputs"][0]["sha256"] == sha256_file(src)
+    assert prov["version"]
+
+
+def test_any_tiff_reader_opens_the_pages(tmp_path):
+    views = np.arange(2 * 5 * 7, dtype=np.float32).reshape(2, 5, 7)
+    tiffio.write_image(tmp_path / "x.tif", views, {"views": ["a", "b"]})
+    with Image.open(tmp_path / "x.tif") as im:  # Pillow: page 1 is view 0
+        np.testing.assert_array_equal(np.asarray(im), views[0])
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "x.tif", key=1), views[1])
+
+
+def test_history_grows_stage_by_stage():
+    first = tiffio.derived_meta({}, {"stage": "decode"})
+    second = tiffio.derived_meta(first, {"stage": "bias"})
+    assert [r["stage"] for r in second["history"]] == ["decode"]
+    assert second["provenance"]["stage"] == "bias"
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    dest = tmp_path / "out.tif"
+    with pytest.raises(RuntimeError):
+        with atomic_path(dest) as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError("interrupted")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_output_may_not_be_an_input(tmp_path):
+    src = tmp_path / "a.tif"
+    tiffio.write_image(src, np.zeros((2, 2), np.float32), {})
+    before = src.read_bytes()
+    with pytest.raises(InputError, match="also an input"):
+        tiffio.write_image(src, np.ones((2, 2), np.float32), {}, protect=(src,))
+    assert src.read_bytes() == before
+
+
+def test_foreign_and_broken_files(tmp_path):
+    tifffile.imwrite(tmp_path / "plain.tif", np.ones((3, 4), np.uint16))
+    data, meta = tiffio.read_image(tmp_path / "plain.tif")
+    assert data.shape == (1, 3, 4) and meta == {}
+    (tmp_path / "bad.tif").write_bytes(b"not a tiff at all")
+    with pytest.raises(InputError, match="not a readable TIFF"):
+        tiffio.read_image(tmp_path / "bad.tif")
+    with pytest.raises(InputError, match="no such file"):
+        tiffio.read_image(tmp_path / "missing.tif")
