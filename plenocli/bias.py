@@ -2,7 +2,8 @@
 
 Like astropy ccdproc's ``subtract_overscan``, but per CFA colour and per row: for each row, the
 robust (outlier-clipped) mean of that row's masked pixels of each column phase (with a Bayer
-mosaic the row and the column phase together fix the colour). A top over-scan gives per-column levels the same way.
+mosaic the row and the column phase together fix the colour). A top over-scan gives
+per-column levels the same way.
 Inputs are never modified; functions return new arrays.
 """
 

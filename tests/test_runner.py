@@ -32,7 +32,7 @@ def test_runs_everything_then_nothing(project):
     steps = load_config(project)
     assert ran(run_pipeline(steps)) == ["decode_white", "bias_white", "decode", "bias", "flat"]
     out = project.parent.parent / "out" / "demo" / "dualpixel"
-    assert (out / "views.tif").is_file() and (out / "view_A.png").is_file()
+    assert (out / "views.tif").is_file() and (out / "views_A_B.png").is_file()
     assert ran(run_pipeline(load_config(project))) == []
 
 

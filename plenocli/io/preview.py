@@ -34,9 +34,22 @@ def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
     return np.round(255.0 * scaled ** (1.0 / gamma)).astype(np.uint8)
 
 
+def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 4) -> np.ndarray:
+    """Views (views, rows, cols) as one picture, left to right, with NaN gaps between them."""
+    tiles = [cfa_to_rgb(v, cfa) if cfa else np.asarray(v, np.float32) for v in views]
+    spacer = np.full((tiles[0].shape[0], gap, *tiles[0].shape[2:]), np.nan, np.float32)
+    out = [tiles[0]]
+    for tile in tiles[1:]:
+        out += [spacer, tile]
+    return np.concatenate(out, axis=1)
+
+
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
               max_side: int = 2048, protect: tuple = ()) -> None:
-    """Write a display PNG of a 2-D frame (Bayer if ``cfa``) or an (rows, cols, 3) RGB image."""
+    """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or
+    (views, rows, cols) views side by side."""
+    if image.ndim == 3 and image.shape[-1] != 3:
+        image, cfa = views_side_by_side(image, cfa), None
     img = cfa_to_rgb(image, cfa) if cfa and image.ndim == 2 else image
     img = to_display(np.asarray(img, dtype=np.float32))
     scale = max(img.shape[:2]) / max_side

@@ -14,7 +14,7 @@ from plenocli.dualpixel import split_views
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -66,10 +66,10 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
                                    bias_levels=levels,
                                    clipped_pixels=int(np.isnan(views).any(axis=0).sum()))
     tiffio.write_image(output, views, out_meta, protect=(input,))
-    log.info("bias: %s -> %s (%s, views %s, %d x %d, %d clipped pixels masked)", input, output,
-             levels[0]["mode"], ",".join(names), cols, rows, out_meta["clipped_pixels"])
+    log.info("bias: %s -> %s (%s, views %s, %d x %d, %d clipped pixels masked)",
+             shown(input), shown(output), levels[0]["mode"], ",".join(names), cols, rows, out_meta["clipped_pixels"])
     if preview:
-        write_png(preview, views[0], cfa=new_cfa, protect=(input,))
+        write_png(preview, views[:2], cfa=new_cfa, protect=(input,))
 
 
 def _summary(info: dict, name: str) -> dict:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from plenocli.cfa import shift_pattern
 from plenocli.io import raw, tiffio
 from plenocli.io.preview import write_png
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -19,8 +19,8 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
     params = dict(camera=camera, frames=frames, black=black, white=white, cfa=cfa)
     record = stage_record("decode", params, {"input": input})
     tiffio.write_image(output, data, tiffio.derived_meta(meta, record), protect=(input,))
-    log.info("decode: %s -> %s (%s, %d frame(s) %s of %d x %d, CFA %s)", input, output,
-             meta["camera"], data.shape[0], ",".join(meta["views"]), data.shape[2], data.shape[1],
+    log.info("decode: %s -> %s (%s, %d frame(s) %s of %d x %d, CFA %s)",
+             shown(input), shown(output), meta["camera"], data.shape[0], ",".join(meta["views"]), data.shape[2], data.shape[1],
              meta.get("cfa") or "none")
     if preview:
         top, left, bottom, right = meta["active_area"]

@@ -8,7 +8,7 @@ from plenocli.errors import InputError
 from plenocli.flatfield import apply_gain, white_gain
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -43,14 +43,14 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
     masked = int(np.isnan(gains).any(axis=0).sum())
     tiffio.write_image(output, corrected, tiffio.derived_meta(meta, record, gain_masked=masked),
                        protect=(input, source))
-    log.info("flat: %s -> %s (gain from %s, %d pixels masked by the floor)", input, output,
-             source, masked)
+    log.info("flat: %s -> %s (gain from %s, %d pixels masked by the floor)",
+             shown(input), shown(output), shown(source), masked)
     if save_gain:
         gain_record = stage_record("flat-gain", params, {"white": source})
         gain_meta = tiffio.derived_meta(ref_meta, gain_record)
         tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source))
     if preview:
-        write_png(preview, corrected[0], cfa=meta.get("cfa"), protect=(input, source))
+        write_png(preview, corrected[:2], cfa=meta.get("cfa"), protect=(input, source))
 
 
 def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:
