@@ -67,7 +67,8 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
                                    clipped_pixels=int(np.isnan(views).any(axis=0).sum()))
     tiffio.write_image(output, views, out_meta, protect=(input,))
     log.info("bias: %s -> %s (%s, views %s, %d x %d, %d clipped pixels masked)",
-             shown(input), shown(output), levels[0]["mode"], ",".join(names), cols, rows, out_meta["clipped_pixels"])
+             shown(input), shown(output), levels[0]["mode"], ",".join(names), cols, rows,
+             out_meta["clipped_pixels"])
     if preview:
         write_png(preview, views[:2], cfa=new_cfa, protect=(input,))
 

@@ -20,8 +20,8 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
     record = stage_record("decode", params, {"input": input})
     tiffio.write_image(output, data, tiffio.derived_meta(meta, record), protect=(input,))
     log.info("decode: %s -> %s (%s, %d frame(s) %s of %d x %d, CFA %s)",
-             shown(input), shown(output), meta["camera"], data.shape[0], ",".join(meta["views"]), data.shape[2], data.shape[1],
-             meta.get("cfa") or "none")
+             shown(input), shown(output), meta["camera"], data.shape[0],
+             ",".join(meta["views"]), data.shape[2], data.shape[1], meta.get("cfa") or "none")
     if preview:
         top, left, bottom, right = meta["active_area"]
         write_png(preview, data[0, top:bottom, left:right].astype("float32"),
