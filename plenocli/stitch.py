@@ -190,20 +190,30 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     # sub-pixel refinement: ECC (translation) on the overlap of the raw views; ECC is invariant
     # to gain and offset, and the raw views resample without the bias a high-pass would add
     _, _, (y0, x0) = crops
-    ra, rb = _flatten(a), _flatten(b)
-    ca = ra[y0:y0 + crops[0].shape[0], x0:x0 + crops[0].shape[1]]
+    ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
+    rows_ov, cols_ov = crops[0].shape
+    ca = ra[y0:y0 + rows_ov, x0:x0 + cols_ov]
+    cb = rb[y0 - dy0:y0 - dy0 + rows_ov, x0 - dx0:x0 - dx0 + cols_ov]
     warp = np.float32([[1, 0, x0 - dx0], [0, 1, y0 - dy0]])  # crop of a -> b
-    try:
-        _, warp = cv2.findTransformECC(ca, rb, warp, cv2.MOTION_TRANSLATION,
-                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
-                                        1e-8), None, 1)
+    method = "ecc"
+    # two passes: the photometric ratio field is re-estimated once the shift is sub-pixel
+    for _ in range(2):
+        b_on_a = cv2.warpAffine(rb, warp, (cols_ov, rows_ov),
+                                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
+        template = _match_photometry(ca, b_on_a, np.ones(ca.shape, bool))
+        try:
+            _, warp = cv2.findTransformECC(template, rb, warp, cv2.MOTION_TRANSLATION,
+                                           (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
+                                            1e-8), None, 1)
+        except cv2.error:
+            method = "phase-correlation"
+            break
+    if method == "ecc":
         ty, tx = float(warp[1, 2]) - (y0 - dy0), float(warp[0, 2]) - (x0 - dx0)
-        method = "ecc"
-    except cv2.error:
-        cb = rb[y0 - dy0:y0 - dy0 + ca.shape[0], x0 - dx0:x0 - dx0 + ca.shape[1]]
+    else:
         window = cv2.createHanningWindow((ca.shape[1], ca.shape[0]), cv2.CV_64F)
         (tx, ty), _ = cv2.phaseCorrelate(cb.astype(np.float64), ca.astype(np.float64), window)
-        method = "phase-correlation"
     if abs(ty) > 2 or abs(tx) > 2:  # refinement ran away: keep the integer match
         ty = tx = 0.0
         method = "template"
@@ -232,18 +242,26 @@ def _aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray) -> fl
     return _ncc(ha[cover], warped[cover])
 
 
-def _flatten(image: np.ndarray) -> np.ndarray:
-    """The view divided by a wide blur of itself: removes vignetting and gain before ECC.
+def _match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
+                      sigma_px: float = 8.0) -> np.ndarray:
+    """``template`` times the smooth ratio field blur(other) / blur(template) over ``mask``.
 
-    A multiplicative fall-off that differs between the views (each is darker on its own edge)
-    would otherwise pull the fit. The blur is wide (1/8 of the view) so the division hardly
-    changes the texture. Signed or dark data (blur not clearly positive) is returned as is.
+    ``other`` is the second view already resampled onto ``template`` (roughly aligned). Both
+    blurs see the same scene content, so their ratio is the relative vignetting and gain
+    between the views; removing it keeps ECC from being pulled by fall-offs that differ
+    between the views (each view is darker towards its own edge).
     """
-    img = _fill_nan(image).astype(np.float32)
-    blur = cv2.GaussianBlur(img, (0, 0), max(4.0, min(img.shape) / 8), borderType=cv2.BORDER_REFLECT)
-    if float(blur.min()) <= 0.05 * float(np.abs(blur).max()):
-        return img
-    return img / blur
+    m = mask.astype(np.float32)
+    t = np.where(mask, template, 0).astype(np.float32)
+    o = np.where(mask, other, 0).astype(np.float32)
+    blur_m = cv2.GaussianBlur(m, (0, 0), sigma_px)
+    blur_t = cv2.GaussianBlur(t, (0, 0), sigma_px) / np.maximum(blur_m, 1e-6)
+    blur_o = cv2.GaussianBlur(o, (0, 0), sigma_px) / np.maximum(blur_m, 1e-6)
+    scale = float(np.abs(blur_t[mask]).max()) if mask.any() else 0.0
+    if scale == 0 or float(blur_t[mask].min()) <= 0.05 * scale:
+        return template.astype(np.float32)  # signed or dark data: leave as is
+    ratio = np.where(mask, blur_o / np.maximum(blur_t, 1e-6 * scale), 1.0)
+    return (template * ratio).astype(np.float32)
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
@@ -301,10 +319,14 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         t_o = _translation_matrix(y0, x0)
         warp = (np.linalg.inv(h) @ t_o).astype(np.float32)  # template (crop of a) -> b
         warp /= warp[2, 2]
-        ra, rb = _flatten(a), _flatten(b)
-        _, warp = cv2.findTransformECC(ra[y0:y1, x0:x1], rb, warp, cv2.MOTION_HOMOGRAPHY,
-                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
-                                        1e-7), None, 1)
+        ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
+        for _ in range(2):  # re-estimate the photometric ratio once the fit is refined
+            b_on_a = cv2.warpPerspective(rb, warp, (x1 - x0, y1 - y0),
+                                         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+            template = _match_photometry(ra[y0:y1, x0:x1], b_on_a, cover[y0:y1, x0:x1])
+            _, warp = cv2.findTransformECC(template, rb, warp, cv2.MOTION_HOMOGRAPHY,
+                                           (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
+                                            1e-7), None, 1)
         candidate = np.linalg.inv(warp.astype(np.float64) @ np.linalg.inv(t_o))
         candidate /= candidate[2, 2]
         after = _aligned_correlation(ha, hb, candidate)
