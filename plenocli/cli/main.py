@@ -3,7 +3,9 @@
 import click
 
 from plenocli import __version__
+from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
+from plenocli.cli.stitch import stitch
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -15,5 +17,5 @@ def cli():
     """
 
 
-for command in (decode,):
+for command in (decode, crosstalk, stitch):
     cli.add_command(command)

@@ -27,10 +27,13 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import decode
+    from plenocli.pipeline.stages import crosstalk, decode, stitch
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"), outputs=("output", "preview")),
+        Stage("stitch", stitch.run, inputs=("input", "transform_in"),
+              outputs=("output", "transform_out", "report", "preview")),
     ]
     return {s.name: s for s in table}
 
