@@ -549,7 +549,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     residuals = []
     for (a, b, _), info in zip(pairs, pair_info or [{} for _ in pairs], strict=True):
         both = (weights[a] > 0) & (weights[b] > 0)
-        res = _block_residual(np.nanmean(warped[a], axis=0), np.nanmean(warped[b], axis=0), both)
+        res = _block_residual(warped[a].mean(axis=0), warped[b].mean(axis=0), both)
         info["residual_px"] = res
         info["overlap_px_area"] = int(both.sum())
         if res is not None:
