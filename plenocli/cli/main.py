@@ -4,10 +4,12 @@ import click
 
 from plenocli import __version__
 from plenocli.cli.bias import bias
+from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
 from plenocli.cli.run import run
 from plenocli.cli.simulate import simulate
+from plenocli.cli.stitch import stitch
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -19,5 +21,14 @@ def cli():
     """
 
 
-for command in (decode, bias, flat, run, simulate):
+# in pipeline order
+for command in (
+    decode,
+    bias,
+    flat,
+    crosstalk,
+    stitch,
+    run,
+    simulate,
+):
     cli.add_command(command)

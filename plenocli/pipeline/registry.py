@@ -27,13 +27,17 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import bias, decode, flat
+    from plenocli.pipeline.stages import bias, crosstalk, decode, flat, stitch
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
         Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
         Stage("flat", flat.run, inputs=("input", "white", "gain"),
               outputs=("output", "save_gain", "preview")),
+        Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),
+              outputs=("output", "preview")),
+        Stage("stitch", stitch.run, inputs=("input", "transform_in"),
+              outputs=("output", "transform_out", "report", "preview")),
     ]
     return {s.name: s for s in table}
 

@@ -12,8 +12,10 @@ from collections.abc import Callable
 
 def kinds() -> dict[str, Callable[..., dict]]:
     """Simulation kinds by name: ``write(out_dir, *, seed, size, ...) -> truth``."""
-    from plenocli.synth import dualpixel
+    from plenocli.synth import dualpixel, rig
 
     return {
         "dualpixel": dualpixel.write_capture_set,
+        "stereo-rig": rig.write_stereo_rig,
+        "quad-rig": rig.write_quad_rig,
     }

@@ -1,0 +1,41 @@
+import click
+
+from plenocli.cli import options
+
+
+@click.command(short_help="Stitch 2 or 4 views into an extended-FOV panorama.")
+@options.input_arg
+@options.output_opt
+@click.option("--views", default=None,
+              help="Views to stitch, by name or page number, comma separated (e.g. A,B).")
+@click.option("--layout", type=click.Choice(["auto", "1x2", "2x1", "2x2"]), default="auto",
+              show_default=True, help="Arrangement, views row-major (2x2: S00,S01,S10,S11).")
+@click.option("--model", type=click.Choice(["translation", "homography"]),
+              default="translation", show_default=True, help="Geometric model between views.")
+@click.option("--distortion", type=float, default=0.0, show_default=True,
+              help="Known radial distortion K1 removed first (r_d = r_u (1 + K1 r_u^2), r in "
+                   "half-diagonals).")
+@click.option("--transform-in", type=click.Path(dir_okay=False), default=None,
+              help="Reapply a transform saved with --transform-out instead of registering.")
+@click.option("--transform-out", type=click.Path(dir_okay=False), default=None,
+              help="Save the transform (JSON) to reapply to later captures of the same rig.")
+@click.option("--blend", type=click.Choice(["feather", "multiband"]), default="feather",
+              show_default=True, help="Seam blending.")
+@click.option("--report", type=click.Path(dir_okay=False), default=None,
+              help="Write a JSON report (model, parameters, overlap, inliers, residual px).")
+@options.preview_opt
+@options.stage_command
+def stitch(**params):
+    """Stitch the views of INPUT (2 side by side or 4 in 2 x 2) into one panorama TIFF.
+
+    Bayer views are stitched as half-size RGB. Exposure is matched from the overlaps; the
+    panorama is NaN where no view covers it.
+
+    \b
+    Example:
+      plenocli stitch flat.tif --views A,B -o panorama.tif --report stitch.json \\
+          --transform-out rig.json --preview panorama.png
+    """
+    from plenocli.pipeline.stages.stitch import run
+
+    run(**params)

@@ -1,0 +1,143 @@
+"""Stage ``crosstalk``: masked-pupil white captures (views TIFFs) -> cross-talk JSON + heat map."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+
+from plenocli import crosstalk as crosstalk_lib
+from plenocli.cfa import shift_pattern
+from plenocli.errors import ConfigError, InputError
+from plenocli.io import tiffio
+from plenocli.io.atomic import atomic_path, write_text
+from plenocli.pipeline.stages.stitch import _plain
+from plenocli.progress import log
+from plenocli.provenance import stage_record
+
+
+def _intended_index(spec: str | None, names: list[str], path: str) -> int | None:
+    if spec is None or spec == "auto":
+        return None
+    if spec in names:
+        return names.index(spec)
+    if spec.isdigit() and int(spec) < len(names):
+        return int(spec)
+    raise InputError(f"{path}: intended view {spec!r} is not one of {','.join(names)}; pass "
+                     "--intended with a view name (or 'auto' for the brightest view)")
+
+
+def _heat_map(maps: list[np.ndarray], cell_px: int = 16) -> np.ndarray:
+    """BGR uint8 picture of r maps side by side (0 = dark blue ... max = yellow; NaN grey)."""
+    top = max([float(np.nanmax(m)) for m in maps if np.isfinite(m).any()] + [1e-6])
+    tiles = []
+    for m in maps:
+        scaled = np.clip(np.nan_to_num(m / top, nan=0.0), 0, 1)
+        img = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
+        img[~np.isfinite(m)] = 128
+        img = np.repeat(np.repeat(img, cell_px, axis=0), cell_px, axis=1)
+        tiles.append(img)
+    height = max(t.shape[0] for t in tiles)
+    padded = [np.pad(t, ((0, height - t.shape[0]), (0, 8), (0, 0)), constant_values=255)
+              for t in tiles]
+    return np.hstack(padded)[:, :-8]
+
+
+def run(inputs: tuple[str, ...] | list[str], output: str, *, intended: str | None = None,
+        tile: int = 64, preview: str | None = None, mask_widths: str | None = None,
+        grid: str | None = None, s: float = 0.2, g: float = 4.0) -> None:
+    """Measure cross-talk on each input (one masked capture each), or sweep Raytrix mask widths."""
+    inputs = [inputs] if isinstance(inputs, str) else list(inputs)
+    if not inputs:
+        raise InputError("no input given; pass one views TIFF per masked capture")
+    if mask_widths:
+        _run_sweep(inputs, output, intended=intended, tile=tile, mask_widths=mask_widths,
+                   grid=grid, s=s, g=g)
+        return
+    specs = (intended or "auto").split(",")
+    if len(specs) not in (1, len(inputs)):
+        raise ConfigError(f"--intended has {len(specs)} names for {len(inputs)} inputs; give one "
+                          "name, or one per input")
+    captures, maps = [], []
+    for k, path in enumerate(inputs):
+        data, meta = tiffio.read_image(path)
+        names = list(meta.get("views") or [str(j) for j in range(data.shape[0])])
+        cfa = meta.get("cfa")
+        area = meta.get("active_area")
+        if area:
+            top, left, bottom, right = area
+            data = data[:, top:bottom, left:right]
+            cfa = shift_pattern(cfa, top, left)
+        idx = _intended_index(specs[k if len(specs) > 1 else 0], names, path)
+        res = crosstalk_lib.crosstalk_ratio(data, intended=idx, tile_px=tile, cfa=cfa)
+        maps.append(res["map"])
+        captures.append({
+            "input": path, "views": names, "intended": names[res["intended"]],
+            "r": res["r"], "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
+            "map_min": res["map_min"], "map_max": res["map_max"], "tile_px": tile,
+            "valid_fraction": res["valid_fraction"], "cfa": cfa,
+            "per_colour": {c: {"r": d["r"], "map": d["map"]} for c, d in res["per_colour"].items()},
+            "map": res["map"],
+        })
+    params = dict(intended=intended, tile=tile)
+    record = stage_record("crosstalk", params, {"inputs": inputs})
+    doc = {"r": max(c["r"] for c in captures), "definition": "max flux on another view / flux "
+           "on the intended view, over pixels finite in every view", "captures": captures,
+           "provenance": record}
+    write_text(output, json.dumps(_plain(doc), indent=1, allow_nan=False), protect=tuple(inputs))
+    if preview:
+        _write_png(preview, _heat_map(maps), tuple(inputs))
+    for c in captures:
+        log.info("crosstalk: %s: intended %s, r = %.2f %% (tiles %.2f .. %.2f %%)", c["input"],
+                 c["intended"], 100 * c["r"], 100 * c["map_min"], 100 * c["map_max"])
+
+
+def _write_png(path: str, bgr: np.ndarray, protect: tuple) -> None:
+    with atomic_path(path, protect=protect) as tmp:
+        ok, buf = cv2.imencode(".png", bgr)
+        if not ok:
+            raise OSError(f"could not encode PNG for {path}")
+        tmp.write_bytes(buf.tobytes())
+
+
+def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: int,
+               mask_widths: str, grid: str | None, s: float, g: float) -> None:
+    """Raytrix: refocus left/right views of a half-masked white capture for each mask width."""
+    try:
+        widths = [float(w) for w in mask_widths.split(",") if w.strip()]
+    except ValueError as err:
+        raise ConfigError(f"--mask-widths {mask_widths!r} is not a comma-separated list of "
+                          "numbers (e.g. 0,1,2,3)") from err
+    if len(inputs) != 1:
+        raise ConfigError("--mask-widths takes exactly one input: the frames TIFF of a white "
+                          "capture with one pupil half masked")
+    if not grid:
+        raise ConfigError("--mask-widths needs --grid GRID.yaml (the lens grid of the capture)")
+    try:
+        from plenocli.refocus import refocus
+    except ImportError as err:
+        raise ConfigError("--mask-widths needs the refocus module (plenocli.refocus), which is "
+                          "not available in this installation; update plenocli") from err
+    from plenocli.io.gridfile import read_grid
+
+    side = intended or "left"
+    if side not in ("left", "right"):
+        raise ConfigError(f"with --mask-widths, --intended is 'left' or 'right', got {side!r}")
+    data, meta = tiffio.read_image(inputs[0])
+    frame = data[0].astype(np.float32)
+    lens_grid = read_grid(grid)
+
+    def make_views(m: float):
+        left, _ = refocus(frame, lens_grid, s=s, g=g, view="left", mask_width=m)
+        right, _ = refocus(frame, lens_grid, s=s, g=g, view="right", mask_width=m)
+        return left, right
+
+    sweep = crosstalk_lib.mask_width_sweep(make_views, widths, intended=side, tile_px=tile)
+    params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
+    record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
+    doc = {"sweep": sweep, "intended": side, "provenance": record}
+    write_text(output, json.dumps(_plain(doc), indent=1, allow_nan=False),
+               protect=(inputs[0], grid))
+    for row in sweep:
+        log.info("crosstalk: m = %g px: r = %.2f %%", row["mask_width"], 100 * row["r"])

@@ -1,0 +1,678 @@
+"""Extended-FOV stitching of 2 (side by side) or 4 (2 x 2) views into one panorama.
+
+Geometry convention: a transform is a 3 x 3 matrix mapping a view's pixel ``(x, y, 1)`` (column,
+row) to the pixel coordinates of view 0 (the reference). The panorama is view 0's pixel grid
+extended to cover every view; ``report["origin_px"]`` is the panorama pixel ``[row, col]`` of view
+0's pixel (0, 0). Views are ordered row-major over the layout: ``1x2`` = left, right; ``2x1`` =
+top, bottom; ``2x2`` = S00, S01, S10, S11 (top-left, top-right, bottom-left, bottom-right).
+
+Registration of a pair of neighbours (b to the right of / below a):
+- ``translation``: integer search by normalised cross-correlation of b's leading edge strip inside
+  a's trailing part (only shifts in the expected overlap direction are searched), then sub-pixel
+  refinement by ECC (``cv2.findTransformECC``, translation) on the windowed overlap region.
+- ``homography``: SIFT features, ratio test, matches restricted to the expected direction,
+  RANSAC, then ECC refinement (homography) on the overlap.
+Both work on high-passed images, so slow vignetting and gain differences do not pull the fit.
+Exposure is then matched from the overlaps (per-view, per-channel gain, least squares in log
+gain with view 0 fixed) and the seams are blended (feathering, or multi-band).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from plenocli.errors import InputError
+
+LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
+MODELS = ("translation", "homography")
+BLENDS = ("feather", "multiband")
+_HIGHPASS_SIGMA_PX = 8.0
+
+
+# ---------------------------------------------------------------------------------------------
+# input handling
+def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray, bool]:
+    """Validate views and return them as (V, C, rows, cols) float32 plus ``colour`` (C given).
+
+    ``views`` is (V, rows, cols), (V, C, rows, cols) or a sequence of equally shaped arrays.
+    Views of different sizes or channel counts are rejected (crop or resample them first).
+    """
+    if isinstance(views, np.ndarray):
+        arrays = list(views)
+    else:
+        arrays = [np.asarray(v) for v in views]
+    if len(arrays) not in (2, 4):
+        raise InputError(f"stitch needs 2 or 4 views, got {len(arrays)}; select views with "
+                         "--views (e.g. --views A,B)")
+    first = arrays[0].shape
+    for k, a in enumerate(arrays):
+        if a.ndim not in (2, 3):
+            raise InputError(f"view {k} has shape {a.shape}; a view is (rows, cols) or "
+                             "(channels, rows, cols)")
+        if a.shape != first:
+            what = "channel count" if a.ndim != len(first) or a.shape[-2:] == first[-2:] else "size"
+            raise InputError(f"view {k} has shape {a.shape} but view 0 has {first} (different "
+                             f"{what}); stitch needs views of one size and one channel count")
+    colour = len(first) == 3
+    stack = np.stack([a if colour else a[np.newaxis] for a in arrays]).astype(np.float32)
+    if min(stack.shape[-2:]) < 32:
+        raise InputError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
+                         "register; need at least 32 x 32")
+    return stack, colour
+
+
+def undistort(image: np.ndarray, k1: float) -> np.ndarray:
+    """Remove a constant radial distortion ``r_d = r_u (1 + k1 r_u^2)`` from a (rows, cols) image.
+
+    ``r`` is measured from the image centre in units of the half-diagonal, so ``k1 = 0.01`` moves
+    the corners outward by 1 %. Resampled with Lanczos-4; NaN stays NaN (within the kernel).
+    """
+    if k1 == 0:
+        return image
+    rows, cols = image.shape
+    cy, cx = (rows - 1) / 2, (cols - 1) / 2
+    norm = np.hypot(cy, cx)
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float32)
+    ru2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / norm**2
+    scale = 1.0 + k1 * ru2
+    map_x = (cx + (xx - cx) * scale).astype(np.float32)
+    map_y = (cy + (yy - cy) * scale).astype(np.float32)
+    return cv2.remap(image.astype(np.float32), map_x, map_y, cv2.INTER_LANCZOS4,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+
+
+def _fill_nan(image: np.ndarray) -> np.ndarray:
+    """Replace NaN by the nearest finite value (so that filters and warps do not spread NaN)."""
+    bad = ~np.isfinite(image)
+    if not bad.any():
+        return image
+    if bad.all():
+        return np.zeros_like(image)
+    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return image[tuple(idx)]
+
+
+def _highpass(image: np.ndarray) -> np.ndarray:
+    """Texture only: image minus a wide Gaussian blur, float32 (removes vignetting and offsets)."""
+    img = _fill_nan(image).astype(np.float32)
+    return img - cv2.GaussianBlur(img, (0, 0), _HIGHPASS_SIGMA_PX)
+
+
+def _pairs(layout: str) -> list[tuple[int, int, str]]:
+    """Neighbour pairs (a, b, direction): 'h' = b right of a, 'v' = b below a."""
+    return {"1x2": [(0, 1, "h")], "2x1": [(0, 1, "v")],
+            "2x2": [(0, 1, "h"), (0, 2, "v"), (1, 3, "v"), (2, 3, "h")]}[layout]
+
+
+def _translation_matrix(dy: float, dx: float) -> np.ndarray:
+    m = np.eye(3)
+    m[0, 2], m[1, 2] = dx, dy
+    return m
+
+
+# ---------------------------------------------------------------------------------------------
+# pairwise registration
+def _ncc(a: np.ndarray, b: np.ndarray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = np.sqrt((a * a).sum() * (b * b).sum())
+    return float((a * b).sum() / den) if den > 0 else 0.0
+
+
+def _overlap_crops(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
+    """Same-size crops of a and b over their overlap for b(q) <-> a(q + (dy, dx)), or None."""
+    rows, cols = a.shape
+    y0, y1 = max(0, dy), min(rows, rows + dy)
+    x0, x1 = max(0, dx), min(cols, cols + dx)
+    if y1 - y0 < 8 or x1 - x0 < 8:
+        return None
+    return a[y0:y1, x0:x1], b[y0 - dy:y1 - dy, x0 - dx:x1 - dx], (y0, x0)
+
+
+def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
+                         max_overlap: float = 0.7, min_overlap_px: int = 16,
+                         max_cross_px: int | None = None,
+                         min_correlation: float = 0.4) -> tuple[float, float, dict]:
+    """Sub-pixel shift of view b against view a: b's pixel (y, x) shows a's (y + dy, x + dx).
+
+    Parameters
+    ----------
+    a, b : (rows, cols) views (NaN allowed); b lies to the right of a (``direction="h"``) or
+        below it (``"v"``).
+    max_overlap : largest overlap searched, fraction of the view width (height for "v").
+    min_overlap_px : width of b's edge strip used for the search (the overlap must be at least
+        this wide).
+    max_cross_px : largest shift across the stitching direction searched (default 10 % of the
+        view's other side).
+    min_correlation : below this normalised cross-correlation over the overlap the views are
+        declared not to overlap (``InputError``).
+
+    Returns
+    -------
+    dy, dx : shift in px. info : dict with ``correlation``, ``overlap_px``, ``overlap_fraction``.
+    """
+    if direction not in ("h", "v"):
+        raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
+    if not 0 < max_overlap <= 1:
+        raise ValueError(f"max_overlap must be in (0, 1], got {max_overlap}")
+    if direction == "v":
+        dx, dy, info = estimate_translation(a.T, b.T, direction="h", max_overlap=max_overlap,
+                                            min_overlap_px=min_overlap_px,
+                                            max_cross_px=max_cross_px,
+                                            min_correlation=min_correlation)
+        return dy, dx, info
+    ha, hb = _highpass(a), _highpass(b)
+    for name, h in (("a", ha), ("b", hb)):
+        if float(h.std()) <= 1e-6 * max(float(np.nanmax(np.abs(a))), 1e-12):
+            raise InputError(f"view {name} has no texture (flat image); stitching needs "
+                             "structure in the overlap")
+    rows, cols = a.shape
+    cross = int(max_cross_px if max_cross_px is not None else round(0.1 * rows))
+    cross = min(cross, rows // 4)
+    strip = max(int(min_overlap_px), 8)
+    x_start = max(0, int(np.floor(cols * (1 - max_overlap))))
+    if cols - x_start < strip:
+        raise ValueError(f"max_overlap {max_overlap} leaves less than {strip} px to search")
+    template = hb[cross:rows - cross, :strip]
+    search = ha[:, x_start:]
+    score = cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED)
+    score = np.nan_to_num(score, nan=-1.0)
+    py, px = np.unravel_index(int(np.argmax(score)), score.shape)
+    dy0, dx0 = int(py) - cross, x_start + int(px)
+    crops = _overlap_crops(ha, hb, dy0, dx0)
+    if crops is None:
+        raise InputError("no overlap found between the views; check the layout (--layout) and "
+                         "that the views overlap")
+    # sub-pixel refinement: ECC (translation) on the overlap of the raw views; ECC is invariant
+    # to gain and offset, and the raw views resample without the bias a high-pass would add
+    _, _, (y0, x0) = crops
+    ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
+    rows_ov, cols_ov = crops[0].shape
+    ca = ra[y0:y0 + rows_ov, x0:x0 + cols_ov]
+    cb = rb[y0 - dy0:y0 - dy0 + rows_ov, x0 - dx0:x0 - dx0 + cols_ov]
+    warp = np.float32([[1, 0, x0 - dx0], [0, 1, y0 - dy0]])  # crop of a -> b
+    method = "ecc"
+    # two passes: the photometric ratio field is re-estimated once the shift is sub-pixel
+    for _ in range(2):
+        b_on_a = cv2.warpAffine(rb, warp, (cols_ov, rows_ov),
+                                flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                borderMode=cv2.BORDER_REPLICATE)
+        template = _match_photometry(ca, b_on_a, np.ones(ca.shape, bool))
+        try:
+            _, warp = cv2.findTransformECC(template, rb, warp, cv2.MOTION_TRANSLATION,
+                                           (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
+                                            1e-8), None, 1)
+        except cv2.error:
+            method = "phase-correlation"
+            break
+    if method == "ecc":
+        ty, tx = float(warp[1, 2]) - (y0 - dy0), float(warp[0, 2]) - (x0 - dx0)
+    else:
+        window = cv2.createHanningWindow((ca.shape[1], ca.shape[0]), cv2.CV_64F)
+        (tx, ty), _ = cv2.phaseCorrelate(cb.astype(np.float64), ca.astype(np.float64), window)
+    if abs(ty) > 2 or abs(tx) > 2:  # refinement ran away: keep the integer match
+        ty = tx = 0.0
+        method = "template"
+    dy, dx = dy0 - ty, dx0 - tx
+    correlation = _aligned_correlation(ha, hb, _translation_matrix(dy, dx))
+    overlap_px = cols - dx
+    info = {"correlation": correlation, "overlap_px": float(overlap_px),
+            "overlap_fraction": float(overlap_px / cols), "refinement": method}
+    if not np.isfinite(correlation) or correlation < min_correlation:
+        raise InputError(f"no reliable overlap found between the views (best normalised "
+                         f"correlation {correlation:.2f} < {min_correlation}); the views may not "
+                         "overlap, or the overlap has no texture")
+    return float(dy), float(dx), info
+
+
+def _aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray) -> float:
+    """NCC of a and b (high-passed) over their overlap once b is warped into a by ``h_ab``."""
+    rows, cols = ha.shape
+    warped = cv2.warpPerspective(hb, h_ab, (cols, rows), flags=cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    cover = cv2.warpPerspective(np.ones_like(hb), h_ab, (cols, rows), flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0.999
+    cover = ndimage.binary_erosion(cover, iterations=2)
+    if cover.sum() < 64:
+        return float("nan")
+    return _ncc(ha[cover], warped[cover])
+
+
+def _match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
+                      sigma_px: float = 8.0) -> np.ndarray:
+    """``template`` times the smooth ratio field blur(other) / blur(template) over ``mask``.
+
+    ``other`` is the second view already resampled onto ``template`` (roughly aligned). Both
+    blurs see the same scene content, so their ratio is the relative vignetting and gain
+    between the views; removing it keeps ECC from being pulled by fall-offs that differ
+    between the views (each view is darker towards its own edge).
+    """
+    m = mask.astype(np.float32)
+    t = np.where(mask, template, 0).astype(np.float32)
+    o = np.where(mask, other, 0).astype(np.float32)
+    blur_m = cv2.GaussianBlur(m, (0, 0), sigma_px)
+    blur_t = cv2.GaussianBlur(t, (0, 0), sigma_px) / np.maximum(blur_m, 1e-6)
+    blur_o = cv2.GaussianBlur(o, (0, 0), sigma_px) / np.maximum(blur_m, 1e-6)
+    scale = float(np.abs(blur_t[mask]).max()) if mask.any() else 0.0
+    if scale == 0 or float(blur_t[mask].min()) <= 0.05 * scale:
+        return template.astype(np.float32)  # signed or dark data: leave as is
+    ratio = np.where(mask, blur_o / np.maximum(blur_t, 1e-6 * scale), 1.0)
+    return (template * ratio).astype(np.float32)
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    img = _fill_nan(image)
+    lo, hi = np.percentile(img, [0.5, 99.5])
+    return np.clip(255 * (img - lo) / max(hi - lo, 1e-12), 0, 255).astype(np.uint8)
+
+
+def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
+                        min_inliers: int = 12, ransac_px: float = 2.0,
+                        min_correlation: float = 0.4) -> tuple[np.ndarray, dict]:
+    """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + ECC refinement.
+
+    Returns
+    -------
+    h_ab : (3, 3) float64 with ``h_ab[2, 2] == 1``.
+    info : dict with ``matches``, ``inliers``, ``reprojection_rms_px`` (RANSAC inliers under the
+        final homography), ``correlation``, ``refinement``.
+    """
+    if direction not in ("h", "v"):
+        raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
+    ua, ub = _to_uint8(a), _to_uint8(b)
+    sift = cv2.SIFT_create(nfeatures=8000, contrastThreshold=0.01)
+    ka, da = sift.detectAndCompute(ua, None)
+    kb, db = sift.detectAndCompute(ub, None)
+    if da is None or db is None or len(ka) < min_inliers or len(kb) < min_inliers:
+        raise InputError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
+                         "views have no texture; try --model translation")
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(db, da, k=2)
+    good = [m for m, *rest in knn if rest and m.distance < 0.75 * rest[0].distance]
+    pb = np.float32([kb[m.queryIdx].pt for m in good]).reshape(-1, 2)
+    pa = np.float32([ka[m.trainIdx].pt for m in good]).reshape(-1, 2)
+    axis = 0 if direction == "h" else 1
+    ahead = pa[:, axis] - pb[:, axis] > 0  # b lies after a: its points sit later in a
+    pa, pb = pa[ahead], pb[ahead]
+    if len(pa) < min_inliers:
+        raise InputError(f"only {len(pa)} feature matches in the expected overlap direction; the "
+                         "views may not overlap or have no texture")
+    h, inl = cv2.findHomography(pb, pa, cv2.RANSAC, ransac_px, maxIters=5000, confidence=0.999)
+    if h is None or inl is None or int(inl.sum()) < min_inliers:
+        n_in = 0 if inl is None else int(inl.sum())
+        raise InputError(f"only {n_in} RANSAC inliers (need {min_inliers}); the views may not "
+                         "overlap or have no texture")
+    inl = inl.ravel().astype(bool)
+    h = h / h[2, 2]
+    ha, hb = _highpass(a), _highpass(b)
+    before = _aligned_correlation(ha, hb, h)
+    refined, method = h, "ransac"
+    try:
+        rows, cols = a.shape
+        cover = cv2.warpPerspective(np.ones_like(hb), h, (cols, rows),
+                                    flags=cv2.INTER_LINEAR) > 0.999
+        ys, xs = np.nonzero(cover)
+        y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+        t_o = _translation_matrix(y0, x0)
+        warp = (np.linalg.inv(h) @ t_o).astype(np.float32)  # template (crop of a) -> b
+        warp /= warp[2, 2]
+        ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
+        for _ in range(2):  # re-estimate the photometric ratio once the fit is refined
+            b_on_a = cv2.warpPerspective(rb, warp, (x1 - x0, y1 - y0),
+                                         flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+            template = _match_photometry(ra[y0:y1, x0:x1], b_on_a, cover[y0:y1, x0:x1])
+            _, warp = cv2.findTransformECC(template, rb, warp, cv2.MOTION_HOMOGRAPHY,
+                                           (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
+                                            1e-7), None, 1)
+        candidate = np.linalg.inv(warp.astype(np.float64) @ np.linalg.inv(t_o))
+        candidate /= candidate[2, 2]
+        after = _aligned_correlation(ha, hb, candidate)
+        if np.isfinite(after) and after >= before - 0.01:
+            refined, method = candidate, "ecc"
+    except (cv2.error, ValueError):
+        pass
+    proj = cv2.perspectiveTransform(pb[inl].reshape(-1, 1, 2).astype(np.float64), refined)
+    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - pa[inl]) ** 2, axis=1))))
+    correlation = _aligned_correlation(ha, hb, refined)
+    if not np.isfinite(correlation) or correlation < min_correlation:
+        raise InputError(f"no reliable overlap found between the views (normalised correlation "
+                         f"{correlation:.2f} < {min_correlation} after the homography fit)")
+    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
+            "correlation": correlation, "refinement": method}
+    return refined, info
+
+
+# ---------------------------------------------------------------------------------------------
+# global solve, warping, gains, blending
+def _solve_translations(measured: list[tuple[int, int, np.ndarray]], n_views: int):
+    """Least-squares positions p_k (p_0 = 0) from pair measurements p_b - p_a = d_ab."""
+    rows = []
+    rhs = []
+    for a, b, d in measured:
+        row = np.zeros(n_views - 1)
+        if b:
+            row[b - 1] += 1
+        if a:
+            row[a - 1] -= 1
+        rows.append(row)
+        rhs.append(d)
+    m, r = np.array(rows), np.array(rhs)
+    pos, *_ = np.linalg.lstsq(m, r, rcond=None)
+    closure = float(np.sqrt(np.mean(np.sum((m @ pos - r) ** 2, axis=1))))
+    return np.vstack([np.zeros(2), pos]), closure
+
+
+def _canvas(transforms: list[np.ndarray], shape: tuple[int, int]) -> tuple[np.ndarray, tuple]:
+    """Translation view-0 coordinates -> panorama pixels, and the panorama (rows, cols)."""
+    rows, cols = shape
+    corners = np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]])
+    pts = np.concatenate([cv2.perspectiveTransform(corners.reshape(-1, 1, 2), t).reshape(-1, 2)
+                          for t in transforms])
+    x0, y0 = np.floor(pts.min(axis=0) + 1e-6)
+    x1, y1 = np.floor(pts.max(axis=0) + 1e-6)
+    out_shape = (int(y1 - y0) + 1, int(x1 - x0) + 1)
+    if out_shape[0] * out_shape[1] > 16 * rows * cols * len(transforms):
+        raise InputError(f"the transforms spread the views over {out_shape[1]} x {out_shape[0]} "
+                         "px; the registration failed (views without a true overlap?)")
+    return _translation_matrix(-y0, -x0), out_shape
+
+
+def _feather_weight(valid: np.ndarray) -> np.ndarray:
+    """Distance (px) to the nearest invalid pixel or the view's border, float32."""
+    padded = np.pad(valid, 1)
+    return ndimage.distance_transform_edt(padded)[1:-1, 1:-1].astype(np.float32)
+
+
+def _warp(image: np.ndarray, m: np.ndarray, out_shape: tuple[int, int], *, interp: int,
+          border: int = cv2.BORDER_REPLICATE) -> np.ndarray:
+    size = (out_shape[1], out_shape[0])
+    if np.allclose(m[2], [0, 0, 1]):
+        return cv2.warpAffine(image, m[:2].astype(np.float64), size, flags=interp,
+                              borderMode=border, borderValue=0)
+    return cv2.warpPerspective(image, m, size, flags=interp, borderMode=border, borderValue=0)
+
+
+def _multiband(images: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
+               levels: int = 5) -> np.ndarray:
+    """Burt-Adelson blend of (V, rows, cols) images with seam masks (winner-takes-all weights)."""
+    rows, cols = fallback.shape
+    levels = max(1, min(levels, int(np.log2(max(2, min(rows, cols) // 16)))))
+    winner = np.argmax(weights, axis=0)
+    covered = weights.max(axis=0) > 0
+    num = None
+    den = None
+    for k in range(images.shape[0]):
+        img = np.where(weights[k] > 0, images[k], fallback).astype(np.float32)
+        mask = ((winner == k) & covered).astype(np.float32)
+        gauss_img, gauss_mask = [img], [mask]
+        for _ in range(levels):
+            gauss_img.append(cv2.pyrDown(gauss_img[-1]))
+            gauss_mask.append(cv2.pyrDown(gauss_mask[-1]))
+        lap = []
+        for lvl in range(levels):
+            size = (gauss_img[lvl].shape[1], gauss_img[lvl].shape[0])
+            lap.append(gauss_img[lvl] - cv2.pyrUp(gauss_img[lvl + 1], dstsize=size))
+        lap.append(gauss_img[-1])
+        terms = [lp * gm for lp, gm in zip(lap, gauss_mask, strict=True)]
+        num = terms if num is None else [n + t for n, t in zip(num, terms, strict=True)]
+        den = gauss_mask if den is None else [d + g for d, g in zip(den, gauss_mask, strict=True)]
+    bands = [n / np.maximum(d, 1e-6) for n, d in zip(num, den, strict=True)]
+    out = bands[-1]
+    for lvl in range(levels - 1, -1, -1):
+        size = (bands[lvl].shape[1], bands[lvl].shape[0])
+        out = cv2.pyrUp(out, dstsize=size) + bands[lvl]
+    return out
+
+
+def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) -> float | None:
+    """RMS (px) of local shifts left between two warped views, over blocks of their overlap."""
+    from skimage.registration import phase_cross_correlation
+
+    ys, xs = np.nonzero(both)
+    if ys.size < 1024:
+        return None
+    y0, y1, x0, x1 = ys.min() + 2, ys.max() - 1, xs.min() + 2, xs.max() - 1
+    if y1 - y0 < 32 or x1 - x0 < 32:
+        return None
+    ha, hb = _highpass(pano_a[y0:y1, x0:x1]), _highpass(pano_b[y0:y1, x0:x1])
+    ok = both[y0:y1, x0:x1]
+    long_axis = 0 if (y1 - y0) >= (x1 - x0) else 1
+    n_blocks = max(1, min(4, (ha.shape[long_axis]) // 64))
+    shifts = []
+    for block in range(n_blocks):
+        sl = [slice(None), slice(None)]
+        length = ha.shape[long_axis]
+        sl[long_axis] = slice(block * length // n_blocks, (block + 1) * length // n_blocks)
+        sl = tuple(sl)
+        if not ok[sl].all() or ha[sl].std() == 0:
+            continue
+        shift, _, _ = phase_cross_correlation(ha[sl], hb[sl], upsample_factor=20)
+        shifts.append(shift)
+    if not shifts:
+        return None
+    return float(np.sqrt(np.mean(np.sum(np.square(shifts), axis=1))))
+
+
+def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
+           model: str = "translation", distortion_k1: float = 0.0,
+           transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
+           max_overlap: float = 0.7, min_overlap_px: int = 16,
+           min_correlation: float = 0.4) -> tuple[np.ndarray, dict]:
+    """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
+
+    Parameters
+    ----------
+    views : (V, rows, cols) or (V, C, rows, cols) array, or a sequence of V equal arrays;
+        V = 2 (side by side or one above the other) or 4 (2 x 2, row-major). NaN = no data.
+    layout : "1x2", "2x1", "2x2" or "auto" (4 views -> 2x2; 2 views -> the direction whose
+        overlap correlates best).
+    model : "translation" or "homography".
+    distortion_k1 : known constant radial distortion removed from every view first (see
+        :func:`undistort`); 0 = none.
+    transform : a previous report's transform (``report["transform"]``) to reapply to views of
+        the same rig instead of registering them again.
+    blend : "feather" (weights = distance to the view's edge) or "multiband".
+    match_gain : match per-view, per-channel exposure from the overlaps (view 0 is the reference).
+    max_overlap, min_overlap_px, min_correlation : registration search limits, see
+        :func:`estimate_translation`.
+
+    Returns
+    -------
+    panorama : (rows', cols') float32, or (C, rows', cols') for colour views; NaN where no view
+        covers the panorama.
+    report : dict (JSON-ready): ``model``, ``layout``, ``transform`` (reusable), ``pairs`` (per
+        neighbour pair: shift or homography, overlap, correlation, inliers, residual_px),
+        ``gains``, ``residual_px``, ``closure_px``, ``panorama_shape``, ``origin_px``,
+        ``coverage_fraction``.
+    """
+    stack, colour = as_view_stack(views)
+    n_views, n_chan, rows, cols = stack.shape
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+    if blend not in BLENDS:
+        raise ValueError(f"blend must be one of {BLENDS}, got {blend!r}")
+    if layout != "auto" and layout not in LAYOUTS:
+        raise ValueError(f"layout must be 'auto' or one of {sorted(LAYOUTS)}, got {layout!r}")
+    if layout != "auto" and LAYOUTS[layout][0] * LAYOUTS[layout][1] != n_views:
+        raise InputError(f"layout {layout} needs {LAYOUTS[layout][0] * LAYOUTS[layout][1]} views, "
+                         f"got {n_views}")
+    if distortion_k1:
+        stack = np.stack([[undistort(ch, distortion_k1) for ch in v] for v in stack])
+    luma = np.nanmean(stack, axis=1) if n_chan > 1 else stack[:, 0]
+    for k in range(n_views):
+        if not np.isfinite(luma[k]).any():
+            raise InputError(f"view {k} holds no data (all NaN)")
+        if float(np.nanstd(luma[k])) == 0.0:
+            raise InputError(f"view {k} has no texture (constant image); stitching needs "
+                             "structure in the overlap")
+    search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
+                  min_correlation=min_correlation)
+    pair_info: list[dict] = []
+    closure = None
+    if transform is not None:
+        transforms, layout, source = _check_transform(transform, n_views, (rows, cols), model)
+    else:
+        source = "estimated"
+        if layout == "auto":
+            layout = "2x2" if n_views == 4 else _auto_layout(luma, search)
+        transforms, pair_info, closure = _register(luma, layout, model, search)
+    offset, pano_shape = _canvas(transforms, (rows, cols))
+    warped = np.full((n_views, n_chan) + pano_shape, np.nan, np.float32)
+    weights = np.zeros((n_views,) + pano_shape, np.float32)
+    for k in range(n_views):
+        m = offset @ transforms[k]
+        valid = np.isfinite(stack[k]).all(axis=0)
+        cover = _warp(valid.astype(np.float32), m, pano_shape, interp=cv2.INTER_LINEAR,
+                      border=cv2.BORDER_CONSTANT) > 0.999
+        weights[k] = np.where(cover, _warp(_feather_weight(valid), m, pano_shape,
+                                           interp=cv2.INTER_LINEAR), 0)
+        for c in range(n_chan):
+            img = _warp(_fill_nan(stack[k, c]), m, pano_shape, interp=cv2.INTER_LANCZOS4)
+            warped[k, c] = np.where(cover, img, np.nan)
+    gains = np.ones((n_views, n_chan))
+    pairs = _pairs(layout)
+    if match_gain:
+        gains = _match_gains(warped, weights, pairs)
+        warped *= gains[:, :, None, None].astype(np.float32)
+    total = weights.sum(axis=0)
+    covered = total > 0
+    panorama = np.full((n_chan,) + pano_shape, np.nan, np.float32)
+    for c in range(n_chan):
+        filled = np.nan_to_num(warped[:, c])
+        feather = (filled * weights).sum(axis=0) / np.maximum(total, 1e-12)
+        if blend == "multiband":
+            feather = _multiband(filled, weights, feather)
+        panorama[c] = np.where(covered, feather, np.nan)
+    residuals = []
+    for (a, b, _), info in zip(pairs, pair_info or [{} for _ in pairs], strict=True):
+        both = (weights[a] > 0) & (weights[b] > 0)
+        res = _block_residual(warped[a].mean(axis=0), warped[b].mean(axis=0), both)
+        info["residual_px"] = res
+        info["overlap_px_area"] = int(both.sum())
+        if res is not None:
+            residuals.append(res)
+    if transform is not None:
+        pair_info = [{"views": [a, b], "direction": d} for a, b, d in pairs]
+    report = {
+        "model": model, "layout": layout, "n_views": n_views, "channels": n_chan if colour else 1,
+        "view_shape": [rows, cols], "distortion_k1": distortion_k1, "blend": blend,
+        "transform_source": source,
+        "transform": {"model": model, "layout": layout, "view_shape": [rows, cols],
+                      "distortion_k1": distortion_k1,
+                      "view_to_reference": [t.tolist() for t in transforms]},
+        "shifts_px": [[float(t[1, 2]), float(t[0, 2])] for t in transforms],
+        "pairs": pair_info,
+        "gains": gains.tolist(),
+        "residual_px": float(np.sqrt(np.mean(np.square(residuals)))) if residuals else None,
+        "closure_px": closure,
+        "panorama_shape": list(pano_shape),
+        "origin_px": [float(offset[1, 2]), float(offset[0, 2])],
+        "coverage_fraction": float(covered.mean()),
+    }
+    return (panorama if colour else panorama[0]), report
+
+
+def _auto_layout(luma: np.ndarray, search: dict) -> str:
+    best, best_corr, errors = None, -np.inf, []
+    for layout, direction in (("1x2", "h"), ("2x1", "v")):
+        try:
+            _, _, info = estimate_translation(luma[0], luma[1], direction=direction, **search)
+        except InputError as err:
+            errors.append(str(err))
+            continue
+        if info["correlation"] > best_corr:
+            best, best_corr = layout, info["correlation"]
+    if best is None:
+        raise InputError(f"no overlap found side by side nor one above the other ({errors[0]})")
+    return best
+
+
+def _register(luma: np.ndarray, layout: str, model: str, search: dict):
+    n_views = luma.shape[0]
+    pair_info = []
+    measured = []
+    for a, b, direction in _pairs(layout):
+        try:
+            if model == "translation":
+                dy, dx, info = estimate_translation(luma[a], luma[b], direction=direction,
+                                                    **search)
+                measured.append((a, b, np.array([dy, dx])))
+                info["shift_px"] = [dy, dx]
+            else:
+                h, info = estimate_homography(luma[a], luma[b], direction=direction,
+                                              min_correlation=search["min_correlation"])
+                measured.append((a, b, h))
+                info["homography"] = h.tolist()
+        except InputError as err:
+            raise InputError(f"views {a} and {b}: {err}") from err
+        pair_info.append({"views": [a, b], "direction": direction, **info})
+    closure = None
+    if model == "translation":
+        pos, closure = _solve_translations(measured, n_views)
+        transforms = [_translation_matrix(*p) for p in pos]
+        if n_views == 2:
+            closure = None
+    else:
+        h = {(a, b): m for a, b, m in measured}
+        transforms = [np.eye(3)] * n_views
+        transforms[1] = h[(0, 1)]
+        if n_views == 4:
+            transforms[2] = h[(0, 2)]
+            via_1 = h[(0, 1)] @ h[(1, 3)]
+            via_2 = h[(0, 2)] @ h[(2, 3)]
+            transforms[3] = via_1 / via_1[2, 2]
+            rows, cols = luma.shape[1:]
+            corners = np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]])
+            p1 = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), via_1)
+            p2 = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), via_2 / via_2[2, 2])
+            closure = float(np.max(np.linalg.norm((p1 - p2).reshape(-1, 2), axis=1)))
+    return transforms, pair_info, closure
+
+
+def _check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str):
+    try:
+        mats = [np.asarray(t, dtype=np.float64) for t in transform["view_to_reference"]]
+        layout = transform["layout"]
+        view_shape = tuple(transform["view_shape"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise InputError(f"the transform is not a plenocli stitch transform (missing or bad "
+                         f"{err}); save one with --transform-out") from err
+    if len(mats) != n_views or any(m.shape != (3, 3) for m in mats):
+        raise InputError(f"the transform holds {len(mats)} view transforms for {n_views} views")
+    if view_shape != shape:
+        raise InputError(f"the transform was made for views of {view_shape[1]} x {view_shape[0]} "
+                         f"px, these are {shape[1]} x {shape[0]}; register them again")
+    if transform.get("model", model) != model:
+        raise InputError(f"the transform is a {transform.get('model')} model but --model is "
+                         f"{model}; pass --model {transform.get('model')}")
+    return mats, layout, "given"
+
+
+def _match_gains(warped: np.ndarray, weights: np.ndarray,
+                 pairs: list[tuple[int, int, str]]) -> np.ndarray:
+    """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed)."""
+    n_views, n_chan = warped.shape[:2]
+    gains = np.ones((n_views, n_chan))
+    for c in range(n_chan):
+        rows, rhs = [], []
+        for a, b, _ in pairs:
+            both = (weights[a] > 0) & (weights[b] > 0)
+            both &= np.isfinite(warped[a, c]) & np.isfinite(warped[b, c])
+            mean_a = float(warped[a, c][both].mean()) if both.any() else 0.0
+            mean_b = float(warped[b, c][both].mean()) if both.any() else 0.0
+            if mean_a <= 0 or mean_b <= 0:
+                continue  # no usable overlap or signed data: leave this pair out
+            row = np.zeros(n_views - 1)
+            if b:
+                row[b - 1] += 1
+            if a:
+                row[a - 1] -= 1
+            rows.append(row)
+            rhs.append(np.log(mean_a / mean_b))
+        if rows:
+            sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
+            gains[1:, c] = np.exp(sol)
+    return gains
