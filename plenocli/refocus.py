@@ -373,20 +373,37 @@ def refocus(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0
     return image, weights
 
 
-def sharpness(image: np.ndarray) -> float:
-    """Normalised Laplacian energy: mean(Lap(I)^2) / var(I) over covered pixels.
+def sharpness(image: np.ndarray, *, lens_period_px: float | None = None) -> float:
+    """Focus score of a refocused image: normalised Laplacian energy below the lens frequency.
 
-    ``image`` is (rows, cols) or (channels, rows, cols) (channels are averaged first); NaN marks
-    uncovered pixels. Lap is the 5-point Laplacian, used only where all five pixels are covered.
-    Dividing by the variance makes the score independent of brightness and contrast, so scores
-    of one focal sweep compare planes by their share of fine detail: the sharpest plane has the
-    highest score. Returns NaN when fewer than 16 pixels are usable.
+    ``image`` is (rows, cols) or (channels, rows, cols) (channels are averaged); NaN marks
+    uncovered pixels. The micro-lens grid leaves a pattern of period s * pitch in every refocused
+    image whatever g (micro-image centres land at s * c_ij), strongest at wrong g; a plain
+    Laplacian would reward it. So the image is first smoothed with a Gaussian of
+    sigma = ``lens_period_px`` / 2 (NaN-aware; it removes that period to < 1 %), then::
+
+        score = mean(Lap(I_s)^2) / var(I_s)
+
+    over covered pixels (5-point Laplacian, only where all five are covered). Dividing by the
+    variance makes the score independent of brightness and contrast, so scores of one focal
+    sweep compare planes by their share of fine (but lens-resolved) detail: the sharpest plane
+    has the highest score. Returns NaN when fewer than 16 pixels are usable.
     """
+    from scipy import ndimage
+
     img = np.asarray(image, float)
     if img.ndim == 3:
         img = img.mean(axis=0)
     if img.ndim != 2:
         raise ValueError(f"image must be 2-D or 3-D, got shape {img.shape}")
+    if lens_period_px is not None:
+        if not (np.isfinite(lens_period_px) and lens_period_px > 0):
+            raise ValueError(f"lens_period_px must be positive, got {lens_period_px}")
+        covered = np.isfinite(img)
+        sigma = lens_period_px / 2.0
+        num = ndimage.gaussian_filter(np.where(covered, img, 0.0), sigma)
+        den = ndimage.gaussian_filter(covered.astype(float), sigma)
+        img = np.where(covered & (den > 0.5), num / np.maximum(den, 1e-12), np.nan)
     c = img[1:-1, 1:-1]
     lap = img[:-2, 1:-1] + img[2:, 1:-1] + img[1:-1, :-2] + img[1:-1, 2:] - 4.0 * c
     ok = np.isfinite(lap)
