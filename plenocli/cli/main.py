@@ -4,6 +4,8 @@ import click
 
 from plenocli import __version__
 from plenocli.cli.decode import decode
+from plenocli.cli.refocus import refocus
+from plenocli.cli.sai import sai
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -15,5 +17,5 @@ def cli():
     """
 
 
-for command in (decode,):
+for command in (decode, refocus, sai):
     cli.add_command(command)

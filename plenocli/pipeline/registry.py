@@ -27,10 +27,12 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import decode
+    from plenocli.pipeline.stages import decode, refocus, sai
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
+        Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
     ]
     return {s.name: s for s in table}
 
