@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import warnings
+from pathlib import Path
+
 import numpy as np
 
 from plenocli import refocus as rf
@@ -29,6 +32,20 @@ def check_options(*, s, view, kernel, mask_width, radius, min_weight) -> None:
         raise ConfigError(f"--radius must be a positive number of pixels, got {radius}")
     if not (np.isfinite(min_weight) and min_weight >= 0):
         raise ConfigError(f"--min-weight must be >= 0, got {min_weight}")
+
+
+def load_grid(path: str, meta: dict, shape: tuple[int, int]) -> LensGrid:
+    """Read a lens grid; a RayCalibData XML is placed on the frames' active area (its offsets
+    are measured from the image centre)."""
+    if Path(path).suffix.lower() != ".xml":
+        return read_grid(path)
+    top, left, bottom, right = (int(v) for v in (meta.get("active_area")
+                                                 or (0, 0, *shape)))
+    try:
+        return read_grid(path, image_shape=(bottom - top, right - left))
+    except TypeError as err:  # a read_grid without XML support
+        raise InputError(f"{path}: this plenocli cannot read RayCalibData XML grids; "
+                         "use a plenocli YAML grid") from err
 
 
 def frame_region(shape: tuple[int, int], meta: dict, grid: LensGrid,
@@ -69,7 +86,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     except ValueError as err:
         raise ConfigError(f"--g: {err}") from err
     data, meta = tiffio.read_image(input)
-    lens_grid = read_grid(grid)
+    lens_grid = load_grid(grid, meta, data.shape[1:])
     r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
     cfa = shift_pattern(meta.get("cfa"), r0, c0)
     pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
@@ -119,5 +136,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         k = g_values.index(best) if best is not None else 0
         chunk = stack[k * per:(k + 1) * per]
         rgb = cfa or [n.split("@")[0] for n in names[:per]] == list(rf.CHANNELS)
-        write_png(preview, np.dstack(chunk) if rgb else np.nanmean(chunk, axis=0),
-                  protect=(input, grid))
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+            picture = np.dstack(chunk) if rgb else np.nanmean(chunk, axis=0)
+        write_png(preview, picture, protect=(input, grid))

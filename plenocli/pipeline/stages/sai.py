@@ -8,9 +8,8 @@ from plenocli import sai as sai_mod
 from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError
 from plenocli.io import tiffio
-from plenocli.io.gridfile import read_grid
 from plenocli.io.preview import write_png
-from plenocli.pipeline.stages.refocus import frame_region
+from plenocli.pipeline.stages.refocus import frame_region, load_grid
 from plenocli.progress import log
 from plenocli.provenance import stage_record
 
@@ -25,7 +24,7 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
     pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
-    lens_grid = read_grid(grid) if grid else None
+    lens_grid = load_grid(grid, meta, data.shape[1:]) if grid else None
     if lens_grid is not None:
         r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
     else:  # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
