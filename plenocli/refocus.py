@@ -106,6 +106,8 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,
     half = ntap // 2
     bins = table.shape[0] - 1
     ni, nj = cx_tab.shape
+    pitch2 = basis[0, 0] ** 2 + basis[0, 1] ** 2
+    inner2 = 0.25 * pitch2 * (1.0 - 1e-9)
     for band in prange(n_bands):
         out_r0 = max(band_out[band], 0)
         out_r1 = min(band_out[n_bands + band], rows_out)  # exclusive
@@ -115,30 +117,39 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,
             y = r + y0
             run_i = -(1 << 62)
             run_j = 0
+            bi = 0
+            bj = 0
+            lat_x = 1e300  # no current lens: forces a search at the first pixel
+            lat_y = 1e300
             run_y = 0.0
             lo = cols_out
             hi = 0
             for c in range(cols):
                 x = c + x0
-                # nearest lattice centre: a corner of the enclosing lattice cell
-                dxo = x - offset[0]
-                dyo = y - offset[1]
-                i0 = math.floor(inv[0, 0] * dxo + inv[0, 1] * dyo)
-                j0 = math.floor(inv[1, 0] * dxo + inv[1, 1] * dyo)
-                best = 1e300
-                bi = 0
-                bj = 0
-                for di in range(2):
-                    for dj in range(2):
-                        px = (i0 + di) * basis[0, 0] + (j0 + dj) * basis[1, 0] - dxo
-                        py = (i0 + di) * basis[0, 1] + (j0 + dj) * basis[1, 1] - dyo
-                        d2 = px * px + py * py
-                        if d2 < best:
-                            best = d2
-                            bi = int(i0) + di
-                            bj = int(j0) + dj
-                cx = offset[0] + bi * basis[0, 0] + bj * basis[1, 0]
-                cy = offset[1] + bi * basis[0, 1] + bj * basis[1, 1]
+                # nearest lattice centre. Inside the circle of radius pitch / 2 around the
+                # current lens's lattice centre no other lattice point can be nearer (lattice
+                # points are >= pitch apart): ~90 % of pixels skip the search.
+                ex = x - lat_x
+                ey = y - lat_y
+                if ex * ex + ey * ey >= inner2:
+                    dxo = x - offset[0]
+                    dyo = y - offset[1]
+                    i0 = math.floor(inv[0, 0] * dxo + inv[0, 1] * dyo)
+                    j0 = math.floor(inv[1, 0] * dxo + inv[1, 1] * dyo)
+                    best = 1e300
+                    for di in range(2):  # the nearest is a corner of the enclosing lattice cell
+                        for dj in range(2):
+                            px = (i0 + di) * basis[0, 0] + (j0 + dj) * basis[1, 0] - dxo
+                            py = (i0 + di) * basis[0, 1] + (j0 + dj) * basis[1, 1] - dyo
+                            d2 = px * px + py * py
+                            if d2 < best:
+                                best = d2
+                                bi = int(i0) + di
+                                bj = int(j0) + dj
+                    lat_x = offset[0] + bi * basis[0, 0] + bj * basis[1, 0]
+                    lat_y = offset[1] + bi * basis[0, 1] + bj * basis[1, 1]
+                cx = lat_x
+                cy = lat_y
                 ti = bi - imin
                 tj = bj - jmin
                 if 0 <= ti < ni and 0 <= tj < nj and math.isfinite(cx_tab[ti, tj]):
@@ -154,7 +165,7 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,
                     run_i = bi
                     run_j = bj
                     run_y = s * (g * dy + cy)
-                ch = chan_map[r % 2, c % 2]
+                ch = chan_map[r & 1, c & 1]
                 if ch < 0:
                     continue
                 v = frame[r, c]
