@@ -137,3 +137,28 @@ def test_sai_bad_n_is_a_usage_error(tmp_path):
     result = invoke("sai", tmp_path / "f.tif", "-n", 0, "-o", tmp_path / "v.tif")
     assert result.exit_code == 2
     assert not (tmp_path / "v.tif").exists()
+
+
+def test_frames_with_margins_are_cropped_to_the_grid_image(scene, tmp_path):
+    folder, _ = scene
+    frames, meta = tiffio.read_image(folder / "frames.tif")
+    top, left = 6, 10  # over-scan margins around the same image
+    padded = np.zeros((1, frames.shape[1] + top + 4, frames.shape[2] + left + 2), np.float32)
+    padded[:, top:top + frames.shape[1], left:left + frames.shape[2]] = frames
+    grid = read_grid(folder / "grid.yaml")
+    on_sensor = LensGrid(pitch_px=grid.pitch_px, angle_rad=grid.angle_rad,
+                         offset_xy=grid.offset_xy, image_shape=grid.image_shape,
+                         sensor_origin=(top, left))
+    write_grid(tmp_path / "grid.yaml", on_sensor, {})
+    tiffio.write_image(tmp_path / "padded.tif", padded,
+                       {**meta, "origin": [0, 0],
+                        "active_area": [top, left, top + frames.shape[1], left + frames.shape[2]]})
+    for name, frames_path, grid_path in (("a", folder / "frames.tif", folder / "grid.yaml"),
+                                         ("b", tmp_path / "padded.tif", tmp_path / "grid.yaml")):
+        result = invoke("refocus", frames_path, "--grid", grid_path, "--view", "left",
+                        "-o", tmp_path / f"{name}.tif")
+        assert result.exit_code == 0, result.output
+    a, _ = tiffio.read_image(tmp_path / "a.tif")
+    b, meta_b = tiffio.read_image(tmp_path / "b.tif")
+    np.testing.assert_array_equal(a, b)
+    assert meta_b["refocus"]["crop_sensor_origin"] == [top, left]
