@@ -7,7 +7,9 @@ from plenocli.cli.bias import bias
 from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
+from plenocli.cli.refocus import refocus
 from plenocli.cli.run import run
+from plenocli.cli.sai import sai
 from plenocli.cli.simulate import simulate
 from plenocli.cli.stitch import stitch
 
@@ -26,6 +28,8 @@ for command in (
     decode,
     bias,
     flat,
+    refocus,
+    sai,
     crosstalk,
     stitch,
     run,

@@ -27,13 +27,15 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import bias, crosstalk, decode, flat, stitch
+    from plenocli.pipeline.stages import bias, crosstalk, decode, flat, refocus, sai, stitch
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
         Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
         Stage("flat", flat.run, inputs=("input", "white", "gain"),
               outputs=("output", "save_gain", "preview")),
+        Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
+        Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),
               outputs=("output", "preview")),
         Stage("stitch", stitch.run, inputs=("input", "transform_in"),

@@ -12,10 +12,11 @@ from collections.abc import Callable
 
 def kinds() -> dict[str, Callable[..., dict]]:
     """Simulation kinds by name: ``write(out_dir, *, seed, size, ...) -> truth``."""
-    from plenocli.synth import dualpixel, rig
+    from plenocli.synth import dualpixel, focused, rig
 
     return {
         "dualpixel": dualpixel.write_capture_set,
+        "raytrix-scene": focused.write_raytrix_scene,
         "stereo-rig": rig.write_stereo_rig,
         "quad-rig": rig.write_quad_rig,
     }

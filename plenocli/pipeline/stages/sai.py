@@ -1,0 +1,67 @@
+"""Stage ``sai``: frames TIFF -> N x N sub-aperture images (Eq. 1, or S-hat with a grid)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli import sai as sai_mod
+from plenocli.cfa import shift_pattern
+from plenocli.errors import ConfigError
+from plenocli.io import tiffio
+from plenocli.io.preview import write_png
+from plenocli.pipeline.stages.refocus import frame_region, load_grid
+from plenocli.progress import log
+from plenocli.provenance import stage_record
+
+
+def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
+        cfa_layout: str = "pixel", preview: str | None = None) -> None:
+    """Demultiplex every page of ``input`` into n * n views (S00, S01, ...)."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ConfigError(f"-n must be a positive integer (pixels per micro-image side), got {n}")
+    if cfa_layout not in sai_mod.CFA_LAYOUTS:
+        raise ConfigError(f"unknown --cfa-layout {cfa_layout!r}; choose one of "
+                          f"{', '.join(sai_mod.CFA_LAYOUTS)}")
+    data, meta = tiffio.read_image(input)
+    pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    lens_grid = load_grid(grid, meta, data.shape[1:]) if grid else None
+    if lens_grid is not None:
+        r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
+    else:  # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
+        r0, c0, r1, c1 = (int(v) for v in (meta.get("active_area")
+                                           or (0, 0, *data.shape[1:])))
+    cfa = shift_pattern(meta.get("cfa"), r0, c0)
+    views, names = [], []
+    for page, name in zip(data, pages, strict=True):
+        crop = page[r0:r1, c0:c1]
+        if lens_grid is not None:
+            try:
+                out, _ = sai_mod.approximate_sai(crop.astype(np.float32), crop_grid, n)
+            except ValueError as err:
+                raise ConfigError(f"{grid}: {err}") from err
+        else:
+            out = sai_mod.demultiplex(crop, n)
+        views.append(out)
+        names.extend(sai_mod.view_names(n) if len(pages) == 1
+                     else [f"{name}.{v}" for v in sai_mod.view_names(n)])
+    stack = np.concatenate(views)
+    colours = sai_mod.sai_colours(cfa, n, layout=cfa_layout) * len(pages)
+    same = len(set(colours)) == 1 and colours[0] is not None and len(colours[0]) == 4
+    params = dict(n=n, grid=grid, cfa_layout=cfa_layout)
+    record = stage_record("sai", params, {"input": input, "grid": grid})
+    out_meta = tiffio.derived_meta(
+        meta, record, views=names, cfa=colours[0] if same else None, view_colours=colours,
+        origin=None, active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
+        black_level=None, white_level=None,
+        sai={"n": n, "approximate": lens_grid is not None, "cfa_layout": cfa_layout,
+             "crop_sensor_origin": [int((meta.get("origin") or [0, 0])[0]) + r0,
+                                    int((meta.get("origin") or [0, 0])[1]) + c0]})
+    protect = (input,) + ((grid,) if grid else ())
+    tiffio.write_image(output, stack, out_meta, protect=protect)
+    log.info("sai: %s -> %s (%d views of %d x %d%s)", input, output, stack.shape[0],
+             stack.shape[2], stack.shape[1], ", approximate S-hat" if lens_grid else "")
+    if preview:
+        nn = n * n
+        mosaic = np.block([[stack[i * n + j].astype(np.float32) for j in range(n)]
+                           for i in range(n)]) if nn > 1 else stack[0]
+        write_png(preview, mosaic, protect=protect)

@@ -1,0 +1,164 @@
+"""`plenocli refocus` and `plenocli sai` end to end, including bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import tiffio
+from plenocli.io.gridfile import read_grid, write_grid
+from plenocli.lensgrid import LensGrid
+from plenocli.pipeline.registry import get_stages
+from plenocli.sai import view_names
+from plenocli.synth.focused import write_raytrix_scene
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    out = tmp_path_factory.mktemp("scene")
+    truth = write_raytrix_scene(out, seed=21, rows=240, cols=320)
+    return out, truth
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def test_refocus_writes_the_image_and_preview(scene, tmp_path):
+    folder, truth = scene
+    out, png = tmp_path / "full.tif", tmp_path / "full.png"
+    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                    "--s", 0.2, "--g", 4, "-o", out, "--preview", png)
+    assert result.exit_code == 0, result.output
+    image, meta = tiffio.read_image(out)
+    texture, _ = tiffio.read_image(folder / "texture.tif")
+    assert image.shape == texture.shape and image.dtype == np.float32
+    ok = np.isfinite(image[0])
+    ok[:8], ok[-8:], ok[:, :8], ok[:, -8:] = False, False, False, False
+    assert np.abs(image[0][ok] - texture[0][ok]).max() < 0.01
+    assert meta["provenance"]["stage"] == "refocus" and meta["refocus"]["view"] == "full"
+    assert png.stat().st_size > 0
+
+
+def test_focal_sweep_finds_the_true_g(scene, tmp_path, caplog):
+    folder, truth = scene
+    out = tmp_path / "sweep.tif"
+    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                    "--g", "2:6:0.5", "-o", out)
+    assert result.exit_code == 0, result.output
+    image, meta = tiffio.read_image(out)
+    assert image.shape[0] == 9 and meta["views"][4] == "raw@g4"
+    scores = meta["sharpness"]["scores"]
+    assert [s["g"] for s in scores] == pytest.approx(np.arange(2, 6.01, 0.5))
+    assert meta["sharpness"]["best_g"] == pytest.approx(truth["g_true"])
+    assert any("g = 4  sharpness" in r.getMessage() for r in caplog.records)
+
+
+def test_bayer_frames_give_rgb_pages(tmp_path):
+    write_raytrix_scene(tmp_path, seed=22, rows=160, cols=200, cfa="RGGB")
+    out = tmp_path / "rgb.tif"
+    result = invoke("refocus", tmp_path / "frames.tif", "--grid", tmp_path / "grid.yaml",
+                    "--view", "right", "-o", out, "--preview", tmp_path / "rgb.png")
+    assert result.exit_code == 0, result.output
+    image, meta = tiffio.read_image(out)
+    assert image.shape[0] == 3 and meta["views"] == ["R", "G", "B"]
+
+
+def one_line_error(result, *words):
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error:")
+    for word in words:
+        assert word in lines[0]
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--s", "0"], ["--s", "0.0"]), (["--s", "-0.2"], ["--s"]),
+    (["--view", "up"], ["view", "'up'", "left"]), (["--kernel", "cubic"], ["kernel"]),
+    (["--g", "6:2:1"], ["--g"]), (["--mask-width", "-2"], ["--mask-width"]),
+])
+def test_bad_options_fail_cleanly(scene, tmp_path, args, words):
+    folder, _ = scene
+    out = tmp_path / "bad.tif"
+    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml", "-o", out,
+                    *args)
+    one_line_error(result, *words)
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_grid_and_frame_sizes_that_disagree(scene, tmp_path):
+    folder, _ = scene
+    grid = read_grid(folder / "grid.yaml")
+    bigger = LensGrid(pitch_px=grid.pitch_px, angle_rad=grid.angle_rad, offset_xy=grid.offset_xy,
+                      image_shape=(480, 640))
+    write_grid(tmp_path / "big.yaml", bigger, {})
+    out = tmp_path / "out" / "bad.tif"
+    result = invoke("refocus", folder / "frames.tif", "--grid", tmp_path / "big.yaml", "-o", out)
+    one_line_error(result, "640 x 480", "320 x 240")
+    assert not out.exists()
+
+
+def test_missing_grid_fails_cleanly(scene, tmp_path):
+    folder, _ = scene
+    out = tmp_path / "bad.tif"
+    result = invoke("refocus", folder / "frames.tif", "--grid", tmp_path / "none.yaml", "-o", out)
+    one_line_error(result, "none.yaml")
+    assert not out.exists()
+
+
+def test_registered_stages():
+    stages = get_stages()
+    assert stages["refocus"].inputs == ("input", "grid")
+    assert set(stages["refocus"].parameters()) >= {"s", "g", "view", "mask_width", "kernel"}
+    assert "n" in stages["sai"].parameters()
+
+
+def test_sai_on_a_quad_pixel_capture(tmp_path):
+    rng = np.random.default_rng(23)
+    views = rng.integers(0, 4096, (4, 30, 40)).astype(np.uint16)
+    frame = np.empty((60, 80), np.uint16)
+    for k in range(4):
+        frame[k // 2::2, k % 2::2] = views[k]
+    meta = {"views": ["raw"], "cfa": "RGGB", "origin": [0, 0], "active_area": [0, 0, 60, 80]}
+    tiffio.write_image(tmp_path / "quad.tif", frame, meta)
+    out = tmp_path / "views.tif"
+    result = invoke("sai", tmp_path / "quad.tif", "-n", 2, "--cfa-layout", "micro-image",
+                    "-o", out, "--preview", tmp_path / "views.png")
+    assert result.exit_code == 0, result.output
+    got, got_meta = tiffio.read_image(out)
+    assert np.array_equal(got, views)
+    assert got_meta["views"] == view_names(2) and got_meta["cfa"] == "RGGB"
+
+
+def test_sai_bad_n_is_a_usage_error(tmp_path):
+    tiffio.write_image(tmp_path / "f.tif", np.zeros((8, 8), np.float32), {"views": ["raw"]})
+    result = invoke("sai", tmp_path / "f.tif", "-n", 0, "-o", tmp_path / "v.tif")
+    assert result.exit_code == 2
+    assert not (tmp_path / "v.tif").exists()
+
+
+def test_frames_with_margins_are_cropped_to_the_grid_image(scene, tmp_path):
+    folder, _ = scene
+    frames, meta = tiffio.read_image(folder / "frames.tif")
+    top, left = 6, 10  # over-scan margins around the same image
+    padded = np.zeros((1, frames.shape[1] + top + 4, frames.shape[2] + left + 2), np.float32)
+    padded[:, top:top + frames.shape[1], left:left + frames.shape[2]] = frames
+    grid = read_grid(folder / "grid.yaml")
+    on_sensor = LensGrid(pitch_px=grid.pitch_px, angle_rad=grid.angle_rad,
+                         offset_xy=grid.offset_xy, image_shape=grid.image_shape,
+                         sensor_origin=(top, left))
+    write_grid(tmp_path / "grid.yaml", on_sensor, {})
+    tiffio.write_image(tmp_path / "padded.tif", padded,
+                       {**meta, "origin": [0, 0],
+                        "active_area": [top, left, top + frames.shape[1], left + frames.shape[2]]})
+    for name, frames_path, grid_path in (("a", folder / "frames.tif", folder / "grid.yaml"),
+                                         ("b", tmp_path / "padded.tif", tmp_path / "grid.yaml")):
+        result = invoke("refocus", frames_path, "--grid", grid_path, "--view", "left",
+                        "-o", tmp_path / f"{name}.tif")
+        assert result.exit_code == 0, result.output
+    a, _ = tiffio.read_image(tmp_path / "a.tif")
+    b, meta_b = tiffio.read_image(tmp_path / "b.tif")
+    np.testing.assert_array_equal(a, b)
+    assert meta_b["refocus"]["crop_sensor_origin"] == [top, left]
