@@ -53,9 +53,10 @@ class CalibrationReport:
     residual_rms_px: float
     residual_max_px: float
     spectrum_score: float
+    centres_refined: bool = True   # False: a scene image, the centres are the lattice's
 
     def to_dict(self) -> dict:
-        return {k: (float(v) if isinstance(v, float) else int(v))
+        return {k: (v if isinstance(v, bool) else float(v) if isinstance(v, float) else int(v))
                 for k, v in self.__dict__.items()}
 
 
@@ -577,14 +578,16 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     outliers = refined & ~use
     centres = np.where(outliers[:, None], ideal, centres)   # a disturbed lens keeps the lattice
     rms = float(np.sqrt(np.mean(resid[use] ** 2)))
-    if rms > SCENE_RESIDUAL * pitch:
+    scene = rms > SCENE_RESIDUAL * pitch
+    if scene:
         # a scene image: micro-image content is not symmetric, per-lens centroids only add
         # noise; the lattice (fitted over thousands of lenses) is the result
         centres = ideal
     report = CalibrationReport(
         lenses_total=len(idx), lenses_refined=n_ref, outliers=int(outliers.sum()),
         residual_rms_px=float(np.sqrt(np.mean(resid[use] ** 2))),
-        residual_max_px=float(resid[use].max()), spectrum_score=float(score))
+        residual_max_px=float(resid[use].max()), spectrum_score=float(score),
+        centres_refined=not scene)
     if not refine:
         return grid, report
     return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, lattice,

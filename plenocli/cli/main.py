@@ -3,6 +3,7 @@
 import click
 
 from plenocli import __version__
+from plenocli.cli.calibrate import calibrate
 from plenocli.cli.decode import decode
 
 
@@ -15,5 +16,5 @@ def cli():
     """
 
 
-for command in (decode,):
+for command in (decode, calibrate):
     cli.add_command(command)

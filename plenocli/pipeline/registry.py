@@ -27,10 +27,12 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import decode
+    from plenocli.pipeline.stages import calibrate, decode
 
     table = [
-        Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("decode", decode.run, inputs=("input", "calib"), outputs=("output", "preview")),
+        Stage("calibrate", calibrate.run, inputs=("input", "compare"),
+              outputs=("output", "xml", "preview")),
     ]
     return {s.name: s for s in table}
 
