@@ -67,7 +67,8 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
     try:
         root = ET.fromstring(text)
     except ET.ParseError as err:
-        raise InputError(f"{source}: malformed XML ({err}); pass a Raytrix RayCalibData file")
+        raise InputError(f"{source}: malformed XML ({err}); pass a Raytrix RayCalibData file") \
+            from err
     if root.tag != "RayCalibData":
         raise InputError(f"{source}: a <{root.tag}> file, not a Raytrix <RayCalibData> "
                          "calibration; plenocli reads RayCalibData XML only")
