@@ -69,7 +69,8 @@ def test_jitter_lattice_and_refined_centres(pitch, angle_deg, cfa):
     margin = 1.5 * pitch
     inner = ((truth_xy[:, 0] > margin) & (truth_xy[:, 0] < size - 1 - margin)
              & (truth_xy[:, 1] > margin) & (truth_xy[:, 1] < size - 1 - margin))
-    ours = np.array([grid.centres_xy[lookup[(int(i), int(j))]] for i, j in zip(ti, tj, strict=True)])
+    ours = np.array([grid.centres_xy[lookup[(int(i), int(j))]]
+                     for i, j in zip(ti, tj, strict=True)])
     err = np.linalg.norm(ours - truth_xy, axis=1)[inner]
     assert np.sqrt(np.mean(err ** 2)) <= 0.02
 

@@ -7,7 +7,8 @@ from plenocli.cli import options
 @options.input_arg
 @options.output_opt
 @click.option("--camera", type=click.Choice(["auto", "canon-dp", "dng", "raytrix", "image"]),
-              default="auto", show_default=True, help="Input kind; auto looks at the file's first bytes.")
+              default="auto", show_default=True,
+              help="Input kind; auto looks at the file's first bytes.")
 @click.option("--frames", default=None, help="Names for the frames, comma separated (e.g. S,A).")
 @click.option("--black", type=float, default=None, help="Black level (DN) when the file has none.")
 @click.option("--white", type=float, default=None, help="White (clipping) level in DN.")
