@@ -6,12 +6,15 @@ from plenocli.cli import options
 @click.command(short_help="Decode a raw capture into a frames TIFF.")
 @options.input_arg
 @options.output_opt
-@click.option("--camera", type=click.Choice(["auto", "canon-dp", "dng", "image"]), default="auto",
-              show_default=True, help="Input kind; auto looks at the file's first bytes.")
+@click.option("--camera", type=click.Choice(["auto", "canon-dp", "dng", "raytrix", "image"]),
+              default="auto", show_default=True,
+              help="Input kind; auto looks at the file's first bytes.")
 @click.option("--frames", default=None, help="Names for the frames, comma separated (e.g. S,A).")
 @click.option("--black", type=float, default=None, help="Black level (DN) when the file has none.")
 @click.option("--white", type=float, default=None, help="White (clipping) level in DN.")
 @click.option("--cfa", default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
+@click.option("--calib", type=click.Path(dir_okay=False), default=None,
+              help="Raytrix RayCalibData XML (with --camera raytrix); stored in the metadata.")
 @options.preview_opt
 @options.stage_command
 def decode(**params):
@@ -22,6 +25,7 @@ def decode(**params):
     \b
     Example:
       plenocli decode IMG_0001.CR2 -o frames.tif --preview frames.png
+      plenocli decode frame0.png --camera raytrix --calib calib.xml -o frames.tif
     """
     from plenocli.pipeline.stages.decode import run
 

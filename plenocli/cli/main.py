@@ -4,6 +4,7 @@ import click
 
 from plenocli import __version__
 from plenocli.cli.bias import bias
+from plenocli.cli.calibrate import calibrate
 from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
@@ -28,6 +29,7 @@ for command in (
     decode,
     bias,
     flat,
+    calibrate,
     refocus,
     sai,
     crosstalk,

@@ -22,7 +22,7 @@ import tifffile
 
 from plenocli.errors import InputError
 
-CAMERAS = ("auto", "canon-dp", "dng", "image")
+CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
 CFA_LETTERS = "RGBG"  # DNG CFAPattern codes 0, 1, 2 (3 would be a second green)
 PHOTOMETRIC_CFA = 32803
 PHOTOMETRIC_LINEAR_RAW = 34892
@@ -57,8 +57,12 @@ def sniff(path: str | os.PathLike) -> str:
 
 def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[str] | None = None,
            black: float | None = None, white: float | None = None,
-           cfa: str | None = None) -> tuple[np.ndarray, dict]:
+           cfa: str | None = None, calib: str | os.PathLike | None = None
+           ) -> tuple[np.ndarray, dict]:
     """Decode a capture.
+
+    ``camera="raytrix"``: a sensor image (TIFF/PNG/BMP) whose RayCalibData XML ``calib`` is
+    parsed into ``meta["raytrix_calib"]`` (see ``plenocli.io.raytrix``).
 
     Returns
     -------
@@ -80,6 +84,14 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         frames, meta = _decode_dng(path)
     else:
         frames, meta = _decode_image(path, cfa=cfa)
+    if kind == "raytrix":
+        from plenocli.io import raytrix
+
+        if calib is None:
+            raise InputError(f"{path}: --camera raytrix needs the RayCalibData XML (--calib XML)")
+        meta["raytrix_calib"] = raytrix.read_calib(calib)
+    elif calib is not None:
+        raise InputError(f"--calib is for --camera raytrix, not {kind}")
     if frame_names:
         if len(frame_names) != frames.shape[0]:
             raise InputError(f"{path}: {len(frame_names)} frame names given "

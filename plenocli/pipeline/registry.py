@@ -27,13 +27,24 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import bias, crosstalk, decode, flat, refocus, sai, stitch
+    from plenocli.pipeline.stages import (
+        bias,
+        calibrate,
+        crosstalk,
+        decode,
+        flat,
+        refocus,
+        sai,
+        stitch,
+    )
 
     table = [
-        Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("decode", decode.run, inputs=("input", "calib"), outputs=("output", "preview")),
         Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
         Stage("flat", flat.run, inputs=("input", "white", "gain"),
               outputs=("output", "save_gain", "preview")),
+        Stage("calibrate", calibrate.run, inputs=("input", "compare"),
+              outputs=("output", "xml", "preview")),
         Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),

@@ -11,13 +11,13 @@ from plenocli.provenance import stage_record
 
 def run(input: str, output: str, *, camera: str = "auto", frames: str | None = None,
         black: float | None = None, white: float | None = None, cfa: str | None = None,
-        preview: str | None = None) -> None:
+        calib: str | None = None, preview: str | None = None) -> None:
     """Decode ``input`` into ``output`` (one page per frame, uint16 for raws)."""
     names = [n.strip() for n in frames.split(",")] if frames else None
     data, meta = raw.decode(input, camera=camera, frame_names=names, black=black, white=white,
-                            cfa=cfa)
-    params = dict(camera=camera, frames=frames, black=black, white=white, cfa=cfa)
-    record = stage_record("decode", params, {"input": input})
+                            cfa=cfa, calib=calib)
+    params = dict(camera=camera, frames=frames, black=black, white=white, cfa=cfa, calib=calib)
+    record = stage_record("decode", params, {"input": input, "calib": calib})
     tiffio.write_image(output, data, tiffio.derived_meta(meta, record), protect=(input,))
     log.info("decode: %s -> %s (%s, %d frame(s) %s of %d x %d, CFA %s)",
              shown(input), shown(output), meta["camera"], data.shape[0],

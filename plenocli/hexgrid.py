@@ -1,0 +1,680 @@
+"""Micro-lens grid calibration from a white (or scene) image with the Fourier transform.
+
+Method (paper section 5.2, made precise):
+
+1. **Flatten.** Each CFA plane (or the mono image) is divided by a heavily blurred copy of itself
+   (Gaussian, ~64 px): main-lens vignetting and colour balance go, the micro-lens pattern stays.
+   Hot pixels are clipped.
+2. **Find the reciprocal lattice.** The Hann-windowed FFT of a central crop shows the lattice as
+   peaks. Their log-magnitude is turned into a z-score against the radial mean (1/f scene
+   spectra, noise). Each strong peak is a hypothesis for a fundamental; a hypothesis is scored on
+   the whole hexagonal (or square) pattern it predicts (first three rings), so a single false
+   periodicity from repeated scene content cannot win; then finer lattices are tried (a
+   hypothesis that only saw a harmonic is replaced by the lattice whose extra peaks are present).
+3. **Sub-bin lattice.** Every harmonic with a clear peak is located with a parabolic fit; the
+   reciprocal basis is the least-squares fit of all of them; the offset comes from the phases of
+   the fundamentals (direct DFT at the fitted frequencies).
+4. **Per-lens centres.** Each micro-image centre is the fixed point of a windowed centroid
+   (symmetric window, so a point-symmetric micro-image converges to its symmetry centre).
+5. **Lattice fit.** A hexagonal (square) similarity lattice ``x_ij = o + i b1 + j b2``,
+   ``b2 = R(60 deg) b1`` is linear in (o, b1): robust least squares over all lens centres gives
+   pitch, rotation and offset; the residuals (centre - lattice) are the report.
+
+Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenocli.lensgrid``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numba
+import numpy as np
+import scipy.fft
+
+from plenocli.errors import CalibrationError
+from plenocli.lensgrid import LATTICES, LensGrid
+
+PITCH_RANGE_PX = (5.0, 80.0)   # search range; the documented working range is 6-60 px
+MIN_SIDE_PX = 48               # smaller images cannot hold a lattice worth fitting
+MIN_LENSES = 12                # fewer refined lenses: no reliable lattice fit
+FFT_CROP_PX = 1024             # the coarse search works on a central crop of at most this size
+SCENE_RESIDUAL = 0.04   # per-lens residual RMS (in pitches) above which centres are not kept
+PEAK_Z = 4.0                   # a spectral peak must stand this many sigma above its ring
+
+
+@dataclass(frozen=True)
+class CalibrationReport:
+    """How well the per-lens centres fit the lattice (pixels)."""
+
+    lenses_total: int
+    lenses_refined: int
+    outliers: int
+    residual_rms_px: float
+    residual_max_px: float
+    spectrum_score: float
+    centres_refined: bool = True   # False: a scene image, the centres are the lattice's
+
+    def to_dict(self) -> dict:
+        return {k: (v if isinstance(v, bool) else float(v) if isinstance(v, float) else int(v))
+                for k, v in self.__dict__.items()}
+
+
+# ----------------------------------------------------------------------------------------------
+# 1. flatten
+def flatten(image: np.ndarray, *, cfa: str | None = None, scale_px: float = 64.0) -> np.ndarray:
+    """Divide each CFA plane by its blurred self: vignetting, colour balance and scene
+    brightness go, the micro-lens pattern (periods < ``scale_px``) stays.
+
+    Parameters
+    ----------
+    image : (rows, cols) array, any real dtype
+    cfa : 2 x 2 Bayer pattern at pixel (0, 0), or None for mono / one colour plane
+    scale_px : Gaussian sigma of the blur, in pixels of ``image``
+
+    Returns
+    -------
+    (rows, cols) float32, about 1 on average, clipped to [0, 4].
+    """
+    if image.ndim != 2:
+        raise ValueError(f"image must be 2-D, got shape {image.shape}")
+    step = 2 if cfa else 1
+    out = np.empty(image.shape, np.float32)
+    for r in range(step):
+        for c in range(step):
+            plane = np.asarray(image[r::step, c::step], dtype=np.float32)
+            out[r::step, c::step] = plane / _blur(plane, scale_px / step)
+    finite = np.isfinite(out)
+    if not finite.all():
+        out[~finite] = 0.0
+    np.clip(out, 0.0, 4.0, out=out)
+    return out
+
+
+def _blur(plane: np.ndarray, sigma: float) -> np.ndarray:
+    """Large Gaussian blur done on a shrunk copy (fast), floored to stay positive."""
+    rows, cols = plane.shape
+    factor = max(1, min(int(sigma // 4), rows // 8, cols // 8))
+    small = cv2.resize(plane, (max(1, cols // factor), max(1, rows // factor)),
+                       interpolation=cv2.INTER_AREA) if factor > 1 else plane
+    small = cv2.GaussianBlur(small, (0, 0), sigmaX=sigma / factor, borderType=cv2.BORDER_REFLECT)
+    blurred = cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR) \
+        if factor > 1 else small
+    floor = max(float(np.mean(blurred)) * 1e-3, 1e-12)
+    return np.maximum(blurred, floor)
+
+
+# ----------------------------------------------------------------------------------------------
+# 2-3. reciprocal lattice
+def _rot(angle: float) -> np.ndarray:
+    return np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+
+
+@dataclass(frozen=True)
+class _Spectrum:
+    z: np.ndarray          # (S, S//2+1) z-score of the log magnitude (rfft half plane)
+    logmag: np.ndarray
+    size: int
+    valid: np.ndarray      # bins usable for peaks (not DC, not CFA Nyquist)
+
+    def index(self, f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Bin (row, col) of frequencies f (..., 2) as (fx, fy) in cycles/px, folded into the
+        half plane, and whether they are inside the band."""
+        f = np.asarray(f, float)
+        sign = np.where(f[..., 0] < 0, -1.0, 1.0)
+        fx, fy = f[..., 0] * sign, f[..., 1] * sign
+        inside = (np.abs(fx) < 0.5) & (np.abs(fy) < 0.5)
+        col = np.rint(fx * self.size).astype(np.int64)
+        row = np.rint(fy * self.size).astype(np.int64) % self.size
+        col = np.clip(col, 0, self.z.shape[1] - 1)
+        return row, col, inside
+
+    def z_at(self, f: np.ndarray) -> np.ndarray:
+        """Peak z-score near frequencies f (max over the 3 x 3 bins around each)."""
+        row, col, inside = self.index(f)
+        best = np.full(row.shape, -np.inf)
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                r = (row + dr) % self.size
+                c = np.clip(col + dc, 0, self.z.shape[1] - 1)
+                best = np.maximum(best, np.where(self.valid[r, c], self.z[r, c], 0.0))
+        return np.where(inside, best, 0.0)
+
+
+def _spectrum(flat: np.ndarray, *, cfa: bool) -> _Spectrum:
+    rows, cols = flat.shape
+    size = min(rows, cols, FFT_CROP_PX)
+    size -= size % 2
+    r0, c0 = (rows - size) // 2, (cols - size) // 2
+    crop = flat[r0:r0 + size, c0:c0 + size]
+    win = np.hanning(size).astype(np.float32)
+    data = (crop - np.float32(crop.mean())) * win[:, None] * win[None, :]
+    spec = scipy.fft.rfft2(data, workers=-1)
+    logmag = np.log(np.abs(spec) + 1e-12).astype(np.float64)
+    fy = np.fft.fftfreq(size)[:, None]
+    fx = np.fft.rfftfreq(size)[None, :]
+    radius = np.hypot(fx, fy)
+    # robust background per ring of 4 bins: median and (median - 16th percentile); the lattice
+    # peaks are a minority of each ring, so they do not inflate it
+    ring = np.minimum((radius * size / 4).astype(np.int64), size // 4 + 1).ravel()
+    nring = size // 4 + 2
+    order = np.lexsort((logmag.ravel(), ring))
+    count = np.bincount(ring, minlength=nring)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    sorted_vals = logmag.ravel()[order]
+    safe = np.maximum(count, 1)
+    median = sorted_vals[np.minimum(start + safe // 2, sorted_vals.size - 1)]
+    low = sorted_vals[np.minimum(start + (safe * 16) // 100, sorted_vals.size - 1)]
+    mean = median
+    std = np.maximum(median - low, 0.05)  # a perfectly flat field has no spread: no peak passes
+    ring = ring.reshape(logmag.shape)
+    z = (logmag - mean[ring]) / std[ring]
+    valid = radius > 2.5 / size
+    if cfa:  # residual mosaic: keep off the Nyquist corners
+        for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
+            valid &= np.hypot(fx - nx, fy - ny) > 0.03
+            valid &= np.hypot(fx - nx, fy + ny) > 0.03
+    return _Spectrum(z=z, logmag=logmag, size=size, valid=valid)
+
+
+def _ring_vectors(g: np.ndarray, lattice: str) -> list[np.ndarray]:
+    """First three rings of the reciprocal lattice whose fundamental is ``g`` (2,)."""
+    step = LATTICES[lattice]
+    n = int(round(2 * np.pi / step))
+    ring1 = [_rot(k * step) @ g for k in range(n)]
+    if lattice == "hex":
+        ring2 = [_rot(np.pi / 6 + k * step) @ g * np.sqrt(3) for k in range(n)]
+    else:
+        ring2 = [_rot(np.pi / 4 + k * step) @ g * np.sqrt(2) for k in range(n)]
+    ring3 = [2 * v for v in ring1]
+    return [np.array(ring1), np.array(ring2), np.array(ring3)]
+
+
+SCORE_BAND = 0.45      # lattice hypotheses are scored on all their points up to this |f|
+SCORE_TAU = 2.0        # a point must beat this z (the 3 x 3 max of pure background is ~1.5)
+
+
+def _score(spec: _Spectrum, recip: np.ndarray) -> float:
+    """Evidence for the lattice with reciprocal basis ``recip``: the sum over its first three
+    rings (18 points for hex) of (z - tau). A lattice built on a harmonic sees only weaker
+    harmonics; a lattice too fine (a false periodicity) pays tau for every empty point."""
+    radius = min(SCORE_BAND, 2.05 * float(np.linalg.norm(recip, axis=1).max()))
+    pts = _lattice_points(recip, radius)
+    if len(pts) == 0:
+        return -np.inf
+    row, col, inside = spec.index(pts)
+    z = spec.z_at(pts)
+    usable = inside & spec.valid[row, col]
+    return float(np.sum(np.clip(z[usable], -2.0, 30.0) - SCORE_TAU))
+
+
+def _lattice_points(recip: np.ndarray, kmax: float) -> np.ndarray:
+    """Points m g1 + n g2 with 0 < |f| <= kmax, one of each +-pair (fx >= 0)."""
+    g1, g2 = recip
+    area = abs(g1[0] * g2[1] - g1[1] * g2[0])
+    n = int(np.ceil(kmax * max(np.linalg.norm(g1), np.linalg.norm(g2)) / area)) + 1
+    m, k = np.meshgrid(np.arange(-n, n + 1), np.arange(-n, n + 1), indexing="ij")
+    pts = m.ravel()[:, None] * g1 + k.ravel()[:, None] * g2
+    norm = np.linalg.norm(pts, axis=1)
+    keep = (norm > 0) & (norm <= kmax) & ((pts[:, 0] > 0) | ((pts[:, 0] == 0) & (pts[:, 1] > 0)))
+    return pts[keep]
+
+
+def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]:
+    """The reciprocal basis (2, 2) (rows g1, g2, cycles/px) of the best-supported lattice, and
+    its score. Candidates: each strong peak taken as a fundamental, then as a harmonic of a
+    finer lattice (g/2, g/sqrt(3) turned 30 deg for hex; g/2, g/sqrt(2) turned 45 deg square)."""
+    z = np.where(spec.valid, spec.z, -np.inf)
+    size = spec.size
+    fy = np.fft.fftfreq(size)[:, None]
+    fx = np.fft.rfftfreq(size)[None, :]
+    radius = np.hypot(fx, fy)
+    step = LATTICES[lattice]
+    scale = 1.0 if lattice == "square" else 1.0 / np.sin(np.pi / 3)
+    fmin, fmax = scale / PITCH_RANGE_PX[1], scale / PITCH_RANGE_PX[0]
+    local = cv2.dilate(z.astype(np.float32), np.ones((5, 5), np.uint8))
+    peaks = np.argwhere((z >= local) & (radius >= fmin) & (radius <= 2 * fmax) & (z > PEAK_Z))
+    if len(peaks) == 0:
+        raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
+                               f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
+                               "pass a white image (or a scene) taken through the lens array")
+    order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:16]
+    best, best_recip = -np.inf, None
+    tried: list[np.ndarray] = []
+    for r, c in peaks[order]:
+        g0 = _subbin_peak(spec, r, c)
+        finer = [g0, g0 / 2] + ([_rot(np.pi / 6) @ g0 / np.sqrt(3)] if lattice == "hex"
+                                else [_rot(np.pi / 4) @ g0 / np.sqrt(2)])
+        for g in finer:
+            if not fmin <= np.linalg.norm(g) <= fmax:
+                continue
+            if any(_same_lattice(g, t, step) for t in tried):
+                continue
+            tried.append(g)
+            recip = _refine_reciprocal(spec, g, lattice, kmax=min(SCORE_BAND,
+                                                                  3.1 * np.linalg.norm(g)))
+            s = _score(spec, recip)
+            if s > best:
+                best, best_recip = s, recip
+    if best_recip is None or best <= 0:
+        raise CalibrationError("no micro-lens lattice found: spectral peaks exist but none forms "
+                               f"a {lattice} lattice; check --lattice, or pass a white image")
+    # the best hypothesis may still be a harmonic lattice when the fundamentals are weak (white
+    # images whose micro-images fill their cells): take a finer lattice when its own first ring
+    # is clearly present
+    for _ in range(3):
+        g = best_recip[0]
+        finer = [g / 2, (_rot(np.pi / 6) @ g / np.sqrt(3)) if lattice == "hex"
+                 else (_rot(np.pi / 4) @ g / np.sqrt(2))]
+        for cand in finer:
+            if np.linalg.norm(cand) < fmin:
+                continue
+            z1 = spec.z_at(_ring_vectors(cand, lattice)[0])
+            if np.sum(z1 > PEAK_Z) >= len(z1) - 1:
+                best_recip = _refine_reciprocal(spec, cand, lattice, kmax=min(
+                    SCORE_BAND, 3.1 * np.linalg.norm(cand)))
+                break
+        else:
+            break
+    return best_recip, best
+
+
+def _same_lattice(g: np.ndarray, other: np.ndarray, step: float) -> bool:
+    if abs(np.linalg.norm(g) - np.linalg.norm(other)) > 0.02 * np.linalg.norm(g):
+        return False
+    da = (np.arctan2(g[1], g[0]) - np.arctan2(other[1], other[0])) % step
+    return min(da, step - da) < 0.02
+
+
+def _subbin_peak(spec: _Spectrum, r: int, c: int) -> np.ndarray:
+    size, lm = spec.size, spec.logmag
+    ox = _parabola(lm[r, c - 1], lm[r, c], lm[r, c + 1]) if 0 < c < lm.shape[1] - 1 else 0.0
+    oy = _parabola(lm[(r - 1) % size, c], lm[r, c], lm[(r + 1) % size, c])
+    fy_bin = r if r < size // 2 else r - size
+    return np.array([(c + ox) / size, (fy_bin + oy) / size])
+
+
+def _refine_reciprocal(spec: _Spectrum, g: np.ndarray, lattice: str, *,
+                       kmax: float) -> np.ndarray:
+    """Least-squares reciprocal basis (2, 2) (rows g1, g2) from every clear harmonic peak with
+    |f| <= kmax, nearest first (each refit predicts the next harmonics better)."""
+    basis = np.array([g, _rot(LATTICES[lattice]) @ g])
+    radius = min(kmax, 3.1 * np.linalg.norm(g))
+    while True:
+        basis = _fit_peaks(spec, basis, radius)
+        if radius >= kmax:
+            return basis
+        radius = min(kmax, 2 * radius)
+
+
+def _fit_peaks(spec: _Spectrum, basis: np.ndarray, kmax: float) -> np.ndarray:
+    g1, g2 = basis
+    area = abs(g1[0] * g2[1] - g1[1] * g2[0])
+    n = int(np.ceil(kmax * max(np.linalg.norm(g1), np.linalg.norm(g2)) / area)) + 1
+    rows, labels, weights = [], [], []
+    size, lm = spec.size, spec.logmag
+    for m in range(-n, n + 1):
+        for k in range(-n, n + 1):
+            f = m * g1 + k * g2
+            if not 0 < np.linalg.norm(f) <= kmax or f[0] < 0 or (f[0] == 0 and f[1] < 0):
+                continue
+            r, c, inside = spec.index(f)
+            if not inside or c < 2 or c >= spec.z.shape[1] - 2:
+                continue
+            win = spec.z[(r + np.arange(-1, 2))[:, None] % size, c + np.arange(-1, 2)[None, :]]
+            dr, dc = np.unravel_index(np.argmax(win), win.shape)
+            pr, pc = (r + dr - 1) % size, c + dc - 1
+            if spec.z[pr, pc] < PEAK_Z or not spec.valid[pr, pc]:
+                continue
+            ox = _parabola(lm[pr, pc - 1], lm[pr, pc], lm[pr, pc + 1])
+            oy = _parabola(lm[(pr - 1) % size, pc], lm[pr, pc], lm[(pr + 1) % size, pc])
+            fy_bin = pr if pr < size // 2 else pr - size
+            rows.append([(pc + ox) / size, (fy_bin + oy) / size])
+            labels.append([m, k])
+            weights.append(min(spec.z[pr, pc], 40.0))
+    lab = np.array(labels, float).reshape(-1, 2)
+    if len(rows) < 3 or np.linalg.matrix_rank(lab) < 2:
+        return basis
+    f_obs, w = np.array(rows), np.sqrt(np.array(weights))
+    fitted, *_ = np.linalg.lstsq(lab * w[:, None], f_obs * w[:, None], rcond=None)
+    return fitted
+
+
+def _parabola(a: float, b: float, c: float) -> float:
+    den = a - 2 * b + c
+    return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+
+
+def _direct_from_reciprocal(recip: np.ndarray, lattice: str) -> tuple[float, float]:
+    """Pitch (px) and angle (rad, reduced to one period of the lattice) of the similarity lattice
+    closest to the reciprocal basis ``recip`` (rows g1, g2)."""
+    direct = np.linalg.inv(recip).T  # rows b1, b2 with b_i . g_j = delta_ij
+    step = LATTICES[lattice]
+    rot = _rot(step)
+    # b2 may be +step or -step from b1 (or the pair reversed); pick the arrangement that fits
+    best = None
+    for b1, b2 in ((direct[0], direct[1]), (direct[1], direct[0]),
+                   (direct[0], -direct[1]), (-direct[1], direct[0])):
+        s = (b1 + rot.T @ b2) / 2
+        err = np.linalg.norm(b1 - s) + np.linalg.norm(b2 - rot @ s)
+        if best is None or err < best[0]:
+            best = (err, s)
+    s = best[1]
+    return float(np.hypot(*s)), float(np.arctan2(s[1], s[0]) % step)
+
+
+def _phase_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
+    """A lattice point from the phases of the fundamentals (direct DFT over a central crop)."""
+    rows, cols = flat.shape
+    size_r, size_c = min(rows, 2 * FFT_CROP_PX), min(cols, 2 * FFT_CROP_PX)
+    r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
+    crop = flat[r0:r0 + size_r, c0:c0 + size_c].astype(np.float64)
+    wr, wc = np.hanning(size_r), np.hanning(size_c)
+    crop = (crop - crop.mean()) * wr[:, None] * wc[None, :]
+    xc, yc = c0 + (size_c - 1) / 2, r0 + (size_r - 1) / 2
+    x = np.arange(size_c) - (size_c - 1) / 2
+    y = np.arange(size_r) - (size_r - 1) / 2
+    direct = grid.basis()
+    recip = np.linalg.inv(direct).T
+    frac = []
+    for g in recip:
+        coeff = np.exp(-2j * np.pi * g[1] * y) @ crop @ np.exp(-2j * np.pi * g[0] * x)
+        frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
+    x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
+    return float(x0[0]), float(x0[1])
+
+
+# ----------------------------------------------------------------------------------------------
+# 4. per-lens centres
+@numba.njit(parallel=True, cache=True)
+def _centroids(values, cx, cy, radius, n_iter):  # pragma: no cover - compiled
+    rows, cols = values.shape
+    out_x = cx.copy()
+    out_y = cy.copy()
+    r2 = radius * radius
+    reach = int(np.ceil(radius))
+    for k in numba.prange(cx.shape[0]):
+        x, y = cx[k], cy[k]
+        for _ in range(n_iter):
+            ix, iy = int(np.rint(x)), int(np.rint(y))
+            sw = 0.0
+            sx = 0.0
+            sy = 0.0
+            for r in range(max(iy - reach, 0), min(iy + reach + 1, rows)):
+                dy = r - y
+                for c in range(max(ix - reach, 0), min(ix + reach + 1, cols)):
+                    dx = c - x
+                    d2 = dx * dx + dy * dy
+                    if d2 < r2:
+                        t = 1.0 - d2 / r2
+                        w = t * t * values[r, c]
+                        sw += w
+                        sx += w * dx
+                        sy += w * dy
+            if sw <= 0.0:
+                break
+            x += sx / sw
+            y += sy / sw
+        out_x[k] = x
+        out_y[k] = y
+    return out_x, out_y
+
+
+def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.45,
+                   n_iter: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-lens centres by iterated windowed centroids.
+
+    Parameters
+    ----------
+    flat : (rows, cols) float32 flattened image (see :func:`flatten`)
+    grid : the lattice to start from
+    window : window radius in units of the pitch
+
+    Returns
+    -------
+    indices (K, 2) int, centres (K, 2) float (x, y) px, refined (K,) bool
+        Every lattice lens whose ideal centre is inside the image; lenses whose window leaves
+        the image keep their ideal centre (refined False).
+    """
+    rows, cols = flat.shape
+    grid = LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
+                    image_shape=(rows, cols))
+    idx, ideal = grid.lens_centres()
+    radius = window * grid.pitch_px
+    margin = radius + 0.5 * grid.pitch_px + 2  # the flattening blur is unreliable at the border
+    inner = ((ideal[:, 0] >= margin) & (ideal[:, 0] <= cols - 1 - margin)
+             & (ideal[:, 1] >= margin) & (ideal[:, 1] <= rows - 1 - margin))
+    values = np.maximum(flat - np.float32(np.median(flat[::7, ::7])), 0).astype(np.float32)
+    cx, cy = _centroids(values, ideal[inner, 0].copy(), ideal[inner, 1].copy(), float(radius),
+                        n_iter)
+    centres = ideal.copy()
+    centres[inner, 0], centres[inner, 1] = cx, cy
+    return idx, centres, inner
+
+
+# ----------------------------------------------------------------------------------------------
+# 5. lattice fit
+def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex",
+                weights: np.ndarray | None = None) -> tuple[float, float, tuple[float, float]]:
+    """Least-squares similarity lattice through lens centres.
+
+    ``x_ij = o + i b1 + j R(step) b1`` is linear in (o, b1), so this is one linear solve.
+
+    Parameters
+    ----------
+    indices : (K, 2) lattice indices (i, j)
+    centres : (K, 2) centres (x, y) in px
+    weights : (K,) optional weights (0 drops a lens)
+
+    Returns
+    -------
+    pitch_px, angle_rad (unreduced), offset_xy (the centre of lens (0, 0))
+    """
+    if lattice not in LATTICES:
+        raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {lattice!r}")
+    i = np.asarray(indices[:, 0], float)
+    j = np.asarray(indices[:, 1], float)
+    cs, sn = np.cos(LATTICES[lattice]), np.sin(LATTICES[lattice])
+    ones, zeros = np.ones_like(i), np.zeros_like(i)
+    # unknowns (ox, oy, u, v); b1 = (u, v), b2 = (cs u - sn v, sn u + cs v)
+    ax = np.stack([ones, zeros, i + j * cs, -j * sn], axis=1)
+    ay = np.stack([zeros, ones, j * sn, i + j * cs], axis=1)
+    a = np.concatenate([ax, ay])
+    b = np.concatenate([centres[:, 0], centres[:, 1]])
+    if weights is not None:
+        w = np.sqrt(np.concatenate([weights, weights]))
+        a, b = a * w[:, None], b * w
+    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+    ox, oy, u, v = sol
+    return float(np.hypot(u, v)), float(np.arctan2(v, u)), (float(ox), float(oy))
+
+
+def _reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: str,
+               shape: tuple[int, int]) -> LensGrid:
+    """The same lattice with its angle in [0, step) and lens (0, 0) nearest the image centre."""
+    step = LATTICES[lattice]
+    k = np.floor(angle / step)
+    angle_red = angle - k * step
+    grid = LensGrid(pitch, angle_red, offset, lattice, image_shape=shape)
+    rows, cols = shape
+    i, j = grid.nearest_index((cols - 1) / 2, (rows - 1) / 2)
+    centre = grid.lattice_xy(i, j)
+    return LensGrid(pitch, angle_red, (float(centre[0]), float(centre[1])), lattice,
+                    image_shape=shape)
+
+
+def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None,
+              black_level: float = 0.0, refine: bool = True) -> tuple[LensGrid, CalibrationReport]:
+    """Estimate the micro-lens lattice and every micro-image centre from one image.
+
+    Parameters
+    ----------
+    image : (rows, cols) array
+        A white image (best) or a scene image taken through the lens array; raw Bayer mosaics
+        are fine when ``cfa`` names the pattern at pixel (0, 0).
+    lattice : "hex" or "square"
+    cfa : Bayer pattern at (0, 0) or None
+    black_level : DN subtracted first (a pedestal would leave the vignetting tilt in the
+        flattened micro-images and bias their centres)
+    refine : also refine each lens centre (otherwise the grid holds the lattice only)
+
+    Returns
+    -------
+    grid : LensGrid with pitch_px, angle_rad in [0, 60 deg) (hex) or [0, 90 deg) (square),
+        offset_xy = centre of the lens nearest the image centre, ``image_shape``, and (when
+        ``refine``) ``centres_xy`` / ``indices`` of every lens inside the image.
+    report : residuals of the refined centres against the fitted lattice.
+    """
+    if lattice not in LATTICES:
+        raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {lattice!r}")
+    image = np.asarray(image)
+    if image.ndim != 2:
+        raise ValueError(f"image must be 2-D (rows, cols), got shape {image.shape}")
+    rows, cols = image.shape
+    if min(rows, cols) < MIN_SIDE_PX:
+        raise CalibrationError(f"image of {cols} x {rows} px is too small to calibrate a lens "
+                               f"grid; it needs at least {MIN_SIDE_PX} px on each side")
+    image = image.astype(np.float32) - np.float32(black_level) if black_level else image
+    # coarse search on a flattened central crop; the whole frame is flattened once the pitch is
+    # known, with a blur of one pitch: it follows the vignetting closely (no tilt left inside a
+    # micro-image, which would pull the centres) and still averages the lattice out
+    size = min(rows, cols, FFT_CROP_PX)
+    r0, c0 = (rows - size) // 2, (cols - size) // 2
+    r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
+    spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
+    recip, score = _find_fundamental(spec, lattice)
+    pitch, angle = _direct_from_reciprocal(recip, lattice)
+    if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
+        raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
+                               f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
+    flat = flatten(image, cfa=cfa, scale_px=max(0.5 * pitch, 4.0))
+    grid = LensGrid(pitch, angle, (0.0, 0.0), lattice, image_shape=(rows, cols))
+    grid = _reindexed(pitch, angle, _phase_offset(flat, grid), lattice, (rows, cols))
+
+    idx, centres, refined = refine_centres(flat, grid)
+    n_ref = int(refined.sum())
+    if n_ref < MIN_LENSES:
+        raise CalibrationError(f"only {n_ref} whole micro-images fit in the {cols} x {rows} px "
+                               f"image (pitch {pitch:.1f} px); use a larger image")
+    use = refined.copy()
+    for _ in range(4):  # robust: drop lenses whose centroid is disturbed (dead pixels, scene)
+        pitch, angle, offset = fit_lattice(idx[use], centres[use], lattice=lattice)
+        fitted = LensGrid(pitch, angle, offset, lattice)
+        resid = np.linalg.norm(centres - fitted.lattice_xy(idx[:, 0], idx[:, 1]), axis=1)
+        sigma = 1.4826 * np.median(resid[refined])
+        new_use = refined & (resid <= max(4.0 * sigma, 0.02))
+        if np.array_equal(new_use, use):
+            break
+        use = new_use
+    grid = _reindexed(pitch, angle, offset, lattice, (rows, cols))
+    # re-express indices relative to the reindexed lens (0, 0)
+    di, dj = fitted.nearest_index(*grid.offset_xy)
+    idx = idx - np.array([int(di), int(dj)])
+    turns = int(np.rint((angle - grid.angle_rad) / LATTICES[lattice]))
+    idx = _rotate_indices(idx, turns, lattice)
+    ideal = grid.lattice_xy(idx[:, 0], idx[:, 1])
+    resid_vec = centres - ideal
+    resid = np.linalg.norm(resid_vec, axis=1)
+    outliers = refined & ~use
+    centres = np.where(outliers[:, None], ideal, centres)   # a disturbed lens keeps the lattice
+    rms = float(np.sqrt(np.mean(resid[use] ** 2)))
+    scene = rms > SCENE_RESIDUAL * pitch
+    if scene:
+        # a scene image: micro-image content is not symmetric, per-lens centroids only add
+        # noise; the lattice (fitted over thousands of lenses) is the result
+        centres = ideal
+    report = CalibrationReport(
+        lenses_total=len(idx), lenses_refined=n_ref, outliers=int(outliers.sum()),
+        residual_rms_px=float(np.sqrt(np.mean(resid[use] ** 2))),
+        residual_max_px=float(resid[use].max()), spectrum_score=float(score),
+        centres_refined=not scene)
+    if not refine:
+        return grid, report
+    return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, lattice,
+                    image_shape=(rows, cols), centres_xy=centres, indices=idx), report
+
+
+def _rotate_indices(idx: np.ndarray, turns: int, lattice: str) -> np.ndarray:
+    """Indices of the same lenses after the basis turned by ``turns`` lattice steps
+    (b1' = R(-turns*step) b1 ...), i.e. the new basis is the old one rotated back."""
+    i, j = idx[:, 0], idx[:, 1]
+    for _ in range(turns % (6 if lattice == "hex" else 4)):
+        # old basis rotated by -step becomes the new one: old b1 = new b2, old b2 = new b2 - new b1
+        # (hex) / old b1 = new b2, old b2 = -new b1 (square). Then a lens i b1 + j b2 (old) is:
+        if lattice == "hex":
+            i, j = -j, i + j
+        else:
+            i, j = -j, i
+    return np.stack([i, j], axis=1)
+
+
+# ----------------------------------------------------------------------------------------------
+# comparison and checks
+def compare_grids(ours: LensGrid, other: LensGrid, image_shape: tuple[int, int]) -> dict:
+    """Distance between two grids over every lens of ``ours`` inside the image (px).
+
+    Each of our centres is paired with the nearest centre of ``other`` (its lattice, or its
+    refined centres when it has them). Returns rms_px, max_px, mean shift (dx, dy) px, count,
+    and the pitch and angle differences (angle modulo the lattice period).
+    """
+    grid = ours if ours.image_shape else LensGrid(ours.pitch_px, ours.angle_rad, ours.offset_xy,
+                                                  ours.lattice, image_shape=image_shape)
+    _, mine = grid.lens_centres() if ours.centres_xy is None else \
+        (ours.indices, ours.centres_xy)
+    if other.centres_xy is not None:
+        from scipy.spatial import cKDTree
+
+        _, k = cKDTree(other.centres_xy).query(mine)
+        theirs = other.centres_xy[k]
+    else:
+        i, j = other.nearest_index(mine[:, 0], mine[:, 1])
+        theirs = other.lattice_xy(i, j)
+    d = mine - theirs
+    dist = np.linalg.norm(d, axis=1)
+    step = LATTICES[ours.lattice]
+    dang = (ours.angle_rad - other.angle_rad + step / 2) % step - step / 2
+    return {"lenses": int(len(dist)), "rms_px": float(np.sqrt(np.mean(dist ** 2))),
+            "max_px": float(dist.max()), "mean_shift_xy": [float(v) for v in d.mean(axis=0)],
+            "pitch_diff_px": float(ours.pitch_px - other.pitch_px),
+            "angle_diff_deg": float(np.degrees(dang))}
+
+
+def mean_micro_image(image: np.ndarray, centres: np.ndarray, *, half: int) -> np.ndarray:
+    """Average of the micro-images around ``centres`` (K, 2), resampled bilinearly on a
+    (2 half + 1)^2 grid centred on each centre: its symmetry centre is the grid's bias."""
+    rows, cols = image.shape
+    offs = np.arange(-half, half + 1, dtype=np.float32)
+    acc = np.zeros((len(offs), len(offs)), np.float64)
+    img = np.asarray(image, np.float32)
+    keep = ((centres[:, 0] > half + 1) & (centres[:, 0] < cols - half - 2)
+            & (centres[:, 1] > half + 1) & (centres[:, 1] < rows - half - 2))
+    for x, y in centres[keep]:
+        mapx = (x + offs)[None, :].repeat(len(offs), 0).astype(np.float32)
+        mapy = (y + offs)[:, None].repeat(len(offs), 1).astype(np.float32)
+        acc += cv2.remap(img, mapx, mapy, cv2.INTER_LINEAR)
+    return acc / max(int(keep.sum()), 1)
+
+
+def symmetry_centre(patch: np.ndarray, *, radius: float) -> tuple[float, float]:
+    """Point-symmetry centre (dx, dy) of a patch relative to its middle pixel (px).
+
+    Minimises sum over |r| < radius of (P(c + r) - P(c - r))^2 over sub-pixel c (bilinear
+    resampling, Nelder-Mead)."""
+    from scipy.optimize import minimize
+
+    n = patch.shape[0]
+    mid = (n - 1) / 2
+    yy, xx = np.mgrid[0:n, 0:n].astype(np.float32) - np.float32(mid)
+    inside = np.hypot(xx, yy) < radius
+    p = patch.astype(np.float32)
+
+    def cost(c):
+        fwd = cv2.remap(p, (mid + c[0] + xx).astype(np.float32),
+                        (mid + c[1] + yy).astype(np.float32), cv2.INTER_CUBIC)
+        back = cv2.remap(p, (mid + c[0] - xx).astype(np.float32),
+                         (mid + c[1] - yy).astype(np.float32), cv2.INTER_CUBIC)
+        return float(np.sum((fwd - back)[inside] ** 2))
+
+    res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                   options={"xatol": 1e-4, "fatol": 1e-12, "maxiter": 400})
+    return float(res.x[0]), float(res.x[1])

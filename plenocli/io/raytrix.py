@@ -1,0 +1,248 @@
+"""Raytrix ``RayCalibData`` XML: read, write, and conversion to / from ``LensGrid``.
+
+A calibration is a plain dict (JSON-ready, so it also travels in TIFF metadata)::
+
+    version        "1.0"
+    offset         [x, y]  px, of the centre lens from the image centre, y pointing UP
+    diameter       lens pitch, px
+    rotation       rad, lattice orientation (y up, counter-clockwise)
+    lens_border    px
+    tcp            virtual depth of the total covering plane
+    lens_base_x    [x, y]  first lattice vector, in units of ``diameter`` (y up)
+    lens_base_y    [x, y]  second lattice vector
+    sub_grid_base  [x, y]  base of the sub-grid of one lens type (= 2 (base_x + base_y))
+    distortion     {"type", "function", "parameters": [..], "offset": [x, y]}
+    lens_types     [{"id", "offset": [x, y] (lens units), "depth_range": [min, max]}, ...]
+    k_matrix       3 x 3 list, or None when absent
+
+Conventions (checked against the real origami frame, see tests/test_raytrix.py):
+
+- Pixel (row r, col c) has its centre at (x, y) = (c, r) in plenocli. The centre lens of a
+  W x H image sits at ``x = W/2 + offset.x``, ``y = H/2 - offset.y``.
+- ``lens_base_x`` / ``lens_base_y`` are y-up vectors: in image coordinates (y down) they become
+  ``diameter * (bx, -by)``. They give the lattice directions to float32 precision only (the files
+  store e.g. ``(-1, -8.7e-8)`` with ``rotation = 2.5e-5``), so the lattice is turned by the small
+  difference between ``rotation`` and the direction of ``lens_base_x`` (modulo 60 deg).
+- ``LensGrid.angle_rad`` is measured from +x towards +y (down): it is minus the y-up angle.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from plenocli.errors import InputError
+from plenocli.io.atomic import write_text
+from plenocli.lensgrid import LensGrid
+
+DEFAULT_LENS_TYPES = [
+    {"id": 0, "offset": [0.0, 0.0], "depth_range": [1.0, 3.2]},
+    {"id": 1, "offset": [1.0, 0.0], "depth_range": [2.6, 4.2]},
+    {"id": 2, "offset": [-1.0, 0.0], "depth_range": [3.5, 100.0]},
+]
+
+
+def _xy(node: ET.Element | None, what: str) -> list[float]:
+    if node is None:
+        raise ValueError(f"missing <{what}>")
+    return [_num(node.find("x"), f"{what}/x"), _num(node.find("y"), f"{what}/y")]
+
+
+def _num(node: ET.Element | None, what: str) -> float:
+    if node is None or node.text is None or not node.text.strip():
+        raise ValueError(f"missing <{what}>")
+    return float(node.text.strip())
+
+
+def _numbers(text: str | None) -> list[float]:
+    parts = (text or "").replace(";", " ").replace(",", " ").split()
+    return [float(p) for p in parts]
+
+
+def parse_calib(text: str, *, source: str = "XML") -> dict:
+    """Parse RayCalibData XML text into a calibration dict (see module doc)."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as err:
+        raise InputError(f"{source}: malformed XML ({err}); pass a Raytrix RayCalibData file") \
+            from err
+    if root.tag != "RayCalibData":
+        raise InputError(f"{source}: a <{root.tag}> file, not a Raytrix <RayCalibData> "
+                         "calibration; plenocli reads RayCalibData XML only")
+    try:
+        dist = root.find("distortion")
+        distortion = None
+        if dist is not None:
+            param = dist.find("parameter")
+            count = int(param.get("count", "0")) if param is not None else 0
+            values = _numbers(param.text) if param is not None else []
+            off = dist.find("offset")
+            distortion = {"type": dist.get("type", "radial"),
+                          "function": (dist.findtext("function") or "constant").strip(),
+                          "parameters": values[:count] if count else [],
+                          "offset": _xy(off, "distortion/offset") if off is not None
+                          else [0.0, 0.0]}
+        lens_types = []
+        for lt in root.findall("lens_type"):
+            rng = lt.find("depth_range")
+            lens_types.append({"id": int(lt.get("id", len(lens_types))),
+                               "offset": _xy(lt.find("offset"), "lens_type/offset"),
+                               "depth_range": [_num(rng.find("min") if rng is not None else None,
+                                                    "depth_range/min"),
+                                               _num(rng.find("max") if rng is not None else None,
+                                                    "depth_range/max")]})
+        kmat = root.find("k_matrix")
+        k_matrix = None
+        if kmat is not None:
+            k_matrix = [_numbers(kmat.findtext(f"row_{r}")) for r in (1, 2, 3)]
+            if any(len(row) != 3 for row in k_matrix):
+                raise ValueError("k_matrix rows must hold 3 numbers")
+        calib = {
+            "version": root.get("version", "1.0"),
+            "offset": _xy(root.find("offset"), "offset"),
+            "diameter": _num(root.find("diameter"), "diameter"),
+            "rotation": _num(root.find("rotation"), "rotation"),
+            "lens_border": _num(root.find("lens_border"), "lens_border")
+            if root.find("lens_border") is not None else 1.0,
+            "tcp": _num(root.find("tcp"), "tcp") if root.find("tcp") is not None else None,
+            "lens_base_x": _xy(root.find("lens_base_x"), "lens_base_x"),
+            "lens_base_y": _xy(root.find("lens_base_y"), "lens_base_y"),
+            "sub_grid_base": _xy(root.find("sub_grid_base"), "sub_grid_base")
+            if root.find("sub_grid_base") is not None else None,
+            "distortion": distortion,
+            "lens_types": lens_types,
+            "k_matrix": k_matrix,
+        }
+    except ValueError as err:
+        raise InputError(f"{source}: bad RayCalibData ({err}); the file may be truncated") \
+            from err
+    if not calib["diameter"] > 0:
+        raise InputError(f"{source}: diameter {calib['diameter']} must be positive")
+    return calib
+
+
+def read_calib(path: str | os.PathLike) -> dict:
+    """Read a RayCalibData XML file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError(f"{p}: not a text XML file ({err})") from err
+    return parse_calib(text, source=str(p))
+
+
+def _f(v: float) -> str:
+    return repr(float(v))
+
+
+def format_calib(calib: dict) -> str:
+    """RayCalibData XML text of a calibration dict (floats written exactly)."""
+    def xy(tag: str, v, units: str, indent: str = "  ") -> list[str]:
+        return [f'{indent}<{tag} units="{units}">', f"{indent}  <x>{_f(v[0])}</x>",
+                f"{indent}  <y>{_f(v[1])}</y>", f"{indent}</{tag}>"]
+
+    out = [f'<RayCalibData version="{calib.get("version", "1.0")}">']
+    out += xy("offset", calib["offset"], "pix")
+    out.append(f'  <diameter units="pix">{_f(calib["diameter"])}</diameter>')
+    out.append(f'  <rotation units="rad">{_f(calib["rotation"])}</rotation>')
+    out.append(f'  <lens_border units="pix">{_f(calib.get("lens_border", 1.0))}</lens_border>')
+    if calib.get("tcp") is not None:
+        out.append(f'  <tcp units="virtual_depth">{_f(calib["tcp"])}</tcp>')
+    out += xy("lens_base_x", calib["lens_base_x"], "lens")
+    out += xy("lens_base_y", calib["lens_base_y"], "lens")
+    if calib.get("sub_grid_base") is not None:
+        out += xy("sub_grid_base", calib["sub_grid_base"], "lens")
+    dist = calib.get("distortion")
+    if dist is not None:
+        params = dist.get("parameters", [])
+        out.append(f'  <distortion type="{dist.get("type", "radial")}">')
+        out.append(f'    <function>{dist.get("function", "constant")}</function>')
+        text = ";".join(_f(v) for v in params) if params else "0"
+        out.append(f'    <parameter count="{len(params)}">{text}</parameter>')
+        out += xy("offset", dist.get("offset", [0.0, 0.0]), "pix", "    ")
+        out.append("  </distortion>")
+    for lt in calib.get("lens_types", []):
+        out.append(f'  <lens_type id="{int(lt["id"])}">')
+        out += xy("offset", lt["offset"], "lens", "    ")
+        lo, hi = lt["depth_range"]
+        out += ['    <depth_range units="virtual_depth">', f"      <min>{_f(lo)}</min>",
+                f"      <max>{_f(hi)}</max>", "    </depth_range>", "  </lens_type>"]
+    if calib.get("k_matrix") is not None:
+        out.append('  <k_matrix count="9">')
+        for r, row in enumerate(calib["k_matrix"], 1):
+            out.append(f"    <row_{r}>{', '.join(_f(v) for v in row)}</row_{r}>")
+        out.append("  </k_matrix>")
+    out.append("</RayCalibData>")
+    return "\n".join(out) + "\n"
+
+
+def write_calib(path: str | os.PathLike, calib: dict, *, protect: tuple = ()) -> None:
+    """Write a calibration dict as RayCalibData XML (atomically)."""
+    write_text(path, format_calib(calib), protect=protect)
+
+
+def _wrap(angle: float, period: float) -> float:
+    return (angle + period / 2) % period - period / 2
+
+
+def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
+    """The lattice of a Raytrix calibration as a ``LensGrid`` of an image of ``image_shape``
+    (rows, cols). Lens (0, 0) is the centre lens; b1, b2 are the Raytrix base vectors (ordered
+    so that b2 is b1 turned by +60 deg in image coordinates)."""
+    rows, cols = image_shape
+    d = float(calib["diameter"])
+    bx = np.asarray(calib["lens_base_x"], float)
+    by = np.asarray(calib["lens_base_y"], float)
+    step = np.pi / 3 if abs(abs(float(np.dot(bx, by)) /
+                                (np.linalg.norm(bx) * np.linalg.norm(by))) - 0.5) < 0.1 \
+        else np.pi / 2
+    lattice = "hex" if step == np.pi / 3 else "square"
+    turn = _wrap(float(calib["rotation"]) - float(np.arctan2(bx[1], bx[0])), step)
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    u1 = rot @ bx * d / np.linalg.norm(bx)
+    u2 = rot @ by * d / np.linalg.norm(by)
+    img1, img2 = np.array([u1[0], -u1[1]]), np.array([u2[0], -u2[1]])
+    a1, a2 = np.arctan2(img1[1], img1[0]), np.arctan2(img2[1], img2[0])
+    first = img1 if _wrap(a2 - a1, 2 * np.pi) > 0 else img2
+    centre = (cols / 2 + float(calib["offset"][0]), rows / 2 - float(calib["offset"][1]))
+    return LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
+                    offset_xy=centre, lattice=lattice, image_shape=(rows, cols))
+
+
+def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
+    """A RayCalibData dict for ``grid`` (which needs ``image_shape``). Fields the grid does not
+    determine (lens_border, tcp, distortion, lens types' depth ranges, k_matrix) come from
+    ``template`` or Raytrix-like defaults. The offset is the lens nearest the image centre."""
+    if grid.image_shape is None:
+        raise ValueError("grid.image_shape is needed to express the offset from the image centre")
+    rows, cols = grid.image_shape
+    i, j = grid.nearest_index((cols - 1) / 2, (rows - 1) / 2)
+    x, y = grid.lattice_xy(i, j)
+    b = grid.basis() / grid.pitch_px
+    base_x = [float(b[0, 0]), float(-b[0, 1])]          # y up
+    base_y = [float(b[1, 0]), float(-b[1, 1])]
+    tpl = template or {}
+    lens_types = [dict(lt) for lt in tpl.get("lens_types", DEFAULT_LENS_TYPES)]
+    for lt in lens_types:  # Raytrix: type 1 sits at +base_x, type 2 at -base_x
+        sign = {0: 0.0, 1: 1.0, 2: -1.0}.get(int(lt["id"]), 0.0)
+        lt["offset"] = [sign * base_x[0], sign * base_x[1]]
+    return {
+        "version": tpl.get("version", "1.0"),
+        "offset": [float(x - cols / 2), float(rows / 2 - y)],
+        "diameter": float(grid.pitch_px),
+        "rotation": float(np.arctan2(base_x[1], base_x[0]) % (2 * np.pi)),
+        "lens_border": tpl.get("lens_border", 1.0),
+        "tcp": tpl.get("tcp", 2.2),
+        "lens_base_x": base_x,
+        "lens_base_y": base_y,
+        "sub_grid_base": [2 * (base_x[0] + base_y[0]), 2 * (base_x[1] + base_y[1])],
+        "distortion": tpl.get("distortion", {"type": "radial", "function": "constant",
+                                             "parameters": [], "offset": [0.0, 0.0]}),
+        "lens_types": lens_types,
+        "k_matrix": tpl.get("k_matrix"),
+    }

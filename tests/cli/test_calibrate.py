@@ -1,0 +1,57 @@
+"""End-to-end `plenocli calibrate`: outputs, and bad input giving one line, exit 1, no output."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tifffile
+import yaml
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.synth.whiteimage import white_image
+
+
+def test_calibrate_writes_yaml_xml_preview(tmp_path):
+    image, _ = white_image((512, 512), pitch_px=15.3, angle_rad=0.2, offset_xy=(250.3, 260.1),
+                           seed=1)
+    src = tmp_path / "white.tif"
+    tifffile.imwrite(src, image)
+    out, xml, png = tmp_path / "g.yaml", tmp_path / "g.xml", tmp_path / "g.png"
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--xml", str(xml),
+                                   "--preview", str(png), "--compare", str(xml)[:-4] + "x.xml"])
+    assert res.exit_code == 1 and not out.exists()   # --compare file missing
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--xml", str(xml),
+                                   "--preview", str(png)])
+    assert res.exit_code == 0, res.output
+    doc = yaml.safe_load(out.read_text())
+    assert abs(doc["lens_grid"]["pitch_px"] - 15.3) < 0.01
+    assert doc["residuals"]["residual_rms_px"] < 0.1
+    assert xml.exists() and png.exists()
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(tmp_path / "h.yaml"),
+                                   "--compare", str(xml)])
+    assert res.exit_code == 0, res.output
+    cmp = yaml.safe_load((tmp_path / "h.yaml").read_text())["compare"]
+    assert cmp["max_px"] < 0.2   # refined centres (noisy) against their own fitted lattice
+
+
+@pytest.mark.parametrize("kind", ["noise", "flat", "small"])
+def test_bad_images(tmp_path, kind):
+    rng = np.random.default_rng(0)
+    data = {"noise": rng.normal(1000, 40, (400, 400)), "flat": np.full((400, 400), 900.0),
+            "small": np.ones((30, 30))}[kind].astype(np.uint16)
+    src, out = tmp_path / "in.tif", tmp_path / "out.yaml"
+    tifffile.imwrite(src, data)
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out)])
+    assert res.exit_code == 1
+    assert res.output.strip().count("\n") == 0 and "Error" in res.output
+    assert not out.exists()
+
+
+def test_corrupt_xml(tmp_path):
+    image, _ = white_image((256, 256), pitch_px=15.0, angle_rad=0.2, offset_xy=(128, 128))
+    src, bad, out = tmp_path / "w.tif", tmp_path / "bad.xml", tmp_path / "o.yaml"
+    tifffile.imwrite(src, image)
+    bad.write_text("<RayCalibData><offset><x>1")
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--compare", str(bad)])
+    assert res.exit_code == 1 and "malformed XML" in res.output and not out.exists()

@@ -1,0 +1,60 @@
+"""RayCalibData XML: every real file parses, round-trips, and maps onto the real frame."""
+
+from __future__ import annotations
+
+import pytest
+
+from plenocli import hexgrid
+from plenocli.errors import InputError
+from plenocli.io import gridfile, raytrix
+from plenocli.lensgrid import LensGrid
+
+
+def _xmls(realdata):
+    return sorted((realdata / "raytrix").rglob("*.xml"))
+
+
+@pytest.mark.realdata
+def test_every_real_file_parses_and_round_trips(realdata):
+    for path in _xmls(realdata):
+        if path.name == "Boys__calib.xml":
+            with pytest.raises(InputError, match="TSPCCalibData"):
+                raytrix.read_calib(path)
+            continue
+        calib = raytrix.read_calib(path)
+        again = raytrix.parse_calib(raytrix.format_calib(calib))
+        assert again == calib, path.name
+        assert calib["diameter"] > 0 and len(calib["lens_types"]) == 3
+
+
+@pytest.mark.parametrize("text", ["<RayCalibData><offset>", "not xml at all",
+                                  "<RayCalibData version='1.0'><diameter>5</diameter>"
+                                  "</RayCalibData>"])
+def test_malformed_xml_is_an_input_error(text):
+    with pytest.raises(InputError):
+        raytrix.parse_calib(text)
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.3, -1.2, 2.9])
+def test_grid_calib_grid_round_trip(angle):
+    grid = LensGrid(23.2, angle, (1001.3, 1040.8), image_shape=(2048, 2000))
+    back = raytrix.grid_from_calib(raytrix.calib_from_grid(grid), (2048, 2000))
+    same = hexgrid.compare_grids(grid, back, (2048, 2000))
+    assert same["max_px"] < 1e-6
+    assert back.pitch_px == pytest.approx(23.2)
+
+
+def test_offset_convention_centre_and_y_up():
+    calib = raytrix.calib_from_grid(LensGrid(20.0, 0.0, (505.0, 495.0), image_shape=(1000, 1000)))
+    assert calib["offset"] == pytest.approx([5.0, 5.0])   # x right of centre, y up (above)
+
+
+@pytest.mark.realdata
+def test_read_grid_accepts_xml(realdata):
+    path = realdata / "raytrix" / "origami" / "calib.xml"
+    with pytest.raises(InputError, match="image size"):
+        gridfile.read_grid(path)
+    grid = gridfile.read_grid(path, image_shape=(2048, 2048))
+    assert grid.pitch_px == pytest.approx(23.202295303345)
+    # offset from the centre, y up: x = W/2 + 13.04, y = H/2 + 20.35
+    assert grid.offset_xy == pytest.approx((1024 + 13.040943844572, 1024 + 20.348051920159))
