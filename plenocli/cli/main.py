@@ -3,6 +3,7 @@
 import click
 
 from plenocli import __version__
+from plenocli.cli.batch import batch
 from plenocli.cli.bias import bias
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
@@ -19,5 +20,5 @@ def cli():
     """
 
 
-for command in (decode, bias, flat, run, simulate):
+for command in (decode, bias, flat, run, batch, simulate):
     cli.add_command(command)
