@@ -7,6 +7,7 @@ from plenocli.cli.batch import batch
 from plenocli.cli.bias import bias
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
+from plenocli.cli.info import info
 from plenocli.cli.run import run
 from plenocli.cli.simulate import simulate
 
@@ -20,5 +21,5 @@ def cli():
     """
 
 
-for command in (decode, bias, flat, run, batch, simulate):
+for command in (decode, bias, flat, run, batch, simulate, info):
     cli.add_command(command)
