@@ -32,6 +32,7 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler):
     Example:
       plenocli batch configs/batch_dualpixel.yaml --inputs 'shoot/*.dng' --out out/shoot -j 2
     """
+    import logging
     import os
 
     from plenocli.errors import PlenocliError
@@ -42,7 +43,8 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler):
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
                        force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler)
-    log.info("%s", format_summary(report))
+    if log.isEnabledFor(logging.INFO):  # -q keeps only the failures
+        click.echo(format_summary(report), err=True)
     for failure in report.failed:
         click.echo(f"failed: {failure.capture}: {failure.detail}", err=True)
     if report.failed:
