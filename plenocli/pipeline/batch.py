@@ -34,6 +34,7 @@ from plenocli.progress import log, progress
 # Each worker gets one thread: the parallelism is across captures (no oversubscription).
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+DASK_CONNECT_TIMEOUT = "20s"
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
            "memory); run it alone with plenocli run to see more")
 
@@ -294,7 +295,7 @@ def _dask_results(address: str, config: str, captures: list[str],
         raise PlenocliError("--scheduler needs dask.distributed, which is not installed; "
                             "install it with: pip install 'plenocli[dask]'") from err
     try:
-        client = Client(address, timeout="20s", set_as_default=False)
+        client = Client(address, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as err:
         raise PlenocliError(f"cannot reach the Dask scheduler at {address!r} ({err}); "
                             "check the address (e.g. tcp://host:8786) and that it runs") from err
@@ -304,7 +305,7 @@ def _dask_results(address: str, config: str, captures: list[str],
                                  key=f"plenocli-{Path(c).stem}-{os.getpid()}-{k}")
                    for k, c in enumerate(captures)]
         capture_of = {f.key: c for f, c in zip(futures, captures, strict=True)}
-        for future in as_completed(futures):
+        for future in as_completed(futures, loop=client.loop):
             try:
                 yield future.result()
             except Exception as err:  # e.g. KilledWorker: the capture's worker kept dying
