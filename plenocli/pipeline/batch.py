@@ -232,9 +232,18 @@ def _one_thread_per_worker() -> Iterator[None]:
                 os.environ[key] = value
 
 
+# Imported once by the fork server, so that each worker starts without re-importing them.
+PRELOAD = ["plenocli.pipeline.batch", "numpy", "scipy.ndimage", "tifffile",
+           "plenocli.pipeline.stages.decode", "plenocli.pipeline.stages.bias",
+           "plenocli.pipeline.stages.flat"]
+
+
 def _context():
-    methods = multiprocessing.get_all_start_methods()
-    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(PRELOAD)  # no effect once the server runs: that is fine
+    return context
 
 
 def _pool_results(jobs: int, config: str, captures: list[str],
