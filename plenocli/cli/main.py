@@ -3,11 +3,13 @@
 import click
 
 from plenocli import __version__
+from plenocli.cli.batch import batch
 from plenocli.cli.bias import bias
 from plenocli.cli.calibrate import calibrate
 from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
+from plenocli.cli.info import info
 from plenocli.cli.refocus import refocus
 from plenocli.cli.run import run
 from plenocli.cli.sai import sai
@@ -35,6 +37,8 @@ for command in (
     crosstalk,
     stitch,
     run,
+    batch,
+    info,
     simulate,
 ):
     cli.add_command(command)

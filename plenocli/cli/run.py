@@ -9,16 +9,53 @@ from plenocli.cli import options
 @click.option("--dry-run", is_flag=True, help="List what would run, run nothing.")
 @click.option("--set", "overrides", multiple=True, metavar="STEP.PARAM=VALUE",
               help="Override a step parameter (repeatable), e.g. --set bias.smooth=9.")
+@click.option("--out", type=click.Path(file_okay=False), default=None,
+              help="Output root: fills {out} in the config (overrides its 'out:' key).")
+@click.option("--print-make", is_flag=True,
+              help="Print the pipeline as a Makefile fragment (stdout) instead of running it.")
+@click.option("--inputs", "patterns", multiple=True, metavar="GLOB|FILE|@LIST",
+              help="With --print-make and a batch template: the captures to write rules for.")
 @options.stage_command
-def run(config, force, dry_run, overrides):
+def run(config, force, dry_run, overrides, out, print_make, patterns):
     """Run the steps of CONFIG in order; a step whose outputs are newer than its inputs and
     whose parameters are unchanged is skipped.
+
+    With --print-make, print make rules instead (targets = outputs, prerequisites = inputs and
+    CONFIG, recipe = the plenocli command); paths are relative to the current folder.
 
     \b
     Example:
       plenocli run configs/demo_dualpixel.yaml --set bias.smooth=9 --dry-run
+      plenocli run configs/demo_dualpixel.yaml --print-make > demo.mk && make -f demo.mk -j2
     """
-    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.config import load_config, read_template
+
+    if patterns and not print_make:
+        raise click.UsageError("--inputs goes with --print-make; to run a batch of captures "
+                               "use plenocli batch CONFIG --inputs ...")
+    if print_make:
+        import shlex
+        import sys
+
+        from plenocli.pipeline.makefile import make_fragment
+
+        template = read_template(config, overrides)
+        if patterns:
+            from plenocli.pipeline.batch import expand_inputs
+
+            captures = expand_inputs(patterns)
+            steps = template.steps(out=out, only="shared")
+            for capture in captures:
+                steps += template.steps(capture=capture, out=out, only="per-capture")
+        else:
+            steps = template.steps(out=out)  # a batch template without --inputs: says so
+        command = "plenocli run " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+        click.echo(make_fragment(steps, config, command=command), nl=False)
+        return
     from plenocli.pipeline.runner import run_pipeline
 
-    run_pipeline(load_config(config, overrides), force=force, dry_run=dry_run)
+    if out is None:
+        steps = load_config(config, overrides)
+    else:
+        steps = read_template(config, overrides).steps(out=out)
+    run_pipeline(steps, force=force, dry_run=dry_run)

@@ -16,12 +16,25 @@
 
 The keys of a step are its stage's long option names (``mask-width`` or ``mask_width``). Unknown
 keys are errors that name the closest valid key.
+
+Batch templates (``plenocli batch``): a value may hold the placeholders ``{capture}`` (the path of
+one capture), ``{name}`` (its file name without suffix) and ``{out}`` (the output root: the
+top-level ``out:`` key, relative to this file, or ``--out DIR``). Steps that use ``{capture}`` or
+``{name}`` run once per capture and must put ``{name}`` (or ``{capture}``) in every output path;
+the other steps (white image, calibration) are shared: they run once and every capture reuses
+their outputs::
+
+    out: ../out/batch
+    steps:
+      decode_white: {stage: decode, input: white.dng, output: "{out}/white_frames.tif"}
+      decode:       {input: "{capture}", output: "{out}/{name}/frames.tif"}
 """
 
 from __future__ import annotations
 
 import difflib
 import inspect
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +44,9 @@ import yaml
 from plenocli.errors import ConfigError
 from plenocli.pipeline.registry import Stage, get_stages
 
-TOP_KEYS = ("description", "steps")
+TOP_KEYS = ("description", "steps", "out")
+PER_CAPTURE = ("capture", "name")  # placeholders that make a step run once per capture
+_PLACEHOLDER = re.compile(r"\{(capture|name|out)\}")
 
 
 @dataclass(frozen=True)
@@ -65,23 +80,129 @@ def closest(word: str, choices) -> str:
 
 def load_config(path: str | Path, overrides: list[str] = ()) -> list[Step]:
     """Read, validate and resolve a pipeline config; ``overrides`` are ``STEP.PARAM=VALUE``."""
+    template = read_template(path, overrides)
+    if template.per_capture_steps():
+        raise ConfigError(f"{template.path}: a batch template (steps "
+                          f"{', '.join(sorted(template.per_capture_steps()))} use {{capture}} or "
+                          "{name}); run it with plenocli batch CONFIG --inputs CAPTURES")
+    return template.steps()
+
+
+@dataclass(frozen=True)
+class Template:
+    """A config as written (placeholders kept, overrides applied), before paths are resolved."""
+
+    path: Path
+    raw_steps: dict[str, dict]
+    out: str | None  # the top-level 'out:' value (relative to the config's folder)
+
+    def per_capture_steps(self) -> set[str]:
+        """Names of the steps that use ``{capture}`` or ``{name}``."""
+        return {name for name, body in self.raw_steps.items()
+                if _placeholders(body) & set(PER_CAPTURE)}
+
+    def steps(self, *, capture: str | Path | None = None, out: str | Path | None = None,
+              only: str = "all") -> list[Step]:
+        """Resolved steps with the placeholders filled in.
+
+        ``capture``: the capture's path (needed by per-capture steps); ``out``: the output root
+        (overrides the config's ``out:``); ``only``: "all", "shared" or "per-capture" steps.
+        """
+        if only not in ("all", "shared", "per-capture"):
+            raise ValueError(f"only must be all, shared or per-capture, got {only!r}")
+        base = self.path.resolve().parent
+        per_capture = self.per_capture_steps()
+        values = {}
+        if capture is not None:
+            values = {"capture": str(Path(capture).resolve()), "name": Path(capture).stem}
+        root = out if out is not None else (str(base / self.out) if self.out else None)
+        if root is not None:
+            values["out"] = str(Path(root).resolve())
+        stages = get_stages()
+        steps = []
+        for name, body in self.raw_steps.items():
+            if only != "all" and (name in per_capture) != (only == "per-capture"):
+                continue
+            missing = _placeholders(body) - set(values)
+            if missing:
+                what = ("--out DIR or a top-level 'out:' key" if missing == {"out"}
+                        else "a capture (plenocli batch CONFIG --inputs CAPTURES)")
+                raise ConfigError(f"{self.path}: step {name!r} uses "
+                                  f"{', '.join('{' + m + '}' for m in sorted(missing))}; "
+                                  f"give {what}")
+            steps.append(_make_step(self.path, base, name, _fill(body, values), stages))
+        return steps
+
+
+def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
+    """Read and check a config's structure; placeholders are kept (see :class:`Template`)."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"{p}: no such config file")
     try:
         doc = yaml.safe_load(p.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{p}: not valid YAML ({str(err).splitlines()[0]})") from err
+        hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
+                if "{" in p.read_text(encoding="utf-8", errors="replace") else "")
+        raise ConfigError(f"{p}: not valid YAML ({str(err).splitlines()[0]}){hint}") from err
     if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict) or not doc["steps"]:
         raise ConfigError(f"{p}: a config needs a 'steps:' mapping of step names to stages")
     for key in doc:
         if key not in TOP_KEYS:
             raise ConfigError(f"{p}: unknown top-level key {key!r}{closest(key, TOP_KEYS)}")
-    raw_steps = {name: dict(body or {}) for name, body in doc["steps"].items()}
+    raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
+                 for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
+    template = Template(p, raw_steps, None if doc.get("out") is None else str(doc["out"]))
+    _check_per_capture_outputs(template)
+    return template
+
+
+def _unflow(value):
+    """YAML reads an unquoted ``{capture}`` as the mapping {capture: None}: take it back."""
+    if (isinstance(value, dict) and len(value) == 1 and None in value.values()
+            and next(iter(value)) in ("capture", "name", "out")):
+        return "{" + next(iter(value)) + "}"
+    return value
+
+
+def _placeholders(value) -> set[str]:
+    if isinstance(value, str):
+        return set(_PLACEHOLDER.findall(value))
+    if isinstance(value, dict):
+        return set().union(*(_placeholders(v) for v in value.values()))
+    if isinstance(value, (list, tuple)):
+        return set().union(*(_placeholders(v) for v in value))
+    return set()
+
+
+def _fill(value, values: dict[str, str]):
+    if isinstance(value, str):
+        return _PLACEHOLDER.sub(lambda m: values[m.group(1)], value)
+    if isinstance(value, dict):
+        return {k: _fill(v, values) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_fill(v, values) for v in value]
+    return value
+
+
+def _check_per_capture_outputs(template: Template) -> None:
+    """Every output of a per-capture step must name the capture, or captures overwrite it."""
     stages = get_stages()
-    base = p.resolve().parent
-    return [_make_step(p, base, name, body, stages) for name, body in raw_steps.items()]
+    for name in template.per_capture_steps():
+        body = template.raw_steps[name]
+        stage = stages.get(body.get("stage", name))
+        if stage is None:
+            continue  # reported with a better message by _make_step
+        for key, value in body.items():
+            if str(key).replace("-", "_") not in stage.outputs or value is None:
+                continue
+            for item in value if isinstance(value, (list, tuple)) else [value]:
+                if not _placeholders(item) & set(PER_CAPTURE):
+                    raise ConfigError(
+                        f"{template.path}: step {name!r} runs once per capture but writes "
+                        f"{key}: {item} for every capture; put {{name}} in the path, e.g. "
+                        f"{{out}}/{{name}}/{Path(str(item)).name}")
 
 
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
@@ -93,7 +214,7 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if step not in steps:
             raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
-        steps[step][param] = yaml.safe_load(value) if value != "" else None
+        steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else None
 
 
 def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> Step:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,10 +29,15 @@ class Decision:
     reason: str
 
 
-def plan(steps: list[Step], *, force: bool = False) -> list[Decision]:
-    """Decide, without running anything, which steps must run and why."""
+def plan(steps: list[Step], *, force: bool = False,
+         upstream: Iterable[Path] = ()) -> list[Decision]:
+    """Decide, without running anything, which steps must run and why.
+
+    ``upstream``: files that steps outside ``steps`` will (re)make before these run, e.g. the
+    outputs of a batch's shared steps.
+    """
     decisions: list[Decision] = []
-    will_make: set[Path] = set()
+    will_make: set[Path] = {Path(p).resolve() for p in upstream}
     for step in steps:
         reason = "forced" if force else _stale(step, will_make)
         if reason:

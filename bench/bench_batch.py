@@ -1,0 +1,69 @@
+"""Batch throughput: captures per minute with 1 and 2 worker processes on this machine.
+
+    python bench/bench_batch.py [--captures 6] [--size 1500x2000]
+
+Writes synthetic dual-pixel captures (plenocli.synth.dualpixel) and a white image into a temporary
+folder, runs the batch template of tests/test_batch.py (decode -> bias -> flat, white shared) with
+--jobs 1 (in this process) and --jobs 2 (process pool), and prints the throughput, the speed-up,
+and the peak memory of this process and of the largest worker.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from plenocli.pipeline.batch import run_batch  # noqa: E402
+from tests.test_batch import make_shoot  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--captures", type=int, default=6)
+    parser.add_argument("--size", default="1500x2000", help="active area ROWSxCOLS")
+    parser.add_argument("--tmp", default=None, help="work folder (default: the system's temp)")
+    args = parser.parse_args()
+    rows, cols = (int(v) for v in args.size.split("x"))
+    with tempfile.TemporaryDirectory(dir=args.tmp) as tmp:
+        folder = Path(tmp)
+        start = time.perf_counter()
+        config, captures = make_shoot(folder, 1, corrupt=None, rows=rows, cols=cols,
+                                      top=42, left=136)
+        for k in range(1, args.captures):  # copies: the work per capture is what counts
+            copy = captures[0].with_name(f"shot{k:02d}.dng")
+            copy.write_bytes(captures[0].read_bytes())
+            captures.append(copy)
+        print(f"{args.captures} dual-pixel captures of {rows} x {cols} (+ over-scan), written in "
+              f"{time.perf_counter() - start:.1f} s")
+        run_batch(config, captures[:1], out=folder / "warm", jobs=1)  # shared steps, imports
+        rates = {}
+        for jobs in (1, 2):
+            out = folder / f"jobs{jobs}"
+            # the shared white steps are copied in, so both runs time only the per-capture work
+            for name in ("white_frames.tif", "white_biased.tif"):
+                out.mkdir(exist_ok=True)
+                (out / name).write_bytes((folder / "warm" / name).read_bytes())
+            load = os.getloadavg()[0]
+            start = time.perf_counter()
+            report = run_batch(config, captures, out=out, jobs=jobs)
+            seconds = time.perf_counter() - start
+            assert all(r.status == "done" for r in report.results), report.results
+            rates[jobs] = 60.0 * len(captures) / seconds
+            per = sum(r.seconds for r in report.results) / len(captures)
+            print(f"--jobs {jobs}: {seconds:6.1f} s  {rates[jobs]:6.1f} captures/min  "
+                  f"({per:.2f} s per capture inside its task; load average before {load:.1f})")
+        print(f"speed-up 2 jobs / 1 job: {rates[2] / rates[1]:.2f}x (target >= 1.7x)")
+        me = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(f"peak memory of this process (generation + the --jobs 1 run): {me:.0f} MB; "
+              "the machine is shared, so compare with the load average above")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,52 @@
+import click
+
+from plenocli.cli import options
+
+
+@click.command(short_help="Run a pipeline template over many captures, in parallel.")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
+              help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
+              help="Worker processes on this machine [default: number of CPUs].")
+@click.option("--out", type=click.Path(file_okay=False), default=None,
+              help="Output root: fills {out} in the config (overrides its 'out:' key).")
+@click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
+@click.option("--dry-run", is_flag=True, help="Say what would run, run nothing.")
+@click.option("--set", "overrides", multiple=True, metavar="STEP.PARAM=VALUE",
+              help="Override a step parameter (repeatable), e.g. --set bias.smooth=9.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Send the captures to this dask.distributed scheduler (tcp://host:8786) "
+                   "instead of local processes; needs pip install 'plenocli[dask]'.")
+@options.stage_command
+def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler):
+    """Run the pipeline template CONFIG over many captures.
+
+    In CONFIG, per-capture steps read "{capture}" and write under "{out}/{name}/" ({name} is the
+    capture's file name without suffix); steps without {capture}/{name} (white image,
+    calibration) run once and every capture reuses them. Up-to-date outputs are skipped, so a
+    rerun after a failure only redoes what is missing. Prints a table (done / skipped / failed
+    with the reason); exit status 1 when a capture failed.
+
+    \b
+    Example:
+      plenocli batch configs/batch_dualpixel.yaml --inputs 'shoot/*.dng' --out out/shoot -j 2
+    """
+    import logging
+    import os
+
+    from plenocli.errors import PlenocliError
+    from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
+    from plenocli.progress import log
+
+    if jobs is None:
+        jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
+                       force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler)
+    if log.isEnabledFor(logging.INFO):  # -q keeps only the failures
+        click.echo(format_summary(report), err=True)
+    for failure in report.failed:
+        click.echo(f"failed: {failure.capture}: {failure.detail}", err=True)
+    if report.failed:
+        raise PlenocliError(f"{len(report.failed)} of {len(report.results)} captures failed "
+                            "(see above); fix them and run the same command again")

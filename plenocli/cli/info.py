@@ -1,0 +1,24 @@
+import click
+
+from plenocli.cli import options
+
+
+@click.command(short_help="Show what a raw, plenocli TIFF, lens grid or XML file holds.")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON (for scripts).")
+@options.stage_command
+def info(file, as_json):
+    """Describe FILE: camera, frames, sizes, CFA, black/white levels, over-scan areas and the
+    provenance (stage, parameters, inputs, history) of a plenocli output.
+
+    \b
+    Example:
+      plenocli info fixtures/dualpixel/capture.dng
+      plenocli info out/demo/dualpixel/views.tif --json
+    """
+    import json
+
+    from plenocli.io.info import describe, format_info
+
+    described = describe(file)
+    click.echo(json.dumps(described, indent=2, default=str) if as_json else format_info(described))

@@ -1,0 +1,235 @@
+"""What a file holds, for ``plenocli info``: raws, plenocli TIFFs, lens grids, configs, XML.
+
+:func:`describe` returns a JSON-ready dict (``kind`` says which reader answered);
+:func:`format_info` turns it into a few human-readable lines.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import tifffile
+import yaml
+
+from plenocli.errors import InputError
+from plenocli.io import raw as raw_io
+from plenocli.io.tiffio import read_meta
+
+IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
+              "masked_areas")
+TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
+
+
+def describe(path: str | os.PathLike) -> dict[str, Any]:
+    """A summary of ``path``: kind, sizes, levels, geometry and provenance (JSON-ready)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such file")
+    head = {"file": str(p), "bytes": p.stat().st_size}
+    suffix = p.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return {**head, **_describe_yaml(p)}
+    if suffix == ".xml":
+        return {**head, **_describe_xml(p)}
+    if suffix == ".json":
+        return {**head, **_describe_json(p)}
+    kind = raw_io.sniff(p)
+    if kind in ("canon-dp", "dng"):
+        return {**head, **_describe_raw(p)}
+    if kind == "image":
+        meta = read_meta(p) if suffix in (".tif", ".tiff") else {}
+        return {**head, **(_describe_plenocli_tiff(p, meta) if meta else _describe_image(p))}
+    raise InputError(f"{p}: plenocli does not know this kind of file (expected a raw, a TIFF, "
+                     "a lens grid or config YAML, a Raytrix XML or a JSON report)")
+
+
+def _describe_raw(p: Path) -> dict:
+    frames, meta = raw_io.decode(p)
+    model = None
+    if meta["camera"] == "dng":
+        with tifffile.TiffFile(p) as tif:
+            tags = tif.pages[0].tags
+            model = next((str(tags[c].value) for c in TIFF_MODEL_TAGS if c in tags), None)
+    top, left, bottom, right = meta["active_area"]
+    stats = []
+    for name, frame in zip(meta["views"], frames, strict=True):
+        active = frame[top:bottom, left:right]
+        stats.append({"view": name, "min": int(active.min()), "max": int(active.max()),
+                      "mean": round(float(active.mean()), 2)})
+    return {"kind": "raw", "format": meta["camera"], "camera_model": model,
+            "frames": int(frames.shape[0]), "rows": int(frames.shape[1]),
+            "cols": int(frames.shape[2]), "dtype": str(frames.dtype),
+            **{k: meta.get(k) for k in IMAGE_KEYS}, "active_stats": stats}
+
+
+def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
+    with tifffile.TiffFile(p) as tif:
+        page = tif.pages[0]
+        shape, dtype, count = page.shape, str(page.dtype), len(tif.pages)
+    extra = {k: v for k, v in meta.items()
+             if k not in (*IMAGE_KEYS, "provenance", "history")}
+    return {"kind": "plenocli-tiff", "pages": count, "rows": int(shape[0]),
+            "cols": int(shape[1]), "dtype": dtype, **{k: meta.get(k) for k in IMAGE_KEYS},
+            "provenance": meta.get("provenance"), "history": meta.get("history", []),
+            "extra": extra}
+
+
+def _describe_image(p: Path) -> dict:
+    frames, meta = raw_io.decode(p)
+    return {"kind": "image", "frames": int(frames.shape[0]), "rows": int(frames.shape[1]),
+            "cols": int(frames.shape[2]), "dtype": str(frames.dtype), "views": meta["views"],
+            "min": float(np.min(frames)), "max": float(np.max(frames))}
+
+
+def _describe_yaml(p: Path) -> dict:
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise InputError(f"{p}: not valid YAML ({str(err).splitlines()[0]})") from err
+    if isinstance(doc, dict) and isinstance(doc.get("lens_grid"), dict):
+        grid = dict(doc["lens_grid"])
+        lenses = grid.pop("lenses", None)
+        others = {k: v for k, v in doc.items() if k not in ("lens_grid", "provenance")}
+        return {"kind": "lens-grid", **grid,
+                "lens_count": lenses.get("count") if isinstance(lenses, dict) else None,
+                "extra": others, "provenance": doc.get("provenance")}
+    if isinstance(doc, dict) and isinstance(doc.get("steps"), dict):
+        steps = {name: (body or {}).get("stage", name) for name, body in doc["steps"].items()}
+        return {"kind": "pipeline-config", "description": doc.get("description"),
+                "out": doc.get("out"), "steps": steps}
+    return {"kind": "yaml", "keys": list(doc) if isinstance(doc, dict) else None}
+
+
+def _describe_xml(p: Path) -> dict:
+    # A dedicated Raytrix RayCalibData reader (plenocli.io.raytrix) can take over here; this
+    # generic view lists the root tag and its top-level fields.
+    try:
+        root = ET.parse(p).getroot()
+    except ET.ParseError as err:
+        raise InputError(f"{p}: not well-formed XML ({err})") from err
+    return {"kind": "xml", "root": root.tag, "attributes": dict(root.attrib),
+            "fields": _xml_children(root)}
+
+
+def _xml_value(elem: ET.Element) -> Any:
+    children = list(elem)
+    if not children:
+        text = (elem.text or "").strip()
+        try:
+            value: Any = float(text) if text else None
+        except ValueError:
+            value = text
+        if elem.attrib:
+            return {"value": value, **elem.attrib}
+        return value
+    return {**elem.attrib, **_xml_children(elem)}
+
+
+def _xml_children(elem: ET.Element) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for child in elem:
+        value = _xml_value(child)
+        if child.tag in out:  # repeated tags become a list
+            if not isinstance(out[child.tag], list):
+                out[child.tag] = [out[child.tag]]
+            out[child.tag].append(value)
+        else:
+            out[child.tag] = value
+    return out
+
+
+def _describe_json(p: Path) -> dict:
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"{p}: not valid JSON ({err})") from err
+    if not isinstance(doc, dict):
+        return {"kind": "json", "keys": None}
+    return {"kind": "json", "keys": [k for k in doc if k != "provenance"],
+            "provenance": doc.get("provenance")}
+
+
+# ------------------------------------------------------------------------------- text output
+
+def format_info(info: dict) -> str:
+    """Human-readable lines for a :func:`describe` result."""
+    lines = [f"{info['file']}: {_title(info)} ({_size(info['bytes'])})"]
+
+    def add(label: str, value) -> None:
+        if value is not None and value != [] and value != {}:
+            lines.append(f"  {label:<14} {_short(value)}")
+
+    kind = info["kind"]
+    if kind in ("raw", "plenocli-tiff", "image"):
+        count = info.get("frames", info.get("pages"))
+        add("size", f"{count} x {info['rows']} x {info['cols']} {info['dtype']} "
+                    "(views x rows x cols)")
+        add("camera", info.get("camera_model"))
+        for key in IMAGE_KEYS:
+            add(key.replace("_", " "), info.get(key))
+        if kind == "image":
+            add("values", f"min {info['min']:g}, max {info['max']:g}")
+        for s in info.get("active_stats", []):
+            add(f"view {s['view']}", f"active area min {s['min']}, max {s['max']}, "
+                                     f"mean {s['mean']} DN")
+        for key, value in (info.get("extra") or {}).items():
+            add(key.replace("_", " "), value)
+    elif kind == "lens-grid":
+        for key in ("lattice", "pitch_px", "angle_deg", "offset_xy", "image_shape",
+                    "sensor_origin", "lens_count"):
+            add(key.replace("_", " "), info.get(key))
+        for key, value in (info.get("extra") or {}).items():
+            add(key.replace("_", " "), value)
+    elif kind == "pipeline-config":
+        add("description", (info.get("description") or "").strip() or None)
+        add("out", info.get("out"))
+        for name, stage in info["steps"].items():
+            add(f"step {name}", f"stage {stage}")
+    elif kind == "xml":
+        add("root", f"<{info['root']}> {_short(info['attributes']) if info['attributes'] else ''}")
+        for key, value in info["fields"].items():
+            add(key, value)
+    else:
+        add("keys", info.get("keys"))
+    record = info.get("provenance")
+    if record:
+        lines.append(f"  made by        plenocli {record.get('version')} {record.get('stage')} "
+                     f"on {record.get('created')}")
+        add("parameters", record.get("parameters"))
+        for item in record.get("inputs", []):
+            add(f"input {item.get('role')}",
+                f"{item.get('path')} (sha256 {str(item.get('sha256'))[:12]}...)")
+    for k, past in enumerate(info.get("history") or [], 1):
+        add(f"history {k}", f"{past.get('stage')} {_short(past.get('parameters'))} "
+                            f"on {past.get('created')}")
+    return "\n".join(lines)
+
+
+def _title(info: dict) -> str:
+    kind = info["kind"]
+    if kind == "raw":
+        return f"raw capture ({info['format']})"
+    if kind == "plenocli-tiff":
+        stage = (info.get("provenance") or {}).get("stage")
+        return "plenocli image" + (f" from stage {stage}" if stage else "")
+    return {"image": "sensor image", "lens-grid": "lens grid", "xml": "XML document",
+            "pipeline-config": "pipeline config", "json": "JSON document",
+            "yaml": "YAML document"}.get(kind, kind)
+
+
+def _size(n: int) -> str:
+    for unit in ("bytes", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1000
+    return str(n)
+
+
+def _short(value, limit: int = 88) -> str:
+    text = value if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

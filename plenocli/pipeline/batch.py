@@ -1,0 +1,350 @@
+"""Batches: one pipeline template run over many captures, in parallel processes or on Dask.
+
+The template is an ordinary config whose per-capture steps name their input ``{capture}`` and their
+outputs under ``{name}`` (see :mod:`plenocli.pipeline.config`). A batch runs the shared steps
+(white image, calibration) once in this process, then one task per capture: the per-capture steps
+through the make-style runner, so a rerun only redoes what is missing or out of date. A task never
+raises: a failed capture becomes a :class:`CaptureResult` with its reason and the others go on.
+
+Engines: in this process (``jobs=1``), a pool of worker processes on this machine (``jobs>1``),
+or a ``dask.distributed`` scheduler (``scheduler=ADDRESS``; paths must then be visible to every
+worker, e.g. on a shared file system).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import logging
+import multiprocessing
+import os
+import signal
+import time
+from collections.abc import Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+
+from plenocli.errors import ConfigError, InputError, PlenocliError
+from plenocli.pipeline.config import Template, read_template
+from plenocli.pipeline.runner import Decision, plan, run_pipeline
+from plenocli.progress import log, progress
+
+# Each worker gets one thread: the parallelism is across captures (no oversubscription).
+THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+              "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
+DASK_CONNECT_TIMEOUT = "20s"
+CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
+           "memory); run it alone with plenocli run to see more")
+
+
+@dataclass(frozen=True)
+class CaptureResult:
+    """What happened to one capture: status "done", "skipped" (up to date), "would run"
+    (dry run) or "failed"; ``detail`` lists the steps run or the reason of the failure."""
+
+    capture: str
+    name: str
+    status: str
+    detail: str
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class BatchReport:
+    shared: list[Decision]
+    results: list[CaptureResult]  # in the order of the captures
+
+    @property
+    def failed(self) -> list[CaptureResult]:
+        return [r for r in self.results if r.status == "failed"]
+
+
+def expand_inputs(patterns: Sequence[str]) -> list[Path]:
+    """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
+
+    Order is kept (globs sorted), duplicates dropped; a pattern that matches nothing is an error.
+    """
+    captures: list[Path] = []
+    for pattern in patterns:
+        if pattern.startswith("@"):
+            listing = Path(pattern[1:])
+            if not listing.is_file():
+                raise InputError(f"--inputs {pattern}: no such list file {listing}")
+            lines = listing.read_text(encoding="utf-8").splitlines()
+            found = [listing.parent / ln.strip() for ln in lines
+                     if ln.strip() and not ln.lstrip().startswith("#")]
+        elif glob.has_magic(pattern):
+            found = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
+                     if Path(p).is_file()]
+        else:
+            found = [Path(pattern)]
+        if not found:
+            raise InputError(f"--inputs {pattern!r} matches no file; quote globs so that "
+                             "plenocli expands them, e.g. --inputs 'shoot/*.CR2'")
+        captures.extend(found)
+    unique = list(dict.fromkeys(p.resolve() for p in captures))
+    stems: dict[str, Path] = {}
+    for p in unique:
+        if p.stem in stems:
+            raise InputError(f"captures {stems[p.stem]} and {p} have the same name {p.stem!r} "
+                             "and would share an output folder; rename one or run them apart")
+        stems[p.stem] = p
+    return unique
+
+
+def run_capture(config: str, capture: str, *, overrides: Sequence[str] = (),
+                out: str | None = None, force: bool = False, dry_run: bool = False,
+                upstream: Sequence[str] = ()) -> CaptureResult:
+    """Run the per-capture steps of ``config`` on one capture; never raises for a bad capture.
+
+    Arguments are plain strings so that the call can be sent to another process or machine.
+    ``upstream``: shared outputs being remade in this batch (for dry runs).
+    """
+    name = Path(capture).stem
+    start = time.monotonic()
+    previous = log.level
+    if not log.isEnabledFor(logging.DEBUG):
+        log.setLevel(logging.WARNING)  # the batch's table reports per capture, not per step
+    try:
+        steps = read_template(config, overrides).steps(capture=capture, out=out,
+                                                       only="per-capture")
+        if dry_run:
+            decisions = plan(steps, force=force, upstream=[Path(p) for p in upstream])
+        else:
+            decisions = run_pipeline(steps, force=force)
+    except PlenocliError as err:
+        return CaptureResult(capture, name, "failed", str(err), time.monotonic() - start)
+    except MemoryError:
+        return CaptureResult(capture, name, "failed", "out of memory",
+                             time.monotonic() - start)
+    except Exception as err:  # a bug in a stage must not stop the other captures
+        return CaptureResult(capture, name, "failed",
+                             f"internal error: {type(err).__name__}: {err}",
+                             time.monotonic() - start)
+    finally:
+        log.setLevel(previous)
+    ran = [d.step.name for d in decisions if d.run]
+    if not ran:
+        status = "skipped"
+    else:
+        status = "would run" if dry_run else "done"
+    return CaptureResult(capture, name, status, ", ".join(ran) or "up to date",
+                         time.monotonic() - start)
+
+
+def run_batch(config: str | Path, captures: Sequence[str | Path], *,
+              overrides: Sequence[str] = (), out: str | Path | None = None,
+              force: bool = False, dry_run: bool = False, jobs: int = 1,
+              scheduler: str | None = None) -> BatchReport:
+    """Run the template ``config`` over ``captures``: shared steps once, then every capture.
+
+    ``jobs``: worker processes on this machine (1 runs in this process); ``scheduler``: the
+    address of a dask.distributed scheduler (then ``jobs`` is not used). Raises only for problems
+    of the whole batch (bad config, a shared step failing, no Dask); a capture's failure is in
+    its :class:`CaptureResult`.
+    """
+    if jobs < 1:
+        raise ConfigError(f"--jobs {jobs}: give 1 or more worker processes")
+    template = read_template(config, overrides)
+    if not template.per_capture_steps():
+        raise ConfigError(f"{config}: no step uses {{capture}} or {{name}}, so there is nothing "
+                          "to run per capture; run it with plenocli run, or name a step's "
+                          'input "{capture}"')
+    if not captures:
+        raise InputError("no captures given; pass --inputs 'FOLDER/*.dng'")
+    captures = [str(Path(c).resolve()) for c in captures]
+    out = None if out is None else str(Path(out).resolve())
+    template.steps(capture=captures[0], out=out)  # config errors once, not once per capture
+
+    shared = _run_shared(template, out=out, force=force, dry_run=dry_run)
+    upstream = [str(p) for d in shared if d.run for p in d.step.output_paths()]
+    kwargs = dict(overrides=list(overrides), out=out, force=force, dry_run=dry_run,
+                  upstream=upstream)
+    if scheduler:
+        results = _dask_results(scheduler, str(config), captures, kwargs)
+    elif jobs == 1 or len(captures) == 1:
+        results = (run_capture(str(config), c, **kwargs) for c in captures)
+    else:
+        results = _pool_results(min(jobs, len(captures)), str(config), captures, kwargs)
+    by_capture = {r.capture: r for r in progress(results, "captures", total=len(captures))}
+    return BatchReport(shared, [by_capture[c] for c in captures])
+
+
+def _run_shared(template: Template, *, out, force: bool, dry_run: bool) -> list[Decision]:
+    steps = template.steps(out=out, only="shared")
+    if not steps:
+        return []
+    if dry_run:
+        decisions = plan(steps, force=force)
+        for d in decisions:
+            log.info("%-9s %-16s (shared) %s", "would run" if d.run else "skip", d.step.name,
+                     d.reason)
+        return decisions
+    try:
+        return run_pipeline(steps, force=force)
+    except PlenocliError as err:
+        raise type(err)(f"shared {err} (no capture was processed)") from err
+
+
+# ---------------------------------------------------------------- worker processes (this machine)
+
+_busy = False  # in a worker: is a capture being processed (then SIGTERM must clean up)
+
+
+def _init_worker() -> None:
+    """Worker set-up: Ctrl-C is the parent's business; SIGTERM unwinds a running capture so
+    that atomic writes remove their temporary files, then the worker exits."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+
+
+def _on_sigterm(signum, frame) -> None:
+    if _busy:
+        raise KeyboardInterrupt  # atomic_path deletes its .part file on the way up
+    os._exit(128 + signum)
+
+
+def _worker_task(config: str, capture: str, kwargs: dict) -> CaptureResult:
+    global _busy
+    _busy = True
+    try:
+        return run_capture(config, capture, **kwargs)
+    except KeyboardInterrupt:
+        os._exit(128 + signal.SIGTERM)
+    finally:
+        _busy = False
+
+
+@contextlib.contextmanager
+def _one_thread_per_worker() -> Iterator[None]:
+    """Workers inherit the environment: BLAS, OpenMP and numba start with one thread each."""
+    saved = {k: os.environ.get(k) for k in THREAD_ENV}
+    os.environ.update({k: "1" for k in THREAD_ENV})
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
+# Imported once by the fork server, so that each worker starts without re-importing them.
+PRELOAD = ["plenocli.pipeline.batch", "numpy", "scipy.ndimage", "tifffile",
+           "plenocli.pipeline.stages.decode", "plenocli.pipeline.stages.bias",
+           "plenocli.pipeline.stages.flat"]
+
+
+def _context():
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload(PRELOAD)  # no effect once the server runs: that is fine
+    return context
+
+
+def _pool_results(jobs: int, config: str, captures: list[str],
+                  kwargs: dict) -> Iterator[CaptureResult]:
+    """Results as they complete. Captures caught in a crashed pool are retried, then run one
+    worker at a time so that a capture that kills its worker fails alone."""
+    crashed = yield from _pool_round(jobs, config, captures, kwargs)
+    for capture in crashed:  # alone now, so that a crash is attributed to the right capture
+        if (yield from _pool_round(1, config, [capture], kwargs)):
+            yield CaptureResult(capture, Path(capture).stem, "failed", CRASHED)
+
+
+def _pool_round(jobs: int, config: str, captures: list[str],
+                kwargs: dict) -> Iterator[CaptureResult]:
+    """One process pool over ``captures``; yields results, returns the crashed captures."""
+    crashed: list[str] = []
+    with _one_thread_per_worker():
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=_context(),
+                                   initializer=_init_worker)
+        try:
+            futures = {pool.submit(_worker_task, config, c, kwargs): c for c in captures}
+            remaining = set(futures)
+            while remaining:
+                finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    try:
+                        yield future.result()
+                    except BrokenProcessPool:
+                        crashed.append(futures[future])
+        except BaseException:  # Ctrl-C or the consumer stopped: no worker may outlive us
+            _terminate(pool)
+            raise
+        pool.shutdown(wait=True)
+    return crashed
+
+
+def _terminate(pool: ProcessPoolExecutor) -> None:
+    """Stop the workers now; each one removes its half-written temporary file first."""
+    processes = list((pool._processes or {}).values())  # no public API for the worker list
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in processes:
+        if proc.is_alive():
+            proc.terminate()
+    deadline = time.monotonic() + 10.0
+    for proc in processes:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+
+
+# ---------------------------------------------------------------- dask.distributed
+
+def _dask_results(address: str, config: str, captures: list[str],
+                  kwargs: dict) -> Iterator[CaptureResult]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError as err:
+        raise PlenocliError("--scheduler needs dask.distributed, which is not installed; "
+                            "install it with: pip install 'plenocli[dask]'") from err
+    try:
+        client = Client(address, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as err:
+        raise PlenocliError(f"cannot reach the Dask scheduler at {address!r} ({err}); "
+                            "check the address (e.g. tcp://host:8786) and that it runs") from err
+    futures = []
+    try:
+        futures = [client.submit(run_capture, config, c, **kwargs, pure=False,
+                                 key=f"plenocli-{Path(c).stem}-{os.getpid()}-{k}")
+                   for k, c in enumerate(captures)]
+        capture_of = {f.key: c for f, c in zip(futures, captures, strict=True)}
+        for future in as_completed(futures, loop=client.loop):
+            try:
+                yield future.result()
+            except Exception as err:  # e.g. KilledWorker: the capture's worker kept dying
+                capture = capture_of[future.key]
+                yield CaptureResult(capture, Path(capture).stem, "failed",
+                                    f"Dask: {type(err).__name__}: {err}")
+    finally:
+        if futures:
+            client.cancel(futures)
+        client.close()
+
+
+# ---------------------------------------------------------------- report
+
+def format_summary(report: BatchReport, *, width: int = 100) -> str:
+    """A plain-text table: one line per capture, then the counts."""
+    results = report.results
+    name_w = max([len("capture")] + [len(r.name) for r in results])
+    lines = [f"{'capture':<{name_w}}  {'status':<9}  {'time':>7}  detail"]
+    for r in results:
+        detail = r.detail if len(r.detail) <= width else r.detail[: width - 3] + "..."
+        lines.append(f"{r.name:<{name_w}}  {r.status:<9}  {r.seconds:>5.1f} s  {detail}")
+    counts = {s: sum(r.status == s for r in results)
+              for s in ("done", "would run", "skipped", "failed")}
+    tail = (f"{len(results)} captures: {counts['done']} done, {counts['skipped']} skipped "
+            f"(up to date), {counts['failed']} failed")
+    if counts["would run"]:
+        tail += f", {counts['would run']} would run"
+    shared_run = [d.step.name for d in report.shared if d.run]
+    if report.shared:
+        tail += f"; shared steps run: {', '.join(shared_run) or 'none (up to date)'}"
+    return "\n".join([*lines, tail])
+

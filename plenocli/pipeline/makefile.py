@@ -1,0 +1,104 @@
+"""Makefile fragments: a pipeline config as make rules, for users who drive plenocli with make.
+
+One rule per step: targets = the step's outputs (a grouped target ``a b &: ...`` when there are
+several, GNU make >= 4.3), prerequisites = its inputs and the config file, recipe = the
+``plenocli STAGE`` command with the step's parameters as options. make then rebuilds exactly what
+is out of date, in parallel with ``make -j``. The command is ``$(PLENOCLI)`` (default
+``plenocli``), so ``make PLENOCLI="python -m plenocli"`` works without the script.
+"""
+
+from __future__ import annotations
+
+import inspect
+import os
+import re
+import shlex
+from collections.abc import Sequence
+from pathlib import Path
+
+from plenocli.errors import ConfigError
+from plenocli.pipeline.config import Step
+
+POSITIONAL = ("input", "inputs")  # stage parameters that are the command's arguments
+_UNSAFE = re.compile(r"[^\w.+,@=~/-]")  # spaces, :, $, #, quotes, globs: not in make names
+
+
+def make_fragment(steps: Sequence[Step], config: str | Path, *,
+                  base: str | Path | None = None, command: str = "") -> str:
+    """Make rules for ``steps`` (in order; a step already written, e.g. a shared one, is skipped).
+
+    ``base``: paths inside this folder are written relative to it (default: the current folder;
+    run make from there); others stay absolute. ``command``: the plenocli invocation that made
+    the fragment, recorded in its header.
+    """
+    root = Path(base or Path.cwd()).resolve()
+    config_path = _name(Path(config), root)
+    seen: set[tuple[str, ...]] = set()
+    rules: list[str] = []
+    finals: list[str] = []
+    for step in steps:
+        outputs = tuple(_name(p, root) for p in step.output_paths())
+        if not outputs:
+            raise ConfigError(f"step {step.name!r} writes no file, so make cannot track it")
+        if outputs in seen:
+            continue
+        seen.add(outputs)
+        finals.extend(outputs)
+        prerequisites = [_name(p, root) for p in step.input_paths()] + [config_path]
+        separator = "&:" if len(outputs) > 1 else ":"
+        rules.append(f"# step {step.name}\n{' '.join(outputs)} {separator} "
+                     f"{' '.join(dict.fromkeys(prerequisites))}\n\t{_recipe(step, root)}\n")
+    header = [
+        "# Makefile fragment made by plenocli" + (f": {command}" if command else ""),
+        f"# Paths are relative to {root}: run make there. Needs GNU make >= 4.3 (grouped '&:').",
+        "PLENOCLI ?= plenocli",
+        "PLENOCLI_OUTPUTS += \\\n  " + " \\\n  ".join(finals),
+        "",
+        ".PHONY: plenocli-all",
+        "plenocli-all: $(PLENOCLI_OUTPUTS)",
+        "",
+    ]
+    return "\n".join(header) + "\n" + "\n".join(rules)
+
+
+def _recipe(step: Step, root: Path) -> str:
+    defaults = step.stage.parameters()
+    words = ["$(PLENOCLI)", step.stage.name]
+    options: list[str] = []
+    for key, value in step.params.items():
+        is_path = key in step.stage.inputs or key in step.stage.outputs
+        values = value if isinstance(value, (list, tuple)) else [value]
+        if is_path:
+            values = [None if v is None else _name(Path(v), root) for v in values]
+        if key in POSITIONAL:
+            words.extend(_quote(v) for v in values if v is not None)
+            continue
+        flag = "--" + key.replace("_", "-")
+        for v in values:
+            if v is None:
+                continue
+            if isinstance(v, bool):
+                if v != defaults.get(key, inspect.Parameter.empty):
+                    options.append(flag if v else "--no-" + key.replace("_", "-"))
+                continue
+            options.extend([flag, v if is_path else _quote(v)])
+    return " ".join(words + options)
+
+
+def _quote(value) -> str:
+    """A shell word, with '$' doubled for make."""
+    return shlex.quote(str(value)).replace("$", "$$")
+
+
+def _name(path: Path, root: Path) -> str:
+    """A path as a make target name: relative to ``root`` when inside it."""
+    resolved = Path(os.path.abspath(path))
+    try:
+        text = str(resolved.relative_to(root))
+    except ValueError:
+        text = str(resolved)
+    bad = _UNSAFE.search(text)
+    if bad:
+        raise ConfigError(f"path {text!r} has {bad.group()!r}, which make or the shell would "
+                          "misread; rename the file or folder, or use plenocli batch instead")
+    return text

@@ -1,0 +1,96 @@
+"""`plenocli info`: raws, plenocli TIFFs, lens grids, configs and XML, as text and JSON."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+
+FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
+
+
+def _info(*args):
+    return CliRunner().invoke(cli, ["info", *map(str, args)])
+
+
+def test_raw_dng(tmp_path):
+    raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
+    write_dualpixel_raw(tmp_path / "c.dng", raw, truth)
+    result = _info(tmp_path / "c.dng", "--json")
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.stdout)
+    assert info["kind"] == "raw" and info["frames"] == 2 and info["views"] == ["S", "A"]
+    assert (info["rows"], info["cols"]) == (40, 64) and info["cfa"] == "RGGB"
+    assert info["active_area"] == truth["geometry"]["active_area"]
+    assert info["masked_areas"] == truth["geometry"]["masked_areas"]
+    assert info["white_level"] == [15000.0, 15000.0]
+    assert [b[0] for b in info["black_level"]] == [2048.0, 2036.0]
+    assert info["active_stats"][0]["max"] == int(raw[0, 8:, 16:].max())
+    text = _info(tmp_path / "c.dng").stdout
+    assert "raw capture (dng)" in text and "masked areas" in text and "5D Mark IV" in text
+
+
+def test_plenocli_tiff_shows_provenance_and_history(tmp_path):
+    raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
+    write_dualpixel_raw(tmp_path / "c.dng", raw, truth)
+    runner = CliRunner()
+    runner.invoke(cli, ["decode", str(tmp_path / "c.dng"), "-o", str(tmp_path / "f.tif")])
+    runner.invoke(cli, ["bias", str(tmp_path / "f.tif"), "--smooth", "3",
+                        "-o", str(tmp_path / "b.tif")])
+    info = json.loads(_info(tmp_path / "b.tif", "--json").stdout)
+    assert info["kind"] == "plenocli-tiff" and info["pages"] == 3
+    assert info["views"] == ["A", "B", "S"] and (info["rows"], info["cols"]) == (32, 48)
+    assert info["provenance"]["stage"] == "bias"
+    assert info["provenance"]["parameters"]["smooth"] == 3
+    assert [h["stage"] for h in info["history"]] == ["decode"]
+    text = _info(tmp_path / "b.tif").stdout
+    assert "plenocli image from stage bias" in text and "history 1      decode" in text
+
+
+def test_lens_grid_yaml(tmp_path):
+    from plenocli.io.gridfile import write_grid
+    from plenocli.lensgrid import LensGrid
+
+    grid = LensGrid(pitch_px=20.2, angle_rad=0.01, offset_xy=(3.0, 4.0), image_shape=(100, 120))
+    write_grid(tmp_path / "g.yaml", grid, {"stage": "calibrate", "version": "0.1.0"})
+    info = json.loads(_info(tmp_path / "g.yaml", "--json").stdout)
+    assert info["kind"] == "lens-grid" and info["pitch_px"] == 20.2
+    assert info["offset_xy"] == [3.0, 4.0] and info["provenance"]["stage"] == "calibrate"
+    assert "pitch px       20.2" in _info(tmp_path / "g.yaml").stdout
+
+
+def test_raytrix_xml_generic_fields(tmp_path):
+    xml = tmp_path / "calib.xml"
+    xml.write_text('<RayCalibData version="1.0"><offset units="pix"><x>1.5</x><y>-2</y>'
+                   '</offset><diameter units="pix">23.2</diameter><lens_type id="0"/>'
+                   '<lens_type id="1"/></RayCalibData>')
+    info = json.loads(_info(xml, "--json").stdout)
+    assert info["root"] == "RayCalibData" and info["attributes"] == {"version": "1.0"}
+    assert info["fields"]["offset"] == {"units": "pix", "x": 1.5, "y": -2.0}
+    assert info["fields"]["diameter"] == {"value": 23.2, "units": "pix"}
+    assert len(info["fields"]["lens_type"]) == 2
+
+
+@pytest.mark.realdata
+def test_real_raytrix_xml(realdata):
+    info = json.loads(_info(realdata / "raytrix/origami/calib.xml", "--json").stdout)
+    assert info["root"] == "RayCalibData"
+    assert info["fields"]["diameter"]["value"] == pytest.approx(23.2023, abs=1e-4)
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"\x00\x01garbage", "does not know this kind of file"),
+    (None, "no such file"),
+])
+def test_errors_are_one_line(tmp_path, content, message):
+    path = tmp_path / "x.bin"
+    if content is not None:
+        path.write_bytes(content)
+    result = _info(path)
+    assert result.exit_code == 1
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1

@@ -1,0 +1,308 @@
+"""Batches: the template convention, the process pool, failures, reruns and Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.errors import ConfigError, InputError
+from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
+from plenocli.pipeline.config import load_config, read_template
+from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+
+ROOT = Path(__file__).resolve().parents[1]
+N_CAPTURES = 12
+CORRUPT = "shot07"
+GEOMETRY = dict(rows=48, cols=64, top=8, left=16)
+
+TEMPLATE = """\
+out: out
+steps:
+  decode_white:
+    stage: decode
+    input: {white}
+    output: "{{out}}/white_frames.tif"
+  bias_white:
+    stage: bias
+    input: "{{out}}/white_frames.tif"
+    smooth: 3
+    output: "{{out}}/white_biased.tif"
+  decode:
+    input: "{{capture}}"
+    output: "{{out}}/{{name}}/frames.tif"
+  bias:
+    input: "{{out}}/{{name}}/frames.tif"
+    smooth: 3
+    output: "{{out}}/{{name}}/biased.tif"
+  flat:
+    input: "{{out}}/{{name}}/biased.tif"
+    white: "{{out}}/white_biased.tif"
+    median: 3
+    output: "{{out}}/{{name}}/views.tif"
+"""
+PER_CAPTURE_OUTPUTS = ("frames.tif", "biased.tif", "views.tif")
+
+
+def make_shoot(folder: Path, n: int = N_CAPTURES, *, corrupt: str | None = CORRUPT,
+               **geometry) -> tuple[Path, list[Path]]:
+    """``n`` synthetic dual-pixel captures, a white image and a batch template in ``folder``."""
+    geo = {**GEOMETRY, **geometry}
+    folder.mkdir(parents=True, exist_ok=True)
+    raw, truth = dualpixel_capture(seed=1000, scene="white", **geo)
+    write_dualpixel_raw(folder / "white.dng", raw, truth)
+    captures = []
+    for k in range(n):
+        path = folder / "captures" / f"shot{k:02d}.dng"
+        path.parent.mkdir(exist_ok=True)
+        raw, truth = dualpixel_capture(seed=k, **geo)
+        write_dualpixel_raw(path, raw, truth)
+        if path.stem == corrupt:
+            data = path.read_bytes()
+            path.write_bytes(data[: len(data) // 3])  # truncated mid-frame
+        captures.append(path)
+    config = folder / "batch.yaml"
+    config.write_text(TEMPLATE.format(white=folder / "white.dng"))
+    return config, captures
+
+
+def concrete_config(folder: Path, capture: Path, out: Path) -> Path:
+    """The template written out for one capture, as a user would for plenocli run."""
+    text = TEMPLATE.format(white=folder / "white.dng").replace("out: out\n", "")
+    text = text.replace("{capture}", str(capture)).replace("{name}", capture.stem)
+    config = folder / "single" / f"{capture.stem}.yaml"
+    config.parent.mkdir(exist_ok=True)
+    config.write_text(text.replace("{out}", str(out)))
+    return config
+
+
+def pixels(path: Path) -> np.ndarray:
+    with tifffile.TiffFile(path) as tif:
+        return np.stack([page.asarray() for page in tif.pages])
+
+
+def mtimes(folder: Path) -> dict[str, int]:
+    return {str(p): p.stat().st_mtime_ns for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def shoot(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("shoot")
+    config, captures = make_shoot(folder)
+    return folder, config, captures
+
+
+@pytest.fixture(scope="module")
+def sequential(shoot):
+    """Reference outputs: one `plenocli run` per capture, each with its own concrete config."""
+    folder, _, captures = shoot
+    out = folder / "sequential"
+    codes = {}
+    for capture in captures:
+        result = CliRunner().invoke(cli, ["run", "-q", str(concrete_config(folder, capture, out))])
+        codes[capture.stem] = result.exit_code
+    return out, codes
+
+
+@pytest.fixture(scope="module")
+def batch_run(shoot):
+    folder, config, _ = shoot
+    out = folder / "batch"
+    args = ["batch", str(config), "--inputs", str(folder / "captures" / "*.dng"), "-j", "2",
+            "--out", str(out)]
+    first = CliRunner().invoke(cli, args)
+    before = mtimes(out)
+    second = CliRunner().invoke(cli, args)
+    return out, first, second, before, args
+
+
+def test_batch_matches_sequential_runs(shoot, sequential, batch_run):
+    _, _, captures = shoot
+    seq_out, codes = sequential
+    out, first, *_ = batch_run
+    assert codes[CORRUPT] == 1 and sum(c == 0 for c in codes.values()) == N_CAPTURES - 1
+    for capture in captures:
+        if capture.stem == CORRUPT:
+            continue
+        for name in PER_CAPTURE_OUTPUTS:
+            got = pixels(out / capture.stem / name)
+            want = pixels(seq_out / capture.stem / name)
+            assert got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want, err_msg=f"{capture.stem}/{name}")
+    # every capture got its own outputs: no two captures' views are the same
+    views = [pixels(out / c.stem / "views.tif") for c in captures if c.stem != CORRUPT]
+    assert all(not np.array_equal(views[0], v, equal_nan=True) for v in views[1:])
+
+
+def test_corrupt_capture_fails_alone_with_its_reason(batch_run):
+    out, first, *_ = batch_run
+    assert first.exit_code == 1
+    failures = [ln for ln in first.stderr.splitlines() if ln.startswith("failed: ")]
+    assert len(failures) == 1 and f"{CORRUPT}.dng" in failures[0]
+    assert "step 'decode'" in failures[0] and "failed to read" in failures[0]  # decoder's
+    table = {ln.split()[0]: ln.split()[1] for ln in first.stderr.splitlines()
+             if ln.startswith("shot")}
+    assert table[CORRUPT] == "failed"
+    assert [s for n, s in table.items() if n != CORRUPT] == ["done"] * (N_CAPTURES - 1)
+    assert f"{N_CAPTURES} captures: {N_CAPTURES - 1} done, 0 skipped" in first.stderr
+    assert "Error: 1 of 12 captures failed" in first.stderr
+    assert not (out / CORRUPT).exists() or not any((out / CORRUPT).iterdir())
+    assert not list(out.rglob("*.part"))
+
+
+def test_rerun_does_no_work(batch_run):
+    out, _, second, before, _ = batch_run
+    assert mtimes(out) == before  # nothing rewritten
+    assert second.exit_code == 1  # the corrupt capture still fails, and only it
+    table = {ln.split()[0]: ln.split()[1] for ln in second.stderr.splitlines()
+             if ln.startswith("shot")}
+    assert [s for n, s in table.items() if n != CORRUPT] == ["skipped"] * (N_CAPTURES - 1)
+    assert "shared steps run: none (up to date)" in second.stderr
+
+
+def test_rerun_after_fixing_redoes_only_the_missing_capture(tmp_path):
+    config, captures = make_shoot(tmp_path, 3, corrupt="shot01")
+    out = tmp_path / "out"
+    report = run_batch(config, captures, out=out, jobs=2)
+    assert [r.status for r in report.results] == ["done", "failed", "done"]
+    before = mtimes(out)
+    raw, truth = dualpixel_capture(seed=1, **GEOMETRY)
+    write_dualpixel_raw(captures[1], raw, truth)  # the photographer copies the file again
+    report = run_batch(config, captures, out=out, jobs=2)
+    assert [r.status for r in report.results] == ["skipped", "done", "skipped"]
+    assert report.results[1].detail == "decode, bias, flat"
+    after = mtimes(out)
+    assert {k: v for k, v in after.items() if k in before} == before
+
+
+def test_changed_shared_input_reruns_every_capture(tmp_path):
+    config, captures = make_shoot(tmp_path, 2, corrupt=None)
+    out = tmp_path / "out"
+    run_batch(config, captures, out=out, jobs=1)
+    report = run_batch(config, captures, out=out, jobs=1, overrides=["bias_white.smooth=5"])
+    assert [d.step.name for d in report.shared if d.run] == ["bias_white"]
+    assert [r.detail for r in report.results] == ["flat", "flat"]  # only what uses the white
+
+
+def test_dry_run_writes_nothing(tmp_path):
+    config, captures = make_shoot(tmp_path, 2, corrupt=None)
+    report = run_batch(config, captures, out=tmp_path / "out", dry_run=True, jobs=2)
+    assert [r.status for r in report.results] == ["would run", "would run"]
+    assert not (tmp_path / "out").exists()
+    assert "2 would run" in format_summary(report)
+
+
+def test_one_job_and_two_jobs_agree(tmp_path):
+    config, captures = make_shoot(tmp_path, 3, corrupt=None)
+    run_batch(config, captures, out=tmp_path / "one", jobs=1)
+    run_batch(config, captures, out=tmp_path / "two", jobs=2)
+    for c in captures:
+        np.testing.assert_array_equal(pixels(tmp_path / "one" / c.stem / "views.tif"),
+                                      pixels(tmp_path / "two" / c.stem / "views.tif"))
+
+
+# ----------------------------------------------------------------------- the template convention
+
+def test_template_shared_and_per_capture_steps(shoot):
+    folder, config, captures = shoot
+    template = read_template(config)
+    assert template.per_capture_steps() == {"decode", "bias", "flat"}
+    steps = template.steps(capture=captures[0], out=folder / "o", only="per-capture")
+    assert [s.name for s in steps] == ["decode", "bias", "flat"]
+    assert steps[0].params["input"] == str(captures[0].resolve())
+    assert steps[2].params["output"] == str((folder / "o" / "shot00" / "views.tif").resolve())
+    assert steps[2].params["white"] == str((folder / "o" / "white_biased.tif").resolve())
+    shared = template.steps(out=folder / "o", only="shared")
+    assert [s.name for s in shared] == ["decode_white", "bias_white"]
+    # the config's own 'out: out' is relative to the config's folder
+    default = template.steps(only="shared")[0].params["output"]
+    assert default == str((folder / "out" / "white_frames.tif").resolve())
+
+
+def test_load_config_refuses_a_template(shoot):
+    _, config, _ = shoot
+    with pytest.raises(ConfigError, match="batch template.*plenocli batch"):
+        load_config(config)
+
+
+def test_unquoted_placeholder_is_understood(tmp_path):
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    config.write_text(config.read_text().replace('input: "{capture}"', "input: {capture}"))
+    steps = read_template(config).steps(capture=captures[0], only="per-capture")
+    assert steps[0].params["input"] == str(captures[0].resolve())
+
+
+@pytest.mark.parametrize("edit, message", [
+    (('"{out}/{name}/views.tif"', '"{out}/views.tif"'), "writes output.*for every capture"),
+    (("out: out\n", ""), r"uses \{out\}; give --out DIR"),
+])
+def test_template_errors(tmp_path, edit, message):
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    config.write_text(config.read_text().replace(*edit))
+    with pytest.raises(ConfigError, match=message):
+        run_batch(config, captures)
+
+
+def test_config_without_capture_placeholder_is_not_a_batch(tmp_path):
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    single = concrete_config(tmp_path, captures[0], tmp_path / "o")
+    with pytest.raises(ConfigError, match="nothing to run per capture"):
+        run_batch(single, captures)
+
+
+def test_expand_inputs(tmp_path):
+    for name in ("b.dng", "a.dng", "c.txt"):
+        (tmp_path / name).write_bytes(b"x")
+    (tmp_path / "list.txt").write_text("# shoot\nc.txt\n\na.dng\n")
+    got = expand_inputs([str(tmp_path / "*.dng"), f"@{tmp_path / 'list.txt'}"])
+    assert got == [tmp_path / "a.dng", tmp_path / "b.dng", tmp_path / "c.txt"]
+    with pytest.raises(InputError, match="matches no file"):
+        expand_inputs([str(tmp_path / "*.CR2")])
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a.dng").write_bytes(b"x")
+    with pytest.raises(InputError, match="same name 'a'"):
+        expand_inputs([str(tmp_path / "a.dng"), str(tmp_path / "sub" / "a.dng")])
+
+
+def test_scheduler_without_dask_is_one_line(shoot, monkeypatch):
+    folder, config, captures = shoot
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed
+    result = CliRunner().invoke(cli, ["batch", str(config), "--inputs", str(captures[0]),
+                                      "--out", str(folder / "nodask"),
+                                      "--scheduler", "tcp://127.0.0.1:1"])
+    assert result.exit_code == 1
+    assert result.stderr.strip().splitlines()[-1] == (
+        "Error: --scheduler needs dask.distributed, which is not installed; install it with: "
+        "pip install 'plenocli[dask]'")
+
+
+# ----------------------------------------------------------------------------------- Ctrl-C
+
+def test_ctrl_c_leaves_no_partial_output(tmp_path):
+    config, captures = make_shoot(tmp_path, 6, corrupt=None, rows=600, cols=800)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "plenocli", "batch", str(config), "--inputs",
+                             str(tmp_path / "captures" / "*.dng"), "-j", "2", "--out", str(out)],
+                            env=env, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(out.glob("shot*/frames.tif")) and time.monotonic() < deadline:
+        time.sleep(0.02)  # wait until the workers are busy with captures
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "interrupted; no partial output was kept" in stderr
+    assert not list(out.rglob("*.part")), "a temporary file was left behind"
+    for tif in out.rglob("*.tif"):
+        pixels(tif)  # every file present is complete
+    views = list(out.rglob("views.tif"))
+    assert len(views) < len(captures)  # it really stopped early

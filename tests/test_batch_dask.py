@@ -1,0 +1,51 @@
+"""The Dask engine on a real LocalCluster (worker processes on this machine)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.pipeline.batch import run_batch
+from tests.test_batch import make_shoot, pixels
+
+distributed = pytest.importorskip("distributed")
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as local:
+        yield local
+
+
+def test_dask_gives_the_local_outputs(tmp_path, cluster):
+    config, captures = make_shoot(tmp_path, 6, corrupt="shot03")
+    local = run_batch(config, captures, out=tmp_path / "local", jobs=2)
+    args = ["batch", str(config), "--inputs", str(tmp_path / "captures" / "*.dng"),
+            "--out", str(tmp_path / "dask"), "--scheduler", cluster.scheduler_address]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1  # shot03 is truncated
+    failures = [ln for ln in result.stderr.splitlines() if ln.startswith("failed: ")]
+    assert len(failures) == 1 and "shot03.dng: step 'decode'" in failures[0]
+    assert [r.status for r in local.results] == ["done"] * 3 + ["failed"] + ["done"] * 2
+    for c in captures:
+        if c.stem == "shot03":
+            continue
+        for name in ("frames.tif", "biased.tif", "views.tif"):
+            np.testing.assert_array_equal(pixels(tmp_path / "dask" / c.stem / name),
+                                          pixels(tmp_path / "local" / c.stem / name))
+    again = run_batch(config, captures, out=tmp_path / "dask",
+                      scheduler=cluster.scheduler_address)
+    assert [r.status for r in again.results if r.name != "shot03"] == ["skipped"] * 5
+
+
+def test_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setattr("plenocli.pipeline.batch.DASK_CONNECT_TIMEOUT", "2s")
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    result = CliRunner().invoke(cli, ["batch", str(config), "--inputs", str(captures[0]),
+                                      "--out", str(tmp_path / "o"),
+                                      "--scheduler", "tcp://127.0.0.1:9"])
+    assert result.exit_code == 1
+    assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in result.stderr
