@@ -106,12 +106,17 @@ def _describe_yaml(p: Path) -> dict:
 
 
 def _describe_xml(p: Path) -> dict:
-    # A dedicated Raytrix RayCalibData reader (plenocli.io.raytrix) can take over here; this
-    # generic view lists the root tag and its top-level fields.
+    # RayCalibData gets the Raytrix reader (validated fields, lattice in plain words); any other
+    # XML a generic view of its root tag and top-level fields.
     try:
         root = ET.parse(p).getroot()
     except ET.ParseError as err:
         raise InputError(f"{p}: not well-formed XML ({err})") from err
+    if root.tag == "RayCalibData":
+        from plenocli.io.raytrix import read_calib
+
+        calib = read_calib(p)
+        return {"kind": "raytrix-calibration", "root": root.tag, "calibration": calib}
     return {"kind": "xml", "root": root.tag, "attributes": dict(root.attrib),
             "fields": _xml_children(root)}
 
@@ -190,6 +195,14 @@ def format_info(info: dict) -> str:
         add("out", info.get("out"))
         for name, stage in info["steps"].items():
             add(f"step {name}", f"stage {stage}")
+    elif kind == "raytrix-calibration":
+        calib = info["calibration"]
+        add("lens pitch", f"{calib['diameter']:g} px (diameter)")
+        add("rotation", f"{calib['rotation']:g} rad")
+        add("offset", f"{_short(calib['offset'])} px from the image centre, y up")
+        for key in ("lens_base_x", "lens_base_y", "lens_border", "tcp", "sub_grid_base",
+                    "distortion", "lens_types", "k_matrix"):
+            add(key.replace("_", " "), calib.get(key))
     elif kind == "xml":
         add("root", f"<{info['root']}> {_short(info['attributes']) if info['attributes'] else ''}")
         for key, value in info["fields"].items():

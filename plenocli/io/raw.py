@@ -201,9 +201,12 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             for k, page in enumerate(raws):
                 try:
                     data = page.asarray()
-                except ValueError as err:  # e.g. a codec tifffile lacks
-                    raise InputError(f"{path}: cannot decode raw IFD {k} ({err}); for compressed "
-                                     "DNGs install imagecodecs (pip install imagecodecs)") from err
+                except ValueError as err:
+                    if int(page.compression) != 1:  # a codec tifffile lacks
+                        raise InputError(f"{path}: cannot decode raw IFD {k} ({err}); for "
+                                         "compressed DNGs install imagecodecs") from err
+                    raise InputError(f"{path}: raw IFD {k} is incomplete ({err}); the file "
+                                     "may be truncated") from err
                 if data.ndim != 2:
                     raise InputError(f"{path}: raw IFD {k} has shape {data.shape}; "
                                      "plenocli reads one-sample raw (CFA or mono) DNGs")

@@ -47,10 +47,12 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
         levels.append(_summary(info, names[k]))
     top, left = meta["active_area"][:2]
     views = np.stack(corrected)
+    white_level = list(meta["white_level"])
     if names[:2] == ["S", "A"]:
         views = split_views(corrected[0], corrected[1], sum_clipped=clipped[0],
                             a_clipped=clipped[1])
         names = ["A", "B", "S"]
+        white_level = [white_level[1], white_level[0], white_level[0]]  # B is bounded by S
     row0, col0 = 0, 0
     if crop:
         views, row0, col0 = _central_crop(views, crop, even=bool(cfa))
@@ -63,6 +65,7 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
     out_meta = tiffio.derived_meta(meta, record, views=names, cfa=new_cfa, origin=origin,
                                    active_area=[0, 0, rows, cols], masked_areas=[],
                                    black_level=[[0.0] * 4] * len(names),
+                                   white_level=white_level,
                                    bias_levels=levels,
                                    clipped_pixels=int(np.isnan(views).any(axis=0).sum()))
     tiffio.write_image(output, views, out_meta, protect=(input,))
