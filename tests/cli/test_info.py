@@ -64,23 +64,32 @@ def test_lens_grid_yaml(tmp_path):
     assert "pitch px       20.2" in _info(tmp_path / "g.yaml").stdout
 
 
-def test_raytrix_xml_generic_fields(tmp_path):
+def test_other_xml_generic_fields(tmp_path):
     xml = tmp_path / "calib.xml"
-    xml.write_text('<RayCalibData version="1.0"><offset units="pix"><x>1.5</x><y>-2</y>'
+    xml.write_text('<TSPCCalibData version="1.0"><offset units="pix"><x>1.5</x><y>-2</y>'
                    '</offset><diameter units="pix">23.2</diameter><lens_type id="0"/>'
-                   '<lens_type id="1"/></RayCalibData>')
+                   '<lens_type id="1"/></TSPCCalibData>')
     info = json.loads(_info(xml, "--json").stdout)
-    assert info["root"] == "RayCalibData" and info["attributes"] == {"version": "1.0"}
+    assert info["root"] == "TSPCCalibData" and info["attributes"] == {"version": "1.0"}
     assert info["fields"]["offset"] == {"units": "pix", "x": 1.5, "y": -2.0}
     assert info["fields"]["diameter"] == {"value": 23.2, "units": "pix"}
     assert len(info["fields"]["lens_type"]) == 2
 
 
+def test_incomplete_raycalibdata_is_one_line(tmp_path):
+    xml = tmp_path / "calib.xml"
+    xml.write_text('<RayCalibData version="1.0"><diameter>23.2</diameter></RayCalibData>')
+    result = _info(xml)
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1
+
+
 @pytest.mark.realdata
 def test_real_raytrix_xml(realdata):
     info = json.loads(_info(realdata / "raytrix/origami/calib.xml", "--json").stdout)
-    assert info["root"] == "RayCalibData"
-    assert info["fields"]["diameter"]["value"] == pytest.approx(23.2023, abs=1e-4)
+    assert info["kind"] == "raytrix-calibration"
+    assert info["calibration"]["diameter"] == pytest.approx(23.2023, abs=1e-4)
+    text = _info(realdata / "raytrix/origami/calib.xml").stdout
+    assert "lens pitch     23.2023 px" in text
 
 
 @pytest.mark.parametrize("content, message", [
