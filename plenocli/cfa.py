@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 
 def shift_pattern(cfa: str | None, row: int, col: int) -> str | None:
     """The 2 x 2 pattern seen from pixel (row, col) of a mosaic whose (0, 0) pattern is ``cfa``.
