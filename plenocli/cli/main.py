@@ -4,6 +4,7 @@ import click
 
 from plenocli import __version__
 from plenocli.cli.decode import decode
+from plenocli.cli.optics import optics
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -15,5 +16,5 @@ def cli():
     """
 
 
-for command in (decode,):
+for command in (decode, optics):
     cli.add_command(command)

@@ -66,7 +66,8 @@ def lens_from_dict(doc: dict, *, source: str = "lens") -> Lens:
     image = doc.get("image_distance_mm")
     try:
         return Lens(tuple(surfaces), name=str(doc.get("name", source)),
-                    image_distance_mm=None if image is None else _number(image, "image_distance_mm"),
+                    image_distance_mm=(None if image is None
+                                       else _number(image, "image_distance_mm")),
                     notes=str(doc.get("notes", "")))
     except ValueError as err:
         raise ConfigError(f"{source}: {err}") from err

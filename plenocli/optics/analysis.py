@@ -151,7 +151,8 @@ def distortion_percent(lens: Lens, field_deg: np.ndarray, *, wavelength_um: floa
     both chief-ray heights taken on the lens's image plane."""
     field = np.atleast_1d(np.asarray(field_deg, dtype=np.float64))
     if np.any(field == 0):
-        raise ValueError("field_deg must be non-zero (distortion is a ratio to the paraxial height)")
+        raise ValueError("field_deg must be non-zero "
+                         "(distortion is a ratio to the paraxial height)")
     ideal = paraxial_image_height(lens, field, wavelength_um=wavelength_um)
     return 100.0 * (real_image_height(lens, field, wavelength_um=wavelength_um) - ideal) / ideal
 

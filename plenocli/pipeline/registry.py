@@ -27,10 +27,11 @@ class Stage:
 
 
 def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import decode
+    from plenocli.pipeline.stages import decode, optics
 
     table = [
         Stage("decode", decode.run, inputs=("input",), outputs=("output", "preview")),
+        Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
     ]
     return {s.name: s for s in table}
 
