@@ -12,8 +12,9 @@ from collections.abc import Callable
 
 def kinds() -> dict[str, Callable[..., dict]]:
     """Simulation kinds by name: ``write(out_dir, *, seed, size, ...) -> truth``."""
-    from plenocli.synth import dualpixel
+    from plenocli.synth import dualpixel, prismcam
 
     return {
         "dualpixel": dualpixel.write_capture_set,
+        **prismcam.kinds(),
     }
