@@ -90,7 +90,7 @@ def image_distance(lens: Lens, *, object_distance_mm: float = math.inf,
     else:
         if object_distance_mm <= 0:
             raise ValueError(f"object_distance_mm {object_distance_mm} must be > 0")
-        y, u = _ynu(lens, object_distance_mm, -1.0, wavelength_um=wavelength_um)
+        y, u = _ynu(lens, object_distance_mm, 1.0, wavelength_um=wavelength_um)
     return -y / u
 
 
@@ -173,13 +173,22 @@ def half_field_deg(lens: Lens, image_half_height_mm: float, *,
     return 0.5 * (lo + hi)
 
 
-def pupil_grid(diameter_mm: float, rays_across: int) -> np.ndarray:
-    """Square-grid sample points (n, 2) inside a disc of ``diameter_mm`` (mm)."""
+def pupil_grid(diameter_mm: float, rays_across: int, *,
+               rng: np.random.Generator | None = None) -> np.ndarray:
+    """Square-grid sample points (n, 2) inside a disc of ``diameter_mm`` (mm).
+
+    With ``rng`` each point is jittered uniformly inside its grid cell (stratified sampling),
+    which avoids aliasing with masks aligned to the grid (a cross at the stop).
+    """
     if rays_across < 2:
         raise ValueError(f"rays_across {rays_across} must be >= 2")
     r = 0.5 * diameter_mm
     g = (np.arange(rays_across) + 0.5) / rays_across * 2.0 - 1.0
     x, y = np.meshgrid(g * r, g * r)
+    if rng is not None:
+        cell = 2.0 * r / rays_across
+        x = x + (rng.random(x.shape) - 0.5) * cell
+        y = y + (rng.random(y.shape) - 0.5) * cell
     keep = x ** 2 + y ** 2 <= r * r
     return np.stack([x[keep], y[keep]], axis=1)
 

@@ -46,7 +46,7 @@ def sai_flux(lens: Lens, *, sensor_mm: float = 3.6, pixel_um: float = 1.2, n: in
              microlens_focal_um: float = 4.8, object_distance_mm: float = 2000.0,
              quarter: str | None = "++", cross_width_mm: float = 0.0, fields_across: int = 11,
              pupil_rays_across: int = 96, microlens_pitch_um: float | None = None,
-             wavelength_um: float = D_LINE_UM) -> dict:
+             wavelength_um: float = D_LINE_UM, seed: int = 0) -> dict:
     """Flux (ray counts) on each of the n x n SAIs for a white board seen through a pupil mask.
 
     Returns ``flux`` (n, n) summed over the field, ``flux_by_field`` (fields, n, n), the field
@@ -82,7 +82,8 @@ def sai_flux(lens: Lens, *, sensor_mm: float = 3.6, pixel_um: float = 1.2, n: in
     stop_index = focused.stop_index
     stop_z = focused.vertex_z_mm[stop_index]
     stop_d = focused.surfaces[stop_index].diameter_mm
-    pupil = pupil_grid(stop_d, pupil_rays_across)
+    # Stratified (jittered) pupil samples, seeded: the same rays with and without a mask.
+    pupil = pupil_grid(stop_d, pupil_rays_across, rng=np.random.default_rng(seed))
     mask = stop_mask(quarter=quarter, cross_width_mm=cross_width_mm)
     nf, npup = len(obj), len(pupil)
     start = np.column_stack([np.repeat(obj, npup, axis=0), np.full(nf * npup, -object_distance_mm)])
