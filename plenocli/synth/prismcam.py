@@ -103,6 +103,27 @@ def _chart_hits(cam: Camera, sensor_xy: np.ndarray, pupil_xy: np.ndarray,
     return pupil_xy + d[..., :2] * (z / d[..., 2:3])
 
 
+def sensor_point_seeing(cam: Camera, chart_xy: np.ndarray, *, region: tuple[int, int],
+                        prism: tuple[int, int] | None) -> np.ndarray:
+    """The sensor point (2,) mm whose ray through the region's pupil centroid (and prism) meets
+    the chart at ``chart_xy`` (2,) mm: Newton iteration on the exact ray geometry."""
+    c = 4 * cam.aperture_mm / 2 / (3 * math.pi)
+    pupil = np.array([[region[0] * c, region[1] * c]])
+    s = -np.asarray(chart_xy, dtype=np.float64) * cam.image_distance_mm / cam.object_distance_mm
+    for _ in range(30):
+        f0 = _chart_hits(cam, s[None], pupil, prism)[0] - chart_xy
+        h = 1e-6
+        jac = np.column_stack([(_chart_hits(cam, (s + [h, 0])[None], pupil, prism)[0]
+                                - chart_xy - f0) / h,
+                               (_chart_hits(cam, (s + [0, h])[None], pupil, prism)[0]
+                                - chart_xy - f0) / h])
+        step = np.linalg.solve(jac, f0)
+        s = s - step
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    return s
+
+
 def _pupil_samples(rng, shape, region: tuple[int, int], radius: float, rays: int) -> np.ndarray:
     """Pupil points (rays, *shape, 2): uniform over the pupil part ``region`` = (sx, sy) with
     sx, sy in {-1, 0, +1} (0: the whole extent on that axis); the part's centroid when rays = 1."""
@@ -327,13 +348,20 @@ def render_dualpixel(*, pixels: int = 384, rays: int = 1, seed: int = 0, prism: 
     a, b = views["A"], views["B"]
     if crosstalk:
         a, b = a + crosstalk * views["B"], b + crosstalk * views["A"]
-    # Horizontal shift (pixels) of the chart between B and A at the view centres.
+    # Horizontal shift (pixels) of the chart between B and A at the view centres, and where
+    # they overlap: the chart point B sees at its left-edge middle is seen by A `overlap` px
+    # further right (the prism's distortion makes the two differ by a few pixels).
     shift_mm = truth_views[0]["centre_mm"][0] - truth_views[1]["centre_mm"][0]
     mm_per_px_on_chart = camera.object_distance_mm / camera.image_distance_mm * cell
+    edge_b = np.array([[-pixels * cell / 2, 0.0]])
+    target = _chart_hits(camera, edge_b, _pupil_samples(None, (1,), (-1, 0), camera.aperture_mm
+                                                        / 2, 1)[0], None)[0]
+    seen_by_a = sensor_point_seeing(camera, target, region=(1, 0), prism=prisms["A"])
     truth = {"kind": "dualpixel-prism", "seed": seed, "pixels": [rows, pixels], "rays": rays,
              "pixel_um": 1e3 * cell, "scene": scene, "prism": prism, "camera": asdict(camera),
              "views": truth_views, "crosstalk": crosstalk,
              "shift_a_minus_b_px": shift_mm / mm_per_px_on_chart,
+             "overlap_shift_px": float((seen_by_a[0] - edge_b[0, 0]) / cell),
              "stitched_field_x_deg": max(v["field_x_deg"][1] for v in truth_views)
              - min(v["field_x_deg"][0] for v in truth_views)}
     return a, b, truth
@@ -494,14 +522,20 @@ def write_quadpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 
 def write_dualpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 384,
                     rays: int = 1, no_prisms: bool = False, scene: str = "chart",
                     open_halves: str = "A,B", crosstalk: float = 0.0,
-                    noise_dn: float = 2.0) -> dict:
+                    noise_dn: float = 2.0, prism_apex_deg: float = 30.0) -> dict:
     """Write ``capture.dng`` (two CFA frames "S" = A + B and "A", like a Canon DPRAW, RGGB,
-    black 512, white 16383, 16 optical-black columns on the left) and ``truth.json``."""
+    black 512, white 16383, 16 optical-black columns on the left) and ``truth.json``.
+
+    The default prism (n = 1.74, A = 30 deg) deviates the A view by ~78 % of the frame width,
+    so that A and B are "almost juxtaposed with a tiny common portion" as in the paper's
+    prototypes (22 % overlap here, enough to register them); the stitched field is 64 deg.
+    """
     halves = tuple(h.strip() for h in open_halves.split(","))
     if set(halves) - {"A", "B"}:
         raise ValueError(f"open_halves {open_halves!r}: use A, B or A,B")
     a, b, truth = render_dualpixel(pixels=pixels, rays=rays, seed=seed, prism=not no_prisms,
-                                   scene=scene, open_halves=halves, crosstalk=crosstalk)
+                                   scene=scene, open_halves=halves, crosstalk=crosstalk,
+                                   camera=Camera(prism_apex_deg=prism_apex_deg))
     rng = np.random.default_rng(seed + 1)
     black, white, margin = 512, 16383, 16
     scale = 0.4 * (white - black)  # a white chart through one half: 40 % of the range
