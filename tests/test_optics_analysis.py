@@ -7,8 +7,14 @@ import pytest
 
 from plenocli.errors import ConfigError
 from plenocli.io.lensfile import lens_from_dict, read_lens
-from plenocli.optics.analysis import (distortion_percent, half_field_deg, lens_report, paraxial,
-                                      prism_deviation_deg, spot_rms_um)
+from plenocli.optics.analysis import (
+    distortion_percent,
+    half_field_deg,
+    lens_report,
+    paraxial,
+    prism_deviation_deg,
+    spot_rms_um,
+)
 from plenocli.optics.lens import Lens, Surface
 from tests.conftest import ROOT
 

@@ -7,8 +7,13 @@ import pytest
 
 from plenocli.io.lensfile import read_lens
 from plenocli.optics.analysis import image_distance
-from plenocli.optics.crosstalk import (crosstalk_ratio, crosstalk_report, intended_sai, sai_flux,
-                                       stop_mask)
+from plenocli.optics.crosstalk import (
+    crosstalk_ratio,
+    crosstalk_report,
+    intended_sai,
+    sai_flux,
+    stop_mask,
+)
 from plenocli.optics.lens import Lens, Surface
 from tests.conftest import ROOT
 

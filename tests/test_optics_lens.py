@@ -147,3 +147,19 @@ def test_image_distance_for_a_near_object_follows_the_thin_lens_equation():
 def test_invalid_conic_for_the_diameter_is_refused():
     with pytest.raises(ValueError, match="does not reach"):
         Lens((Surface(-2.6425, 1.0, "air", 3.38069, conic=18.7316),))
+
+
+def test_compiled_tracer_matches_the_numpy_tracer():
+    from plenocli.optics.crosstalk import stop_mask
+    from plenocli.optics.fasttrace import trace_fast
+
+    lens = table2()
+    pos, d = random_rays(np.random.default_rng(5), 5000)
+    for quarter, width in ((None, 0.0), ((1, -1), 0.0), ((-1, 1), 0.3), (None, 0.3)):
+        signs = {(1, 1): "++", (1, -1): "+-", (-1, 1): "-+", (-1, -1): "--"}
+        ref = trace(lens, pos, d, stop_mask=stop_mask(
+            quarter=signs[quarter] if quarter else None, cross_width_mm=width))
+        p, dd, alive = trace_fast(lens, pos, d, quarter=quarter, cross_half_width_mm=width / 2)
+        assert np.array_equal(alive, ref.alive)
+        assert np.nanmax(np.abs(p - ref.position)) < 1e-12
+        assert np.nanmax(np.abs(dd - ref.direction)) < 1e-12

@@ -199,4 +199,5 @@ def test_bad_options(bad, match):
 def test_kinds_are_registered():
     kinds = prismcam.kinds()
     assert {"quadpixel-pyramid", "dualpixel-prism", "raytrix-prism", "quadpixel-white",
-            "quadpixel-masked", "dualpixel-masked", "dualpixel-white", "raytrix-white"} <= set(kinds)
+            "quadpixel-masked", "dualpixel-masked", "dualpixel-white",
+            "raytrix-white"} <= set(kinds)

@@ -58,15 +58,17 @@ def format_report(report: dict) -> str:
         f"field of view ({report['sensor_mm']} mm)   {fov['horizontal']:.2f} deg horizontal, "
         f"{fov['diagonal']:.2f} deg diagonal (paraxial {fov['paraxial_horizontal']:.2f} deg)",
         "distortion                " + ", ".join(
-            f"{d['percent']:+.3f} % @ {d['field_deg']:.1f} deg" for d in report["distortion_percent"]),
+            f"{d['percent']:+.3f} % @ {d['field_deg']:.1f} deg"
+            for d in report["distortion_percent"]),
         f"max |distortion|          {report['max_abs_distortion_percent']:.3f} %",
         "RMS spot radius           " + ", ".join(
             f"{s['rms_um']:.2f} um @ {s['field_deg']:.1f} deg" for s in report["spot_rms_um"]),
     ]
     p = report["prism"]
     lines.append(f"prism n {p['n']}, A {p['apex_deg']} deg  deviation {p['thin_deg']:.3f} deg "
-                 f"(n-1)A, {p['minimum_deg']:.3f} deg exact minimum, {p['normal_incidence_deg']:.3f}"
-                 f" deg at normal incidence; A for alpha = half field: "
+                 f"(n-1)A, {p['minimum_deg']:.3f} deg exact minimum, "
+                 f"{p['normal_incidence_deg']:.3f} deg at normal incidence; "
+                 "A for alpha = half field: "
                  f"{p['apex_for_half_field_deg']:.2f} deg")
     ct = report.get("crosstalk")
     if ct:
