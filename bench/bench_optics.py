@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import resource
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -23,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 from plenocli.io.lensfile import read_lens  # noqa: E402
 from plenocli.optics.fasttrace import trace_fast  # noqa: E402
 from plenocli.optics.lens import Lens, Surface, trace  # noqa: E402
-from plenocli.synth.prismcam import render_quadpixel  # noqa: E402
+from plenocli.synth.prismcam import render_quadpixel, write_quadpixel  # noqa: E402
 
 
 def peak_rss_mb() -> float:
@@ -52,6 +53,25 @@ def main() -> None:
     parser.add_argument("--rays", type=int, default=2_000_000)
     parser.add_argument("--pixels", type=int, default=3000)
     args = parser.parse_args()
+    t0 = time.perf_counter()
+    sensor, truth = render_quadpixel(pixels=args.pixels, rays=1, seed=0)
+    t_sim = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    render_quadpixel(pixels=args.pixels // 10 // 2 * 2, rays=1, seed=0)
+    t_small = time.perf_counter() - t0
+    print(f"simulate quad-pixel pyramid {args.pixels} x {args.pixels} (1 ray/pixel, chart "
+          f"{truth['chart']['px']} px): {t_sim:.2f} s "
+          f"({args.pixels ** 2 / t_sim / 1e6:.1f} M pixels/s); "
+          f"1/10 size: {t_small:.3f} s (ratio {t_sim / t_small:.0f} for 100x the pixels)")
+    print(f"peak RSS after simulating: {peak_rss_mb():.0f} MB (sensor image float32 RGB: "
+          f"{sensor.nbytes / 2 ** 20:.0f} MB)")
+    del sensor
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        write_quadpixel(tmp, pixels=args.pixels, seed=0)
+        t_write = time.perf_counter() - t0
+    print(f"plenocli simulate quadpixel-pyramid --pixels {args.pixels} (render + 16-bit TIFF + "
+          f"truth.json): {t_write:.2f} s")
     rng = np.random.default_rng(0)
     lens = read_lens(ROOT / "configs" / "lenses" / "paper_table2.yaml")
     flat = Lens((Surface(),), image_distance_mm=1.0)
@@ -71,18 +91,6 @@ def main() -> None:
           f"on all cores, {args.rays / t_fast1 / 1e6:.2f} M rays/s on one; "
           f"{t_lens / t_fast:.1f} x the numpy tracer")
     print(f"peak RSS after tracing: {peak_rss_mb():.0f} MB")
-    t0 = time.perf_counter()
-    sensor, truth = render_quadpixel(pixels=args.pixels, rays=1, seed=0)
-    t_sim = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    render_quadpixel(pixels=args.pixels // 10 // 2 * 2, rays=1, seed=0)
-    t_small = time.perf_counter() - t0
-    print(f"simulate quad-pixel pyramid {args.pixels} x {args.pixels} (1 ray/pixel, chart "
-          f"{truth['chart']['px']} px): {t_sim:.2f} s "
-          f"({args.pixels ** 2 / t_sim / 1e6:.1f} M pixels/s); "
-          f"1/10 size: {t_small:.3f} s (ratio {t_sim / t_small:.0f} for 100x the pixels)")
-    print(f"peak RSS: {peak_rss_mb():.0f} MB (sensor image float32 RGB: "
-          f"{sensor.nbytes / 2 ** 20:.0f} MB)")
 
 
 if __name__ == "__main__":

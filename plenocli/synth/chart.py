@@ -11,7 +11,13 @@ SYMBOLS = string.ascii_uppercase + string.digits
 
 
 def test_chart(rows: int, cols: int, *, seed: int = 0, cells_across: int = 12) -> np.ndarray:
-    """A chart image (rows, cols, 3) float32 in [0, 1], RGB.
+    """A chart image (rows, cols, 3) float32 in [0, 1], RGB (see :func:`test_chart_u8`)."""
+    return test_chart_u8(rows, cols, seed=seed, cells_across=cells_across).astype(
+        np.float32) / 255.0
+
+
+def test_chart_u8(rows: int, cols: int, *, seed: int = 0, cells_across: int = 12) -> np.ndarray:
+    """A chart image (rows, cols, 3) uint8, RGB.
 
     A grid of ``cells_across`` square cells (fewer down when the chart is wider than tall), each
     with a pale random background and a large saturated letter or digit; thin black grid lines,
@@ -44,4 +50,4 @@ def test_chart(rows: int, cols: int, *, seed: int = 0, cells_across: int = 12) -
             cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), (0, 0, 0), max(1, thick // 3))
     cv2.circle(img, (cols // 2, rows // 2), max(2, int(cell / 8)), (255, 0, 0), -1,
                cv2.LINE_AA)
-    return img.astype(np.float32) / 255.0
+    return img

@@ -36,7 +36,7 @@ import tifffile
 from plenocli.io.atomic import atomic_path, write_text
 from plenocli.io.dng import write_dng
 from plenocli.optics.lens import refract
-from plenocli.synth.chart import test_chart
+from plenocli.synth.chart import test_chart_u8
 
 FULL_SCALE_DN = 50000  # 16-bit value of a white chart seen through the whole pupil
 
@@ -163,7 +163,7 @@ def make_chart(cam: Camera, view_pixels: int, *, seed: int, scene: str) -> Chart
     if scene == "white":
         img = np.full((size, size, 3), 255, np.uint8)
     elif scene == "chart":
-        img = np.round(255 * test_chart(size, size, seed=seed, cells_across=16)).astype(np.uint8)
+        img = test_chart_u8(size, size, seed=seed, cells_across=16)
     else:
         raise ValueError(f"scene {scene!r}: use 'chart' or 'white'")
     return Chart(img, half_mm)
