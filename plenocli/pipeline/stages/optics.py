@@ -5,6 +5,7 @@ from __future__ import annotations
 import json as _json
 import math
 
+from plenocli.errors import ConfigError
 from plenocli.io.atomic import write_text
 from plenocli.io.lensfile import read_lens
 from plenocli.optics.analysis import lens_report
@@ -29,8 +30,6 @@ def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,
                 lens, cross_width_fraction=mask_width, sensor_mm=sensor_mm, pixel_um=pixel_um,
                 object_distance_mm=object_distance_mm)
     except ValueError as err:
-        from plenocli.errors import ConfigError
-
         raise ConfigError(f"{input}: {err}") from err
     if json:
         params = dict(sensor_mm=sensor_mm, crosstalk=crosstalk, mask_width=mask_width,
