@@ -10,6 +10,7 @@ from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
 from plenocli.cli.flat import flat
 from plenocli.cli.info import info
+from plenocli.cli.optics import optics
 from plenocli.cli.refocus import refocus
 from plenocli.cli.run import run
 from plenocli.cli.sai import sai
@@ -40,5 +41,6 @@ for command in (
     batch,
     info,
     simulate,
+    optics,
 ):
     cli.add_command(command)

@@ -12,8 +12,9 @@ def _kind_names():
     return sorted(kinds())
 
 
-@click.command(short_help="Write synthetic captures with ground truth.")
-@click.argument("kind", type=click.Choice(_kind_names()))
+@click.command(short_help="Write synthetic captures with ground truth.",
+               epilog="KIND is one of: " + ", ".join(_kind_names()) + ".")
+@click.argument("kind", metavar="KIND", type=click.Choice(_kind_names()))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
               help="Folder for the capture files and truth.json.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")

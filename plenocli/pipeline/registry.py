@@ -33,6 +33,7 @@ def _stages() -> dict[str, Stage]:
         crosstalk,
         decode,
         flat,
+        optics,
         refocus,
         sai,
         stitch,
@@ -51,6 +52,7 @@ def _stages() -> dict[str, Stage]:
               outputs=("output", "preview")),
         Stage("stitch", stitch.run, inputs=("input", "transform_in"),
               outputs=("output", "transform_out", "report", "preview")),
+        Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
     ]
     return {s.name: s for s in table}
 

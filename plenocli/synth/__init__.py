@@ -12,12 +12,13 @@ from collections.abc import Callable
 
 def kinds() -> dict[str, Callable[..., dict]]:
     """Simulation kinds by name: ``write(out_dir, *, seed, size, ...) -> truth``."""
-    from plenocli.synth import dualpixel, focused, rig, whiteimage
+    from plenocli.synth import dualpixel, focused, prismcam, rig, whiteimage
 
     return {
         "dualpixel": dualpixel.write_capture_set,
         "raytrix-scene": focused.write_raytrix_scene,
         "raytrix-white": whiteimage.write_raytrix_white,
+        **prismcam.kinds(),
         "stereo-rig": rig.write_stereo_rig,
         "quad-rig": rig.write_quad_rig,
     }

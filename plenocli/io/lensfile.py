@@ -1,0 +1,85 @@
+"""Lens prescriptions as YAML (human-readable; see configs/lenses/paper_table2.yaml).
+
+    name: my_lens
+    image_distance_mm: 1.03669     # last vertex -> sensor (default: the last row's thickness)
+    surfaces:                      # in the order light meets them
+      - {stop: true, diameter: 3.09, thickness: 0.0}
+      - {thickness: 1.82133, radius: 3.08301, glass: SK16, diameter: 3.53718, conic: 0.1747}
+
+Units are millimetres. ``radius`` is signed (positive: centre of curvature towards the sensor),
+``inf`` or omitted for a flat surface; ``glass`` is the medium after the surface (a catalogue
+name, ``air``, or a constant index); ``conic`` is the standard conic constant K.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import yaml
+
+from plenocli.errors import ConfigError, InputError
+from plenocli.optics.glass import refractive_index
+from plenocli.optics.lens import Lens, Surface
+
+SURFACE_KEYS = {"thickness", "radius", "glass", "diameter", "conic", "stop"}
+
+
+def _number(value, what: str) -> float:
+    if value is None:
+        return math.inf
+    if isinstance(value, str) and value.strip().lower() in ("inf", "infinity", "flat"):
+        return math.inf
+    try:
+        return float(value)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{what}: {value!r} is not a number") from err
+
+
+def lens_from_dict(doc: dict, *, source: str = "lens") -> Lens:
+    """Build a :class:`Lens` from a parsed YAML document (errors name the row and key)."""
+    if not isinstance(doc, dict) or not isinstance(doc.get("surfaces"), list):
+        raise ConfigError(f"{source}: a lens file needs a 'surfaces' list")
+    surfaces = []
+    for k, row in enumerate(doc["surfaces"], 1):
+        where = f"{source}: surface {k}"
+        if not isinstance(row, dict):
+            raise ConfigError(f"{where}: expected a mapping of {', '.join(sorted(SURFACE_KEYS))}")
+        unknown = set(row) - SURFACE_KEYS
+        if unknown:
+            raise ConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}; "
+                              f"use {', '.join(sorted(SURFACE_KEYS))}")
+        glass = row.get("glass", "air")
+        try:
+            refractive_index(glass)
+        except ValueError as err:
+            raise ConfigError(f"{where}: {err}") from err
+        surfaces.append(Surface(
+            radius_mm=_number(row.get("radius"), f"{where} radius"),
+            thickness_mm=_number(row.get("thickness", 0.0), f"{where} thickness"),
+            glass=glass,
+            diameter_mm=_number(row.get("diameter"), f"{where} diameter"),
+            conic=_number(row.get("conic", 0.0), f"{where} conic"),
+            stop=bool(row.get("stop", False)),
+        ))
+    image = doc.get("image_distance_mm")
+    try:
+        return Lens(tuple(surfaces), name=str(doc.get("name", source)),
+                    image_distance_mm=(None if image is None
+                                       else _number(image, "image_distance_mm")),
+                    notes=str(doc.get("notes", "")))
+    except ValueError as err:
+        raise ConfigError(f"{source}: {err}") from err
+
+
+def read_lens(path: str | os.PathLike) -> Lens:
+    """Read a lens prescription YAML file."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such lens file")
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{p}: not valid YAML ({err})") from err
+    return lens_from_dict(doc, source=str(p))

@@ -1,0 +1,53 @@
+"""A test chart of coloured letters and numbers (like the paper's), drawn with OpenCV."""
+
+from __future__ import annotations
+
+import string
+
+import cv2
+import numpy as np
+
+SYMBOLS = string.ascii_uppercase + string.digits
+
+
+def test_chart(rows: int, cols: int, *, seed: int = 0, cells_across: int = 12) -> np.ndarray:
+    """A chart image (rows, cols, 3) float32 in [0, 1], RGB (see :func:`test_chart_u8`)."""
+    return test_chart_u8(rows, cols, seed=seed, cells_across=cells_across).astype(
+        np.float32) / 255.0
+
+
+def test_chart_u8(rows: int, cols: int, *, seed: int = 0, cells_across: int = 12) -> np.ndarray:
+    """A chart image (rows, cols, 3) uint8, RGB.
+
+    A grid of ``cells_across`` square cells (fewer down when the chart is wider than tall), each
+    with a pale random background and a large saturated letter or digit; thin black grid lines,
+    and a red disc at the centre (the optical axis when the chart is centred on it).
+    """
+    if rows < 16 or cols < 16:
+        raise ValueError(f"chart size {rows} x {cols} too small; give at least 16 x 16 pixels")
+    if cells_across < 1:
+        raise ValueError(f"cells_across {cells_across} must be >= 1")
+    rng = np.random.default_rng(seed)
+    cell = cols / cells_across
+    cells_down = max(1, int(round(rows / cell)))
+    img = np.full((rows, cols, 3), 255, dtype=np.uint8)  # OpenCV draws text on 8-bit images
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    for r in range(cells_down):
+        for c in range(cells_across):
+            y0, y1 = int(r * rows / cells_down), int((r + 1) * rows / cells_down)
+            x0, x1 = int(c * cell), int((c + 1) * cell)
+            img[y0:y1, x0:x1] = np.round(255 * (0.75 + 0.25 * rng.random(3))).astype(np.uint8)
+            text = SYMBOLS[int(rng.integers(len(SYMBOLS)))]
+            colour = rng.random(3)
+            colour[int(rng.integers(3))] = 0.05  # saturated: one channel nearly off
+            h = y1 - y0
+            scale = max(h / 40.0, 0.2)
+            thick = max(1, int(h / 14))
+            (tw, th), _ = cv2.getTextSize(text, font, scale, thick)
+            org = (x0 + (x1 - x0 - tw) // 2, y0 + (h + th) // 2)
+            cv2.putText(img, text, org, font, scale, tuple(int(255 * v) for v in colour), thick,
+                        cv2.LINE_AA)
+            cv2.rectangle(img, (x0, y0), (x1 - 1, y1 - 1), (0, 0, 0), max(1, thick // 3))
+    cv2.circle(img, (cols // 2, rows // 2), max(2, int(cell / 8)), (255, 0, 0), -1,
+               cv2.LINE_AA)
+    return img
