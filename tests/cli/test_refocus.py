@@ -162,3 +162,16 @@ def test_frames_with_margins_are_cropped_to_the_grid_image(scene, tmp_path):
     b, meta_b = tiffio.read_image(tmp_path / "b.tif")
     np.testing.assert_array_equal(a, b)
     assert meta_b["refocus"]["crop_sensor_origin"] == [top, left]
+
+
+def test_sai_of_rgb_frames_is_view_major(tmp_path):
+    """Colour pages of one view are consecutive and named VIEW.CHANNEL (S00.R, S00.G, ...)."""
+    rng = np.random.default_rng(4)
+    frames = rng.random((3, 8, 12)).astype(np.float32)
+    tiffio.write_image(tmp_path / "f.tif", frames, {"views": ["R", "G", "B"]})
+    res = CliRunner().invoke(cli, ["sai", str(tmp_path / "f.tif"), "-n", "2",
+                                   "-o", str(tmp_path / "v.tif")])
+    assert res.exit_code == 0, res.output
+    views, meta = tiffio.read_image(tmp_path / "v.tif")
+    assert meta["views"][:4] == ["S00.R", "S00.G", "S00.B", "S01.R"]
+    np.testing.assert_array_equal(views[4], frames[1, 0::2, 1::2])  # S01.G = G(2k, 2l + 1)

@@ -10,7 +10,7 @@ from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
 from plenocli.pipeline.stages.refocus import frame_region, load_grid
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -31,8 +31,8 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
         r0, c0, r1, c1 = (int(v) for v in (meta.get("active_area")
                                            or (0, 0, *data.shape[1:])))
     cfa = shift_pattern(meta.get("cfa"), r0, c0)
-    views, names = [], []
-    for page, name in zip(data, pages, strict=True):
+    per_page = []
+    for page in data:
         crop = page[r0:r1, c0:c1]
         if lens_grid is not None:
             try:
@@ -41,11 +41,12 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                 raise ConfigError(f"{grid}: {err}") from err
         else:
             out = sai_mod.demultiplex(crop, n)
-        views.append(out)
-        names.extend(sai_mod.view_names(n) if len(pages) == 1
-                     else [f"{name}.{v}" for v in sai_mod.view_names(n)])
-    stack = np.concatenate(views)
-    colours = sai_mod.sai_colours(cfa, n, layout=cfa_layout) * len(pages)
+        per_page.append(out)
+    # view-major pages: the channels of one view are consecutive, named VIEW.CHANNEL
+    stack = np.stack(per_page, axis=1).reshape(-1, *per_page[0].shape[1:])
+    names = (sai_mod.view_names(n) if len(pages) == 1
+             else [f"{v}.{name}" for v in sai_mod.view_names(n) for name in pages])
+    colours = [c for c in sai_mod.sai_colours(cfa, n, layout=cfa_layout) for _ in pages]
     same = len(set(colours)) == 1 and colours[0] is not None and len(colours[0]) == 4
     params = dict(n=n, grid=grid, cfa_layout=cfa_layout)
     record = stage_record("sai", params, {"input": input, "grid": grid})
@@ -58,10 +59,12 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                                     int((meta.get("origin") or [0, 0])[1]) + c0]})
     protect = (input,) + ((grid,) if grid else ())
     tiffio.write_image(output, stack, out_meta, protect=protect)
-    log.info("sai: %s -> %s (%d views of %d x %d%s)", input, output, stack.shape[0],
-             stack.shape[2], stack.shape[1], ", approximate S-hat" if lens_grid else "")
-    if preview:
-        nn = n * n
-        mosaic = np.block([[stack[i * n + j].astype(np.float32) for j in range(n)]
-                           for i in range(n)]) if nn > 1 else stack[0]
-        write_png(preview, mosaic, protect=protect)
+    log.info("sai: %s -> %s (%d views%s of %d x %d%s)", shown(input), shown(output), n * n,
+             f" x {len(pages)} channels" if len(pages) > 1 else "", stack.shape[2],
+             stack.shape[1], ", approximate S-hat" if lens_grid else "")
+    if preview:  # the views in their N x N arrangement, in colour when the input is RGB
+        tiles = stack.reshape(n * n, len(pages), *stack.shape[1:]).astype(np.float32)
+        rgb = pages == ["R", "G", "B"]
+        tiles = np.moveaxis(tiles, 1, -1) if rgb else tiles.mean(axis=1)
+        rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
+        write_png(preview, np.concatenate(rows, axis=0), protect=protect)
