@@ -49,8 +49,6 @@ def test_sweep_lattice_accuracy(case):
     assert report.centres_refined
 
 
-@pytest.mark.xfail(reason="per-lens centroids reach ~0.033 px RMS against jittered truth, not "
-                   "yet the 0.02 px target (the lattice itself passes)", strict=False)
 @pytest.mark.parametrize("pitch,angle_deg,cfa", [(8.3, 13.0, "RGGB"), (14.7, 71.0, None),
                                                   (21.1, 200.0, "BGGR")])
 def test_jitter_lattice_and_refined_centres(pitch, angle_deg, cfa):
