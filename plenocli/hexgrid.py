@@ -42,8 +42,8 @@ MIN_LENSES = 12                # fewer refined lenses: no reliable lattice fit
 FFT_CROP_PX = 1024             # the coarse search works on a central crop of at most this size
 SCENE_RESIDUAL = 0.04   # per-lens residual RMS (in pitches) above which centres are not kept
 PEAK_Z = 4.0                   # a spectral peak must stand this many sigma above its ring
-FLAT_SCALE = 1.5
-EDGE_MARGIN = 0.25
+FLAT_SCALE = 1.5               # blur before refinement (pitches)
+EDGE_MARGIN = 0.25             # border (pitches, beyond the disc) where lenses keep the lattice
 
 
 @dataclass(frozen=True)
@@ -103,32 +103,44 @@ def _blur(plane: np.ndarray, sigma: float) -> np.ndarray:
     factor = max(1, min(int(sigma // 4), rows // 8, cols // 8))
     small = cv2.resize(plane, (max(1, cols // factor), max(1, rows // factor)),
                        interpolation=cv2.INTER_AREA) if factor > 1 else plane
-    s = sigma / factor
-    h, w = small.shape
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    u -= w / 2
-    v -= h / 2
-
-    def g(a):   # Gaussian sums over the frame only (zeros outside)
-        return cv2.GaussianBlur(a, (0, 0), sigmaX=s, borderType=cv2.BORDER_CONSTANT)
-
-    f = small.astype(np.float64)
-    m0, gu, gv = g(np.ones_like(f)), g(u), g(v)
-    guu, guv, gvv = g(u * u), g(u * v), g(v * v)
-    gf, guf, gvf = g(f), g(u * f), g(v * f)
-    # moments about each output pixel: sum g (y - x)^k
-    mu, mv = gu - u * m0, gv - v * m0
-    muu = guu - 2 * u * gu + u * u * m0
-    mvv = gvv - 2 * v * gv + v * v * m0
-    muv = guv - u * gv - v * gu + u * v * m0
-    a = np.stack([np.stack([m0, mu, mv], -1), np.stack([mu, muu, muv], -1),
-                  np.stack([mv, muv, mvv], -1)], -2)
-    b = np.stack([gf, guf - u * gf, gvf - v * gf], -1)
-    fit = np.linalg.solve(a, b[..., None])[..., 0, 0].astype(np.float32)
+    level = float(np.mean(small))    # a constant is fitted exactly: keep rounding off it
+    fit = small.astype(np.float64) - level
+    for axis in (0, 1):
+        fit = _local_linear_1d(fit, sigma / factor, axis)
+    fit = (fit + level).astype(np.float32)
     blurred = cv2.resize(fit, (cols, rows), interpolation=cv2.INTER_LINEAR) \
         if factor > 1 else fit
     floor = max(float(np.mean(blurred)) * 1e-3, 1e-12)
     return np.maximum(blurred, floor)
+
+
+def _local_linear_1d(f: np.ndarray, sigma: float, axis: int) -> np.ndarray:
+    """Gaussian-weighted local linear fit along ``axis`` of a float64 image, over the frame only
+    (no padding): the value at t of the line fitted to f(t') with weights g(t' - t)."""
+    n = f.shape[axis]
+    half = int(np.ceil(3 * sigma))
+    kern = cv2.getGaussianKernel(2 * half + 1, sigma)[:, 0]
+    t = np.arange(n, dtype=np.float64) - n / 2
+
+    def g1d(a):   # the truncated sums along the line, (n,)
+        return np.convolve(a, kern)[half:half + n]
+
+    g0, g1, g2 = g1d(np.ones(n)), g1d(t), g1d(t * t)
+    m1 = g1 - t * g0                       # moments of (t' - t)
+    m2 = g2 - 2 * t * g1 + t * t * g0
+    det = g0 * m2 - m1 * m1
+    shape = (n, 1) if axis == 0 else (1, n)
+    ca = (m2 / det).reshape(shape)   # a = ca G(f) + cb (G(t f) - t G(f))
+    cb = (-m1 / det).reshape(shape)
+    t_img = t.reshape(shape)
+    one = np.ones((1, 1))
+    kx, ky = (one, kern[:, None]) if axis == 0 else (kern[:, None], one)
+
+    def g(a):
+        return cv2.sepFilter2D(a, cv2.CV_64F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+
+    gf = g(f)
+    return ca * gf + cb * (g(f * t_img) - t_img * gf)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -185,10 +197,13 @@ def _spectrum(flat: np.ndarray, *, cfa: bool) -> _Spectrum:
     # peaks are a minority of each ring, so they do not inflate it
     ring = np.minimum((radius * size / 4).astype(np.int64), size // 4 + 1).ravel()
     nring = size // 4 + 2
-    order = np.lexsort((logmag.ravel(), ring))
+    # one float sort of (ring + normalised value) orders by ring, then by value
+    lo, span = float(logmag.min()), float(np.ptp(logmag)) + 1e-9
+    key = ring + (logmag.ravel() - lo) * (0.999 / span)
+    key.sort()
     count = np.bincount(ring, minlength=nring)
     start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    sorted_vals = logmag.ravel()[order]
+    sorted_vals = (key - np.repeat(np.arange(nring), count)) * (span / 0.999) + lo
     safe = np.maximum(count, 1)
     median = sorted_vals[np.minimum(start + safe // 2, sorted_vals.size - 1)]
     low = sorted_vals[np.minimum(start + (safe * 16) // 100, sorted_vals.size - 1)]
@@ -437,11 +452,14 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
             a22 = 0.0
             b1 = 0.0
             b2 = 0.0
+            # the mirror 2c - x_k of every pixel has the same fractional part: one set of
+            # bilinear weights per iteration
+            fx2, fy2 = np.floor(2 * x), np.floor(2 * y)
+            fx, fy = 2 * x - fx2, 2 * y - fy2
+            ix2, iy2 = int(fx2), int(fy2)
             for r in range(r_lo, r_hi + 1):
                 dy = r - y
-                my = 2 * y - r
-                j0 = int(np.floor(my))
-                fy = my - j0
+                j0 = iy2 - r
                 for c in range(c_lo, c_hi + 1):
                     dx = c - x
                     d2 = dx * dx + dy * dy
@@ -449,21 +467,16 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
                         continue
                     t = 1.0 - d2 / r2
                     w = t * t
-                    mx = 2 * x - c
-                    i0 = int(np.floor(mx))
-                    fx = mx - i0
+                    i0 = ix2 - c
                     v00 = values[j0, i0]
                     v01 = values[j0, i0 + 1]
                     v10 = values[j0 + 1, i0]
                     v11 = values[j0 + 1, i0 + 1]
                     top = v00 + fx * (v01 - v00)
                     bot = v10 + fx * (v11 - v10)
-                    v = top + fy * (bot - top)
-                    gx = (1 - fy) * (v01 - v00) + fy * (v11 - v10)
-                    gy = bot - top
-                    e = values[r, c] - v
-                    jx = -2.0 * gx
-                    jy = -2.0 * gy
+                    e = values[r, c] - (top + fy * (bot - top))
+                    jx = -2.0 * ((1 - fy) * (v01 - v00) + fy * (v11 - v10))
+                    jy = -2.0 * (bot - top)
                     a11 += w * jx * jx
                     a12 += w * jx * jy
                     a22 += w * jy * jy
@@ -481,7 +494,7 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
                 sy *= 0.1 * radius / step
             x += sx
             y += sy
-            if step < 1e-4:
+            if step < 1e-3:
                 break
         out_x[k] = x
         out_y[k] = y
@@ -489,7 +502,7 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
 
 
 def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
-                   n_iter: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   n_iter: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-lens centres as point-symmetry centres of the micro-images.
 
     Each centre c minimises sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2 over the pixels x_k
@@ -517,7 +530,7 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
                     image_shape=(rows, cols))
     idx, ideal = grid.lens_centres()
     radius = window * grid.pitch_px
-    margin = radius + EDGE_MARGIN * grid.pitch_px + 2  # the flattening blur is unreliable at the border
+    margin = radius + EDGE_MARGIN * grid.pitch_px + 2  # flattening is less sure at the border
     inner = ((ideal[:, 0] >= margin) & (ideal[:, 0] <= cols - 1 - margin)
              & (ideal[:, 1] >= margin) & (ideal[:, 1] <= rows - 1 - margin))
     cx, cy, ok = _symmetry_centres(np.ascontiguousarray(flat, np.float32),
