@@ -8,6 +8,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +30,13 @@ def main() -> None:
             grid, _ = hexgrid.calibrate(image, cfa="RGGB", black_level=64)
             times.append(time.perf_counter() - t)
         best = min(times)
+        tracemalloc.start()
+        hexgrid.calibrate(image, cfa="RGGB", black_level=64)
+        peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
+        tracemalloc.stop()
         print(f"calibrate {cols}x{rows}: {best:.3f} s (target {target} s, ratio "
-              f"{best / target:.2f}), pitch {grid.pitch_px:.5f}")
+              f"{best / target:.2f}), pitch {grid.pitch_px:.5f}; peak traced memory "
+              f"{peak_mb:.0f} MB = {peak_mb / (image.size * 4 / 1e6):.1f} x the float32 image")
         with tempfile.TemporaryDirectory() as tmp:
             src = Path(tmp) / "white.tif"
             tifffile.imwrite(src, image)
@@ -39,7 +45,8 @@ def main() -> None:
                             str(Path(tmp) / "g.yaml"), "-q"], check=True)
             print(f"  whole command with file reading: {time.perf_counter() - t:.2f} s")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"peak RSS {peak:.0f} MB; numpy {np.__version__}")
+    print(f"peak RSS of this process {peak:.0f} MB (dominated by the synthetic image "
+          f"generator; calibrate's own peak is the traced figure above); numpy {np.__version__}")
 
 
 if __name__ == "__main__":

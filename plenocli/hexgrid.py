@@ -14,8 +14,9 @@ Method (paper section 5.2, made precise):
 3. **Sub-bin lattice.** Every harmonic with a clear peak is located with a parabolic fit; the
    reciprocal basis is the least-squares fit of all of them; the offset comes from the phases of
    the fundamentals (direct DFT at the fitted frequencies).
-4. **Per-lens centres.** Each micro-image centre is the fixed point of a windowed centroid
-   (symmetric window, so a point-symmetric micro-image converges to its symmetry centre).
+4. **Per-lens centres.** Each micro-image centre is its point-symmetry centre: Gauss-Newton on
+   sum w (I(x) - I(2c - x))^2 over a disc of 0.6 pitch (edges carry the position; a centroid
+   only sees the flat top).
 5. **Lattice fit.** A hexagonal (square) similarity lattice ``x_ij = o + i b1 + j b2``,
    ``b2 = R(60 deg) b1`` is linear in (o, b1): robust least squares over all lens centres gives
    pitch, rotation and offset; the residuals (centre - lattice) are the report.
@@ -41,6 +42,8 @@ MIN_LENSES = 12                # fewer refined lenses: no reliable lattice fit
 FFT_CROP_PX = 1024             # the coarse search works on a central crop of at most this size
 SCENE_RESIDUAL = 0.04   # per-lens residual RMS (in pitches) above which centres are not kept
 PEAK_Z = 4.0                   # a spectral peak must stand this many sigma above its ring
+FLAT_SCALE = 1.5               # blur before refinement (pitches)
+EDGE_MARGIN = 0.25             # border (pitches, beyond the disc) where lenses keep the lattice
 
 
 @dataclass(frozen=True)
@@ -92,16 +95,52 @@ def flatten(image: np.ndarray, *, cfa: str | None = None, scale_px: float = 64.0
 
 
 def _blur(plane: np.ndarray, sigma: float) -> np.ndarray:
-    """Large Gaussian blur done on a shrunk copy (fast), floored to stay positive."""
+    """Large Gaussian-weighted local *linear* fit done on a shrunk copy (fast), floored to stay
+    positive. Inside the frame it is the Gaussian blur; near the border a plain blur (any
+    padding) flattens the vignetting slope and tilts the border micro-images, the local linear
+    fit keeps the slope."""
     rows, cols = plane.shape
     factor = max(1, min(int(sigma // 4), rows // 8, cols // 8))
     small = cv2.resize(plane, (max(1, cols // factor), max(1, rows // factor)),
                        interpolation=cv2.INTER_AREA) if factor > 1 else plane
-    small = cv2.GaussianBlur(small, (0, 0), sigmaX=sigma / factor, borderType=cv2.BORDER_REFLECT)
-    blurred = cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR) \
-        if factor > 1 else small
+    level = float(np.mean(small))    # a constant is fitted exactly: keep rounding off it
+    fit = small.astype(np.float64) - level
+    for axis in (0, 1):
+        fit = _local_linear_1d(fit, sigma / factor, axis)
+    fit = (fit + level).astype(np.float32)
+    blurred = cv2.resize(fit, (cols, rows), interpolation=cv2.INTER_LINEAR) \
+        if factor > 1 else fit
     floor = max(float(np.mean(blurred)) * 1e-3, 1e-12)
     return np.maximum(blurred, floor)
+
+
+def _local_linear_1d(f: np.ndarray, sigma: float, axis: int) -> np.ndarray:
+    """Gaussian-weighted local linear fit along ``axis`` of a float64 image, over the frame only
+    (no padding): the value at t of the line fitted to f(t') with weights g(t' - t)."""
+    n = f.shape[axis]
+    half = int(np.ceil(3 * sigma))
+    kern = cv2.getGaussianKernel(2 * half + 1, sigma)[:, 0]
+    t = np.arange(n, dtype=np.float64) - n / 2
+
+    def g1d(a):   # the truncated sums along the line, (n,)
+        return np.convolve(a, kern)[half:half + n]
+
+    g0, g1, g2 = g1d(np.ones(n)), g1d(t), g1d(t * t)
+    m1 = g1 - t * g0                       # moments of (t' - t)
+    m2 = g2 - 2 * t * g1 + t * t * g0
+    det = g0 * m2 - m1 * m1
+    shape = (n, 1) if axis == 0 else (1, n)
+    ca = (m2 / det).reshape(shape)   # a = ca G(f) + cb (G(t f) - t G(f))
+    cb = (-m1 / det).reshape(shape)
+    t_img = t.reshape(shape)
+    one = np.ones((1, 1))
+    kx, ky = (one, kern[:, None]) if axis == 0 else (kern[:, None], one)
+
+    def g(a):
+        return cv2.sepFilter2D(a, cv2.CV_64F, kx, ky, borderType=cv2.BORDER_CONSTANT)
+
+    gf = g(f)
+    return ca * gf + cb * (g(f * t_img) - t_img * gf)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -158,10 +197,13 @@ def _spectrum(flat: np.ndarray, *, cfa: bool) -> _Spectrum:
     # peaks are a minority of each ring, so they do not inflate it
     ring = np.minimum((radius * size / 4).astype(np.int64), size // 4 + 1).ravel()
     nring = size // 4 + 2
-    order = np.lexsort((logmag.ravel(), ring))
+    # one float sort of (ring + normalised value) orders by ring, then by value
+    lo, span = float(logmag.min()), float(np.ptp(logmag)) + 1e-9
+    key = ring + (logmag.ravel() - lo) * (0.999 / span)
+    key.sort()
     count = np.bincount(ring, minlength=nring)
     start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    sorted_vals = logmag.ravel()[order]
+    sorted_vals = (key - np.repeat(np.arange(nring), count)) * (span / 0.999) + lo
     safe = np.maximum(count, 1)
     median = sorted_vals[np.minimum(start + safe // 2, sorted_vals.size - 1)]
     low = sorted_vals[np.minimum(start + (safe * 16) // 100, sorted_vals.size - 1)]
@@ -387,69 +429,119 @@ def _phase_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
 # ----------------------------------------------------------------------------------------------
 # 4. per-lens centres
 @numba.njit(parallel=True, cache=True)
-def _centroids(values, cx, cy, radius, n_iter):  # pragma: no cover - compiled
+def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - compiled
+    """Gauss-Newton point-symmetry centres: minimise sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2
+    over the pixels x_k of a disc of ``radius`` around c; I(2c - x_k) bilinear."""
     rows, cols = values.shape
     out_x = cx.copy()
     out_y = cy.copy()
+    ok = np.ones(cx.shape[0], np.bool_)
     r2 = radius * radius
-    reach = int(np.ceil(radius))
     for k in numba.prange(cx.shape[0]):
         x, y = cx[k], cy[k]
         for _ in range(n_iter):
-            ix, iy = int(np.rint(x)), int(np.rint(y))
-            sw = 0.0
-            sx = 0.0
-            sy = 0.0
-            for r in range(max(iy - reach, 0), min(iy + reach + 1, rows)):
+            r_lo, r_hi = int(np.ceil(y - radius)), int(np.floor(y + radius))
+            c_lo, c_hi = int(np.ceil(x - radius)), int(np.floor(x + radius))
+            if (r_lo < 1 or c_lo < 1 or r_hi > rows - 2 or c_hi > cols - 2
+                    or 2 * y - r_hi < 0 or 2 * x - c_hi < 0
+                    or 2 * y - r_lo > rows - 2 or 2 * x - c_lo > cols - 2):
+                ok[k] = False
+                break
+            a11 = 0.0
+            a12 = 0.0
+            a22 = 0.0
+            b1 = 0.0
+            b2 = 0.0
+            # the mirror 2c - x_k of every pixel has the same fractional part: one set of
+            # bilinear weights per iteration
+            fx2, fy2 = np.floor(2 * x), np.floor(2 * y)
+            fx, fy = 2 * x - fx2, 2 * y - fy2
+            ix2, iy2 = int(fx2), int(fy2)
+            for r in range(r_lo, r_hi + 1):
                 dy = r - y
-                for c in range(max(ix - reach, 0), min(ix + reach + 1, cols)):
+                j0 = iy2 - r
+                for c in range(c_lo, c_hi + 1):
                     dx = c - x
                     d2 = dx * dx + dy * dy
-                    if d2 < r2:
-                        t = 1.0 - d2 / r2
-                        w = t * t * values[r, c]
-                        sw += w
-                        sx += w * dx
-                        sy += w * dy
-            if sw <= 0.0:
+                    if d2 >= r2:
+                        continue
+                    t = 1.0 - d2 / r2
+                    w = t * t
+                    i0 = ix2 - c
+                    v00 = values[j0, i0]
+                    v01 = values[j0, i0 + 1]
+                    v10 = values[j0 + 1, i0]
+                    v11 = values[j0 + 1, i0 + 1]
+                    top = v00 + fx * (v01 - v00)
+                    bot = v10 + fx * (v11 - v10)
+                    e = values[r, c] - (top + fy * (bot - top))
+                    jx = -2.0 * ((1 - fy) * (v01 - v00) + fy * (v11 - v10))
+                    jy = -2.0 * (bot - top)
+                    a11 += w * jx * jx
+                    a12 += w * jx * jy
+                    a22 += w * jy * jy
+                    b1 += w * jx * e
+                    b2 += w * jy * e
+            det = a11 * a22 - a12 * a12
+            if det <= 0.0:
+                ok[k] = False
                 break
-            x += sx / sw
-            y += sy / sw
+            sx = -(a22 * b1 - a12 * b2) / det
+            sy = -(a11 * b2 - a12 * b1) / det
+            step = np.hypot(sx, sy)
+            if step > 0.1 * radius:   # far from the fixed point: damp
+                sx *= 0.1 * radius / step
+                sy *= 0.1 * radius / step
+            x += sx
+            y += sy
+            if step < 1e-3:
+                break
         out_x[k] = x
         out_y[k] = y
-    return out_x, out_y
+    return out_x, out_y, ok
 
 
-def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.45,
-                   n_iter: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-lens centres by iterated windowed centroids.
+def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
+                   n_iter: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-lens centres as point-symmetry centres of the micro-images.
+
+    Each centre c minimises sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2 over the pixels x_k
+    within ``window`` pitches of c (Gauss-Newton from the lattice position; w a smooth taper,
+    I(2c - x_k) bilinear). A plain centroid weighs the flat top of a micro-image and ignores its
+    edges, which carry the position; the symmetry fit uses the edges, and neighbours that
+    overlap the window only add noise, not a systematic pull, as long as they are symmetric on
+    average.
 
     Parameters
     ----------
-    flat : (rows, cols) float32 flattened image (see :func:`flatten`)
+    flat : (rows, cols) float32 flattened image (see :func:`flatten`, blur of >= 1 pitch: a
+        narrower blur follows each lens's neighbours and tilts its micro-image)
     grid : the lattice to start from
-    window : window radius in units of the pitch
+    window : radius of the symmetry disc in units of the pitch
 
     Returns
     -------
     indices (K, 2) int, centres (K, 2) float (x, y) px, refined (K,) bool
-        Every lattice lens whose ideal centre is inside the image; lenses whose window leaves
-        the image keep their ideal centre (refined False).
+        Every lattice lens whose ideal centre is inside the image; lenses whose disc (or its
+        mirror) leaves the image keep their ideal centre (refined False).
     """
     rows, cols = flat.shape
     grid = LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
                     image_shape=(rows, cols))
     idx, ideal = grid.lens_centres()
     radius = window * grid.pitch_px
-    margin = radius + 0.5 * grid.pitch_px + 2  # the flattening blur is unreliable at the border
+    margin = radius + EDGE_MARGIN * grid.pitch_px + 2  # flattening is less sure at the border
     inner = ((ideal[:, 0] >= margin) & (ideal[:, 0] <= cols - 1 - margin)
              & (ideal[:, 1] >= margin) & (ideal[:, 1] <= rows - 1 - margin))
-    values = np.maximum(flat - np.float32(np.median(flat[::7, ::7])), 0).astype(np.float32)
-    cx, cy = _centroids(values, ideal[inner, 0].copy(), ideal[inner, 1].copy(), float(radius),
-                        n_iter)
+    cx, cy, ok = _symmetry_centres(np.ascontiguousarray(flat, np.float32),
+                                   ideal[inner, 0].copy(), ideal[inner, 1].copy(),
+                                   float(radius), n_iter)
+    refined = np.zeros(len(ideal), bool)
+    refined[np.flatnonzero(inner)[ok]] = True
     centres = ideal.copy()
-    centres[inner, 0], centres[inner, 1] = cx, cy
-    return idx, centres, inner
+    centres[inner, 0] = np.where(ok, cx, ideal[inner, 0])
+    centres[inner, 1] = np.where(ok, cy, ideal[inner, 1])
+    return idx, centres, refined
 
 
 # ----------------------------------------------------------------------------------------------
@@ -536,7 +628,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
                                f"grid; it needs at least {MIN_SIDE_PX} px on each side")
     image = image.astype(np.float32) - np.float32(black_level) if black_level else image
     # coarse search on a flattened central crop; the whole frame is flattened once the pitch is
-    # known, with a blur of one pitch: it follows the vignetting closely (no tilt left inside a
+    # known, with a blur of 1.5 pitch: it follows the vignetting (no tilt left inside a
     # micro-image, which would pull the centres) and still averages the lattice out
     size = min(rows, cols, FFT_CROP_PX)
     r0, c0 = (rows - size) // 2, (cols - size) // 2
@@ -547,7 +639,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
                                f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
-    flat = flatten(image, cfa=cfa, scale_px=max(0.5 * pitch, 4.0))
+    flat = flatten(image, cfa=cfa, scale_px=max(FLAT_SCALE * pitch, 8.0))
     grid = LensGrid(pitch, angle, (0.0, 0.0), lattice, image_shape=(rows, cols))
     grid = _reindexed(pitch, angle, _phase_offset(flat, grid), lattice, (rows, cols))
 
@@ -678,3 +770,4 @@ def symmetry_centre(patch: np.ndarray, *, radius: float) -> tuple[float, float]:
     res = minimize(cost, np.zeros(2), method="Nelder-Mead",
                    options={"xatol": 1e-4, "fatol": 1e-12, "maxiter": 400})
     return float(res.x[0]), float(res.x[1])
+

@@ -100,8 +100,9 @@ class LensGrid:
         idx = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)[inside]
         return idx, xy[inside]
 
-    def to_dict(self) -> dict:
-        """Human-readable, YAML-ready description (centres as lists)."""
+    def to_dict(self, *, lens_rows: bool = True) -> dict:
+        """Human-readable, YAML-ready description (centres as lists). With ``lens_rows=False``
+        the ``lenses`` entry holds only its count and columns (a writer adds the rows)."""
         out = {
             "lattice": self.lattice,
             "pitch_px": float(self.pitch_px),
@@ -115,9 +116,12 @@ class LensGrid:
             out["lenses"] = {
                 "count": int(len(self.centres_xy)),
                 "columns": ["i", "j", "x", "y"],
-                "rows": [[int(i), int(j), round(float(x), 5), round(float(y), 5)]
-                         for (i, j), (x, y) in zip(self.indices, self.centres_xy, strict=True)],
             }
+            if lens_rows:
+                out["lenses"]["rows"] = [
+                    [int(i), int(j), round(float(x), 5), round(float(y), 5)]
+                    for (i, j), (x, y) in zip(np.asarray(self.indices).tolist(),
+                                              np.asarray(self.centres_xy).tolist(), strict=True)]
         return out
 
     @classmethod

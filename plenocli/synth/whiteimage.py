@@ -2,12 +2,14 @@
 
 Each micro-image is a bright disc (radius ``fill * pitch / 2`` with a soft edge of
 ``edge_px``) shaded by a cos^4-like falloff towards its rim, centred on its lens centre; the lens
-centres are a hexagonal (or square) lattice plus optional Gaussian jitter. The whole frame is
+centres are a hexagonal (or square) lattice plus optional Gaussian jitter; where soft edges of
+neighbouring micro-images overlap their light adds. The whole frame is
 multiplied by a main-lens vignetting (quadratic, off-centre), then photon (Poisson) and read
 noise are added and the result is quantised to 12-bit DN in uint16. With ``cfa`` the frame is
 a Bayer mosaic (per-colour sensitivity). A few dead and hot pixels can be added.
 
-The truth is exact: each micro-image is point-symmetric about its centre, sampled at pixel
+The truth is exact: each micro-image is point-symmetric about its centre (the neighbours' tails
+add on top), sampled at pixel
 centres (x = col, y = row).
 """
 
@@ -59,8 +61,8 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         raise ValueError(f"pitch_px must be between 2 and the image size, got {pitch_px}")
     rng = np.random.default_rng(seed)
     grid = LensGrid(pitch_px, angle_rad, tuple(offset_xy), lattice, image_shape=(rows, cols))
-    # every pixel belongs to the lens of its nearest lattice point or a neighbour; jitter is
-    # small, so testing the nearest lattice point and its six (four) neighbours is enough
+    # the discs reaching a pixel belong to its nearest lattice point or a neighbour (jitter is
+    # small, discs are at most one pitch across)
     yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
     i0, j0 = grid.nearest_index(xx, yy)
 
@@ -74,20 +76,19 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         return base + jitter_px * u
 
     radius = fill * pitch_px / 2
-    best_d = np.full((rows, cols), np.inf)
     value = np.zeros((rows, cols))
     neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)]
     if lattice == "square":
         neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1),
                       (-1, 1)]
+    # light of neighbouring micro-images adds (their soft edges overlap): each micro-image keeps
+    # its whole point-symmetric profile, so its true centre is exactly its symmetry centre (a
+    # nearest-lens assignment would clip jittered micro-images unevenly)
     for di, dj in neighbours:
         c = centre_of(i0 + di, j0 + dj)
         d = np.hypot(xx - c[..., 0], yy - c[..., 1])
-        closer = d < best_d
-        best_d = np.where(closer, d, best_d)
         shade = (1 - falloff * np.clip(d / radius, 0, 1) ** 2) ** 2
-        disc = 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
-        value = np.where(closer, shade * disc, value)
+        value += shade * 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
     cx, cy = cols / 2 + 0.1 * cols, rows / 2 - 0.07 * rows
     r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((rows / 2) ** 2 + (cols / 2) ** 2)
     value *= 1 - vignetting * r2
