@@ -37,6 +37,8 @@ def simulate(kind, output, extra, **given):
 
     writer = kinds()[kind]
     kwargs = {k: v for k, v in given.items() if v is not None}
+    if "pixels" in kwargs and kwargs["pixels"].isdigit():  # one number, else ROWSxCOLS
+        kwargs["pixels"] = int(kwargs["pixels"])
     for item in extra:
         key, sep, value = item.partition("=")
         if not sep:
@@ -47,5 +49,8 @@ def simulate(kind, output, extra, **given):
         if key not in accepted:
             names = ", ".join(k for k in accepted if k != "out_dir")
             raise ConfigError(f"simulate {kind} does not take {key!r}; it takes: {names}")
-    writer(output, **kwargs)
+    try:
+        writer(output, **kwargs)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"simulate {kind}: {err}") from err
     click.echo(f"simulate {kind}: wrote {output}", err=True)

@@ -136,7 +136,7 @@ def write_dualpixel_raw(path, raw: np.ndarray, truth: dict) -> None:
               model="plenocli synthetic Canon EOS 5D Mark IV (dual pixel)")
 
 
-def write_capture_set(out_dir, *, seed: int = 0, pixels: str | None = None,
+def write_capture_set(out_dir, *, seed: int = 0, pixels: str | int | None = None,
                       noise: float = 2.0) -> dict:
     """``plenocli simulate dualpixel``: capture.dng, white.dng and their truth in ``out_dir``.
 
@@ -145,7 +145,12 @@ def write_capture_set(out_dir, *, seed: int = 0, pixels: str | None = None,
     Truth: ``truth.json`` (parameters, geometry) and ``truth.npz`` (per-row bias, A, B, S, split,
     vignetting and clipping masks of each capture, prefixed ``capture_`` / ``white_``).
     """
-    rows, cols = (192, 256) if not pixels else (int(v) for v in str(pixels).lower().split("x"))
+    if not pixels:
+        rows, cols = 192, 256
+    elif isinstance(pixels, int) or str(pixels).isdigit():
+        rows = cols = int(pixels)
+    else:
+        rows, cols = (int(v) for v in str(pixels).lower().split("x"))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     full = rows >= 2000
