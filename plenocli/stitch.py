@@ -297,9 +297,10 @@ def _refine_level(a: np.ndarray, b: np.ndarray, valid_a: np.ndarray, valid_b: np
     if ys.size < 256:
         raise ValueError(f"the overlap holds only {ys.size} px; too small to refine")
     y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    stride = max(1, int(np.ceil(np.sqrt(ys.size / max_points))))
-    keep = (ys % stride == 0) & (xs % stride == 0)
-    ys, xs = ys[keep], xs[keep]
+    if ys.size > max_points:  # a fixed random subset (a regular subgrid biased the shift)
+        keep = np.random.default_rng(0).choice(ys.size, max_points, replace=False)
+        keep.sort()
+        ys, xs = ys[keep], xs[keep]
     grad_y, grad_x = np.gradient(a[y0 - 1:y1 + 1, x0 - 1:x1 + 1])
     template = a[ys, xs]
     # normalised template coordinates (centre of the overlap, half its longer side) keep the
