@@ -16,7 +16,9 @@ plenocli). Memory: tracemalloc peak of numpy allocations during one plenocli run
 process peak RSS (ru_maxrss) after it. Errors are against the known geometry: shift error (px)
 and the far-corner error of the homography (px).
 
-    python bench/bench_stitch.py [--repeat 1] [--skip-stitcher]
+    PYTHONPATH=. python bench/bench_stitch.py [--repeat 1] [--skip-stitcher]
+
+(from the checkout root: without PYTHONPATH the installed plenocli is measured instead).
 """
 
 from __future__ import annotations
