@@ -6,6 +6,9 @@ from plenocli.cli import options
 @click.command(short_help="Measure sub-aperture cross-talk from masked white captures.")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @options.output_opt
+@click.option("--views", default=None,
+              help="Views to compare, by name or page number, e.g. A,B (leaves out the sum view "
+                   "S that bias writes); default: all pages.")
 @click.option("--intended", default=None,
               help="Name of the view whose pupil part was open (one, or one per input, comma "
                    "separated); default: the brightest view. With --mask-widths: left|right.")
@@ -31,8 +34,8 @@ def crosstalk(**params):
 
     \b
     Example:
-      plenocli crosstalk white_maskR.tif white_maskL.tif --intended A,B -o crosstalk.json \\
-          --preview crosstalk.png
+      plenocli crosstalk white_maskR.tif white_maskL.tif --views A,B --intended A,B \\
+          -o crosstalk.json --preview crosstalk.png
     """
     from plenocli.pipeline.stages.crosstalk import run
 

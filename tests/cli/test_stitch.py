@@ -99,3 +99,22 @@ def test_crosstalk_sweep_guarded(tmp_path):
     assert res.exit_code == 1
     assert "refocus" in res.output or "no such file" in res.output
     assert not out.exists()
+
+
+def test_crosstalk_views_leave_out_the_sum_view(tmp_path):
+    # bias writes pages A, B, S (S = A + B): S is not a pupil view and must not count as one
+    views, truth = make_masked_white(r=0.13, intended=0, seed=3)
+    with_sum = np.concatenate([views, views.sum(axis=0, keepdims=True)])
+    p = tmp_path / "masked.tif"
+    tiffio.write_image(p, with_sum, {"views": ["A", "B", "S"]})
+    out = tmp_path / "x.json"
+    res = CliRunner().invoke(cli, ["crosstalk", str(p), "--views", "A,B", "--intended", "A",
+                                   "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert abs(doc["r"] - truth["r"]) < 1e-3
+    assert doc["captures"][0]["views"] == ["A", "B"]
+    res = CliRunner().invoke(cli, ["crosstalk", str(p), "--intended", "A", "-o", str(out)])
+    assert json.loads(out.read_text())["r"] > 1  # S counted: the ratio is meaningless
+    res = CliRunner().invoke(cli, ["crosstalk", str(p), "--views", "A,Q", "-o", str(out)])
+    assert res.exit_code == 1 and "not in the input" in res.output

@@ -12,7 +12,7 @@ from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import atomic_path, write_text
-from plenocli.pipeline.stages.stitch import _plain
+from plenocli.pipeline.stages.stitch import _plain, select_views
 from plenocli.progress import log
 from plenocli.provenance import stage_record
 
@@ -44,9 +44,10 @@ def _heat_map(maps: list[np.ndarray], cell_px: int = 16) -> np.ndarray:
     return np.hstack(padded)[:, :-8]
 
 
-def run(inputs: tuple[str, ...] | list[str], output: str, *, intended: str | None = None,
-        tile: int = 64, preview: str | None = None, mask_widths: str | None = None,
-        grid: str | None = None, s: float = 0.2, g: float = 4.0) -> None:
+def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None = None,
+        intended: str | None = None, tile: int = 64, preview: str | None = None,
+        mask_widths: str | None = None, grid: str | None = None, s: float = 0.2,
+        g: float = 4.0) -> None:
     """Measure cross-talk on each input (one masked capture each), or sweep Raytrix mask widths."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
@@ -62,7 +63,8 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, intended: str | Non
     captures, maps = [], []
     for k, path in enumerate(inputs):
         data, meta = tiffio.read_image(path)
-        names = list(meta.get("views") or [str(j) for j in range(data.shape[0])])
+        # e.g. --views A,B after bias: the sum view S must not count as "another view"
+        data, names = select_views(data, meta, views)
         cfa = meta.get("cfa")
         area = meta.get("active_area")
         if area:
@@ -80,7 +82,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, intended: str | Non
             "per_colour": {c: {"r": d["r"], "map": d["map"]} for c, d in res["per_colour"].items()},
             "map": res["map"],
         })
-    params = dict(intended=intended, tile=tile)
+    params = dict(views=views, intended=intended, tile=tile)
     record = stage_record("crosstalk", params, {"inputs": inputs})
     doc = {"r": max(c["r"] for c in captures), "definition": "max flux on another view / flux "
            "on the intended view, over pixels finite in every view", "captures": captures,
