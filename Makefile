@@ -16,14 +16,30 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
 	touch $@
 
-fixtures: $(STAMP)
+# Simulated captures with ground truth for the demos (seeded: the same files every time).
+SIM       := out/fixtures
+SIM_KINDS := dualpixel-prism dualpixel-white dualpixel-masked quadpixel-pyramid \
+             raytrix-prism raytrix-white
+SIM_ARGS_dualpixel-prism   := --pixels 384
+SIM_ARGS_dualpixel-white   := --pixels 384
+SIM_ARGS_dualpixel-masked  := --pixels 384 --param crosstalk=0.2
+SIM_ARGS_quadpixel-pyramid := --pixels 1024
+SIM_ARGS_raytrix-prism     := --pixels 1200
+SIM_ARGS_raytrix-white     := --pixels 1200
+
+$(SIM)/%/truth.json: $(STAMP)
+	$(BIN)/plenocli simulate $* -o $(SIM)/$* $(SIM_ARGS_$*) -q
+
+fixtures: $(STAMP) $(SIM_KINDS:%=$(SIM)/%/truth.json)
 	test -f fixtures/dualpixel/capture.dng || $(BIN)/plenocli simulate dualpixel -o fixtures/dualpixel --seed 1
 
+DEMOS := demo_dualpixel dualpixel_stitch quadpixel_stitch raytrix_r5
+
 demo: $(STAMP) fixtures
-	$(BIN)/plenocli run configs/demo_dualpixel.yaml
+	for c in $(DEMOS); do echo "== configs/$$c.yaml"; $(BIN)/plenocli run configs/$$c.yaml || exit 1; done
 	@echo
-	@echo "demo results and PNG previews are in $(DEMO)/:"
-	@find $(DEMO) -name '*.png' -o -name '*.tif' -o -name '*.yaml' -o -name '*.json' | sort | sed 's/^/  /'
+	@echo "demo results and PNG previews are in $(DEMO)/ (panoramas: $(DEMO)/*/panorama.png):"
+	@find $(DEMO) -name '*.png' | sort | sed 's/^/  /'
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -4,6 +4,7 @@ import click
 
 from plenocli.cli import options
 from plenocli.errors import ConfigError
+from plenocli.progress import log
 
 
 def _kind_names():
@@ -53,4 +54,4 @@ def simulate(kind, output, extra, **given):
         writer(output, **kwargs)
     except (ValueError, TypeError) as err:
         raise ConfigError(f"simulate {kind}: {err}") from err
-    click.echo(f"simulate {kind}: wrote {output}", err=True)
+    log.info("simulate %s: wrote %s", kind, output)

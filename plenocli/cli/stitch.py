@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Stitch 2 or 4 views into an extended-FOV panorama.")
-@options.input_arg
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @options.output_opt
 @click.option("--views", default=None,
               help="Views to stitch, by name or page number, comma separated (e.g. A,B).")
@@ -26,15 +26,18 @@ from plenocli.cli import options
 @options.preview_opt
 @options.stage_command
 def stitch(**params):
-    """Stitch the views of INPUT (2 side by side or 4 in 2 x 2) into one panorama TIFF.
+    """Stitch the views in INPUTS (2 side by side or 4 in 2 x 2) into one panorama TIFF.
 
-    Bayer views are stitched as half-size RGB. Exposure is matched from the overlaps; the
-    panorama is NaN where no view covers it.
+    Views come from one file (dual-pixel A and B, the four sub-apertures of sai) or several (the
+    left and right refocused images). Pages VIEW.R, VIEW.G, VIEW.B are one colour view; a file
+    of pages R, G, B is one view named after the file. Bayer views are stitched as half-size
+    RGB. Exposure is matched from the overlaps; the panorama is NaN where no view covers it.
 
     \b
     Example:
       plenocli stitch flat.tif --views A,B -o panorama.tif --report stitch.json \\
           --transform-out rig.json --preview panorama.png
+      plenocli stitch left.tif right.tif -o panorama.tif
     """
     from plenocli.pipeline.stages.stitch import run
 

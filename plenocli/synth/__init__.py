@@ -17,7 +17,7 @@ def kinds() -> dict[str, Callable[..., dict]]:
     return {
         "dualpixel": dualpixel.write_capture_set,
         "raytrix-scene": focused.write_raytrix_scene,
-        "raytrix-white": whiteimage.write_raytrix_white,
+        "hexgrid-white": whiteimage.write_hexgrid_white,
         **prismcam.kinds(),
         "stereo-rig": rig.write_stereo_rig,
         "quad-rig": rig.write_quad_rig,

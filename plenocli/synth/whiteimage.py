@@ -131,7 +131,7 @@ def _hash_normal(key: np.ndarray, seed: int) -> np.ndarray:
     return np.stack([r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)], axis=-1)
 
 
-def write_raytrix_white(out_dir: str | os.PathLike, *, seed: int = 0, size: int = 1024,
+def write_hexgrid_white(out_dir: str | os.PathLike, *, seed: int = 0, size: int = 1024,
                         pitch_px: float = 20.2, angle_deg: float = 7.0, jitter_px: float = 0.05,
                         cfa: str | None = "RGGB", lattice: str = "hex") -> dict:
     """Write ``white.tif`` (a Bayer or mono white image, uint16), ``truth.json`` (lattice and

@@ -1,4 +1,11 @@
-"""Stage ``stitch``: a views TIFF (2 or 4 pages) -> extended-FOV panorama TIFF + JSON report."""
+"""Stage ``stitch``: 2 or 4 views (from one or more TIFFs) -> extended-FOV panorama + report.
+
+Views are found by page name: a page ``VIEW.CHANNEL`` (``S00.R``, ``S00.G``, ...) is one channel
+of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is a view of its
+own. A file that holds a single view (e.g. a left or right refocused image) names it after the
+file (``left.tif`` -> ``left``). A
+single-page Bayer view is stitched as half-size RGB.
+"""
 
 from __future__ import annotations
 
@@ -13,7 +20,7 @@ from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -44,23 +51,68 @@ def bayer_to_rgb(view: np.ndarray, cfa: str) -> np.ndarray:
     return np.stack([np.mean(planes[c], axis=0) for c in "RGB"])
 
 
-def run(input: str, output: str, *, views: str | None = None, layout: str = "auto",
+CHANNELS = ("R", "G", "B")
+
+
+def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
+    """(view name, page indices) in page order; see the module docstring for the rules."""
+    if names == list(CHANNELS):
+        return [(stem, [0, 1, 2])]
+    groups: dict[str, list[int]] = {}
+    for k, name in enumerate(names):
+        view, dot, channel = name.rpartition(".")
+        groups.setdefault(view if dot and channel in CHANNELS else name, []).append(k)
+    if len(groups) == 1:
+        return [(stem, next(iter(groups.values())))]
+    return list(groups.items())
+
+
+def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
+    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols), their names, whether any
+    was a Bayer mosaic (stitched half-size), and the first file's metadata."""
+    found: list[tuple[str, np.ndarray]] = []
+    bayer, first_meta = False, None
+    for path in inputs:
+        data, meta = tiffio.read_image(path)
+        first_meta = first_meta or meta
+        cfa = meta.get("cfa")
+        area = meta.get("active_area")
+        if area:  # stitch the light-sensitive area only
+            top, left, bottom, right = area
+            data = data[:, top:bottom, left:right]
+            cfa = shift_pattern(cfa, top, left)
+        names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+        for name, pages in _view_groups(names, Path(path).stem):
+            if len(pages) == 1 and cfa:  # registration needs whole CFA cells
+                found.append((name, bayer_to_rgb(data[pages[0]], cfa)))
+                bayer = True
+            else:
+                found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
+                              if len(pages) == 1 else data[pages].astype(np.float32)))
+    if views:
+        by_name = dict(found)
+        wanted = [v.strip() for v in views.split(",") if v.strip()]
+        missing = [v for v in wanted if v not in by_name]
+        if missing:
+            raise InputError(f"view {missing[0]!r} is not in the input (views: "
+                             f"{','.join(n for n, _ in found)}); pass --views with those names")
+        found = [(v, by_name[v]) for v in wanted]
+    shapes = {a.shape for _, a in found}
+    if len(shapes) > 1:
+        listing = ", ".join(f"{n} {'x'.join(map(str, a.shape))}" for n, a in found)
+        raise InputError(f"the views differ in size or colour channels ({listing}); stitch "
+                         "views of one capture, processed the same way")
+    return np.stack([a for _, a in found]), [n for n, _ in found], bayer, first_meta
+
+
+def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
         model: str = "translation", distortion: float = 0.0, transform_in: str | None = None,
         transform_out: str | None = None, blend: str = "feather", report: str | None = None,
         preview: str | None = None) -> None:
-    """Stitch the views of ``input`` into ``output``; optional report, transform and preview."""
-    data, meta = tiffio.read_image(input)
-    data, names = select_views(data, meta, views)
-    cfa = meta.get("cfa")
-    area = meta.get("active_area")
-    if area:  # stitch the light-sensitive area only
-        top, left, bottom, right = area
-        data = data[:, top:bottom, left:right]
-        cfa = shift_pattern(cfa, top, left)
-    if cfa:  # Bayer views: stitch half-size RGB (registration needs whole CFA cells)
-        stack = np.stack([bayer_to_rgb(v, cfa) for v in data])
-    else:
-        stack = data.astype(np.float32)
+    """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
+    preview."""
+    inputs = [inputs] if isinstance(inputs, str) else list(inputs)
+    stack, names, cfa, meta = load_views(inputs, views)
     transform = None
     if transform_in:
         path = Path(transform_in)
@@ -76,12 +128,12 @@ def run(input: str, output: str, *, views: str | None = None, layout: str = "aut
                                       distortion_k1=distortion, transform=transform, blend=blend)
     params = dict(views=views, layout=layout, model=model, distortion=distortion,
                   transform_in=transform_in, blend=blend)
-    record = stage_record("stitch", params, {"input": input, "transform_in": transform_in})
-    rep.update(input_views=names, bayer_half_size=bool(cfa))
-    protect = tuple(p for p in (input, transform_in) if p)
+    record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in})
+    rep.update(input_views=names, bayer_half_size=cfa)
+    protect = tuple(p for p in (*inputs, transform_in) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
-    page_names = ["R", "G", "B"] if cfa else (["panorama"] if pano.shape[0] == 1
-                                               else [f"C{c}" for c in range(pano.shape[0])])
+    page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
+                  else [f"C{c}" for c in range(pano.shape[0])])
     out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, active_area=None,
                                    masked_areas=None, origin=None,
                                    stitch={k: rep[k] for k in ("model", "layout", "shifts_px",
@@ -97,8 +149,9 @@ def run(input: str, output: str, *, views: str | None = None, layout: str = "aut
     if preview:
         image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
         write_png(preview, image, protect=protect)
-    log.info("stitch: %s -> %s (%s, layout %s, %d x %d px, residual %s px)", input, output,
-             model, rep["layout"], pano.shape[2], pano.shape[1],
+    log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %s px)",
+             " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
+             ",".join(names), pano.shape[2], pano.shape[1],
              "n/a" if rep["residual_px"] is None else f"{rep['residual_px']:.3f}")
 
 
