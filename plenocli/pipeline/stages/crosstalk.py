@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -28,20 +29,36 @@ def _intended_index(spec: str | None, names: list[str], path: str) -> int | None
                      "--intended with a view name (or 'auto' for the brightest view)")
 
 
-def _heat_map(maps: list[np.ndarray], cell_px: int = 16) -> np.ndarray:
-    """BGR uint8 picture of r maps side by side (0 = dark blue ... max = yellow; NaN grey)."""
-    top = max([float(np.nanmax(m)) for m in maps if np.isfinite(m).any()] + [1e-6])
+def _heat_map(maps: list[np.ndarray], names: list[str], min_side: int = 240) -> np.ndarray:
+    """BGR uint8 picture: each r map as a heat map (viridis, NaN grey) under its name, with a
+    colour bar in percent. The scale runs from 0 to the next 5 % above the largest r, so a
+    uniform map reads as its value, not as "maximum"."""
+    finite = [float(np.nanmax(m)) for m in maps if np.isfinite(m).any()]
+    top = max(0.05, np.ceil(max(finite + [0.0]) * 20) / 20)
+    font = cv2.FONT_HERSHEY_SIMPLEX
     tiles = []
-    for m in maps:
+    for m, name in zip(maps, names, strict=True):
         scaled = np.clip(np.nan_to_num(m / top, nan=0.0), 0, 1)
         img = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
         img[~np.isfinite(m)] = 128
-        img = np.repeat(np.repeat(img, cell_px, axis=0), cell_px, axis=1)
-        tiles.append(img)
+        cell = max(1, int(np.ceil(min_side / max(m.shape))))
+        img = np.repeat(np.repeat(img, cell, axis=0), cell, axis=1)
+        label = np.full((24, img.shape[1], 3), 255, np.uint8)
+        cv2.putText(label, name, (4, 17), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+        tiles.append(np.vstack([label, img]))
     height = max(t.shape[0] for t in tiles)
+    bar_values = np.linspace(1, 0, height - 24)[:, None]
+    bar = cv2.applyColorMap(np.round(255 * np.repeat(bar_values, 16, axis=1)).astype(np.uint8),
+                            cv2.COLORMAP_VIRIDIS)
+    bar = np.vstack([np.full((24, 16, 3), 255, np.uint8), bar])
+    ticks = np.full((height, 56, 3), 255, np.uint8)
+    for frac in (0.0, 0.5, 1.0):
+        y = 24 + int(round((1 - frac) * (height - 25)))
+        cv2.putText(ticks, f"{100 * frac * top:.0f} %", (4, min(max(y + 4, 32), height - 2)),
+                    font, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
     padded = [np.pad(t, ((0, height - t.shape[0]), (0, 8), (0, 0)), constant_values=255)
               for t in tiles]
-    return np.hstack(padded)[:, :-8]
+    return np.hstack([*padded, bar, ticks])
 
 
 def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None = None,
@@ -89,7 +106,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
            "provenance": record}
     write_text(output, json.dumps(_plain(doc), indent=1, allow_nan=False), protect=tuple(inputs))
     if preview:
-        _write_png(preview, _heat_map(maps), tuple(inputs))
+        titles = [f"{Path(c['input']).stem}: r {100 * c['r']:.1f} % ({c['intended']} intended)"
+                  for c in captures]
+        _write_png(preview, _heat_map(maps, titles), tuple(inputs))
     for c in captures:
         log.info("crosstalk: %s: intended %s, r = %.2f %% (tiles %.2f .. %.2f %%)", c["input"],
                  c["intended"], 100 * c["r"], 100 * c["map_min"], 100 * c["map_max"])
