@@ -1,31 +1,33 @@
-"""The whole pipeline on simulated captures: simulate -> decode -> sai -> stitch (small size).
+"""The whole pipeline on simulated captures: simulate -> decode -> (sai | refocus) -> stitch."""
 
-Assembled by the lead after merging: it runs when plenocli.stitch (and plenocli.sai) exist.
-"""
+import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from plenocli.io.gridfile import read_grid
 from plenocli.io.raw import decode
-from plenocli.synth import prismcam
+from plenocli.io.tiffio import read_image, read_meta
+from plenocli.pipeline.config import load_config
+from plenocli.pipeline.runner import run_pipeline
+from plenocli.sai import demultiplex
+from plenocli.stitch import stitch
+from plenocli.synth import kinds, prismcam
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _views(frames, n=2):
-    try:
-        from plenocli.sai import demultiplex
-    except ImportError:
-        return np.stack([np.stack([f[i::n, j::n] for i in range(n) for j in range(n)])
-                         for f in frames])
     return np.stack([demultiplex(f, n) for f in frames])
 
 
 def test_quadpixel_pyramid_stitches_to_twice_the_field(tmp_path):
-    stitch = pytest.importorskip("plenocli.stitch")
     truth = prismcam.write_quadpixel(tmp_path, pixels=256, seed=0)
     frames, meta = decode(tmp_path / truth["files"]["capture"])
     views = _views(frames.astype(np.float32))  # (3 colours, 4 views, rows, cols)
     green = views[1]
-    panorama, report = stitch.stitch(green, layout="2x2", model="translation")
+    panorama, report = stitch(green, layout="2x2", model="translation")
     rows, cols = green.shape[1:]
     # The four views overlap by a sliver only (64 deg stitched vs 2 x 32.6): the panorama is
     # close to twice a view in each direction.
@@ -36,7 +38,6 @@ def test_quadpixel_pyramid_stitches_to_twice_the_field(tmp_path):
 
 
 def test_dualpixel_prism_stitches_a_wider_image(tmp_path):
-    stitch = pytest.importorskip("plenocli.stitch")
     truth = prismcam.write_dualpixel(tmp_path, pixels=384, seed=2, noise_dn=0.0)
     frames, meta = decode(tmp_path / truth["files"]["capture"])
     top, left, bottom, right = meta["active_area"]
@@ -47,7 +48,38 @@ def test_dualpixel_prism_stitches_a_wider_image(tmp_path):
     # Green pixels of each 2 x 2 cell: a grey picture of each view. The raw image is inverted,
     # so A (deviated towards +x on the chart) is the left part of the panorama.
     views = np.stack([a[0::2, 1::2], b[0::2, 1::2]])
-    panorama, report = stitch.stitch(views, layout="1x2", model="translation")
+    panorama, report = stitch(views, layout="1x2", model="translation")
     cols = views.shape[-1]
     expected = cols + truth["overlap_shift_px"] / 2  # green sub-grid: half the pixels
     assert panorama.shape[-1] == pytest.approx(expected, abs=4)
+
+
+def test_raytrix_prism_pipeline_from_the_config(tmp_path):
+    """simulate -> decode -> calibrate -> flat -> refocus (sweep, left, right) -> stitch, run by
+    the shipped config with its inputs and outputs redirected into a temp folder."""
+    for kind in ("raytrix-prism", "raytrix-white"):
+        kinds()[kind](tmp_path / kind, pixels=1200)
+    out = tmp_path / "out"
+    overrides = [f"decode.input={tmp_path / 'raytrix-prism' / 'capture.tif'}",
+                 f"decode_white.input={tmp_path / 'raytrix-white' / 'capture.tif'}"]
+    steps = load_config(ROOT / "configs" / "raytrix_r5.yaml", overrides)
+    for step in steps:  # every path under out/demo goes to the temp folder instead
+        for key in (*step.stage.inputs, *step.stage.outputs):
+            value = step.params.get(key)
+            if isinstance(value, list):
+                step.params[key] = [_moved(v, out) for v in value]
+            elif value:
+                step.params[key] = _moved(value, out)
+    run_pipeline(steps)
+
+    truth = json.loads((tmp_path / "raytrix-prism" / "truth.json").read_text())
+    grid = read_grid(out / "grid.yaml")
+    assert grid.pitch_px == pytest.approx(truth["lattice"]["diameter"], abs=0.005)
+    assert read_meta(out / "sweep.tif")["sharpness"]["best_g"] == pytest.approx(truth["g"])
+    left, _ = read_image(out / "left.tif")
+    panorama, _ = read_image(out / "panorama.tif")
+    assert panorama.shape[-1] > 1.2 * left.shape[-1]  # wider than one view: the prism's field
+
+
+def _moved(path: str, folder: Path) -> str:
+    return str(folder / Path(path).name) if "out/demo" in path else path
