@@ -248,6 +248,13 @@ def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight)
         raise TypeError(f"grid must be a LensGrid, got {type(grid).__name__}")
     if frame.ndim != 2:
         raise ValueError(f"frame must be 2-D (rows, cols), got shape {frame.shape}")
+    check_options(s=s, g=g, view=view, mask_width=mask_width, kernel=kernel, radius=radius,
+                  cfa=cfa, min_weight=min_weight)
+
+
+def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: str,
+                  radius: float | None, cfa: str | None, min_weight: float) -> None:
+    """Raise ValueError naming the first refocus option that is out of range."""
     if not (np.isfinite(s) and s > 0):
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
     if not np.isfinite(g):

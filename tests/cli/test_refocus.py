@@ -75,9 +75,9 @@ def one_line_error(result, *words):
 
 
 @pytest.mark.parametrize("args,words", [
-    (["--s", "0"], ["--s", "0.0"]), (["--s", "-0.2"], ["--s"]),
+    (["--s", "0"], ["s must be a positive", "0.0"]), (["--s", "-0.2"], ["s must be"]),
     (["--view", "up"], ["view", "'up'", "left"]), (["--kernel", "cubic"], ["kernel"]),
-    (["--g", "6:2:1"], ["--g"]), (["--mask-width", "-2"], ["--mask-width"]),
+    (["--g", "6:2:1"], ["--g"]), (["--mask-width", "-2"], ["mask_width must be"]),
 ])
 def test_bad_options_fail_cleanly(scene, tmp_path, args, words):
     folder, _ = scene

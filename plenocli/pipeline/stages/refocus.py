@@ -18,22 +18,6 @@ from plenocli.progress import log
 from plenocli.provenance import stage_record
 
 
-def check_options(*, s, view, kernel, mask_width, radius, min_weight) -> None:
-    """Refuse bad option values before any file is read (one-line ConfigError)."""
-    if not (np.isfinite(s) and s > 0):
-        raise ConfigError(f"--s must be a positive scale (paper: 0.2), got {s}")
-    if view not in rf.VIEWS:
-        raise ConfigError(f"unknown view {view!r}; choose one of {', '.join(rf.VIEWS)}")
-    if kernel not in rf.KERNELS:
-        raise ConfigError(f"unknown kernel {kernel!r}; choose one of {', '.join(rf.KERNELS)}")
-    if not (np.isfinite(mask_width) and mask_width >= 0):
-        raise ConfigError(f"--mask-width must be >= 0 pixels (paper: 2), got {mask_width}")
-    if radius is not None and not (np.isfinite(radius) and radius > 0):
-        raise ConfigError(f"--radius must be a positive number of pixels, got {radius}")
-    if not (np.isfinite(min_weight) and min_weight >= 0):
-        raise ConfigError(f"--min-weight must be >= 0, got {min_weight}")
-
-
 def load_grid(path: str, meta: dict, shape: tuple[int, int]) -> LensGrid:
     """Read a lens grid; a RayCalibData XML is placed on the frames' active area (its offsets
     are measured from the image centre)."""
@@ -79,12 +63,15 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         radius: float | None = None, min_weight: float = 0.25,
         preview: str | None = None) -> None:
     """Refocus every page of ``input`` at each g; one output page per (g, channel)."""
-    check_options(s=s, view=view, kernel=kernel, mask_width=mask_width, radius=radius,
-                  min_weight=min_weight)
     try:
         g_values = rf.parse_g(g)
     except ValueError as err:
         raise ConfigError(f"--g: {err}") from err
+    try:  # refuse bad values before any file is read
+        rf.check_options(s=s, g=g_values[0], view=view, mask_width=mask_width, kernel=kernel,
+                         radius=radius, cfa=None, min_weight=min_weight)
+    except ValueError as err:
+        raise ConfigError(f"refocus: {err}") from err
     data, meta = tiffio.read_image(input)
     lens_grid = load_grid(grid, meta, data.shape[1:])
     r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
