@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import tifffile
+import yaml
 
 from plenocli import hexgrid
+from plenocli.io import gridfile
 from plenocli.synth.whiteimage import white_image
 
 
@@ -44,6 +46,15 @@ def main() -> None:
             subprocess.run([sys.executable, "-m", "plenocli", "calibrate", str(src), "-o",
                             str(Path(tmp) / "g.yaml"), "-q"], check=True)
             print(f"  whole command with file reading: {time.perf_counter() - t:.2f} s")
+            gpath = Path(tmp) / "g.yaml"
+            t = time.perf_counter()
+            read = gridfile.read_grid(gpath)
+            fast = time.perf_counter() - t
+            t = time.perf_counter()
+            yaml.load(gpath.read_text(), Loader=gridfile._LOADER)
+            plain = time.perf_counter() - t
+            print(f"  read_grid of {len(read.centres_xy)} lenses: {fast:.3f} s (target 0.3 s); "
+                  f"whole file through libyaml {plain:.2f} s ({plain / fast:.0f} x)")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak RSS of this process {peak:.0f} MB (dominated by the synthetic image "
           f"generator; calibrate's own peak is the traced figure above); numpy {np.__version__}")

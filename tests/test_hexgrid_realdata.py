@@ -45,8 +45,62 @@ def test_origami_scene_against_xml_and_symmetry(realdata):
     assert worse >= 7   # the camera's grid is further from the symmetry centres than ours
 
 
-@pytest.mark.xfail(reason="measured pitch 33.94 px vs XML 34.86 px, angle 2 deg off: not yet "
-                   "understood (crop scale or lattice choice)", strict=False)
+def _border_contrast(grad: np.ndarray, pitch_px: float, angle_deg: float, nb: int = 32) -> float:
+    """How sharply the micro-image borders stand out when every pixel's gradient magnitude is
+    folded onto one lattice cell (nb x nb bins of the fractional lattice coordinates): the
+    variance of the folded mean after removing its smooth part. Scene content shifts from lens
+    to lens (parallax) and blurs out in the fold; the borders (discontinuities) add up only on
+    the true lattice. The smooth part is removed because a scene periodicity folds into broad
+    stripes (high raw variance, no sharp lines)."""
+    from scipy import ndimage
+
+    rows, cols = grad.shape
+    yy, xx = np.mgrid[0:rows, 0:cols]
+    a, step = np.radians(angle_deg), np.pi / 3
+    basis = pitch_px * np.array([[np.cos(a), np.sin(a)], [np.cos(a + step), np.sin(a + step)]])
+    inv = np.linalg.inv(basis.T)
+    u = inv[0, 0] * xx + inv[0, 1] * yy
+    v = inv[1, 0] * xx + inv[1, 1] * yy
+    k = (((u % 1) * nb).astype(np.int64) % nb) * nb + ((v % 1) * nb).astype(np.int64) % nb
+    total = np.bincount(k.ravel(), grad.ravel().astype(np.float64), nb * nb)
+    count = np.bincount(k.ravel(), None, nb * nb)
+    mean = (total / np.maximum(count, 1)).reshape(nb, nb)
+    filled = (count > 0).reshape(nb, nb).astype(float)   # rational pitch/row ratios skip bins
+    near = ndimage.gaussian_filter(mean * filled, 1, mode="wrap") / np.maximum(
+        ndimage.gaussian_filter(filled, 1, mode="wrap"), 1e-9)
+    mean = np.where(filled > 0, mean, near)
+    return float(np.var(mean - ndimage.gaussian_filter(mean, nb / 16, mode="wrap")))
+
+
+def test_r42_crop_xml_lattice_is_the_micro_image_borders(realdata):
+    """Independent check that the XML's pitch and rotation describe this crop (it was not
+    resized): the micro-image borders fold sharpest on the XML lattice (34.865 px, 0 deg);
+    a fine scan of the same measure peaks at 34.87 +- 0.03 px, 0.00 +- 0.04 deg."""
+    folder = realdata / "raytrix" / "r42_crop"
+    flat = hexgrid.flatten(_load(folder / "sc2_klein.png"), scale_px=50.0)
+    grad = np.hypot(cv2.Sobel(flat, cv2.CV_32F, 1, 0, ksize=1),
+                    cv2.Sobel(flat, cv2.CV_32F, 0, 1, ksize=1))
+    grad = np.minimum(grad, np.percentile(grad, 99))
+    xml = raytrix.grid_from_calib(raytrix.read_calib(folder / "sc2_klein.xml"), grad.shape)
+    pitch, angle = xml.pitch_px, np.degrees(xml.angle_rad)
+    assert abs(pitch - 34.8647) < 1e-3 and abs(angle) < 1e-6
+    at_xml = _border_contrast(grad, pitch, angle)
+    # a scene periodicity (strongest raw fold), calibrate's past answers, and detunings
+    others = {(32.35, 2.4): 0, (36.37, -0.1): 0, (33.94, 2.0): 0, (34.55, 0.74): 0}
+    for dp, da in ((0.5, 0), (-0.5, 0), (0, 1.0), (0, -1.0), (1.5, 0), (-1.5, 0)):
+        others[(pitch + dp, angle + da)] = 0
+    for key in others:
+        others[key] = _border_contrast(grad, *key)
+    worst = max(others, key=others.get)
+    assert at_xml >= 3.0 * others[worst], (at_xml, worst, others[worst])
+
+
+@pytest.mark.xfail(reason="calibrate takes a scene periodicity for the lattice on this crop: "
+                   "its 670 px central square holds ~19 lenses and the repeated scene content "
+                   "(shifted lens to lens by the parallax) outscores the lattice in the "
+                   "intensity spectrum; moving that square by 1-150 px gives 36.37, 10.61, 34.49, "
+                   "29.03 or 14.15 px. The XML is right (previous test).",
+                   strict=True)
 def test_r42_crop_pitch_and_rotation(realdata):
     folder = realdata / "raytrix" / "r42_crop"
     image = _load(folder / "sc2_klein.png")

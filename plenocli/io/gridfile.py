@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +38,54 @@ def _dump(doc: dict) -> str:
     return yaml.dump(doc, Dumper=_DUMPER, sort_keys=False, width=100)
 
 
+# The lens table as write_grid lays it out: `    rows:` then one `    - [i, j, x, y]` per line.
+# Only number forms that every YAML parser reads as these same numbers are accepted (no leading
+# zeros: YAML 1.1 reads 012 as octal; no exponents: PyYAML reads 1e5 as a string); any other
+# layout (hand-edited, re-indented, block style, CRLF) goes through the YAML parser.
+_INT = r"-?(?:0|[1-9][0-9]*)"
+_NUM = rf"(?:-?[0-9]+\.[0-9]+|{_INT})"
+_ROW_LINES = re.compile(rf"(?:    - \[{_INT}, {_INT}, {_NUM}, {_NUM}\]\n)+")
+_MORE_ITEMS = re.compile(r"(?:[ \t]*(?:#[^\n]*)?\n)*    -")
+_ROWS_KEY = "\n    rows:\n"
+_ROWS_SENTINEL = "plenocli-lens-rows"
+
+
+def _split_rows(text: str) -> tuple[str, np.ndarray] | None:
+    """(the document with the lens rows replaced by a placeholder, the rows as a (K, 4) float
+    array), or None when the text does not hold write_grid's exact row layout. Parsing 85k rows
+    with numpy takes ~0.1 s; a YAML parser needs ~5 s."""
+    start = text.find(_ROWS_KEY)
+    if start < 0 or text.find(_ROWS_KEY, start + 1) >= 0:
+        return None
+    first = start + len(_ROWS_KEY)
+    block = _ROW_LINES.match(text, first)
+    if block is None:
+        return None
+    end = block.end()
+    if _MORE_ITEMS.match(text, end):   # the sequence goes on after a blank or comment line
+        return None
+    body = text[first:end].replace("    - [", "").replace("]\n", ",")
+    table = np.array(body[:-1].split(","), dtype=float).reshape(-1, 4)
+    return text[:start] + f"\n    rows: {_ROWS_SENTINEL}\n" + text[end:], table
+
+
+def _fast_load(text: str) -> dict | None:
+    """The YAML document with its lens rows parsed by numpy, or None (then parse it all)."""
+    fast = _split_rows(text)
+    if fast is None:
+        return None
+    try:
+        doc = yaml.load(fast[0], Loader=_LOADER)
+    except yaml.YAMLError:
+        return None
+    grid = doc.get("lens_grid") if isinstance(doc, dict) else None
+    lenses = grid.get("lenses") if isinstance(grid, dict) else None
+    if not isinstance(lenses, dict) or lenses.get("rows") != _ROWS_SENTINEL:
+        return None   # the block was not lens_grid.lenses.rows after all
+    lenses["rows"] = fast[1]
+    return doc
+
+
 def read_grid(path: str | os.PathLike, *,
               image_shape: tuple[int, int] | None = None) -> LensGrid:
     """Read a lens grid from plenocli YAML or from a Raytrix RayCalibData XML.
@@ -57,7 +106,10 @@ def read_grid(path: str | os.PathLike, *,
                              "the image centre); pass the image it belongs to")
         return raytrix.grid_from_calib(calib, image_shape)
     try:
-        doc = yaml.load(p.read_text(encoding="utf-8"), Loader=_LOADER)
+        text = p.read_text(encoding="utf-8")
+        doc = _fast_load(text)
+        if doc is None:
+            doc = yaml.load(text, Loader=_LOADER)
         return LensGrid.from_dict(doc["lens_grid"])
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise InputError(f"{p}: not a YAML lens grid ({err})") from err

@@ -1,0 +1,102 @@
+"""Lens-grid YAML: the fast lens-row reader gives exactly what a YAML parser gives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from plenocli.errors import InputError
+from plenocli.io import gridfile
+from plenocli.lensgrid import LensGrid
+
+
+def _grid(seed: int = 0) -> LensGrid:
+    base = LensGrid(13.7, 0.21, (201.3, 149.8), image_shape=(300, 400))
+    idx, ideal = base.lens_centres()
+    rng = np.random.default_rng(seed)
+    centres = ideal + rng.normal(0, 0.3, ideal.shape)
+    centres[0] = (-0.4, 0.00001)   # a negative and a tiny value keep their sign and digits
+    return LensGrid(base.pitch_px, base.angle_rad, base.offset_xy, image_shape=(300, 400),
+                    centres_xy=centres, indices=idx)
+
+
+def _plain(path) -> LensGrid:
+    """The reference: the whole file through PyYAML's pure-Python safe loader."""
+    return LensGrid.from_dict(yaml.load(path.read_text(), Loader=yaml.SafeLoader)["lens_grid"])
+
+
+def _same(a: LensGrid, b: LensGrid) -> None:
+    assert a == b
+    np.testing.assert_array_equal(a.indices, b.indices)
+    np.testing.assert_array_equal(a.centres_xy, b.centres_xy)
+    assert a.indices.dtype == b.indices.dtype and a.centres_xy.dtype == b.centres_xy.dtype
+
+
+def test_written_grid_reads_fast_and_equal_to_yaml(tmp_path):
+    grid = _grid()
+    path = tmp_path / "grid.yaml"
+    gridfile.write_grid(path, grid, {"stage": "calibrate", "params": {"rows": 3}},
+                        extra={"residuals": {"rms_px": 0.1}})
+    text = path.read_text()
+    assert gridfile._fast_load(text) is not None          # the numpy path is taken
+    got = gridfile.read_grid(path)
+    _same(got, _plain(path))
+    assert len(got.centres_xy) == len(grid.centres_xy) > 500
+    np.testing.assert_allclose(got.centres_xy, grid.centres_xy, atol=5e-6)
+
+
+def _edit_row(text: str, k: int, new: str) -> str:
+    lines = text.split("\n")
+    first = lines.index("    rows:") + 1
+    lines[first + k] = new
+    return "\n".join(lines)
+
+
+EDITS = {
+    "exponent": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5e+2, 2.0]"),
+    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 9, 1.5, 2.0]"),
+    "block_row": lambda t: _edit_row(t, 3, "    - - 9\n      - 9\n      - 1.5\n      - 2.0"),
+    "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [9, 9, 1.5, 2.0]"),
+    "blank_inside": lambda t: _edit_row(t, 3, "\n    - [9, 9, 1.5, 2.0]"),
+    "extra_spaces": lambda t: _edit_row(t, 3, "    - [ 9, 9, 1.5, 2.0 ]"),
+    "rows_indented": lambda t: t.replace("\n    - [", "\n      - ["),
+    "trailing_comment": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5, 2.0]  # moved"),
+}
+
+
+@pytest.mark.parametrize("edit", sorted(EDITS))
+def test_hand_edited_grid_falls_back_to_yaml(tmp_path, edit):
+    path = tmp_path / "grid.yaml"
+    gridfile.write_grid(path, _grid(1), {"stage": "calibrate"})
+    text = EDITS[edit](path.read_text())
+    path.write_bytes(text.encode())
+    assert gridfile._fast_load(path.read_text()) is None
+    _same(gridfile.read_grid(path), _plain(path))
+
+
+def test_crlf_file_reads_the_same(tmp_path):
+    path = tmp_path / "grid.yaml"
+    gridfile.write_grid(path, _grid(3), {"stage": "calibrate"})
+    path.write_bytes(path.read_bytes().replace(b"\n", b"\r\n"))
+    _same(gridfile.read_grid(path), _plain(path))
+
+
+def test_rows_elsewhere_are_not_taken_for_lenses(tmp_path):
+    """A `    rows:` block outside lens_grid.lenses is left to the YAML parser."""
+    path = tmp_path / "grid.yaml"
+    text = ("lens_grid:\n  lattice: hex\n  pitch_px: 10.0\n  angle_rad: 0.0\n"
+            "  offset_xy: [5.0, 5.0]\n  image_shape: null\n"
+            "notes:\n  table:\n    rows:\n    - [1, 2, 3.0, 4.0]\n")
+    path.write_text(text)
+    assert gridfile._fast_load(text) is None
+    got = gridfile.read_grid(path)
+    assert got.centres_xy is None and got.pitch_px == 10.0
+
+
+def test_broken_yaml_is_one_input_error(tmp_path):
+    path = tmp_path / "grid.yaml"
+    gridfile.write_grid(path, _grid(2), {"stage": "calibrate"})
+    path.write_text(path.read_text().replace("lattice: hex", "lattice: [hex"))
+    with pytest.raises(InputError, match="not a YAML lens grid"):
+        gridfile.read_grid(path)
