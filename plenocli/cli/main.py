@@ -18,7 +18,15 @@ from plenocli.cli.simulate import simulate
 from plenocli.cli.stitch import stitch
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class PipelineOrder(click.Group):
+    """Lists the commands in the order they were added (pipeline order), not alphabetically."""
+
+    def list_commands(self, ctx):
+        return list(self.commands)
+
+
+@click.group(cls=PipelineOrder,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(__version__, prog_name="plenocli")
 def cli():
     """Raw-processing pipeline for plenoptic captures.
