@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
+import threading
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -50,3 +52,37 @@ def progress(items: Iterable[T], label: str, *, total: int | None = None) -> Ite
             sys.stderr.flush()
     if show and time.monotonic() - start > 1.0:
         sys.stderr.write("\n")
+
+
+@contextlib.contextmanager
+def working(label: str, *, after_s: float = 1.0, every_s: float = 0.5):
+    """Show ``label: N.N s`` on stderr while the block runs, once it has taken ``after_s``.
+
+    For work with no natural steps (a registration, a large write). Only on a terminal and when
+    not quiet; the line is cleared when the block ends.
+    """
+    show = sys.stderr.isatty() and log.isEnabledFor(logging.INFO)
+    done = threading.Event()
+    start = time.monotonic()
+
+    def tick():
+        shown_once = False
+        while not done.wait(every_s):
+            elapsed = time.monotonic() - start
+            if elapsed >= after_s:
+                sys.stderr.write(f"\r{label}: {elapsed:.1f} s ")
+                sys.stderr.flush()
+                shown_once = True
+        if shown_once:
+            sys.stderr.write("\r" + " " * (len(label) + 16) + "\r")
+            sys.stderr.flush()
+
+    thread = threading.Thread(target=tick, daemon=True) if show else None
+    if thread:
+        thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        if thread:
+            thread.join()

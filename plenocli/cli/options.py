@@ -8,7 +8,7 @@ import sys
 import click
 
 from plenocli.errors import PlenocliError
-from plenocli.progress import configure
+from plenocli.progress import configure, working
 
 output_opt = click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                           help="Output file (written atomically).")
@@ -26,8 +26,10 @@ def stage_command(func):
     @functools.wraps(func)
     def wrapper(*args, verbose: int = 0, quiet: bool = False, debug: bool = False, **kwargs):
         configure(-1 if quiet else verbose)
+        name = click.get_current_context().info_name or "plenocli"
         try:
-            return func(*args, **kwargs)
+            with working(name):
+                return func(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
         except PlenocliError as err:
