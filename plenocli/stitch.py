@@ -7,9 +7,11 @@ extended to cover every view; ``report["origin_px"]`` is the panorama pixel ``[r
 top, bottom; ``2x2`` = S00, S01, S10, S11 (top-left, top-right, bottom-left, bottom-right).
 
 Registration of a pair of neighbours (b to the right of / below a):
-- ``translation``: integer search by normalised cross-correlation of b's leading edge strip inside
-  a's trailing part (only shifts in the expected overlap direction are searched), then sub-pixel
-  refinement by ECC (``cv2.findTransformECC``, translation) on the windowed overlap region.
+- ``translation``: integer search by masked normalised cross-correlation over the whole overlap
+  (only shifts in the expected overlap direction, or near a rig's / ``overlap``'s prediction;
+  ambiguous matches are refused), then sub-pixel refinement (ECC, then photometric least squares).
+- With a prism ``rig`` (:mod:`plenocli.prismrig`) the views are first resampled into a common
+  undistorted frame, which cancels the prisms' constant distortion.
 - ``homography``: SIFT features, ratio test, matches restricted to the expected direction,
   RANSAC, then ECC refinement (homography) on the overlap.
 Both work on high-passed images, so slow vignetting and gain differences do not pull the fit.
@@ -271,7 +273,11 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     min_pixels = max(64, strip * (rows - 2 * cross) // 2)
     dy0, dx0, best, second = search_shift(a, b, dy_range=dy_range, dx_range=dx_range,
                                           min_pixels=min_pixels)
-    if best > 0 and second >= max_ambiguity * best:
+    if best < min_correlation:
+        raise InputError(f"no reliable overlap found between the views (best normalised "
+                         f"correlation {best:.2f} < {min_correlation}); the views may not "
+                         "overlap, or the overlap has no texture")
+    if second >= max_ambiguity * best:
         raise InputError(f"ambiguous overlap: shifts correlating {best:.2f} and {second:.2f} "
                          "(a periodic scene?); give the expected overlap (--overlap) or the "
                          "rig (--rig)")
