@@ -20,9 +20,9 @@ $(STAMP): pyproject.toml
 SIM       := out/fixtures
 SIM_KINDS := dualpixel-prism dualpixel-white dualpixel-masked quadpixel-pyramid \
              raytrix-prism raytrix-white
-SIM_ARGS_dualpixel-prism   := --pixels 384
-SIM_ARGS_dualpixel-white   := --pixels 384
-SIM_ARGS_dualpixel-masked  := --pixels 384 --param crosstalk=0.2
+SIM_ARGS_dualpixel-prism   := --pixels 768
+SIM_ARGS_dualpixel-white   := --pixels 768
+SIM_ARGS_dualpixel-masked  := --pixels 768 --param crosstalk=0.2
 SIM_ARGS_quadpixel-pyramid := --pixels 1024
 SIM_ARGS_raytrix-prism     := --pixels 1200
 SIM_ARGS_raytrix-white     := --pixels 1200

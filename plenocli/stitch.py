@@ -7,9 +7,11 @@ extended to cover every view; ``report["origin_px"]`` is the panorama pixel ``[r
 top, bottom; ``2x2`` = S00, S01, S10, S11 (top-left, top-right, bottom-left, bottom-right).
 
 Registration of a pair of neighbours (b to the right of / below a):
-- ``translation``: integer search by normalised cross-correlation of b's leading edge strip inside
-  a's trailing part (only shifts in the expected overlap direction are searched), then sub-pixel
-  refinement by ECC (``cv2.findTransformECC``, translation) on the windowed overlap region.
+- ``translation``: integer search by masked normalised cross-correlation over the whole overlap
+  (only shifts in the expected overlap direction, or near a rig's / ``overlap``'s prediction;
+  ambiguous matches are refused), then sub-pixel refinement (ECC, then photometric least squares).
+- With a prism ``rig`` (:mod:`plenocli.prismrig`) the views are first resampled into a common
+  undistorted frame, which cancels the prisms' constant distortion.
 - ``homography``: SIFT features, ratio test, matches restricted to the expected direction,
   RANSAC, then ECC refinement (homography) on the overlap.
 Both work on high-passed images, so slow vignetting and gain differences do not pull the fit.
@@ -19,6 +21,7 @@ gain with view 0 fixed) and the seams are blended (feathering, or multi-band).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import cv2
@@ -26,6 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.errors import InputError
+from plenocli.prismrig import PrismRig, undistort_views
 
 LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
 MODELS = ("translation", "homography")
@@ -97,9 +101,20 @@ def _fill_nan(image: np.ndarray) -> np.ndarray:
 
 
 def _highpass(image: np.ndarray) -> np.ndarray:
-    """Texture only: image minus a wide Gaussian blur, float32 (removes vignetting and offsets)."""
-    img = _fill_nan(image).astype(np.float32)
-    return img - cv2.GaussianBlur(img, (0, 0), _HIGHPASS_SIGMA_PX)
+    """Texture only: image minus a wide Gaussian blur, float32 (removes vignetting and offsets).
+
+    With NaN (no data) the blur is a normalised convolution over the valid pixels and the
+    result is 0 where there is no data, so the edges of a view's data add no false texture.
+    """
+    valid = np.isfinite(image)
+    if valid.all():
+        img = image.astype(np.float32)
+        return img - cv2.GaussianBlur(img, (0, 0), _HIGHPASS_SIGMA_PX)
+    m = valid.astype(np.float32)
+    img = np.where(valid, image, 0).astype(np.float32)
+    blur = cv2.GaussianBlur(img, (0, 0), _HIGHPASS_SIGMA_PX) / np.maximum(
+        cv2.GaussianBlur(m, (0, 0), _HIGHPASS_SIGMA_PX), 1e-6)
+    return np.where(valid, img - blur, 0).astype(np.float32)
 
 
 def _pairs(layout: str) -> list[tuple[int, int, str]]:
@@ -123,6 +138,66 @@ def _ncc(a: np.ndarray, b: np.ndarray) -> float:
     return float((a * b).sum() / den) if den > 0 else 0.0
 
 
+def masked_ncc_surface(a: np.ndarray, b: np.ndarray, valid_a: np.ndarray, valid_b: np.ndarray,
+                       *, min_pixels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised cross-correlation of b against a over their common valid pixels, every shift.
+
+    Entry ``[dy + rows_b - 1, dx + cols_b - 1]`` is the NCC over the pixels q valid in both with
+    b(q) <-> a(q + (dy, dx)) (Padfield's masked NCC by FFT). Returns the surface and the
+    overlap pixel counts; shifts overlapping fewer than ``min_pixels`` pixels get -1.
+    """
+    from scipy.signal import fftconvolve
+
+    ma, mb = valid_a.astype(np.float64), valid_b.astype(np.float64)
+    fa, fb = np.where(valid_a, a, 0.0).astype(np.float64), np.where(valid_b, b, 0.0).astype(
+        np.float64)
+
+    def corr(x, y):  # sum_q x(q + t) y(q) for every t
+        return fftconvolve(x, y[::-1, ::-1], mode="full")
+
+    n = np.rint(corr(ma, mb))
+    sa, sb = corr(fa, mb), corr(ma, fb)
+    saa, sbb, sab = corr(fa * fa, mb), corr(ma, fb * fb), corr(fa, fb)
+    n_safe = np.maximum(n, 1)
+    num = sab - sa * sb / n_safe
+    var = np.maximum(saa - sa * sa / n_safe, 0) * np.maximum(sbb - sb * sb / n_safe, 0)
+    ok = (n >= min_pixels) & (var > 1e-12 * max(float(var.max()), 1e-30))
+    ncc = np.where(ok, num / np.sqrt(np.where(ok, var, 1.0)), -1.0)
+    return np.clip(ncc, -1.0, 1.0), n
+
+
+def search_shift(a: np.ndarray, b: np.ndarray, *, dy_range: tuple[int, int],
+                 dx_range: tuple[int, int], min_pixels: int, exclusion_px: int = 6
+                 ) -> tuple[int, int, float, float]:
+    """Integer shift (dy, dx) maximising the masked NCC of high-passed b against a over the
+    whole overlap, within the given inclusive ranges; also the best score elsewhere (the
+    runner-up outside ``exclusion_px`` of the best), which tells whether the match is unique.
+
+    Whole-overlap NCC (not a thin edge strip) makes a periodic scene's false matches, shifted by
+    a multiple of the period, score clearly lower: over the whole overlap they disagree
+    somewhere (different cell contents, the overlap's other end).
+    """
+    ha, hb = _highpass(a), _highpass(b)
+    va = ndimage.binary_erosion(np.isfinite(a), iterations=2)
+    vb = ndimage.binary_erosion(np.isfinite(b), iterations=2)
+    surface, _ = masked_ncc_surface(ha, hb, va, vb, min_pixels=min_pixels)
+    rows_b, cols_b = b.shape
+    y0, y1 = dy_range[0] + rows_b - 1, dy_range[1] + rows_b - 1
+    x0, x1 = dx_range[0] + cols_b - 1, dx_range[1] + cols_b - 1
+    y0, x0 = max(y0, 0), max(x0, 0)
+    y1, x1 = min(y1, surface.shape[0] - 1), min(x1, surface.shape[1] - 1)
+    if y1 < y0 or x1 < x0:
+        raise InputError("the expected overlap lies outside the views; check --layout and "
+                         "--overlap")
+    window = surface[y0:y1 + 1, x0:x1 + 1]
+    py, px = np.unravel_index(int(np.argmax(window)), window.shape)
+    best = float(window[py, px])
+    yy, xx = np.mgrid[0:window.shape[0], 0:window.shape[1]]
+    far = np.hypot(yy - py, xx - px) > exclusion_px
+    second = float(window[far].max()) if far.any() else -1.0
+    return int(py + y0 - rows_b + 1), int(px + x0 - cols_b + 1), best, second
+
+
 def _overlap_crops(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
     """Same-size crops of a and b over their overlap for b(q) <-> a(q + (dy, dx)), or None."""
     rows, cols = a.shape
@@ -136,7 +211,10 @@ def _overlap_crops(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
 def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                          max_overlap: float = 0.7, min_overlap_px: int = 16,
                          max_cross_px: int | None = None,
-                         min_correlation: float = 0.4) -> tuple[float, float, dict]:
+                         min_correlation: float = 0.4,
+                         prior: tuple[float, float] | None = None,
+                         tolerance_px: float | None = None,
+                         max_ambiguity: float = 0.9) -> tuple[float, float, dict]:
     """Sub-pixel shift of view b against view a: b's pixel (y, x) shows a's (y + dy, x + dx).
 
     Parameters
@@ -150,20 +228,28 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         view's other side).
     min_correlation : below this normalised cross-correlation over the overlap the views are
         declared not to overlap (``InputError``).
+    prior : expected shift (dy, dx) px, e.g. from a rig model or an expected overlap; the
+        search is then restricted to ``tolerance_px`` (default 5 % of the view, >= 8 px)
+        around it instead of the whole range above.
+    max_ambiguity : the best whole-overlap correlation elsewhere (outside 6 px of the match)
+        must stay below this fraction of the match's, else the match is ambiguous (a periodic
+        scene, or too little overlap) and ``InputError`` is raised instead of a ghosted result.
 
     Returns
     -------
-    dy, dx : shift in px. info : dict with ``correlation``, ``overlap_px``, ``overlap_fraction``.
+    dy, dx : shift in px. info : dict with ``correlation``, ``overlap_px``, ``overlap_fraction``,
+    ``runner_up_correlation``.
     """
     if direction not in ("h", "v"):
         raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
     if not 0 < max_overlap <= 1:
         raise ValueError(f"max_overlap must be in (0, 1], got {max_overlap}")
     if direction == "v":
-        dx, dy, info = estimate_translation(a.T, b.T, direction="h", max_overlap=max_overlap,
-                                            min_overlap_px=min_overlap_px,
-                                            max_cross_px=max_cross_px,
-                                            min_correlation=min_correlation)
+        dx, dy, info = estimate_translation(
+            a.T, b.T, direction="h", max_overlap=max_overlap, min_overlap_px=min_overlap_px,
+            max_cross_px=max_cross_px, min_correlation=min_correlation,
+            prior=None if prior is None else (prior[1], prior[0]), tolerance_px=tolerance_px,
+            max_ambiguity=max_ambiguity)
         return dy, dx, info
     ha, hb = _highpass(a), _highpass(b)
     for name, h in (("a", ha), ("b", hb)):
@@ -177,12 +263,24 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     x_start = max(0, int(np.floor(cols * (1 - max_overlap))))
     if cols - x_start < strip:
         raise ValueError(f"max_overlap {max_overlap} leaves less than {strip} px to search")
-    template = hb[cross:rows - cross, :strip]
-    search = ha[:, x_start:]
-    score = cv2.matchTemplate(search, template, cv2.TM_CCOEFF_NORMED)
-    score = np.nan_to_num(score, nan=-1.0)
-    py, px = np.unravel_index(int(np.argmax(score)), score.shape)
-    dy0, dx0 = int(py) - cross, x_start + int(px)
+    if prior is not None:
+        tol = int(np.ceil(tolerance_px if tolerance_px is not None
+                          else max(8.0, 0.05 * max(rows, cols))))
+        dy_range = (int(np.floor(prior[0])) - tol, int(np.ceil(prior[0])) + tol)
+        dx_range = (int(np.floor(prior[1])) - tol, int(np.ceil(prior[1])) + tol)
+    else:
+        dy_range, dx_range = (-cross, cross), (x_start, cols - strip)
+    min_pixels = max(64, strip * (rows - 2 * cross) // 2)
+    dy0, dx0, best, second = search_shift(a, b, dy_range=dy_range, dx_range=dx_range,
+                                          min_pixels=min_pixels)
+    if best < min_correlation:
+        raise InputError(f"no reliable overlap found between the views (best normalised "
+                         f"correlation {best:.2f} < {min_correlation}); the views may not "
+                         "overlap, or the overlap has no texture")
+    if second >= max_ambiguity * best:
+        raise InputError(f"ambiguous overlap: shifts correlating {best:.2f} and {second:.2f} "
+                         "(a periodic scene?); give the expected overlap (--overlap) or the "
+                         "rig (--rig)")
     crops = _overlap_crops(ha, hb, dy0, dx0)
     if crops is None:
         raise InputError("no overlap found between the views; check the layout (--layout) and "
@@ -192,12 +290,14 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     _, _, (y0, x0) = crops
     ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
     rows_ov, cols_ov = crops[0].shape
+    has_nan = not (np.isfinite(a).all() and np.isfinite(b).all())
     ca = ra[y0:y0 + rows_ov, x0:x0 + cols_ov]
     cb = rb[y0 - dy0:y0 - dy0 + rows_ov, x0 - dx0:x0 - dx0 + cols_ov]
     warp = np.float32([[1, 0, x0 - dx0], [0, 1, y0 - dy0]])  # crop of a -> b
     method = "ecc"
     # two passes: the photometric ratio field is re-estimated once the shift is sub-pixel
-    for _ in range(2):
+    # (views with no-data regions, e.g. undistorted canvases, skip ECC: it cannot mask them)
+    for _ in range(0 if has_nan else 2):
         b_on_a = cv2.warpAffine(rb, warp, (cols_ov, rows_ov),
                                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REPLICATE)
@@ -209,7 +309,10 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         except cv2.error:
             method = "phase-correlation"
             break
-    if method == "ecc":
+    if has_nan:
+        ty = tx = 0.0
+        method = "template"
+    elif method == "ecc":
         ty, tx = float(warp[1, 2]) - (y0 - dy0), float(warp[0, 2]) - (x0 - dx0)
     else:
         window = cv2.createHanningWindow((ca.shape[1], ca.shape[0]), cv2.CV_64F)
@@ -227,10 +330,11 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
             method += "+photometric"
     except ValueError:
         pass
-    correlation = _aligned_correlation(ha, hb, _translation_matrix(dy, dx))
+    correlation = _aligned_correlation(ha, hb, _translation_matrix(dy, dx), a, b)
     overlap_px = cols - dx
     info = {"correlation": correlation, "overlap_px": float(overlap_px),
-            "overlap_fraction": float(overlap_px / cols), "refinement": method}
+            "overlap_fraction": float(overlap_px / cols), "refinement": method,
+            "runner_up_correlation": second}
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (best normalised "
                          f"correlation {correlation:.2f} < {min_correlation}); the views may not "
@@ -238,13 +342,18 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     return float(dy), float(dx), info
 
 
-def _aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray) -> float:
-    """NCC of a and b (high-passed) over their overlap once b is warped into a by ``h_ab``."""
+def _aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray,
+                         a: np.ndarray | None = None, b: np.ndarray | None = None) -> float:
+    """NCC of a and b (high-passed) over their overlap once b is warped into a by ``h_ab``
+    (only over the pixels with data in both when the raw views ``a``, ``b`` are given)."""
     rows, cols = ha.shape
     warped = cv2.warpPerspective(hb, h_ab, (cols, rows), flags=cv2.INTER_LINEAR,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    cover = cv2.warpPerspective(np.ones_like(hb), h_ab, (cols, rows), flags=cv2.INTER_LINEAR,
+    valid_b = np.ones_like(hb) if b is None else np.isfinite(b).astype(np.float32)
+    cover = cv2.warpPerspective(valid_b, h_ab, (cols, rows), flags=cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0.999
+    if a is not None:
+        cover &= np.isfinite(a)
     cover = ndimage.binary_erosion(cover, iterations=2)
     if cover.sum() < 64:
         return float("nan")
@@ -439,8 +548,13 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
 
 def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                         min_inliers: int = 12, ransac_px: float = 2.0,
-                        min_correlation: float = 0.4) -> tuple[np.ndarray, dict]:
-    """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + ECC refinement.
+                        min_correlation: float = 0.4,
+                        prior: tuple[float, float] | None = None,
+                        tolerance_px: float | None = None) -> tuple[np.ndarray, dict]:
+    """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + photometric
+    refinement. With ``prior`` = expected shift (dy, dx), only matches displaced by it within
+    ``tolerance_px`` (default 5 % of the view, >= 8 px) are kept: a periodic scene's false
+    matches, a period away, are left out.
 
     Returns
     -------
@@ -452,8 +566,14 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
     ua, ub = _to_uint8(a), _to_uint8(b)
     sift = cv2.SIFT_create(nfeatures=8000, contrastThreshold=0.01)
-    ka, da = sift.detectAndCompute(ua, None)
-    kb, db = sift.detectAndCompute(ub, None)
+
+    def data_mask(view):  # no features on the edges of no-data regions
+        valid = np.isfinite(view)
+        return None if valid.all() else ndimage.binary_erosion(valid, iterations=4).astype(
+            np.uint8)
+
+    ka, da = sift.detectAndCompute(ua, data_mask(a))
+    kb, db = sift.detectAndCompute(ub, data_mask(b))
     if da is None or db is None or len(ka) < min_inliers or len(kb) < min_inliers:
         raise InputError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
                          "views have no texture; try --model translation")
@@ -463,6 +583,10 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     pa = np.float32([ka[m.trainIdx].pt for m in good]).reshape(-1, 2)
     axis = 0 if direction == "h" else 1
     ahead = pa[:, axis] - pb[:, axis] > 0  # b lies after a: its points sit later in a
+    if prior is not None:
+        tol = tolerance_px if tolerance_px is not None else max(8.0, 0.05 * max(a.shape))
+        shift = pa - pb
+        ahead &= (np.abs(shift[:, 0] - prior[1]) <= tol) & (np.abs(shift[:, 1] - prior[0]) <= tol)
     pa, pb = pa[ahead], pb[ahead]
     if len(pa) < min_inliers:
         raise InputError(f"only {len(pa)} feature matches in the expected overlap direction; the "
@@ -479,18 +603,18 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     h = h_ls if h_ls is not None else h
     h = h / h[2, 2]
     ha, hb = _highpass(a), _highpass(b)
-    before = _aligned_correlation(ha, hb, h)
+    before = _aligned_correlation(ha, hb, h, a, b)
     refined, method, photometric = h, "ransac", {}
     try:
         candidate, photometric = refine_homography(a, b, h)
-        after = _aligned_correlation(ha, hb, candidate)
+        after = _aligned_correlation(ha, hb, candidate, a, b)
         if np.isfinite(after) and after >= before - 0.01:
             refined, method = candidate, "photometric"
     except ValueError:
         pass
     proj = cv2.perspectiveTransform(pb[inl].reshape(-1, 1, 2).astype(np.float64), refined)
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - pa[inl]) ** 2, axis=1))))
-    correlation = _aligned_correlation(ha, hb, refined)
+    correlation = _aligned_correlation(ha, hb, refined, a, b)
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
@@ -581,6 +705,17 @@ def _multiband(images: np.ndarray, weights: np.ndarray, fallback: np.ndarray,
     return out
 
 
+def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
+    """[start, stop) of the longest run of True in a 1-D boolean array, or None."""
+    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    if edges.size == 0:
+        return None
+    starts, stops = edges[::2], edges[1::2]
+    k = int(np.argmax(stops - starts))
+    return int(starts[k]), int(stops[k])
+
+
 def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) -> float | None:
     """RMS (px) of local shifts left between two warped views, over blocks of their overlap."""
     from skimage.registration import phase_cross_correlation
@@ -591,8 +726,9 @@ def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) ->
     y0, y1, x0, x1 = ys.min() + 2, ys.max() - 1, xs.min() + 2, xs.max() - 1
     if y1 - y0 < 32 or x1 - x0 < 32:
         return None
-    ha, hb = _highpass(pano_a[y0:y1, x0:x1]), _highpass(pano_b[y0:y1, x0:x1])
     ok = both[y0:y1, x0:x1]
+    ha = _highpass(np.where(ok, pano_a[y0:y1, x0:x1], np.nan))
+    hb = _highpass(np.where(ok, pano_b[y0:y1, x0:x1], np.nan))
     long_axis = 0 if (y1 - y0) >= (x1 - x0) else 1
     n_blocks = max(1, min(4, (ha.shape[long_axis]) // 64))
     shifts = []
@@ -600,8 +736,15 @@ def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) ->
         sl = [slice(None), slice(None)]
         length = ha.shape[long_axis]
         sl[long_axis] = slice(block * length // n_blocks, (block + 1) * length // n_blocks)
+        # an overlap that is not a rectangle (homography, undistorted views): keep the longest
+        # run of lines across the block that lie wholly inside it
+        full = ok[tuple(sl)].all(axis=long_axis)
+        run = _longest_run(full)
+        if run is None or run[1] - run[0] < 16:
+            continue
+        sl[1 - long_axis] = slice(*run)
         sl = tuple(sl)
-        if not ok[sl].all() or ha[sl].std() == 0:
+        if ha[sl].std() == 0:
             continue
         shift, _, _ = phase_cross_correlation(ha[sl], hb[sl], upsample_factor=20)
         shifts.append(shift)
@@ -614,7 +757,9 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            model: str = "translation", distortion_k1: float = 0.0,
            transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
            max_overlap: float = 0.7, min_overlap_px: int = 16,
-           min_correlation: float = 0.4) -> tuple[np.ndarray, dict]:
+           min_correlation: float = 0.4, rig: PrismRig | None = None,
+           overlap: float | None = None, overlap_tolerance: float = 0.1,
+           tolerance_px: float | None = None) -> tuple[np.ndarray, dict]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -632,6 +777,13 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     match_gain : match per-view, per-channel exposure from the overlaps (view 0 is the reference).
     max_overlap, min_overlap_px, min_correlation : registration search limits, see
         :func:`estimate_translation`.
+    rig : the prism rig (:class:`plenocli.prismrig.PrismRig`, one entry per view): every view
+        is first resampled into the common undistorted frame (the prisms' constant distortion
+        cancelled), and each pair is searched only within ``tolerance_px`` (default 5 % of the
+        view, >= 8 px) of the position the rig predicts.
+    overlap, overlap_tolerance : without a rig, the expected overlap (fraction of the view
+        along the stitching direction) and the tolerance on it (same unit): the search is
+        restricted to it.
 
     Returns
     -------
@@ -653,9 +805,37 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     if layout != "auto" and LAYOUTS[layout][0] * LAYOUTS[layout][1] != n_views:
         raise InputError(f"layout {layout} needs {LAYOUTS[layout][0] * LAYOUTS[layout][1]} views, "
                          f"got {n_views}")
+    if overlap is not None and not 0 < overlap < 1:
+        raise ValueError(f"overlap must be in (0, 1), got {overlap}")
+    if not 0 < overlap_tolerance < 1:
+        raise ValueError(f"overlap_tolerance must be in (0, 1), got {overlap_tolerance}")
+    view_shape = (rows, cols)
+    if transform is not None and rig is None and transform.get("rig"):
+        try:
+            rig = PrismRig.from_dict(transform["rig"])
+        except ValueError as err:
+            raise InputError(f"the transform's rig is not valid ({err})") from err
     if distortion_k1:
         stack = np.stack([[undistort(ch, distortion_k1) for ch in v] for v in stack])
-    luma = np.nanmean(stack, axis=1) if n_chan > 1 else stack[:, 0]
+    origins = None
+    if rig is not None:
+        if len(rig.views) != n_views:
+            raise InputError(f"the rig describes {len(rig.views)} views but {n_views} are "
+                             "given; list one rig view per input view, in order")
+        try:
+            stack, origins = undistort_views(stack, rig)
+        except ValueError as err:
+            raise InputError(f"the rig does not fit these views: {err}") from err
+        rows, cols = stack.shape[-2:]
+        if layout == "auto":
+            d = origins[1] - origins[0]
+            layout = "2x2" if n_views == 4 else ("1x2" if abs(d[1]) >= abs(d[0]) else "2x1")
+    if n_chan > 1:
+        with warnings.catch_warnings():  # no-data pixels (all NaN) stay NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            luma = np.nanmean(stack, axis=1)
+    else:
+        luma = stack[:, 0]
     for k in range(n_views):
         if not np.isfinite(luma[k]).any():
             raise InputError(f"view {k} holds no data (all NaN)")
@@ -667,12 +847,15 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     pair_info: list[dict] = []
     closure = None
     if transform is not None:
-        transforms, layout, source = _check_transform(transform, n_views, (rows, cols), model)
+        transforms, layout, source = _check_transform(transform, n_views, view_shape, model)
     else:
         source = "estimated"
         if layout == "auto":
-            layout = "2x2" if n_views == 4 else _auto_layout(luma, search)
-        transforms, pair_info, closure = _register(luma, layout, model, search)
+            layout = "2x2" if n_views == 4 else _auto_layout(luma, search, overlap,
+                                                              overlap_tolerance)
+        priors = _priors(layout, (rows, cols), origins, overlap, overlap_tolerance,
+                         tolerance_px)
+        transforms, pair_info, closure = _register(luma, layout, model, search, priors)
     offset, pano_shape = _canvas(transforms, (rows, cols))
     warped = np.full((n_views, n_chan) + pano_shape, np.nan, np.float32)
     weights = np.zeros((n_views,) + pano_shape, np.float32)
@@ -710,12 +893,20 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
             residuals.append(res)
     if transform is not None:
         pair_info = [{"views": [a, b], "direction": d} for a, b, d in pairs]
+    axis_px, field_deg = None, None
+    if rig is not None:
+        axis_px, field_deg = _rig_axis_and_field(rig, view_shape, origins, offset, panorama)
     report = {
         "model": model, "layout": layout, "n_views": n_views, "channels": n_chan if colour else 1,
-        "view_shape": [rows, cols], "distortion_k1": distortion_k1, "blend": blend,
+        "view_shape": list(view_shape), "distortion_k1": distortion_k1, "blend": blend,
+        "rig": rig.to_dict() if rig is not None else None,
+        "canvas_shape": [rows, cols] if rig is not None else None,
+        "canvas_origins_px": origins.tolist() if origins is not None else None,
+        "axis_px": axis_px, "field_deg": field_deg,
         "transform_source": source,
-        "transform": {"model": model, "layout": layout, "view_shape": [rows, cols],
+        "transform": {"model": model, "layout": layout, "view_shape": list(view_shape),
                       "distortion_k1": distortion_k1,
+                      "rig": rig.to_dict() if rig is not None else None,
                       "view_to_reference": [t.tolist() for t in transforms]},
         "shifts_px": [[float(t[1, 2]), float(t[0, 2])] for t in transforms],
         "pairs": pair_info,
@@ -729,11 +920,66 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     return (panorama if colour else panorama[0]), report
 
 
-def _auto_layout(luma: np.ndarray, search: dict) -> str:
+def _rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
+                        offset: np.ndarray, panorama: np.ndarray):
+    """Panorama pixel [row, col] of the main lens's optical axis, and the panorama's angular
+    field {"x", "y"} (deg): the covered span along the row (column) through each view's centre,
+    the widest of them (the prisms bend the views' outer edges, so the span depends on the line).
+    """
+    from plenocli.prismrig import view_to_common
+
+    rows, cols = view_shape
+    shift = -origins[0] + [offset[1, 2], offset[0, 2]]  # common -> panorama (view 0 reference)
+    axis = np.array([(rows - 1) / 2, (cols - 1) / 2]) + shift
+    pix = rig.sensor_mm / cols
+    dist = rig.image_distance_mm
+    covered = np.isfinite(panorama).all(axis=0) if panorama.ndim == 3 else np.isfinite(panorama)
+    field: dict = {"x": None, "y": None}
+    for k in range(len(rig.views)):
+        cx, cy = view_to_common(rig, k, np.array([(cols - 1) / 2]), np.array([(rows - 1) / 2]),
+                                view_shape)
+        centre = np.array([cy[0], cx[0]]) + shift
+        for name, line, c in (("x", covered[int(round(centre[0])), :], axis[1]),
+                              ("y", covered[:, int(round(centre[1]))], axis[0])):
+            idx = np.nonzero(line)[0]
+            if idx.size == 0:
+                continue
+            lo, hi = idx.min() - 0.5 - c, idx.max() + 0.5 - c  # pixel edges
+            span = float(np.degrees(np.arctan(hi * pix / dist) - np.arctan(lo * pix / dist)))
+            field[name] = span if field[name] is None else max(field[name], span)
+    return axis.tolist(), field
+
+
+def _priors(layout: str, shape: tuple[int, int], origins: np.ndarray | None,
+            overlap: float | None, overlap_tolerance: float, tolerance_px: float | None
+            ) -> dict:
+    """Expected shift (dy, dx) and search tolerance (px) per neighbour pair, or None."""
+    rows, cols = shape
+    priors = {}
+    for a, b, direction in _pairs(layout):
+        if origins is not None:
+            d = origins[b] - origins[a]
+            priors[(a, b)] = ((float(d[0]), float(d[1])), tolerance_px)
+        elif overlap is not None:
+            size = cols if direction == "h" else rows
+            shift = (0.0, size * (1 - overlap)) if direction == "h" else (size * (1 - overlap),
+                                                                           0.0)
+            tol = tolerance_px if tolerance_px is not None else overlap_tolerance * size
+            priors[(a, b)] = (shift, tol)
+        else:
+            priors[(a, b)] = (None, None)
+    return priors
+
+
+def _auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
+                 overlap_tolerance: float = 0.1) -> str:
     best, best_corr, errors = None, -np.inf, []
     for layout, direction in (("1x2", "h"), ("2x1", "v")):
+        (prior, tol), = _priors(layout, luma.shape[1:], None, overlap, overlap_tolerance,
+                                None).values()
         try:
-            _, _, info = estimate_translation(luma[0], luma[1], direction=direction, **search)
+            _, _, info = estimate_translation(luma[0], luma[1], direction=direction, prior=prior,
+                                              tolerance_px=tol, **search)
         except InputError as err:
             errors.append(str(err))
             continue
@@ -744,24 +990,28 @@ def _auto_layout(luma: np.ndarray, search: dict) -> str:
     return best
 
 
-def _register(luma: np.ndarray, layout: str, model: str, search: dict):
+def _register(luma: np.ndarray, layout: str, model: str, search: dict, priors: dict):
     n_views = luma.shape[0]
     pair_info = []
     measured = []
     for a, b, direction in _pairs(layout):
+        prior, tol = priors[(a, b)]
         try:
             if model == "translation":
                 dy, dx, info = estimate_translation(luma[a], luma[b], direction=direction,
-                                                    **search)
+                                                    prior=prior, tolerance_px=tol, **search)
                 measured.append((a, b, np.array([dy, dx])))
                 info["shift_px"] = [dy, dx]
             else:
                 h, info = estimate_homography(luma[a], luma[b], direction=direction,
-                                              min_correlation=search["min_correlation"])
+                                              min_correlation=search["min_correlation"],
+                                              prior=prior, tolerance_px=tol)
                 measured.append((a, b, h))
                 info["homography"] = h.tolist()
         except InputError as err:
             raise InputError(f"views {a} and {b}: {err}") from err
+        if prior is not None:
+            info["expected_shift_px"] = list(prior)
         pair_info.append({"views": [a, b], "direction": direction, **info})
     closure = None
     if model == "translation":

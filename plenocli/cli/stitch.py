@@ -15,6 +15,14 @@ from plenocli.cli import options
 @click.option("--distortion", type=float, default=0.0, show_default=True,
               help="Known radial distortion K1 removed first (r_d = r_u (1 + K1 r_u^2), r in "
                    "half-diagonals).")
+@click.option("--rig", type=click.Path(dir_okay=False), default=None,
+              help="Prism rig YAML (focal_mm, sensor_mm, prism_n, prism_apex_deg, views): cancel "
+                   "the prisms' distortion and search near the predicted overlap "
+                   "(configs/rigs/).")
+@click.option("--overlap", type=float, default=None,
+              help="Expected overlap, fraction of the view (e.g. 0.2); restricts the search.")
+@click.option("--overlap-tolerance", type=float, default=0.1, show_default=True,
+              help="Tolerance on --overlap (fraction of the view).")
 @click.option("--transform-in", type=click.Path(dir_okay=False), default=None,
               help="Reapply a transform saved with --transform-out instead of registering.")
 @click.option("--transform-out", type=click.Path(dir_okay=False), default=None,
@@ -38,6 +46,8 @@ def stitch(**params):
       plenocli stitch flat.tif --views A,B -o panorama.tif --report stitch.json \\
           --transform-out rig.json --preview panorama.png
       plenocli stitch left.tif right.tif -o panorama.tif
+      plenocli stitch views.tif --layout 2x2 --rig configs/rigs/quadpixel_pyramid.yaml \\
+          -o panorama.tif
     """
     from plenocli.pipeline.stages.stitch import run
 

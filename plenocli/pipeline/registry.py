@@ -50,7 +50,7 @@ def _stages() -> dict[str, Stage]:
         Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),
               outputs=("output", "preview")),
-        Stage("stitch", stitch.run, inputs=("inputs", "transform_in"),
+        Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
               outputs=("output", "transform_out", "report", "preview")),
         Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
     ]

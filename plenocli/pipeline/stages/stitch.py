@@ -20,6 +20,7 @@ from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
+from plenocli.prismrig import PrismRig
 from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
@@ -108,7 +109,8 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
         model: str = "translation", distortion: float = 0.0, transform_in: str | None = None,
         transform_out: str | None = None, blend: str = "feather", report: str | None = None,
-        preview: str | None = None) -> None:
+        preview: str | None = None, rig: str | None = None, overlap: float | None = None,
+        overlap_tolerance: float = 0.1) -> None:
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
@@ -124,13 +126,18 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as err:
             raise InputError(f"{path}: not a JSON stitch transform ({err}); save one with "
                              "--transform-out") from err
+    prism_rig = load_rig(rig) if rig else None
     panorama, rep = stitch_lib.stitch(stack, layout=layout, model=model,
-                                      distortion_k1=distortion, transform=transform, blend=blend)
+                                      distortion_k1=distortion, transform=transform, blend=blend,
+                                      rig=prism_rig, overlap=overlap,
+                                      overlap_tolerance=overlap_tolerance)
     params = dict(views=views, layout=layout, model=model, distortion=distortion,
-                  transform_in=transform_in, blend=blend)
-    record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in})
+                  transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
+                  overlap_tolerance=overlap_tolerance)
+    record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
+                                             "rig": rig})
     rep.update(input_views=names, bayer_half_size=cfa)
-    protect = tuple(p for p in (*inputs, transform_in) if p)
+    protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
     page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
                   else [f"C{c}" for c in range(pano.shape[0])])
@@ -152,7 +159,28 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %s px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1],
-             "n/a" if rep["residual_px"] is None else f"{rep['residual_px']:.3f}")
+             "n/a (overlap too small to measure)" if rep["residual_px"] is None
+             else f"{rep['residual_px']:.3f}")
+
+
+def load_rig(path: str) -> PrismRig:
+    """A prism rig from a YAML or JSON file (keys of :meth:`PrismRig.to_dict`; a ``rig`` key
+    holding them is also accepted, e.g. a stitch report)."""
+    import yaml
+
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"{file}: no such file (the --rig YAML)")
+    try:
+        data = yaml.safe_load(file.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise InputError(f"{file}: not a YAML rig ({err})") from err
+    if isinstance(data, dict) and isinstance(data.get("rig"), dict):
+        data = data["rig"]
+    try:
+        return PrismRig.from_dict(data)
+    except ValueError as err:
+        raise InputError(f"{file}: {err}; see configs/rigs/ for examples") from err
 
 
 def _plain(value):

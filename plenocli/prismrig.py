@@ -1,0 +1,285 @@
+"""The constant geometric distortion of views seen through prisms at the main lens's stop.
+
+A prism rig (paper sections 3, 5.2, 6) puts a thin prism over part of the pupil of a thin main
+lens of focal ``F``; each view (sub-aperture image) sees the scene through its own pupil part and
+prism. The prism deviates the view's field by about (n - 1) A, but not uniformly: at non-normal
+incidence the deviation grows towards the field's edges, so the lines of the scene bend and two
+views disagree over their overlap by many pixels. This module maps every view into one common,
+undistorted frame: the image the main lens alone would form of the scene plane (at
+``object_distance_mm``, or of directions at infinity), on the views' pixel grid, extended past the
+sensor. Views mapped there differ by no more than the rig model's error, so they stitch by a
+small translation.
+
+Coordinates: a view pixel (x = column, y = row) has its centre at sensor position
+``((x + 0.5) - cols / 2, (y + 0.5) - rows / 2) * pixel_mm`` (mm from the optical axis; x right,
+y down, looking from the sensor through the lens). The common frame uses the same pixel grid:
+common pixel = (sensor-plane position of the undeviated image) / pixel_mm + (cols / 2 - 0.5,
+rows / 2 - 0.5), so for a view without prism (and an object at infinity) the map is the identity
+and the optical axis sits at common pixel ((cols - 1) / 2, (rows - 1) / 2).
+
+Ray model (exact for thin lens + thin prism at the stop; :mod:`plenocli.synth.prismcam` renders
+with it): the view pixel at sensor point s sends its ray through the pupil part's centroid p
+towards the conjugate point q = -s z / D (D = 1 / (1/F - 1/z)); the prism (two plane faces, each
+leaning by A / 2 towards the prism's thin edge, vector Snell's law) deviates it; it meets the
+scene plane z at C. The common coordinate is -C D / z. The inverse traces the ray back through the
+prism (exact, no iteration).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from plenocli.optics.lens import refract
+
+
+@dataclass(frozen=True)
+class ViewOptics:
+    """One view of the rig: ``pupil`` = (sx, sy) the pupil part it sees (each -1, 0 or +1: the
+    half or quarter on that side, 0 = the whole extent on that axis); ``prism`` = (sx, sy) the
+    direction the prism over that part deviates towards (its thin edge), or None."""
+
+    pupil: tuple[int, int] = (0, 0)
+    prism: tuple[int, int] | None = None
+
+
+@dataclass(frozen=True)
+class PrismRig:
+    """Main lens + prisms at its stop. Lengths in mm, angles in degrees.
+
+    ``sensor_mm`` is the width of the sensor area a view images (the view's pixel pitch is
+    ``sensor_mm / cols``, so the rig holds for views of any resolution). ``aperture_mm`` sets the
+    pupil parts' centroids (parallax for a near object; 0 = rays through the pupil centre).
+    ``object_distance_mm`` = inf maps directions (scene at infinity).
+    """
+
+    focal_mm: float
+    sensor_mm: float
+    prism_n: float
+    prism_apex_deg: float
+    views: tuple[ViewOptics, ...] = field(default_factory=tuple)
+    aperture_mm: float = 0.0
+    object_distance_mm: float = math.inf
+
+    def __post_init__(self):
+        for name in ("focal_mm", "sensor_mm", "prism_n"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"rig {name} must be a positive number, got {value}")
+        if not 0 <= self.prism_apex_deg < 90:
+            raise ValueError(f"rig prism_apex_deg must be in [0, 90), got {self.prism_apex_deg}")
+        if not self.object_distance_mm > self.focal_mm:
+            raise ValueError(f"rig object_distance_mm {self.object_distance_mm} must exceed the "
+                             f"focal length {self.focal_mm}")
+        if self.aperture_mm < 0:
+            raise ValueError(f"rig aperture_mm must be >= 0, got {self.aperture_mm}")
+        for k, v in enumerate(self.views):
+            sides = list(v.pupil) + (list(v.prism) if v.prism is not None else [])
+            if len(v.pupil) != 2 or (v.prism is not None and len(v.prism) != 2) \
+                    or any(s not in (-1, 0, 1) for s in sides):
+                raise ValueError(f"rig view {k}: pupil and prism are [sx, sy] with -1, 0 or 1, "
+                                 f"got pupil {v.pupil}, prism {v.prism}")
+
+    @property
+    def image_distance_mm(self) -> float:
+        """D: the sensor's distance behind the thin lens (focused on the object plane)."""
+        if math.isinf(self.object_distance_mm):
+            return self.focal_mm
+        return 1.0 / (1.0 / self.focal_mm - 1.0 / self.object_distance_mm)
+
+    def with_apex(self, apex_deg: float) -> PrismRig:
+        """The same rig with another prism apex angle (for fitting it to data)."""
+        return PrismRig(self.focal_mm, self.sensor_mm, self.prism_n, apex_deg, self.views,
+                        self.aperture_mm, self.object_distance_mm)
+
+    def to_dict(self) -> dict:
+        return {"focal_mm": self.focal_mm, "sensor_mm": self.sensor_mm,
+                "prism_n": self.prism_n, "prism_apex_deg": self.prism_apex_deg,
+                "aperture_mm": self.aperture_mm,
+                "object_distance_mm": (None if math.isinf(self.object_distance_mm)
+                                       else self.object_distance_mm),
+                "views": [{"pupil": list(v.pupil),
+                           "prism": list(v.prism) if v.prism is not None else None}
+                          for v in self.views]}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> PrismRig:
+        """A rig from its dict (YAML/JSON; see :meth:`to_dict`). Raises ValueError naming the
+        missing or bad key."""
+        if not isinstance(data, dict):
+            raise ValueError("a rig is a mapping with focal_mm, sensor_mm, prism_n, "
+                             "prism_apex_deg and views")
+        try:
+            views = tuple(ViewOptics(tuple(int(s) for s in v.get("pupil", (0, 0))),
+                                     None if v.get("prism") is None
+                                     else tuple(int(s) for s in v["prism"]))
+                          for v in data["views"])
+            dist = data.get("object_distance_mm")
+            return cls(float(data["focal_mm"]), float(data["sensor_mm"]),
+                       float(data["prism_n"]), float(data["prism_apex_deg"]), views,
+                       float(data.get("aperture_mm") or 0.0),
+                       math.inf if dist is None else float(dist))
+        except KeyError as err:
+            raise ValueError(f"the rig has no {err.args[0]!r} key") from err
+        except (TypeError, AttributeError) as err:
+            raise ValueError(f"the rig has a malformed entry ({err})") from err
+
+
+def _deviate(d: np.ndarray, *, n: float, apex_deg: float, towards: tuple[int, int],
+             reverse: bool) -> np.ndarray:
+    """Directions (N, 3) through the prism (light going +z); ``reverse`` traces back from the
+    exit direction to the entrance direction. NaN where totally internally reflected."""
+    t = math.tan(math.radians(apex_deg) / 2)
+    n1 = np.array([towards[0] * t, towards[1] * t, 1.0])
+    n2 = np.array([-towards[0] * t, -towards[1] * t, 1.0])
+    n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
+    if reverse:  # light running backwards: enter by the exit face, leave by the entrance face
+        inside, ok1 = refract(-d, np.broadcast_to(n2, d.shape), 1.0, n)
+        out, ok2 = refract(inside, np.broadcast_to(n1, d.shape), n, 1.0)
+        out = -out
+    else:
+        inside, ok1 = refract(d, np.broadcast_to(n1, d.shape), 1.0, n)
+        out, ok2 = refract(inside, np.broadcast_to(n2, d.shape), n, 1.0)
+    out[~(ok1 & ok2)] = np.nan
+    return out
+
+
+def _fill_nan(image: np.ndarray) -> np.ndarray:
+    """NaN replaced by the nearest finite value (so the resampling kernel does not spread NaN)."""
+    bad = ~np.isfinite(image)
+    if not bad.any():
+        return image
+    if bad.all():
+        return np.zeros_like(image)
+    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return image[tuple(idx)]
+
+
+def _pupil_centroid(rig: PrismRig, view: ViewOptics) -> np.ndarray:
+    """Centroid (2,) mm of the view's pupil part (half or quarter disk)."""
+    c = 4 * (rig.aperture_mm / 2) / (3 * math.pi)
+    return np.array([view.pupil[0] * c, view.pupil[1] * c], np.float64)
+
+
+def _check_view(rig: PrismRig, view: int) -> ViewOptics:
+    if not 0 <= view < len(rig.views):
+        raise ValueError(f"view {view} is not in the rig ({len(rig.views)} views)")
+    return rig.views[view]
+
+
+def view_to_common(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
+                   shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Common-frame pixel coordinates (x, y) of view pixels ``x``, ``y`` (any equal shapes) of a
+    view of ``shape`` = (rows, cols). NaN where the prism reflects the ray totally."""
+    v = _check_view(rig, view)
+    rows, cols = shape
+    pix = rig.sensor_mm / cols
+    s = np.stack([((np.asarray(x, np.float64) + 0.5) - cols / 2) * pix,
+                  ((np.asarray(y, np.float64) + 0.5) - rows / 2) * pix], axis=-1).reshape(-1, 2)
+    z, dist = rig.object_distance_mm, rig.image_distance_mm
+    p = _pupil_centroid(rig, v)
+    if math.isinf(z):
+        d = np.concatenate([-s, np.full((len(s), 1), dist)], axis=1)
+    else:
+        d = np.concatenate([-s * (z / dist) - p, np.full((len(s), 1), z)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    if v.prism is not None and rig.prism_apex_deg > 0:
+        d = _deviate(d, n=rig.prism_n, apex_deg=rig.prism_apex_deg, towards=v.prism,
+                     reverse=False)
+    if math.isinf(z):
+        u = -dist * d[:, :2] / d[:, 2:3]
+    else:
+        u = -(p + d[:, :2] * (z / d[:, 2:3])) * (dist / z)
+    cx = u[:, 0] / pix + cols / 2 - 0.5
+    cy = u[:, 1] / pix + rows / 2 - 0.5
+    return cx.reshape(np.shape(x)), cy.reshape(np.shape(x))
+
+
+def common_to_view(rig: PrismRig, view: int, cx: np.ndarray, cy: np.ndarray,
+                   shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`view_to_common`: view pixel (x, y) seeing common pixel (cx, cy)."""
+    v = _check_view(rig, view)
+    rows, cols = shape
+    pix = rig.sensor_mm / cols
+    u = np.stack([(np.asarray(cx, np.float64) + 0.5 - cols / 2) * pix,
+                  (np.asarray(cy, np.float64) + 0.5 - rows / 2) * pix], axis=-1).reshape(-1, 2)
+    z, dist = rig.object_distance_mm, rig.image_distance_mm
+    p = _pupil_centroid(rig, v)
+    if math.isinf(z):
+        d = np.concatenate([-u, np.full((len(u), 1), dist)], axis=1)
+    else:
+        d = np.concatenate([-u * (z / dist) - p, np.full((len(u), 1), z)], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    if v.prism is not None and rig.prism_apex_deg > 0:
+        d = _deviate(d, n=rig.prism_n, apex_deg=rig.prism_apex_deg, towards=v.prism,
+                     reverse=True)
+    if math.isinf(z):
+        s = -dist * d[:, :2] / d[:, 2:3]
+    else:
+        s = -(p + d[:, :2] * (z / d[:, 2:3])) * (dist / z)
+    x = s[:, 0] / pix + cols / 2 - 0.5
+    y = s[:, 1] / pix + rows / 2 - 0.5
+    return x.reshape(np.shape(cx)), y.reshape(np.shape(cx))
+
+
+def common_extent(rig: PrismRig, view: int, shape: tuple[int, int]) -> np.ndarray:
+    """Bounding box [x0, y0, x1, y1] (common pixels) of the view's outline in the common frame."""
+    rows, cols = shape
+    t = np.linspace(0.0, 1.0, 257)
+    xs = np.concatenate([t * (cols - 1), np.full_like(t, cols - 1), t * (cols - 1),
+                         np.zeros_like(t)])
+    ys = np.concatenate([np.zeros_like(t), t * (rows - 1), np.full_like(t, rows - 1),
+                         t * (rows - 1)])
+    cx, cy = view_to_common(rig, view, xs, ys, shape)
+    ok = np.isfinite(cx) & np.isfinite(cy)
+    if not ok.any():
+        raise ValueError(f"view {view}: the prism reflects every ray totally; check the rig")
+    return np.array([cx[ok].min(), cy[ok].min(), cx[ok].max(), cy[ok].max()])
+
+
+def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.ndarray]:
+    """Resample every view into the common undistorted frame.
+
+    Parameters
+    ----------
+    stack : (V, C, rows, cols) float views (NaN = no data), V = ``len(rig.views)``.
+    rig : the rig.
+
+    Returns
+    -------
+    canvases : (V, C, rows', cols') float32, one equal-size canvas per view holding its
+        undistorted image (NaN outside it); Lanczos-4 resampling.
+    origins : (V, 2) [row, col] common-frame pixel of each canvas's pixel (0, 0): canvas pixel
+        (r, c) of view k is common pixel (r + origins[k, 0], c + origins[k, 1]). The views'
+        relative positions predicted by the rig are the differences of the origins.
+    """
+    n_views, n_chan, rows, cols = stack.shape
+    if n_views != len(rig.views):
+        raise ValueError(f"the rig describes {len(rig.views)} views but there are {n_views}")
+    boxes = np.array([common_extent(rig, k, (rows, cols)) for k in range(n_views)])
+    origin_xy = np.floor(boxes[:, :2])
+    size = np.ceil(boxes[:, 2:] - origin_xy).max(axis=0).astype(int) + 1
+    if size.prod() > 16 * rows * cols:
+        raise ValueError(f"the rig spreads a view over {size[0]} x {size[1]} px; check its "
+                         "focal_mm, sensor_mm and prism")
+    out = np.full((n_views, n_chan, size[1], size[0]), np.nan, np.float32)
+    gy, gx = np.mgrid[0:size[1], 0:size[0]].astype(np.float64)
+    for k in range(n_views):
+        vx, vy = common_to_view(rig, k, gx + origin_xy[k, 0], gy + origin_xy[k, 1],
+                                (rows, cols))
+        bad = ~(np.isfinite(vx) & np.isfinite(vy))
+        mx = np.where(bad, -10, vx).astype(np.float32)
+        my = np.where(bad, -10, vy).astype(np.float32)
+        valid = np.isfinite(stack[k]).all(axis=0).astype(np.float32)
+        cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0) > 0.999
+        cover &= ~bad
+        for c in range(n_chan):
+            img = _fill_nan(stack[k, c].astype(np.float32))
+            warped = cv2.remap(img, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+            out[k, c] = np.where(cover, warped, np.nan)
+    return out, origin_xy[:, ::-1].copy()
