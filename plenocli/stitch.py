@@ -876,6 +876,17 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         warped *= gains[:, :, None, None].astype(np.float32)
     total = weights.sum(axis=0)
     covered = total > 0
+    if covered.any():  # trim the canvas to what the views cover (rig canvases are generous)
+        rows_any = np.flatnonzero(covered.any(axis=1))
+        cols_any = np.flatnonzero(covered.any(axis=0))
+        r0, r1, c0, c1 = rows_any[0], rows_any[-1] + 1, cols_any[0], cols_any[-1] + 1
+        if (r0, c0, r1, c1) != (0, 0, *pano_shape):
+            warped, weights = warped[..., r0:r1, c0:c1], weights[:, r0:r1, c0:c1]
+            total, covered = total[r0:r1, c0:c1], covered[r0:r1, c0:c1]
+            pano_shape = (int(r1 - r0), int(c1 - c0))
+            offset = offset.copy()
+            offset[0, 2] -= c0
+            offset[1, 2] -= r0
     panorama = np.full((n_chan,) + pano_shape, np.nan, np.float32)
     for c in range(n_chan):
         filled = np.nan_to_num(warped[:, c])
