@@ -550,11 +550,13 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                         min_inliers: int = 12, ransac_px: float = 2.0,
                         min_correlation: float = 0.4,
                         prior: tuple[float, float] | None = None,
-                        tolerance_px: float | None = None) -> tuple[np.ndarray, dict]:
+                        tolerance_px: float | None = None,
+                        max_overlap: float = 0.7) -> tuple[np.ndarray, dict]:
     """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + photometric
     refinement. With ``prior`` = expected shift (dy, dx), only matches displaced by it within
     ``tolerance_px`` (default 5 % of the view, >= 8 px) are kept: a periodic scene's false
-    matches, a period away, are left out.
+    matches, a period away, are left out. A fit that lays view b over more than ``max_overlap``
+    of view a (or not after it at all) is refused: on a periodic scene that is a false match.
 
     Returns
     -------
@@ -618,8 +620,17 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
+    size = a.shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
+    centre = np.array([[[(b.shape[1] - 1) / 2, (b.shape[0] - 1) / 2]]])
+    step = float(cv2.perspectiveTransform(centre, refined)[0, 0, axis] - centre[0, 0, axis])
+    overlap = 1.0 - step / size
+    if not 0 < overlap <= max_overlap:
+        raise InputError(f"the homography lays one view {100 * overlap:.0f} % over the other "
+                         f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "
+                         "periodic scene gives; use --overlap or --rig")
     info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
-            "correlation": correlation, "refinement": method, **photometric}
+            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
+            **photometric}
     return refined, info
 
 
@@ -1016,7 +1027,8 @@ def _register(luma: np.ndarray, layout: str, model: str, search: dict, priors: d
             else:
                 h, info = estimate_homography(luma[a], luma[b], direction=direction,
                                               min_correlation=search["min_correlation"],
-                                              prior=prior, tolerance_px=tol)
+                                              prior=prior, tolerance_px=tol,
+                                              max_overlap=search["max_overlap"])
                 measured.append((a, b, h))
                 info["homography"] = h.tolist()
         except InputError as err:

@@ -124,6 +124,13 @@ def test_periodic_scene_is_refused_not_ghosted():
         estimate_translation(a, b, direction="h")
 
 
+def test_homography_on_the_quadpixel_chart_without_a_rig_is_refused_not_ghosted():
+    """The chart's grid lets SIFT lay every view on top of the others; that must be an error."""
+    views, _, _ = quad(512)
+    with pytest.raises(InputError, match="false match|ambiguous|no reliable"):
+        stitch(views, layout="2x2", model="homography")
+
+
 def test_overlap_prior_restricts_the_search():
     rng = np.random.default_rng(5)
     from scipy import ndimage
