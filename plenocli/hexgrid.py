@@ -262,10 +262,13 @@ def _lattice_points(recip: np.ndarray, kmax: float) -> np.ndarray:
     return pts[keep]
 
 
-def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]:
-    """The reciprocal basis (2, 2) (rows g1, g2, cycles/px) of the best-supported lattice, and
-    its score. Candidates: each strong peak taken as a fundamental, then as a harmonic of a
-    finer lattice (g/2, g/sqrt(3) turned 30 deg for hex; g/2, g/sqrt(2) turned 45 deg square)."""
+def _find_fundamental(spec: _Spectrum, lattice: str, *, strict: bool = True
+                      ) -> tuple[np.ndarray | None, float, list[tuple[np.ndarray, float]]]:
+    """The reciprocal basis (2, 2) (rows g1, g2, cycles/px) of the best-supported lattice, its
+    score, and every hypothesis tried as (basis, score); with ``strict`` False, (None, -inf or
+    the best score, hypotheses) instead of an error when no lattice stands out. Candidates: each
+    strong peak taken as a fundamental, then as a harmonic of a finer lattice (g/2, g/sqrt(3)
+    turned 30 deg for hex; g/2, g/sqrt(2) turned 45 deg square)."""
     z = np.where(spec.valid, spec.z, -np.inf)
     size = spec.size
     fy = np.fft.fftfreq(size)[:, None]
@@ -277,12 +280,15 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
     local = cv2.dilate(z.astype(np.float32), np.ones((5, 5), np.uint8))
     peaks = np.argwhere((z >= local) & (radius >= fmin) & (radius <= 2 * fmax) & (z > PEAK_Z))
     if len(peaks) == 0:
+        if not strict:
+            return None, -np.inf, []
         raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
                                f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
                                "pass a white image (or a scene) taken through the lens array")
     order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:16]
     best, best_recip = -np.inf, None
     tried: list[np.ndarray] = []
+    candidates: list[tuple[np.ndarray, float]] = []
     for r, c in peaks[order]:
         g0 = _subbin_peak(spec, r, c)
         finer = [g0, g0 / 2] + ([_rot(np.pi / 6) @ g0 / np.sqrt(3)] if lattice == "hex"
@@ -296,9 +302,12 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
             recip = _refine_reciprocal(spec, g, lattice, kmax=min(SCORE_BAND,
                                                                   3.1 * np.linalg.norm(g)))
             s = _score(spec, recip)
+            candidates.append((recip, s))
             if s > best:
                 best, best_recip = s, recip
     if best_recip is None or best <= 0:
+        if not strict:
+            return None, best, candidates
         raise CalibrationError("no micro-lens lattice found: spectral peaks exist but none forms "
                                f"a {lattice} lattice; check --lattice, or pass a white image")
     # the best hypothesis may still be a harmonic lattice when the fundamentals are weak (white
@@ -318,7 +327,7 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
                 break
         else:
             break
-    return best_recip, best
+    return best_recip, best, candidates
 
 
 def _same_lattice(g: np.ndarray, other: np.ndarray, step: float) -> bool:
@@ -424,6 +433,210 @@ def _phase_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
         frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
     x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
     return float(x0[0]), float(x0[1])
+
+
+# ----------------------------------------------------------------------------------------------
+# 2b. ambiguous spectra (scene images): lattice hypotheses scored by the micro-image borders
+CONFIDENT_Z = 8.0      # every point of the first two rings above this: the spectrum is decisive
+FOLD_MAX_PX = 1024     # the fold is evaluated over a central region of at most this side
+FINER_KEEP = 0.6       # a finer relative replaces a lattice when it keeps this much contrast
+HYPOTHESES_PER_SPECTRUM = 6   # strongest spectral lattices taken from each spectrum
+FOLD_REFINE = 6        # hypotheses refined locally (by their first fold contrast)
+
+
+def _spectrum_is_decisive(spec: _Spectrum, recip: np.ndarray, lattice: str) -> bool:
+    """A white image shows every point of the first two reciprocal rings as a strong peak; a
+    scene image (parallax-repeated content, weak or missing lattice peaks) does not."""
+    rings = _ring_vectors(recip[0], lattice)[:2]
+    z = np.concatenate([spec.z_at(r) for r in rings])
+    return bool(np.all(z >= CONFIDENT_Z))
+
+
+def _gradient_magnitude(flat: np.ndarray) -> np.ndarray:
+    """|grad| of a flattened image (central differences), clipped at its 99th percentile so a few
+    strong scene edges do not dominate the fold."""
+    gx = cv2.Sobel(flat, cv2.CV_32F, 1, 0, ksize=1)
+    gy = cv2.Sobel(flat, cv2.CV_32F, 0, 1, ksize=1)
+    grad = np.sqrt(gx * gx + gy * gy)
+    return np.minimum(grad, np.float32(np.percentile(grad, 99)))
+
+
+FOLD_BIN_PX = 1.0      # fold bin size (px): the same sharpness scale for every pitch
+FOLD_SMOOTH_PX = 2.0   # folded structure broader than this (px) is removed (scene stripes)
+
+
+@numba.njit(cache=True)
+def _fold_sums(grad, inv00, inv01, inv10, inv11, bins):  # pragma: no cover - compiled
+    """Sum, sum of squares and count of ``grad`` per bin of the fractional lattice coordinates
+    (u, v) = inv @ (x, y) (x, y relative to the region centre), ``bins`` per unit, (bins^2,)."""
+    rows, cols = grad.shape
+    total = np.zeros(bins * bins)
+    total2 = np.zeros(bins * bins)
+    count = np.zeros(bins * bins)
+    xc, yc = (cols - 1) / 2, (rows - 1) / 2
+    for r in range(rows):
+        y = r - yc
+        for c in range(cols):
+            x = c - xc
+            u = (inv00 * x + inv01 * y) * bins
+            v = (inv10 * x + inv11 * y) * bins
+            k = (int(np.floor(u)) % bins) * bins + int(np.floor(v)) % bins
+            g = grad[r, c]
+            total[k] += g
+            total2[k] += g * g
+            count[k] += 1.0
+    return total, total2, count
+
+
+@dataclass(frozen=True)
+class _Fold:
+    """Gradient magnitude of a region, ready to be folded onto lattice cells."""
+
+    grad: np.ndarray      # (rows, cols) float32
+    mean_sq: float        # mean of grad, squared (normalisation)
+
+    @classmethod
+    def of(cls, grad: np.ndarray) -> _Fold:
+        grad = np.ascontiguousarray(grad, np.float32)
+        return cls(grad=grad, mean_sq=max(float(np.mean(grad)) ** 2, 1e-24))
+
+    def contrast(self, pitch_px: float, angle_rad: float, lattice: str) -> float:
+        """Border contrast of the lattice (pitch, angle): every pixel's gradient magnitude is
+        folded onto one lattice cell (bins of about 1 x 1 px of the fractional lattice
+        coordinates); the result is the variance of the folded mean after removing its smooth
+        part (> 2 px), less the variance the bin means have by chance (sampling noise, which
+        grows with the number of bins), over the squared mean gradient. Scene content shifts
+        from lens to lens (parallax) and blurs out in the fold; the micro-image borders add up
+        only on the true lattice or a coarser one containing it (same contrast), a finer one
+        mixes several cell positions (about 1/3 or less). The smooth part goes because a scene
+        periodicity folds into broad stripes. Independent of the offset (a shift of the fold is
+        a cyclic shift of its bins)."""
+        step = LATTICES[lattice]
+        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
+        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
+                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
+        inv = np.linalg.inv(basis.T)
+        total, total2, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0],
+                                          inv[1, 1], bins)
+        n = np.maximum(count, 1)
+        mean = total / n
+        chance = float(np.mean(np.maximum(total2 / n - mean ** 2, 0) / n))
+        filled = count > 0
+        mean = mean.reshape(bins, bins)
+        if not filled.all():   # a rational pitch / row ratio can leave bins empty
+            f = filled.reshape(mean.shape).astype(np.float64)
+            near = _wrap_blur(mean * f, 1.0) / np.maximum(_wrap_blur(f, 1.0), 1e-9)
+            mean = np.where(f > 0, mean, near)
+        fine = mean - _wrap_blur(mean, FOLD_SMOOTH_PX * bins / pitch_px)
+        return (float(np.var(fine)) - chance) / self.mean_sq
+
+
+def _wrap_blur(a: np.ndarray, sigma: float) -> np.ndarray:
+    from scipy import ndimage
+
+    return ndimage.gaussian_filter(a, sigma, mode="wrap")
+
+
+def _refine_by_fold(fold: _Fold, pitch: float, angle: float, lattice: str, *,
+                    span: float, evaluations: int) -> tuple[float, float, float]:
+    """Local maximum of the border contrast around (pitch, angle): Nelder-Mead in (log pitch,
+    angle) with an initial step of ``span`` (relative pitch, rad), at most ``evaluations``
+    folds. Returns pitch px, angle rad, contrast."""
+    from scipy.optimize import minimize
+
+    def cost(p):
+        return -fold.contrast(pitch * np.exp(p[0]), angle + p[1], lattice)
+
+    res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                   options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
+                            "xatol": 1e-6, "fatol": 0, "maxfev": evaluations})
+    return float(pitch * np.exp(res.x[0])), float(angle + res.x[1]), float(-res.fun)
+
+
+def _relatives(pitch: float, angle: float, lattice: str) -> list[tuple[float, float]]:
+    """The lattice, its sub-lattices of index 3 / 4 (hex) or 2 / 4 (square) and the finer
+    lattices it is a sub-lattice of: a spectral peak may be a harmonic or a sub-harmonic."""
+    turn, root = (np.pi / 6, np.sqrt(3)) if lattice == "hex" else (np.pi / 4, np.sqrt(2))
+    return [(pitch, angle), (pitch * root, angle + turn), (pitch / root, angle + turn),
+            (pitch * 2, angle), (pitch / 2, angle)]
+
+
+def _windows(shape: tuple[int, int], size: int) -> list[tuple[int, int]]:
+    """Top-left corners of square windows of ``size`` at the start, middle and end of the long
+    side (even, to keep the CFA phase); one window for a square image."""
+    rows, cols = shape
+    out = []
+    for fr in (0.0, 0.5, 1.0):
+        r0, c0 = int(fr * (rows - size)), int(fr * (cols - size))
+        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+        if (r0, c0) not in out:
+            out.append((r0, c0))
+    return out
+
+
+def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str,
+                spectra: list[_Spectrum]) -> list[tuple[float, float]]:
+    """Lattice hypotheses (pitch px, angle rad): the strongest spectral lattices of the given
+    spectra and of the intensity and gradient-magnitude spectra of square windows along the
+    frame, with their harmonic and sub-harmonic relatives."""
+    rows, cols = image.shape
+    size = min(rows, cols, FFT_CROP_PX)
+    size -= size % 2
+    spectra = list(spectra)
+    for r0, c0 in _windows((rows, cols), size):
+        flat = flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa)
+        spectra.append(_spectrum(flat, cfa=bool(cfa)))
+        spectra.append(_spectrum(_gradient_magnitude(flat), cfa=bool(cfa)))
+    step = LATTICES[lattice]
+    out: list[tuple[float, float]] = []
+    for spec in spectra:
+        _, _, cands = _find_fundamental(spec, lattice, strict=False)
+        for recip, _ in sorted(cands, key=lambda t: -t[1])[:HYPOTHESES_PER_SPECTRUM]:
+            for pitch, angle in _relatives(*_direct_from_reciprocal(recip, lattice), lattice):
+                if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
+                    continue
+                angle %= step
+                if any(abs(pitch / p - 1) < 0.01 and abs((angle - a + step / 2) % step
+                                                         - step / 2) < 0.01 for p, a in out):
+                    continue
+                out.append((pitch, angle))
+    return out
+
+
+def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str,
+                     spectra: list[_Spectrum]) -> tuple[float, float, float]:
+    """(pitch px, angle rad, contrast) of the hypothesis whose micro-image borders fold
+    sharpest, refined locally; the finest lattice that keeps most of that contrast (a
+    multi-focus array also folds sharply on its coarser sub-lattice of one lens type)."""
+    rows, cols = image.shape
+    r0, c0 = max(0, (rows - FOLD_MAX_PX) // 2), max(0, (cols - FOLD_MAX_PX) // 2)
+    r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+    region = image[r0:r0 + FOLD_MAX_PX, c0:c0 + FOLD_MAX_PX]
+    hyps = _hypotheses(image, cfa, lattice, spectra)
+    if not hyps:
+        raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
+                               f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
+                               "pass a white image (or a scene) taken through the lens array")
+    median_pitch = float(np.median([p for p, _ in hyps]))
+    fold = _Fold.of(_gradient_magnitude(flatten(region, cfa=cfa,
+                                                 scale_px=max(FLAT_SCALE * median_pitch, 8.0))))
+    def refined(p, a):
+        return _refine_by_fold(fold, p, a, lattice, span=0.004, evaluations=40)
+
+    scored = sorted(((fold.contrast(p, a, lattice), p, a) for p, a in hyps), reverse=True)
+    pitch, angle, best = max((refined(p, a) for _, p, a in scored[:FOLD_REFINE]),
+                             key=lambda t: t[2])
+    for _ in range(3):   # walk the scale: the lattice, not a finer or coarser relative
+        near = _relatives(pitch, angle, lattice)
+        moves = [(refined(p, a), 1 / FINER_KEEP) for p, a in near[1::2]
+                 if p <= PITCH_RANGE_PX[1]]
+        moves += [(refined(p, a), FINER_KEEP) for p, a in near[2::2] if p >= PITCH_RANGE_PX[0]]
+        keep = [m for m, need in moves if m[2] >= need * best]
+        if not keep:
+            break
+        pitch, angle, best = max(keep, key=lambda t: t[2])
+    pitch, angle, best = _refine_by_fold(fold, pitch, angle, lattice, span=0.001, evaluations=80)
+    return pitch, angle, best
 
 
 # ----------------------------------------------------------------------------------------------
@@ -634,7 +847,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     r0, c0 = (rows - size) // 2, (cols - size) // 2
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
     spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
-    recip, score = _find_fundamental(spec, lattice)
+    recip, score, _ = _find_fundamental(spec, lattice)
     pitch, angle = _direct_from_reciprocal(recip, lattice)
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
