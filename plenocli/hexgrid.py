@@ -439,7 +439,14 @@ def _phase_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
 # 2b. ambiguous spectra (scene images): lattice hypotheses scored by the micro-image borders
 CONFIDENT_Z = 8.0      # every point of the first two rings above this: the spectrum is decisive
 FOLD_MAX_PX = 1024     # the fold is evaluated over a central region of at most this side
-FINER_KEEP = 0.6       # a finer relative replaces a lattice when it keeps this much contrast
+# a finer relative (pitch / sqrt(3) turned 30 deg, pitch / 2) replaces a lattice when it keeps
+# this share of its contrast. A false finer lattice mixes 3 (4) cell positions: about 1/3 of
+# the contrast for sqrt(3) and 1/2 for 2 (a honeycomb shifted by half a lattice vector overlaps
+# itself in part); the true lattice keeps about 1 against a coarser relative, down to ~0.55
+# against sqrt(3) on a multi-focus array whose three lens types (a sqrt(3) sub-lattice each)
+# differ in sharpness.
+FINER_KEEP = {"sqrt": 0.45, "half": 0.75}
+FOLD_CONTROL = 3.0     # the winner's contrast must beat detuned copies of it this many times
 HYPOTHESES_PER_SPECTRUM = 6   # strongest spectral lattices taken from each spectrum
 FOLD_REFINE = 6        # hypotheses refined locally (by their first fold contrast)
 
@@ -467,25 +474,25 @@ FOLD_SMOOTH_PX = 2.0   # folded structure broader than this (px) is removed (sce
 
 @numba.njit(cache=True)
 def _fold_sums(grad, inv00, inv01, inv10, inv11, bins):  # pragma: no cover - compiled
-    """Sum, sum of squares and count of ``grad`` per bin of the fractional lattice coordinates
-    (u, v) = inv @ (x, y) (x, y relative to the region centre), ``bins`` per unit, (bins^2,)."""
+    """Sum and count of ``grad`` per bin of the fractional lattice coordinates
+    (u, v) = inv @ (x, y) (x, y relative to the region centre), ``bins`` per unit, separately
+    for the four quadrants of the region: (4, bins^2) each."""
     rows, cols = grad.shape
-    total = np.zeros(bins * bins)
-    total2 = np.zeros(bins * bins)
-    count = np.zeros(bins * bins)
+    total = np.zeros((4, bins * bins))
+    count = np.zeros((4, bins * bins))
     xc, yc = (cols - 1) / 2, (rows - 1) / 2
     for r in range(rows):
         y = r - yc
+        qr = 2 * ((2 * r) // rows)
         for c in range(cols):
             x = c - xc
             u = (inv00 * x + inv01 * y) * bins
             v = (inv10 * x + inv11 * y) * bins
+            q = qr + (2 * c) // cols
             k = (int(np.floor(u)) % bins) * bins + int(np.floor(v)) % bins
-            g = grad[r, c]
-            total[k] += g
-            total2[k] += g * g
-            count[k] += 1.0
-    return total, total2, count
+            total[q, k] += grad[r, c]
+            count[q, k] += 1.0
+    return total, count
 
 
 @dataclass(frozen=True)
@@ -503,38 +510,39 @@ class _Fold:
     def contrast(self, pitch_px: float, angle_rad: float, lattice: str) -> float:
         """Border contrast of the lattice (pitch, angle): every pixel's gradient magnitude is
         folded onto one lattice cell (bins of about 1 x 1 px of the fractional lattice
-        coordinates); the result is the variance of the folded mean after removing its smooth
-        part (> 2 px), less the variance the bin means have by chance (sampling noise, which
-        grows with the number of bins), over the squared mean gradient. Scene content shifts
-        from lens to lens (parallax) and blurs out in the fold; the micro-image borders add up
-        only on the true lattice or a coarser one containing it (same contrast), a finer one
-        mixes several cell positions (about 1/3 or less). The smooth part goes because a scene
-        periodicity folds into broad stripes. Independent of the offset (a shift of the fold is
-        a cyclic shift of its bins)."""
+        coordinates), separately for the four quadrants of the region; the smooth part (> 2 px)
+        of each folded mean is removed and the result is the mean covariance of the quadrant
+        pairs over the squared mean gradient. Scene content shifts from lens to lens
+        (parallax) and blurs out in the fold; what is left of it, and a local repetition of
+        the scene (the parallax repeats it with a depth-dependent period), differs between
+        quadrants and averages out of the covariance (unlike a variance, which also grows
+        with the number of bins by chance); the micro-image borders are common to all. They
+        add up only on the true lattice or a coarser one containing it (the same
+        contrast); a finer one mixes several cell positions (about 1/3 or less). The smooth
+        part goes because a scene periodicity folds into broad stripes. Independent of the
+        offset (a shift of the fold is a cyclic shift of its bins)."""
         step = LATTICES[lattice]
         bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
         basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
                                      [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
         inv = np.linalg.inv(basis.T)
-        total, total2, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0],
-                                          inv[1, 1], bins)
-        n = np.maximum(count, 1)
-        mean = total / n
-        chance = float(np.mean(np.maximum(total2 / n - mean ** 2, 0) / n))
-        filled = count > 0
-        mean = mean.reshape(bins, bins)
+        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        mean = (total / np.maximum(count, 1)).reshape(4, bins, bins)
+        filled = (count > 0).reshape(4, bins, bins)
         if not filled.all():   # a rational pitch / row ratio can leave bins empty
-            f = filled.reshape(mean.shape).astype(np.float64)
+            f = filled.astype(np.float64)
             near = _wrap_blur(mean * f, 1.0) / np.maximum(_wrap_blur(f, 1.0), 1e-9)
-            mean = np.where(f > 0, mean, near)
+            mean = np.where(filled, mean, near)
         fine = mean - _wrap_blur(mean, FOLD_SMOOTH_PX * bins / pitch_px)
-        return (float(np.var(fine)) - chance) / self.mean_sq
+        fine = fine.reshape(4, -1)
+        pairs = fine.sum(axis=0) ** 2 - (fine ** 2).sum(axis=0)   # 2 x sum over pairs
+        return float(np.mean(pairs)) / (12 * self.mean_sq)
 
 
 def _wrap_blur(a: np.ndarray, sigma: float) -> np.ndarray:
     from scipy import ndimage
 
-    return ndimage.gaussian_filter(a, sigma, mode="wrap")
+    return ndimage.gaussian_filter(a, (0, sigma, sigma), mode="wrap")   # (4, bins, bins)
 
 
 def _refine_by_fold(fold: _Fold, pitch: float, angle: float, lattice: str, *,
@@ -574,15 +582,15 @@ def _windows(shape: tuple[int, int], size: int) -> list[tuple[int, int]]:
     return out
 
 
-def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str,
-                spectra: list[_Spectrum]) -> list[tuple[float, float]]:
-    """Lattice hypotheses (pitch px, angle rad): the strongest spectral lattices of the given
-    spectra and of the intensity and gradient-magnitude spectra of square windows along the
-    frame, with their harmonic and sub-harmonic relatives."""
+def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str
+                ) -> tuple[list[tuple[float, float]], list[_Spectrum]]:
+    """Lattice hypotheses (pitch px, angle rad): the strongest spectral lattices of the
+    intensity and gradient-magnitude spectra of square windows along the
+    frame, with their harmonic and sub-harmonic relatives; and the intensity spectra."""
     rows, cols = image.shape
     size = min(rows, cols, FFT_CROP_PX)
     size -= size % 2
-    spectra = list(spectra)
+    spectra = []
     for r0, c0 in _windows((rows, cols), size):
         flat = flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa)
         spectra.append(_spectrum(flat, cfa=bool(cfa)))
@@ -591,6 +599,7 @@ def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str,
     out: list[tuple[float, float]] = []
     for spec in spectra:
         _, _, cands = _find_fundamental(spec, lattice, strict=False)
+        cands = [c for c in cands if c[1] > 0]   # some evidence of a whole lattice
         for recip, _ in sorted(cands, key=lambda t: -t[1])[:HYPOTHESES_PER_SPECTRUM]:
             for pitch, angle in _relatives(*_direct_from_reciprocal(recip, lattice), lattice):
                 if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
@@ -600,11 +609,23 @@ def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str,
                                                          - step / 2) < 0.01 for p, a in out):
                     continue
                 out.append((pitch, angle))
-    return out
+    return out, spectra[::2]
 
 
-def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str,
-                     spectra: list[_Spectrum]) -> tuple[float, float, float]:
+def _fundamental_seen(spectra: list[_Spectrum], pitch: float, angle: float,
+                      lattice: str) -> bool:
+    """Whether the intensity spectra show the first reciprocal ring of the lattice (mean z over
+    its points and the spectra above PEAK_Z): then the lattice is real periodic structure and a
+    finer relative (which has no peaks there) is not the lens lattice, however sharply it
+    folds. A multi-focus array's coarser lens-type lattice shows no such ring on a scene."""
+    grid = LensGrid(pitch, angle, (0.0, 0.0), lattice)
+    g = np.linalg.inv(grid.basis()).T[0]
+    ring = _ring_vectors(g, lattice)[0]
+    return bool(np.mean([np.mean(spec.z_at(ring)) for spec in spectra]) > PEAK_Z)
+
+
+def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str
+                     ) -> tuple[float, float, float]:
     """(pitch px, angle rad, contrast) of the hypothesis whose micro-image borders fold
     sharpest, refined locally; the finest lattice that keeps most of that contrast (a
     multi-focus array also folds sharply on its coarser sub-lattice of one lens type)."""
@@ -612,7 +633,7 @@ def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str,
     r0, c0 = max(0, (rows - FOLD_MAX_PX) // 2), max(0, (cols - FOLD_MAX_PX) // 2)
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2
     region = image[r0:r0 + FOLD_MAX_PX, c0:c0 + FOLD_MAX_PX]
-    hyps = _hypotheses(image, cfa, lattice, spectra)
+    hyps, spectra = _hypotheses(image, cfa, lattice)
     if not hyps:
         raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
                                f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
@@ -628,14 +649,25 @@ def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str,
                              key=lambda t: t[2])
     for _ in range(3):   # walk the scale: the lattice, not a finer or coarser relative
         near = _relatives(pitch, angle, lattice)
-        moves = [(refined(p, a), 1 / FINER_KEEP) for p, a in near[1::2]
-                 if p <= PITCH_RANGE_PX[1]]
-        moves += [(refined(p, a), FINER_KEEP) for p, a in near[2::2] if p >= PITCH_RANGE_PX[0]]
-        keep = [m for m, need in moves if m[2] >= need * best]
-        if not keep:
+        moves = []
+        for k, (p, a) in enumerate(near[1:]):
+            keep = FINER_KEEP["sqrt" if k < 2 else "half"]
+            if k % 2 == 0 and p <= PITCH_RANGE_PX[1]:      # coarser
+                moves.append((refined(p, a), 1 / keep))
+            elif k % 2 == 1 and p >= PITCH_RANGE_PX[0] and not _fundamental_seen(
+                    spectra, pitch, angle, lattice):   # finer, unless the spectrum shows ours
+                moves.append((refined(p, a), keep))
+        better = [m for m, need in moves if m[2] >= need * best]
+        if not better:
             break
-        pitch, angle, best = max(keep, key=lambda t: t[2])
+        pitch, angle, best = max(better, key=lambda t: t[2])
     pitch, angle, best = _refine_by_fold(fold, pitch, angle, lattice, span=0.001, evaluations=80)
+    control = max(fold.contrast(pitch * f, angle + da, lattice)
+                  for f, da in ((1.03, 0.0), (0.97, 0.0), (1.0, 0.05), (1.0, -0.05)))
+    if not best > FOLD_CONTROL * max(control, 0.0):
+        raise CalibrationError("no micro-lens lattice found: no lattice hypothesis shows "
+                               "micro-image borders; pass a white image (or a scene) taken "
+                               "through the lens array")
     return pitch, angle, best
 
 
@@ -847,8 +879,13 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     r0, c0 = (rows - size) // 2, (cols - size) // 2
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
     spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
-    recip, score, _ = _find_fundamental(spec, lattice)
-    pitch, angle = _direct_from_reciprocal(recip, lattice)
+    recip, score, _ = _find_fundamental(spec, lattice, strict=False)
+    if recip is not None and _spectrum_is_decisive(spec, recip, lattice):
+        pitch, angle = _direct_from_reciprocal(recip, lattice)
+    else:
+        # a scene image (or a small crop): repeated scene content can outscore the lattice in
+        # the spectrum; the micro-image borders decide between the spectral hypotheses
+        pitch, angle, score = _lattice_by_fold(image, cfa, lattice)
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
                                f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
