@@ -446,6 +446,11 @@ FOLD_MAX_PX = 1024     # the fold is evaluated over a central region of at most 
 # against sqrt(3) on a multi-focus array whose three lens types (a sqrt(3) sub-lattice each)
 # differ in sharpness.
 FINER_KEEP = {"sqrt": 0.45, "half": 0.75}
+# the fold's rotation is good to about this many rad times 1 / (side of the fold region in px)
+# (1/8 of its quadratic-fit grid step; R42 crop: 0.009 deg from the XML = 0.3 of a step).
+# A lattice fitted through scene centres is kept when its standard error is smaller (large
+# frames: origami 0.001 deg against a fold precision of 0.004 deg)
+FOLD_ANGLE_PRECISION = 0.0625
 FOLD_CONTROL = 3.0     # the winner's contrast must beat detuned copies of it this many times
 HYPOTHESES_PER_SPECTRUM = 6   # strongest spectral lattices taken from each spectrum
 FOLD_REFINE = 6        # hypotheses refined locally (by their first fold contrast)
@@ -561,6 +566,28 @@ def _refine_by_fold(fold: _Fold, pitch: float, angle: float, lattice: str, *,
     return float(pitch * np.exp(res.x[0])), float(angle + res.x[1]), float(-res.fun)
 
 
+def _fold_peak(fold: _Fold, pitch: float, angle: float, lattice: str) -> tuple[float, float]:
+    """Centre of a quadratic fitted to the contrast on a 7 x 7 grid around (pitch, angle): the
+    binned contrast is bumpy at the scale of a few hundredths of a degree, the fit averages
+    the bumps. The grid spans +-3/4 of the detuning that shifts the region's edge by 1 px."""
+    rows, cols = fold.grad.shape
+    h = 0.5 / max(rows, cols)       # relative pitch step and angle step (rad)
+    k = np.arange(-3, 4) * h
+    dp, da = np.meshgrid(k, k, indexing="ij")
+    c = np.array([fold.contrast(pitch * (1 + x), angle + y, lattice)
+                  for x, y in zip(dp.ravel(), da.ravel(), strict=True)])
+    x, y = dp.ravel() / h, da.ravel() / h
+    a = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+    q, *_ = np.linalg.lstsq(a, c, rcond=None)
+    hess = np.array([[2 * q[3], q[4]], [q[4], 2 * q[5]]])
+    if not (np.all(np.linalg.eigvalsh(hess) < 0)):
+        return pitch, angle
+    peak = np.linalg.solve(hess, -q[1:3])
+    if np.any(np.abs(peak) > 3):    # outside the grid: keep the direct optimum
+        return pitch, angle
+    return pitch * (1 + peak[0] * h), angle + peak[1] * h
+
+
 def _relatives(pitch: float, angle: float, lattice: str) -> list[tuple[float, float]]:
     """The lattice, its sub-lattices of index 3 / 4 (hex) or 2 / 4 (square) and the finer
     lattices it is a sub-lattice of: a spectral peak may be a harmonic or a sub-harmonic."""
@@ -662,6 +689,7 @@ def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str
             break
         pitch, angle, best = max(better, key=lambda t: t[2])
     pitch, angle, best = _refine_by_fold(fold, pitch, angle, lattice, span=0.001, evaluations=80)
+    pitch, angle = _fold_peak(fold, pitch, angle, lattice)
     control = max(fold.contrast(pitch * f, angle + da, lattice)
                   for f, da in ((1.03, 0.0), (0.97, 0.0), (1.0, 0.05), (1.0, -0.05)))
     if not best > FOLD_CONTROL * max(control, 0.0):
@@ -880,12 +908,23 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
     spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
     recip, score, _ = _find_fundamental(spec, lattice, strict=False)
+    folded = None
     if recip is not None and _spectrum_is_decisive(spec, recip, lattice):
         pitch, angle = _direct_from_reciprocal(recip, lattice)
     else:
         # a scene image (or a small crop): repeated scene content can outscore the lattice in
         # the spectrum; the micro-image borders decide between the spectral hypotheses
         pitch, angle, score = _lattice_by_fold(image, cfa, lattice)
+        folded = (pitch, angle)
+        # the fold measures the central region; where the spectrum has peaks on that lattice,
+        # their least-squares fit is the start (as for a white image), the fold's otherwise
+        g = np.linalg.inv(LensGrid(pitch, angle, (0.0, 0.0), lattice).basis()).T[0]
+        peaks = _refine_reciprocal(spec, g, lattice, kmax=min(SCORE_BAND, 3.1 * np.linalg.norm(g)))
+        p_spec, a_spec = _direct_from_reciprocal(peaks, lattice)
+        step = LATTICES[lattice]
+        if (_score(spec, peaks) > 0 and abs(p_spec / pitch - 1) < 0.002
+                and abs((a_spec - angle + step / 2) % step - step / 2) < 0.002):
+            pitch, angle = p_spec, a_spec
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
                                f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
@@ -908,6 +947,18 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
         if np.array_equal(new_use, use):
             break
         use = new_use
+    spread = np.sqrt(np.sum((centres[use] - centres[use].mean(axis=0)) ** 2))
+    angle_se = np.sqrt(np.mean(resid[use] ** 2)) / max(spread, 1e-9)   # rad
+    if folded is not None and angle_se > FOLD_ANGLE_PRECISION / min(max(rows, cols),
+                                                                    FOLD_MAX_PX):
+        # a scene with few lenses: its micro-images are not symmetric and their centres follow
+        # the content, so the rotation of the lattice fitted through them is less certain than
+        # the fold's; the borders (the fold) give pitch and rotation, the centres the offset
+        step = LATTICES[lattice]
+        pitch, angle = folded[0], angle + (folded[1] - angle + step / 2) % step - step / 2
+        basis = LensGrid(pitch, angle, (0.0, 0.0), lattice).basis()
+        offset = tuple(float(v) for v in np.mean(centres[use] - idx[use] @ basis, axis=0))
+        fitted = LensGrid(pitch, angle, offset, lattice)
     grid = _reindexed(pitch, angle, offset, lattice, (rows, cols))
     # re-express indices relative to the reindexed lens (0, 0)
     di, dj = fitted.nearest_index(*grid.offset_xy)
