@@ -543,6 +543,36 @@ class _Fold:
         pairs = fine.sum(axis=0) ** 2 - (fine ** 2).sum(axis=0)   # 2 x sum over pairs
         return float(np.mean(pairs)) / (12 * self.mean_sq)
 
+    def centre(self, pitch_px: float, angle_rad: float, lattice: str) -> np.ndarray:
+        """A micro-image centre (x, y) px relative to the region centre, to about half a pixel:
+        the point of the folded borders that is both a 2-fold and a 3-fold (hex) or 4-fold
+        (square) symmetry centre. The honeycomb of borders is also point-symmetric about its
+        edge midpoints and 3-fold about its vertices; only the cell centre is both."""
+        step = LATTICES[lattice]
+        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
+        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
+                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
+        inv = np.linalg.inv(basis.T)
+        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        mean = (total.sum(0) / np.maximum(count.sum(0), 1)).reshape(bins, bins)
+        fine = mean - _wrap_blur(mean[None], FOLD_SMOOTH_PX * bins / pitch_px)[0]
+        d = np.arange(bins)
+        du, dv = np.meshgrid(d, d, indexing="ij")
+        # rotations about bin (0, 0) in lattice coordinates: by 180 deg, and by 120 deg (hex:
+        # b1 -> b2 - b1, b2 -> -b1) or 90 deg (square: b1 -> b2, b2 -> -b1)
+        turn = ((-du - dv) % bins, du) if lattice == "hex" else ((-dv) % bins, du)
+        flip = ((-du) % bins, (-dv) % bins)
+        score = np.empty((bins, bins))
+        for cu in range(bins):
+            for cv in range(bins):
+                f = np.roll(fine, (-cu, -cv), axis=(0, 1))   # candidate centre at (0, 0)
+                score[cu, cv] = np.sum(f * f[flip]) + np.sum(f * f[turn])
+        cu, cv = np.unravel_index(np.argmax(score), score.shape)
+        su = _parabola(score[(cu - 1) % bins, cv], score[cu, cv], score[(cu + 1) % bins, cv])
+        sv = _parabola(score[cu, (cv - 1) % bins], score[cu, cv], score[cu, (cv + 1) % bins])
+        uv = (np.array([cu + su, cv + sv]) + 0.5) / bins
+        return uv @ basis
+
 
 def _wrap_blur(a: np.ndarray, sigma: float) -> np.ndarray:
     from scipy import ndimage
@@ -652,10 +682,10 @@ def _fundamental_seen(spectra: list[_Spectrum], pitch: float, angle: float,
 
 
 def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str
-                     ) -> tuple[float, float, float]:
-    """(pitch px, angle rad, contrast) of the hypothesis whose micro-image borders fold
-    sharpest, refined locally; the finest lattice that keeps most of that contrast (a
-    multi-focus array also folds sharply on its coarser sub-lattice of one lens type)."""
+                     ) -> tuple[float, float, float, tuple[float, float]]:
+    """(pitch px, angle rad, contrast, a lens centre (x, y) px) of the hypothesis whose
+    micro-image borders fold sharpest, refined locally, at the scale where no finer or coarser
+    relative folds clearly better (see FINER_KEEP)."""
     rows, cols = image.shape
     r0, c0 = max(0, (rows - FOLD_MAX_PX) // 2), max(0, (cols - FOLD_MAX_PX) // 2)
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2
@@ -696,7 +726,10 @@ def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str
         raise CalibrationError("no micro-lens lattice found: no lattice hypothesis shows "
                                "micro-image borders; pass a white image (or a scene) taken "
                                "through the lens array")
-    return pitch, angle, best
+    rows_r, cols_r = region.shape
+    centre = fold.centre(pitch, angle, lattice) + np.array([c0 + (cols_r - 1) / 2,
+                                                            r0 + (rows_r - 1) / 2])
+    return pitch, angle, best, (float(centre[0]), float(centre[1]))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -908,13 +941,14 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
     spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
     recip, score, _ = _find_fundamental(spec, lattice, strict=False)
-    folded = None
+    folded, start_xy, fold_xy = None, None, None
     if recip is not None and _spectrum_is_decisive(spec, recip, lattice):
         pitch, angle = _direct_from_reciprocal(recip, lattice)
     else:
         # a scene image (or a small crop): repeated scene content can outscore the lattice in
         # the spectrum; the micro-image borders decide between the spectral hypotheses
-        pitch, angle, score = _lattice_by_fold(image, cfa, lattice)
+        pitch, angle, score, fold_xy = _lattice_by_fold(image, cfa, lattice)
+        start_xy = fold_xy
         folded = (pitch, angle)
         # the fold measures the central region; where the spectrum has peaks on that lattice,
         # their least-squares fit is the start (as for a white image), the fold's otherwise
@@ -925,12 +959,15 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
         if (_score(spec, peaks) > 0 and abs(p_spec / pitch - 1) < 0.002
                 and abs((a_spec - angle + step / 2) % step - step / 2) < 0.002):
             pitch, angle = p_spec, a_spec
+            start_xy = None   # and the phases of those peaks the offset
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
                                f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
     flat = flatten(image, cfa=cfa, scale_px=max(FLAT_SCALE * pitch, 8.0))
     grid = LensGrid(pitch, angle, (0.0, 0.0), lattice, image_shape=(rows, cols))
-    grid = _reindexed(pitch, angle, _phase_offset(flat, grid), lattice, (rows, cols))
+    if start_xy is None:   # the phases of the fundamentals; a scene may have none: its fold
+        start_xy = _phase_offset(flat, grid)
+    grid = _reindexed(pitch, angle, start_xy, lattice, (rows, cols))
 
     idx, centres, refined = refine_centres(flat, grid)
     n_ref = int(refined.sum())
@@ -952,12 +989,13 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     if folded is not None and angle_se > FOLD_ANGLE_PRECISION / min(max(rows, cols),
                                                                     FOLD_MAX_PX):
         # a scene with few lenses: its micro-images are not symmetric and their centres follow
-        # the content, so the rotation of the lattice fitted through them is less certain than
-        # the fold's; the borders (the fold) give pitch and rotation, the centres the offset
+        # the content, so the lattice fitted through them is less certain than the fold's; the
+        # borders (the fold) give pitch, rotation and offset
         step = LATTICES[lattice]
         pitch, angle = folded[0], angle + (folded[1] - angle + step / 2) % step - step / 2
         basis = LensGrid(pitch, angle, (0.0, 0.0), lattice).basis()
-        offset = tuple(float(v) for v in np.mean(centres[use] - idx[use] @ basis, axis=0))
+        i, j = fitted.nearest_index(*fold_xy)
+        offset = tuple(float(v) for v in np.asarray(fold_xy) - i * basis[0] - j * basis[1])
         fitted = LensGrid(pitch, angle, offset, lattice)
     grid = _reindexed(pitch, angle, offset, lattice, (rows, cols))
     # re-express indices relative to the reindexed lens (0, 0)
