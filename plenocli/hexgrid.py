@@ -11,6 +11,11 @@ Method (paper section 5.2, made precise):
    the whole hexagonal (or square) pattern it predicts (first three rings), so a single false
    periodicity from repeated scene content cannot win; then finer lattices are tried (a
    hypothesis that only saw a harmonic is replaced by the lattice whose extra peaks are present).
+   2b. When the spectrum is not decisive (scene images, small crops: the parallax repeats scene
+   content with periods that outscore the lattice), hypotheses from several windows and from
+   the gradient-magnitude spectrum are scored by how sharply the micro-image borders fold onto
+   one lattice cell (independent of the scene), refined, and walked in scale; see
+   ``_lattice_by_fold`` and docs/calibrate.md.
 3. **Sub-bin lattice.** Every harmonic with a clear peak is located with a parabolic fit; the
    reciprocal basis is the least-squares fit of all of them; the offset comes from the phases of
    the fundamentals (direct DFT at the fitted frequencies).
@@ -55,7 +60,7 @@ class CalibrationReport:
     outliers: int
     residual_rms_px: float
     residual_max_px: float
-    spectrum_score: float
+    spectrum_score: float      # spectral lattice score, or the border-fold contrast (scenes)
     centres_refined: bool = True   # False: a scene image, the centres are the lattice's
 
     def to_dict(self) -> dict:
