@@ -11,6 +11,11 @@ Method (paper section 5.2, made precise):
    the whole hexagonal (or square) pattern it predicts (first three rings), so a single false
    periodicity from repeated scene content cannot win; then finer lattices are tried (a
    hypothesis that only saw a harmonic is replaced by the lattice whose extra peaks are present).
+   2b. When the spectrum is not decisive (scene images, small crops: the parallax repeats scene
+   content with periods that outscore the lattice), hypotheses from several windows and from
+   the gradient-magnitude spectrum are scored by how sharply the micro-image borders fold onto
+   one lattice cell (independent of the scene), refined, and walked in scale; see
+   ``_lattice_by_fold`` and docs/calibrate.md.
 3. **Sub-bin lattice.** Every harmonic with a clear peak is located with a parabolic fit; the
    reciprocal basis is the least-squares fit of all of them; the offset comes from the phases of
    the fundamentals (direct DFT at the fitted frequencies).
@@ -55,7 +60,7 @@ class CalibrationReport:
     outliers: int
     residual_rms_px: float
     residual_max_px: float
-    spectrum_score: float
+    spectrum_score: float      # spectral lattice score, or the border-fold contrast (scenes)
     centres_refined: bool = True   # False: a scene image, the centres are the lattice's
 
     def to_dict(self) -> dict:
@@ -262,10 +267,13 @@ def _lattice_points(recip: np.ndarray, kmax: float) -> np.ndarray:
     return pts[keep]
 
 
-def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]:
-    """The reciprocal basis (2, 2) (rows g1, g2, cycles/px) of the best-supported lattice, and
-    its score. Candidates: each strong peak taken as a fundamental, then as a harmonic of a
-    finer lattice (g/2, g/sqrt(3) turned 30 deg for hex; g/2, g/sqrt(2) turned 45 deg square)."""
+def _find_fundamental(spec: _Spectrum, lattice: str, *, strict: bool = True
+                      ) -> tuple[np.ndarray | None, float, list[tuple[np.ndarray, float]]]:
+    """The reciprocal basis (2, 2) (rows g1, g2, cycles/px) of the best-supported lattice, its
+    score, and every hypothesis tried as (basis, score); with ``strict`` False, (None, -inf or
+    the best score, hypotheses) instead of an error when no lattice stands out. Candidates: each
+    strong peak taken as a fundamental, then as a harmonic of a finer lattice (g/2, g/sqrt(3)
+    turned 30 deg for hex; g/2, g/sqrt(2) turned 45 deg square)."""
     z = np.where(spec.valid, spec.z, -np.inf)
     size = spec.size
     fy = np.fft.fftfreq(size)[:, None]
@@ -277,12 +285,15 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
     local = cv2.dilate(z.astype(np.float32), np.ones((5, 5), np.uint8))
     peaks = np.argwhere((z >= local) & (radius >= fmin) & (radius <= 2 * fmax) & (z > PEAK_Z))
     if len(peaks) == 0:
+        if not strict:
+            return None, -np.inf, []
         raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
                                f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
                                "pass a white image (or a scene) taken through the lens array")
     order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:16]
     best, best_recip = -np.inf, None
     tried: list[np.ndarray] = []
+    candidates: list[tuple[np.ndarray, float]] = []
     for r, c in peaks[order]:
         g0 = _subbin_peak(spec, r, c)
         finer = [g0, g0 / 2] + ([_rot(np.pi / 6) @ g0 / np.sqrt(3)] if lattice == "hex"
@@ -296,9 +307,12 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
             recip = _refine_reciprocal(spec, g, lattice, kmax=min(SCORE_BAND,
                                                                   3.1 * np.linalg.norm(g)))
             s = _score(spec, recip)
+            candidates.append((recip, s))
             if s > best:
                 best, best_recip = s, recip
     if best_recip is None or best <= 0:
+        if not strict:
+            return None, best, candidates
         raise CalibrationError("no micro-lens lattice found: spectral peaks exist but none forms "
                                f"a {lattice} lattice; check --lattice, or pass a white image")
     # the best hypothesis may still be a harmonic lattice when the fundamentals are weak (white
@@ -318,7 +332,7 @@ def _find_fundamental(spec: _Spectrum, lattice: str) -> tuple[np.ndarray, float]
                 break
         else:
             break
-    return best_recip, best
+    return best_recip, best, candidates
 
 
 def _same_lattice(g: np.ndarray, other: np.ndarray, step: float) -> bool:
@@ -424,6 +438,303 @@ def _phase_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
         frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
     x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
     return float(x0[0]), float(x0[1])
+
+
+# ----------------------------------------------------------------------------------------------
+# 2b. ambiguous spectra (scene images): lattice hypotheses scored by the micro-image borders
+CONFIDENT_Z = 8.0      # every point of the first two rings above this: the spectrum is decisive
+FOLD_MAX_PX = 1024     # the fold is evaluated over a central region of at most this side
+# a finer relative (pitch / sqrt(3) turned 30 deg, pitch / 2) replaces a lattice when it keeps
+# this share of its contrast. A false finer lattice mixes 3 (4) cell positions: about 1/3 of
+# the contrast for sqrt(3) and 1/2 for 2 (a honeycomb shifted by half a lattice vector overlaps
+# itself in part); the true lattice keeps about 1 against a coarser relative, down to ~0.55
+# against sqrt(3) on a multi-focus array whose three lens types (a sqrt(3) sub-lattice each)
+# differ in sharpness.
+FINER_KEEP = {"sqrt": 0.45, "half": 0.75}
+# the fold's rotation is good to about this many rad times 1 / (side of the fold region in px)
+# (1/8 of its quadratic-fit grid step; R42 crop: 0.009 deg from the XML = 0.3 of a step).
+# A lattice fitted through scene centres is kept when its standard error is smaller (large
+# frames: origami 0.001 deg against a fold precision of 0.004 deg)
+FOLD_ANGLE_PRECISION = 0.0625
+FOLD_CONTROL = 3.0     # the winner's contrast must beat detuned copies of it this many times
+HYPOTHESES_PER_SPECTRUM = 6   # strongest spectral lattices taken from each spectrum
+FOLD_REFINE = 6        # hypotheses refined locally (by their first fold contrast)
+
+
+def _spectrum_is_decisive(spec: _Spectrum, recip: np.ndarray, lattice: str) -> bool:
+    """A white image shows every point of the first two reciprocal rings as a strong peak; a
+    scene image (parallax-repeated content, weak or missing lattice peaks) does not."""
+    rings = _ring_vectors(recip[0], lattice)[:2]
+    z = np.concatenate([spec.z_at(r) for r in rings])
+    return bool(np.all(z >= CONFIDENT_Z))
+
+
+def _gradient_magnitude(flat: np.ndarray) -> np.ndarray:
+    """|grad| of a flattened image (central differences), clipped at its 99th percentile so a few
+    strong scene edges do not dominate the fold."""
+    gx = cv2.Sobel(flat, cv2.CV_32F, 1, 0, ksize=1)
+    gy = cv2.Sobel(flat, cv2.CV_32F, 0, 1, ksize=1)
+    grad = np.sqrt(gx * gx + gy * gy)
+    return np.minimum(grad, np.float32(np.percentile(grad, 99)))
+
+
+FOLD_BIN_PX = 1.0      # fold bin size (px): the same sharpness scale for every pitch
+FOLD_SMOOTH_PX = 2.0   # folded structure broader than this (px) is removed (scene stripes)
+
+
+@numba.njit(cache=True)
+def _fold_sums(grad, inv00, inv01, inv10, inv11, bins):  # pragma: no cover - compiled
+    """Sum and count of ``grad`` per bin of the fractional lattice coordinates
+    (u, v) = inv @ (x, y) (x, y relative to the region centre), ``bins`` per unit, separately
+    for the four quadrants of the region: (4, bins^2) each."""
+    rows, cols = grad.shape
+    total = np.zeros((4, bins * bins))
+    count = np.zeros((4, bins * bins))
+    xc, yc = (cols - 1) / 2, (rows - 1) / 2
+    for r in range(rows):
+        y = r - yc
+        qr = 2 * ((2 * r) // rows)
+        for c in range(cols):
+            x = c - xc
+            u = (inv00 * x + inv01 * y) * bins
+            v = (inv10 * x + inv11 * y) * bins
+            q = qr + (2 * c) // cols
+            k = (int(np.floor(u)) % bins) * bins + int(np.floor(v)) % bins
+            total[q, k] += grad[r, c]
+            count[q, k] += 1.0
+    return total, count
+
+
+@dataclass(frozen=True)
+class _Fold:
+    """Gradient magnitude of a region, ready to be folded onto lattice cells."""
+
+    grad: np.ndarray      # (rows, cols) float32
+    mean_sq: float        # mean of grad, squared (normalisation)
+
+    @classmethod
+    def of(cls, grad: np.ndarray) -> _Fold:
+        grad = np.ascontiguousarray(grad, np.float32)
+        return cls(grad=grad, mean_sq=max(float(np.mean(grad)) ** 2, 1e-24))
+
+    def contrast(self, pitch_px: float, angle_rad: float, lattice: str) -> float:
+        """Border contrast of the lattice (pitch, angle): every pixel's gradient magnitude is
+        folded onto one lattice cell (bins of about 1 x 1 px of the fractional lattice
+        coordinates), separately for the four quadrants of the region; the smooth part (> 2 px)
+        of each folded mean is removed and the result is the mean covariance of the quadrant
+        pairs over the squared mean gradient. Scene content shifts from lens to lens
+        (parallax) and blurs out in the fold; what is left of it, and a local repetition of
+        the scene (the parallax repeats it with a depth-dependent period), differs between
+        quadrants and averages out of the covariance (unlike a variance, which also grows
+        with the number of bins by chance); the micro-image borders are common to all. They
+        add up only on the true lattice or a coarser one containing it (the same
+        contrast); a finer one mixes several cell positions (about 1/3 or less). The smooth
+        part goes because a scene periodicity folds into broad stripes. Independent of the
+        offset (a shift of the fold is a cyclic shift of its bins)."""
+        step = LATTICES[lattice]
+        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
+        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
+                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
+        inv = np.linalg.inv(basis.T)
+        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        mean = (total / np.maximum(count, 1)).reshape(4, bins, bins)
+        filled = (count > 0).reshape(4, bins, bins)
+        if not filled.all():   # a rational pitch / row ratio can leave bins empty
+            f = filled.astype(np.float64)
+            near = _wrap_blur(mean * f, 1.0) / np.maximum(_wrap_blur(f, 1.0), 1e-9)
+            mean = np.where(filled, mean, near)
+        fine = mean - _wrap_blur(mean, FOLD_SMOOTH_PX * bins / pitch_px)
+        fine = fine.reshape(4, -1)
+        pairs = fine.sum(axis=0) ** 2 - (fine ** 2).sum(axis=0)   # 2 x sum over pairs
+        return float(np.mean(pairs)) / (12 * self.mean_sq)
+
+    def centre(self, pitch_px: float, angle_rad: float, lattice: str) -> np.ndarray:
+        """A micro-image centre (x, y) px relative to the region centre, to about half a pixel:
+        the point of the folded borders that is both a 2-fold and a 3-fold (hex) or 4-fold
+        (square) symmetry centre. The honeycomb of borders is also point-symmetric about its
+        edge midpoints and 3-fold about its vertices; only the cell centre is both."""
+        step = LATTICES[lattice]
+        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
+        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
+                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
+        inv = np.linalg.inv(basis.T)
+        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        mean = (total.sum(0) / np.maximum(count.sum(0), 1)).reshape(bins, bins)
+        fine = mean - _wrap_blur(mean[None], FOLD_SMOOTH_PX * bins / pitch_px)[0]
+        d = np.arange(bins)
+        du, dv = np.meshgrid(d, d, indexing="ij")
+        # rotations about bin (0, 0) in lattice coordinates: by 180 deg, and by 120 deg (hex:
+        # b1 -> b2 - b1, b2 -> -b1) or 90 deg (square: b1 -> b2, b2 -> -b1)
+        turn = ((-du - dv) % bins, du) if lattice == "hex" else ((-dv) % bins, du)
+        flip = ((-du) % bins, (-dv) % bins)
+        score = np.empty((bins, bins))
+        for cu in range(bins):
+            for cv in range(bins):
+                f = np.roll(fine, (-cu, -cv), axis=(0, 1))   # candidate centre at (0, 0)
+                score[cu, cv] = np.sum(f * f[flip]) + np.sum(f * f[turn])
+        cu, cv = np.unravel_index(np.argmax(score), score.shape)
+        su = _parabola(score[(cu - 1) % bins, cv], score[cu, cv], score[(cu + 1) % bins, cv])
+        sv = _parabola(score[cu, (cv - 1) % bins], score[cu, cv], score[cu, (cv + 1) % bins])
+        uv = (np.array([cu + su, cv + sv]) + 0.5) / bins
+        return uv @ basis
+
+
+def _wrap_blur(a: np.ndarray, sigma: float) -> np.ndarray:
+    from scipy import ndimage
+
+    return ndimage.gaussian_filter(a, (0, sigma, sigma), mode="wrap")   # (4, bins, bins)
+
+
+def _refine_by_fold(fold: _Fold, pitch: float, angle: float, lattice: str, *,
+                    span: float, evaluations: int) -> tuple[float, float, float]:
+    """Local maximum of the border contrast around (pitch, angle): Nelder-Mead in (log pitch,
+    angle) with an initial step of ``span`` (relative pitch, rad), at most ``evaluations``
+    folds. Returns pitch px, angle rad, contrast."""
+    from scipy.optimize import minimize
+
+    def cost(p):
+        return -fold.contrast(pitch * np.exp(p[0]), angle + p[1], lattice)
+
+    res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                   options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
+                            "xatol": 1e-6, "fatol": 0, "maxfev": evaluations})
+    return float(pitch * np.exp(res.x[0])), float(angle + res.x[1]), float(-res.fun)
+
+
+def _fold_peak(fold: _Fold, pitch: float, angle: float, lattice: str) -> tuple[float, float]:
+    """Centre of a quadratic fitted to the contrast on a 7 x 7 grid around (pitch, angle): the
+    binned contrast is bumpy at the scale of a few hundredths of a degree, the fit averages
+    the bumps. The grid spans +-3/4 of the detuning that shifts the region's edge by 1 px."""
+    rows, cols = fold.grad.shape
+    h = 0.5 / max(rows, cols)       # relative pitch step and angle step (rad)
+    k = np.arange(-3, 4) * h
+    dp, da = np.meshgrid(k, k, indexing="ij")
+    c = np.array([fold.contrast(pitch * (1 + x), angle + y, lattice)
+                  for x, y in zip(dp.ravel(), da.ravel(), strict=True)])
+    x, y = dp.ravel() / h, da.ravel() / h
+    a = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+    q, *_ = np.linalg.lstsq(a, c, rcond=None)
+    hess = np.array([[2 * q[3], q[4]], [q[4], 2 * q[5]]])
+    if not (np.all(np.linalg.eigvalsh(hess) < 0)):
+        return pitch, angle
+    peak = np.linalg.solve(hess, -q[1:3])
+    if np.any(np.abs(peak) > 3):    # outside the grid: keep the direct optimum
+        return pitch, angle
+    return pitch * (1 + peak[0] * h), angle + peak[1] * h
+
+
+def _relatives(pitch: float, angle: float, lattice: str) -> list[tuple[float, float]]:
+    """The lattice, its sub-lattices of index 3 / 4 (hex) or 2 / 4 (square) and the finer
+    lattices it is a sub-lattice of: a spectral peak may be a harmonic or a sub-harmonic."""
+    turn, root = (np.pi / 6, np.sqrt(3)) if lattice == "hex" else (np.pi / 4, np.sqrt(2))
+    return [(pitch, angle), (pitch * root, angle + turn), (pitch / root, angle + turn),
+            (pitch * 2, angle), (pitch / 2, angle)]
+
+
+def _windows(shape: tuple[int, int], size: int) -> list[tuple[int, int]]:
+    """Top-left corners of square windows of ``size`` at the start, middle and end of the long
+    side (even, to keep the CFA phase); one window for a square image."""
+    rows, cols = shape
+    out = []
+    for fr in (0.0, 0.5, 1.0):
+        r0, c0 = int(fr * (rows - size)), int(fr * (cols - size))
+        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+        if (r0, c0) not in out:
+            out.append((r0, c0))
+    return out
+
+
+def _hypotheses(image: np.ndarray, cfa: str | None, lattice: str
+                ) -> tuple[list[tuple[float, float]], list[_Spectrum]]:
+    """Lattice hypotheses (pitch px, angle rad): the strongest spectral lattices of the
+    intensity and gradient-magnitude spectra of square windows along the
+    frame, with their harmonic and sub-harmonic relatives; and the intensity spectra."""
+    rows, cols = image.shape
+    size = min(rows, cols, FFT_CROP_PX)
+    size -= size % 2
+    spectra = []
+    for r0, c0 in _windows((rows, cols), size):
+        flat = flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa)
+        spectra.append(_spectrum(flat, cfa=bool(cfa)))
+        spectra.append(_spectrum(_gradient_magnitude(flat), cfa=bool(cfa)))
+    step = LATTICES[lattice]
+    out: list[tuple[float, float]] = []
+    for spec in spectra:
+        _, _, cands = _find_fundamental(spec, lattice, strict=False)
+        cands = [c for c in cands if c[1] > 0]   # some evidence of a whole lattice
+        for recip, _ in sorted(cands, key=lambda t: -t[1])[:HYPOTHESES_PER_SPECTRUM]:
+            for pitch, angle in _relatives(*_direct_from_reciprocal(recip, lattice), lattice):
+                if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
+                    continue
+                angle %= step
+                if any(abs(pitch / p - 1) < 0.01 and abs((angle - a + step / 2) % step
+                                                         - step / 2) < 0.01 for p, a in out):
+                    continue
+                out.append((pitch, angle))
+    return out, spectra[::2]
+
+
+def _fundamental_seen(spectra: list[_Spectrum], pitch: float, angle: float,
+                      lattice: str) -> bool:
+    """Whether the intensity spectra show the first reciprocal ring of the lattice (mean z over
+    its points and the spectra above PEAK_Z): then the lattice is real periodic structure and a
+    finer relative (which has no peaks there) is not the lens lattice, however sharply it
+    folds. A multi-focus array's coarser lens-type lattice shows no such ring on a scene."""
+    grid = LensGrid(pitch, angle, (0.0, 0.0), lattice)
+    g = np.linalg.inv(grid.basis()).T[0]
+    ring = _ring_vectors(g, lattice)[0]
+    return bool(np.mean([np.mean(spec.z_at(ring)) for spec in spectra]) > PEAK_Z)
+
+
+def _lattice_by_fold(image: np.ndarray, cfa: str | None, lattice: str
+                     ) -> tuple[float, float, float, tuple[float, float]]:
+    """(pitch px, angle rad, contrast, a lens centre (x, y) px) of the hypothesis whose
+    micro-image borders fold sharpest, refined locally, at the scale where no finer or coarser
+    relative folds clearly better (see FINER_KEEP)."""
+    rows, cols = image.shape
+    r0, c0 = max(0, (rows - FOLD_MAX_PX) // 2), max(0, (cols - FOLD_MAX_PX) // 2)
+    r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+    region = image[r0:r0 + FOLD_MAX_PX, c0:c0 + FOLD_MAX_PX]
+    hyps, spectra = _hypotheses(image, cfa, lattice)
+    if not hyps:
+        raise CalibrationError("no micro-lens lattice found: the image spectrum has no periodic "
+                               f"peaks for pitches {PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px; "
+                               "pass a white image (or a scene) taken through the lens array")
+    median_pitch = float(np.median([p for p, _ in hyps]))
+    fold = _Fold.of(_gradient_magnitude(flatten(region, cfa=cfa,
+                                                 scale_px=max(FLAT_SCALE * median_pitch, 8.0))))
+    def refined(p, a):
+        return _refine_by_fold(fold, p, a, lattice, span=0.004, evaluations=40)
+
+    scored = sorted(((fold.contrast(p, a, lattice), p, a) for p, a in hyps), reverse=True)
+    pitch, angle, best = max((refined(p, a) for _, p, a in scored[:FOLD_REFINE]),
+                             key=lambda t: t[2])
+    for _ in range(3):   # walk the scale: the lattice, not a finer or coarser relative
+        near = _relatives(pitch, angle, lattice)
+        moves = []
+        for k, (p, a) in enumerate(near[1:]):
+            keep = FINER_KEEP["sqrt" if k < 2 else "half"]
+            if k % 2 == 0 and p <= PITCH_RANGE_PX[1]:      # coarser
+                moves.append((refined(p, a), 1 / keep))
+            elif k % 2 == 1 and p >= PITCH_RANGE_PX[0] and not _fundamental_seen(
+                    spectra, pitch, angle, lattice):   # finer, unless the spectrum shows ours
+                moves.append((refined(p, a), keep))
+        better = [m for m, need in moves if m[2] >= need * best]
+        if not better:
+            break
+        pitch, angle, best = max(better, key=lambda t: t[2])
+    pitch, angle, best = _refine_by_fold(fold, pitch, angle, lattice, span=0.001, evaluations=80)
+    pitch, angle = _fold_peak(fold, pitch, angle, lattice)
+    control = max(fold.contrast(pitch * f, angle + da, lattice)
+                  for f, da in ((1.03, 0.0), (0.97, 0.0), (1.0, 0.05), (1.0, -0.05)))
+    if not best > FOLD_CONTROL * max(control, 0.0):
+        raise CalibrationError("no micro-lens lattice found: no lattice hypothesis shows "
+                               "micro-image borders; pass a white image (or a scene) taken "
+                               "through the lens array")
+    rows_r, cols_r = region.shape
+    centre = fold.centre(pitch, angle, lattice) + np.array([c0 + (cols_r - 1) / 2,
+                                                            r0 + (rows_r - 1) / 2])
+    return pitch, angle, best, (float(centre[0]), float(centre[1]))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -634,14 +945,34 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
     r0, c0 = (rows - size) // 2, (cols - size) // 2
     r0, c0 = r0 - r0 % 2, c0 - c0 % 2   # keep the CFA phase
     spec = _spectrum(flatten(image[r0:r0 + size, c0:c0 + size], cfa=cfa), cfa=bool(cfa))
-    recip, score = _find_fundamental(spec, lattice)
-    pitch, angle = _direct_from_reciprocal(recip, lattice)
+    recip, score, _ = _find_fundamental(spec, lattice, strict=False)
+    folded, start_xy, fold_xy = None, None, None
+    if recip is not None and _spectrum_is_decisive(spec, recip, lattice):
+        pitch, angle = _direct_from_reciprocal(recip, lattice)
+    else:
+        # a scene image (or a small crop): repeated scene content can outscore the lattice in
+        # the spectrum; the micro-image borders decide between the spectral hypotheses
+        pitch, angle, score, fold_xy = _lattice_by_fold(image, cfa, lattice)
+        start_xy = fold_xy
+        folded = (pitch, angle)
+        # the fold measures the central region; where the spectrum has peaks on that lattice,
+        # their least-squares fit is the start (as for a white image), the fold's otherwise
+        g = np.linalg.inv(LensGrid(pitch, angle, (0.0, 0.0), lattice).basis()).T[0]
+        peaks = _refine_reciprocal(spec, g, lattice, kmax=min(SCORE_BAND, 3.1 * np.linalg.norm(g)))
+        p_spec, a_spec = _direct_from_reciprocal(peaks, lattice)
+        step = LATTICES[lattice]
+        if (_score(spec, peaks) > 0 and abs(p_spec / pitch - 1) < 0.002
+                and abs((a_spec - angle + step / 2) % step - step / 2) < 0.002):
+            pitch, angle = p_spec, a_spec
+            start_xy = None   # and the phases of those peaks the offset
     if not PITCH_RANGE_PX[0] <= pitch <= PITCH_RANGE_PX[1]:
         raise CalibrationError(f"the lattice found has a pitch of {pitch:.2f} px, outside "
                                f"{PITCH_RANGE_PX[0]:g}-{PITCH_RANGE_PX[1]:g} px")
     flat = flatten(image, cfa=cfa, scale_px=max(FLAT_SCALE * pitch, 8.0))
     grid = LensGrid(pitch, angle, (0.0, 0.0), lattice, image_shape=(rows, cols))
-    grid = _reindexed(pitch, angle, _phase_offset(flat, grid), lattice, (rows, cols))
+    if start_xy is None:   # the phases of the fundamentals; a scene may have none: its fold
+        start_xy = _phase_offset(flat, grid)
+    grid = _reindexed(pitch, angle, start_xy, lattice, (rows, cols))
 
     idx, centres, refined = refine_centres(flat, grid)
     n_ref = int(refined.sum())
@@ -658,6 +989,19 @@ def calibrate(image: np.ndarray, *, lattice: str = "hex", cfa: str | None = None
         if np.array_equal(new_use, use):
             break
         use = new_use
+    spread = np.sqrt(np.sum((centres[use] - centres[use].mean(axis=0)) ** 2))
+    angle_se = np.sqrt(np.mean(resid[use] ** 2)) / max(spread, 1e-9)   # rad
+    if folded is not None and angle_se > FOLD_ANGLE_PRECISION / min(max(rows, cols),
+                                                                    FOLD_MAX_PX):
+        # a scene with few lenses: its micro-images are not symmetric and their centres follow
+        # the content, so the lattice fitted through them is less certain than the fold's; the
+        # borders (the fold) give pitch, rotation and offset
+        step = LATTICES[lattice]
+        pitch, angle = folded[0], angle + (folded[1] - angle + step / 2) % step - step / 2
+        basis = LensGrid(pitch, angle, (0.0, 0.0), lattice).basis()
+        i, j = fitted.nearest_index(*fold_xy)
+        offset = tuple(float(v) for v in np.asarray(fold_xy) - i * basis[0] - j * basis[1])
+        fitted = LensGrid(pitch, angle, offset, lattice)
     grid = _reindexed(pitch, angle, offset, lattice, (rows, cols))
     # re-express indices relative to the reindexed lens (0, 0)
     di, dj = fitted.nearest_index(*grid.offset_xy)
