@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 
 def shift_pattern(cfa: str | None, row: int, col: int) -> str | None:
     """The 2 x 2 pattern seen from pixel (row, col) of a mosaic whose (0, 0) pattern is ``cfa``.
@@ -22,3 +24,18 @@ def positions(cfa: str | None) -> list[tuple[int, int]]:
 def period(cfa: str | None) -> int:
     """2 for a Bayer mosaic, 1 for mono or already demosaiced data."""
     return 2 if cfa else 1
+
+
+def half_size_rgb(frame: np.ndarray, cfa: str) -> np.ndarray:
+    """Half-size RGB of a Bayer frame: each 2 x 2 cell gives one pixel (greens averaged).
+
+    Returns (rows // 2, cols // 2, 3) float32; a NaN in a cell makes that pixel's colour NaN.
+    No interpolation: for registration and previews, where whole cells are what matters.
+    """
+    rows, cols = (frame.shape[0] // 2) * 2, (frame.shape[1] // 2) * 2
+    out = np.zeros((rows // 2, cols // 2, 3), np.float32)
+    for k, colour in enumerate(cfa.upper()):
+        plane = frame[k // 2:rows:2, k % 2:cols:2]
+        channel = "RGB".index(colour)
+        out[..., channel] += plane * (0.5 if colour == "G" else 1.0)
+    return out

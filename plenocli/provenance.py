@@ -11,14 +11,25 @@ from typing import Any
 
 from plenocli import __version__
 
+_HASHES: dict[tuple, str] = {}
+
 
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
-    """Hex sha256 of a file's bytes."""
+    """Hex sha256 of a file's bytes.
+
+    Remembered per process by (device, inode, size, mtime): a shared input (the white image of a
+    batch) is hashed once, and any change to the file gives a new key.
+    """
+    st = os.stat(path)
+    key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    if key in _HASHES:
+        return _HASHES[key]
     digest = hashlib.sha256()
     with open(path, "rb") as fh:
         while block := fh.read(chunk):
             digest.update(block)
-    return digest.hexdigest()
+    _HASHES[key] = digest.hexdigest()
+    return _HASHES[key]
 
 
 def _plain(value: Any) -> Any:

@@ -37,6 +37,13 @@ steps:
     input: "{{out}}/white_frames.tif"
     smooth: 3
     output: "{{out}}/white_biased.tif"
+  gain:
+    stage: flat
+    input: "{{out}}/white_biased.tif"
+    white: "{{out}}/white_biased.tif"
+    median: 3
+    save-gain: "{{out}}/gain.tif"
+    output: "{{out}}/white_flat.tif"
   decode:
     input: "{{capture}}"
     output: "{{out}}/{{name}}/frames.tif"
@@ -46,8 +53,7 @@ steps:
     output: "{{out}}/{{name}}/biased.tif"
   flat:
     input: "{{out}}/{{name}}/biased.tif"
-    white: "{{out}}/white_biased.tif"
-    median: 3
+    gain: "{{out}}/gain.tif"
     output: "{{out}}/{{name}}/views.tif"
 """
 PER_CAPTURE_OUTPUTS = ("frames.tif", "biased.tif", "views.tif")
@@ -189,7 +195,7 @@ def test_changed_shared_input_reruns_every_capture(tmp_path):
     out = tmp_path / "out"
     run_batch(config, captures, out=out, jobs=1)
     report = run_batch(config, captures, out=out, jobs=1, overrides=["bias_white.smooth=5"])
-    assert [d.step.name for d in report.shared if d.run] == ["bias_white"]
+    assert [d.step.name for d in report.shared if d.run] == ["bias_white", "gain"]
     assert [r.detail for r in report.results] == ["flat", "flat"]  # only what uses the white
 
 
@@ -220,9 +226,9 @@ def test_template_shared_and_per_capture_steps(shoot):
     assert [s.name for s in steps] == ["decode", "bias", "flat"]
     assert steps[0].params["input"] == str(captures[0].resolve())
     assert steps[2].params["output"] == str((folder / "o" / "shot00" / "views.tif").resolve())
-    assert steps[2].params["white"] == str((folder / "o" / "white_biased.tif").resolve())
+    assert steps[2].params["gain"] == str((folder / "o" / "gain.tif").resolve())
     shared = template.steps(out=folder / "o", only="shared")
-    assert [s.name for s in shared] == ["decode_white", "bias_white"]
+    assert [s.name for s in shared] == ["decode_white", "bias_white", "gain"]
     # the config's own 'out: out' is relative to the config's folder
     default = template.steps(only="shared")[0].params["output"]
     assert default == str((folder / "out" / "white_frames.tif").resolve())

@@ -58,13 +58,13 @@ def test_make_builds_the_batch_outputs_then_does_nothing(tmp_path, monkeypatch):
 def test_fragment_rules(tmp_path):
     config, captures = make_shoot(tmp_path, 1, corrupt=None)
     single = concrete_config(tmp_path, captures[0], tmp_path / "o")
-    text = single.read_text().replace("median: 3", "median: 3\n    preview: o/view.png")
+    text = single.read_text().replace("    gain: ", "    preview: o/view.png\n    gain: ")
     single.write_text(text)
     fragment = make_fragment(load_config(single), single, base=tmp_path)
     assert "PLENOCLI ?= plenocli" in fragment
-    assert ("o/shot00/views.tif single/o/view.png &: o/shot00/biased.tif o/white_biased.tif "
-            "single/shot00.yaml\n\t$(PLENOCLI) flat o/shot00/biased.tif --white o/white_biased.tif"
-            " --median 3 --preview single/o/view.png --output o/shot00/views.tif") in fragment
+    assert ("o/shot00/views.tif single/o/view.png &: o/shot00/biased.tif o/gain.tif "
+            "single/shot00.yaml\n\t$(PLENOCLI) flat o/shot00/biased.tif --preview "
+            "single/o/view.png --gain o/gain.tif --output o/shot00/views.tif") in fragment
     assert ("o/shot00/frames.tif : captures/shot00.dng single/shot00.yaml\n"
             "\t$(PLENOCLI) decode captures/shot00.dng --output o/shot00/frames.tif") in fragment
 

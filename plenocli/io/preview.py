@@ -7,20 +7,8 @@ import os
 import cv2
 import numpy as np
 
+from plenocli.cfa import half_size_rgb
 from plenocli.io.atomic import atomic_path
-
-
-def cfa_to_rgb(frame: np.ndarray, cfa: str) -> np.ndarray:
-    """Half-size RGB of a Bayer frame: each 2 x 2 cell gives one pixel (greens averaged).
-
-    Returns (rows // 2, cols // 2, 3) float32. No interpolation: good enough to look at.
-    """
-    rows, cols = (frame.shape[0] // 2) * 2, (frame.shape[1] // 2) * 2
-    f = frame[:rows, :cols].astype(np.float32, copy=False)
-    planes: dict[str, list[np.ndarray]] = {"R": [], "G": [], "B": []}
-    for k, colour in enumerate(cfa.upper()):
-        planes[colour].append(f[k // 2::2, k % 2::2])
-    return np.dstack([np.mean(planes[c], axis=0) for c in "RGB"])
 
 
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
@@ -36,7 +24,7 @@ def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
 
 def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 4) -> np.ndarray:
     """Views (views, rows, cols) as one picture, left to right, with NaN gaps between them."""
-    tiles = [cfa_to_rgb(v, cfa) if cfa else np.asarray(v, np.float32) for v in views]
+    tiles = [half_size_rgb(v, cfa) if cfa else np.asarray(v, np.float32) for v in views]
     spacer = np.full((tiles[0].shape[0], gap, *tiles[0].shape[2:]), np.nan, np.float32)
     out = [tiles[0]]
     for tile in tiles[1:]:
@@ -50,12 +38,12 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
     (views, rows, cols) views side by side."""
     if image.ndim == 3 and image.shape[-1] != 3:
         image, cfa = views_side_by_side(image, cfa), None
-    img = cfa_to_rgb(image, cfa) if cfa and image.ndim == 2 else image
-    img = to_display(np.asarray(img, dtype=np.float32))
+    img = np.asarray(half_size_rgb(image, cfa) if cfa and image.ndim == 2 else image, np.float32)
     scale = max(img.shape[:2]) / max_side
-    if scale > 1:
+    if scale > 1:  # shrink first: the stretch below then works on a few megapixels, not 60
         size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    img = to_display(img)
     if img.ndim == 3:
         img = img[..., ::-1]  # OpenCV writes BGR
     with atomic_path(path, protect=protect) as tmp:

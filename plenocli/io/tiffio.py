@@ -59,22 +59,17 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
         raise InputError(f"{p}: no such file")
     try:
         with tifffile.TiffFile(p) as tif:
-            pages = [page.asarray() for page in tif.pages]
-            description = tif.pages[0].description if tif.pages else ""
+            if not tif.pages:
+                raise InputError(f"{p}: the TIFF holds no image")
+            description = tif.pages[0].description
+            series = tif.series[0] if len(tif.series) == 1 else None
+            if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
+                data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
+            else:
+                data = _stack_pages(p, [page.asarray() for page in tif.pages])
     except (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError) as err:
         raise InputError(f"{p}: not a readable TIFF image ({err}); "
                          "pass an image written by plenocli or a plain TIFF") from err
-    if not pages:
-        raise InputError(f"{p}: the TIFF holds no image")
-    arrays = []
-    for page in pages:
-        if page.ndim == 3:  # interleaved samples (e.g. RGB): one view per sample
-            arrays.extend(np.moveaxis(page, -1, 0))
-        else:
-            arrays.append(page)
-    if len({a.shape for a in arrays}) != 1:
-        raise InputError(f"{p}: the pages have different sizes; plenocli expects equal-sized views")
-    data = np.stack(arrays)
     meta: dict = {}
     if description:
         try:
@@ -84,6 +79,20 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
         if isinstance(parsed, dict) and FORMAT_KEY in parsed:
             meta = {k: v for k, v in parsed.items() if k != FORMAT_KEY}
     return data, meta
+
+
+def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
+    """Pages of a foreign TIFF as (views, rows, cols): interleaved samples (RGB) become views."""
+    arrays = []
+    for page in pages:
+        if page.ndim == 3:
+            arrays.extend(np.moveaxis(page, -1, 0))
+        else:
+            arrays.append(page)
+    if len({a.shape for a in arrays}) != 1:
+        raise InputError(f"{path}: the pages have different sizes; plenocli expects equal-sized "
+                         "views")
+    return np.stack(arrays)
 
 
 def read_meta(path: str | os.PathLike) -> dict:

@@ -46,13 +46,15 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
         clipped.append(clip)
         levels.append(_summary(info, names[k]))
     top, left = meta["active_area"][:2]
-    views = np.stack(corrected)
     white_level = list(meta["white_level"])
     if names[:2] == ["S", "A"]:
         views = split_views(corrected[0], corrected[1], sum_clipped=clipped[0],
                             a_clipped=clipped[1])
         names = ["A", "B", "S"]
         white_level = [white_level[1], white_level[0], white_level[0]]  # B is bounded by S
+    else:
+        views = np.stack(corrected)
+    del corrected
     row0, col0 = 0, 0
     if crop:
         views, row0, col0 = _central_crop(views, crop, even=bool(cfa))

@@ -36,7 +36,9 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         if ref_meta.get("provenance", {}).get("stage") != "flat-gain":
             raise InputError(f"{gain}: not a gain map; make one with plenocli flat --save-gain")
         gains = ref.astype(np.float32, copy=False)
-    corrected = np.stack([apply_gain(v, g) for v, g in zip(views, gains, strict=True)])
+    corrected = np.empty(views.shape, np.float32)
+    for k, (view, view_gain) in enumerate(zip(views, gains, strict=True)):
+        corrected[k] = apply_gain(view, view_gain)
     params = dict(median=median, reference=reference, percentile=percentile, floor=floor)
     inputs = {"input": input, "white": white, "gain": gain}
     record = stage_record("flat", params, inputs)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import stitch as stitch_lib
-from plenocli.cfa import shift_pattern
+from plenocli.cfa import half_size_rgb, shift_pattern
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
@@ -41,15 +41,6 @@ def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.nd
             raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
                              "pass --views with names from that list")
     return data[idx], [names[k] for k in idx]
-
-
-def bayer_to_rgb(view: np.ndarray, cfa: str) -> np.ndarray:
-    """(3, rows // 2, cols // 2) half-size RGB of a Bayer view (greens averaged, NaN kept)."""
-    rows, cols = (view.shape[0] // 2) * 2, (view.shape[1] // 2) * 2
-    planes: dict[str, list[np.ndarray]] = {"R": [], "G": [], "B": []}
-    for k, colour in enumerate(cfa.upper()):
-        planes[colour].append(view[k // 2:rows:2, k % 2:cols:2].astype(np.float32))
-    return np.stack([np.mean(planes[c], axis=0) for c in "RGB"])
 
 
 CHANNELS = ("R", "G", "B")
@@ -85,7 +76,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
             if len(pages) == 1 and cfa:  # registration needs whole CFA cells
-                found.append((name, bayer_to_rgb(data[pages[0]], cfa)))
+                found.append((name, np.moveaxis(half_size_rgb(data[pages[0]], cfa), -1, 0)))
                 bayer = True
             else:
                 found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
