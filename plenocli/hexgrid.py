@@ -517,6 +517,17 @@ class _Fold:
         grad = np.ascontiguousarray(grad, np.float32)
         return cls(grad=grad, mean_sq=max(float(np.mean(grad)) ** 2, 1e-24))
 
+    def _fold(self, pitch_px: float, angle_rad: float, lattice: str):
+        """Sums and counts of the gradient folded onto one cell (per quadrant), the bins per
+        side, and the lattice basis (rows b1, b2, px)."""
+        step = LATTICES[lattice]
+        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
+        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
+                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
+        inv = np.linalg.inv(basis.T)
+        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        return total, count, bins, basis
+
     def contrast(self, pitch_px: float, angle_rad: float, lattice: str) -> float:
         """Border contrast of the lattice (pitch, angle): every pixel's gradient magnitude is
         folded onto one lattice cell (bins of about 1 x 1 px of the fractional lattice
@@ -531,12 +542,7 @@ class _Fold:
         contrast); a finer one mixes several cell positions (about 1/3 or less). The smooth
         part goes because a scene periodicity folds into broad stripes. Independent of the
         offset (a shift of the fold is a cyclic shift of its bins)."""
-        step = LATTICES[lattice]
-        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
-        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
-                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
-        inv = np.linalg.inv(basis.T)
-        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        total, count, bins, _ = self._fold(pitch_px, angle_rad, lattice)
         mean = (total / np.maximum(count, 1)).reshape(4, bins, bins)
         filled = (count > 0).reshape(4, bins, bins)
         if not filled.all():   # a rational pitch / row ratio can leave bins empty
@@ -553,12 +559,7 @@ class _Fold:
         the point of the folded borders that is both a 2-fold and a 3-fold (hex) or 4-fold
         (square) symmetry centre. The honeycomb of borders is also point-symmetric about its
         edge midpoints and 3-fold about its vertices; only the cell centre is both."""
-        step = LATTICES[lattice]
-        bins = max(8, int(round(pitch_px / FOLD_BIN_PX)))
-        basis = pitch_px * np.array([[np.cos(angle_rad), np.sin(angle_rad)],
-                                     [np.cos(angle_rad + step), np.sin(angle_rad + step)]])
-        inv = np.linalg.inv(basis.T)
-        total, count = _fold_sums(self.grad, inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1], bins)
+        total, count, bins, basis = self._fold(pitch_px, angle_rad, lattice)
         mean = (total.sum(0) / np.maximum(count.sum(0), 1)).reshape(bins, bins)
         fine = mean - _wrap_blur(mean[None], FOLD_SMOOTH_PX * bins / pitch_px)[0]
         d = np.arange(bins)
