@@ -175,6 +175,20 @@ def view_to_common(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Common-frame pixel coordinates (x, y) of view pixels ``x``, ``y`` (any equal shapes) of a
     view of ``shape`` = (rows, cols). NaN where the prism reflects the ray totally."""
+    return _through_prism(rig, view, x, y, shape, reverse=False)
+
+
+def common_to_view(rig: PrismRig, view: int, cx: np.ndarray, cy: np.ndarray,
+                   shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`view_to_common`: view pixel (x, y) seeing common pixel (cx, cy)."""
+    return _through_prism(rig, view, cx, cy, shape, reverse=True)
+
+
+def _through_prism(rig: PrismRig, view: int, x, y, shape: tuple[int, int], *,
+                   reverse: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Trace pixels (x, y) out through the lens to the chart (or infinity), deviate the ray by
+    the view's prism (forwards, or backwards when ``reverse``) and trace it back to a pixel.
+    The same geometry both ways, so the inverse is exact and needs no iteration."""
     v = _check_view(rig, view)
     rows, cols = shape
     pix = rig.sensor_mm / cols
@@ -189,41 +203,14 @@ def view_to_common(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     if v.prism is not None and rig.prism_apex_deg > 0:
         d = _deviate(d, n=rig.prism_n, apex_deg=rig.prism_apex_deg, towards=v.prism,
-                     reverse=False)
+                     reverse=reverse)
     if math.isinf(z):
         u = -dist * d[:, :2] / d[:, 2:3]
     else:
         u = -(p + d[:, :2] * (z / d[:, 2:3])) * (dist / z)
-    cx = u[:, 0] / pix + cols / 2 - 0.5
-    cy = u[:, 1] / pix + rows / 2 - 0.5
-    return cx.reshape(np.shape(x)), cy.reshape(np.shape(x))
-
-
-def common_to_view(rig: PrismRig, view: int, cx: np.ndarray, cy: np.ndarray,
-                   shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of :func:`view_to_common`: view pixel (x, y) seeing common pixel (cx, cy)."""
-    v = _check_view(rig, view)
-    rows, cols = shape
-    pix = rig.sensor_mm / cols
-    u = np.stack([(np.asarray(cx, np.float64) + 0.5 - cols / 2) * pix,
-                  (np.asarray(cy, np.float64) + 0.5 - rows / 2) * pix], axis=-1).reshape(-1, 2)
-    z, dist = rig.object_distance_mm, rig.image_distance_mm
-    p = _pupil_centroid(rig, v)
-    if math.isinf(z):
-        d = np.concatenate([-u, np.full((len(u), 1), dist)], axis=1)
-    else:
-        d = np.concatenate([-u * (z / dist) - p, np.full((len(u), 1), z)], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    if v.prism is not None and rig.prism_apex_deg > 0:
-        d = _deviate(d, n=rig.prism_n, apex_deg=rig.prism_apex_deg, towards=v.prism,
-                     reverse=True)
-    if math.isinf(z):
-        s = -dist * d[:, :2] / d[:, 2:3]
-    else:
-        s = -(p + d[:, :2] * (z / d[:, 2:3])) * (dist / z)
-    x = s[:, 0] / pix + cols / 2 - 0.5
-    y = s[:, 1] / pix + rows / 2 - 0.5
-    return x.reshape(np.shape(cx)), y.reshape(np.shape(cx))
+    out_x = u[:, 0] / pix + cols / 2 - 0.5
+    out_y = u[:, 1] / pix + rows / 2 - 0.5
+    return out_x.reshape(np.shape(x)), out_y.reshape(np.shape(x))
 
 
 def common_extent(rig: PrismRig, view: int, shape: tuple[int, int]) -> np.ndarray:
