@@ -453,7 +453,9 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     warp = np.float32([[1, 0, x0 - dx0], [0, 1, y0 - dy0]])  # crop of a -> b
     method = "ecc"
     # two passes: the photometric ratio field is re-estimated once the shift is sub-pixel
-    # (views with no-data regions, e.g. undistorted canvases, skip ECC: it cannot mask them)
+    # (views with no-data regions, e.g. undistorted canvases, skip ECC: it cannot mask them).
+    # ECC stops once its correlation gains less than 1e-6: the photometric fit below sets the
+    # final shift (1e-8 took ten times the iterations for the same final result)
     for _ in range(0 if has_nan else 2):
         b_on_a = cv2.warpAffine(rb, warp, (cols_ov, rows_ov),
                                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
@@ -462,7 +464,7 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         try:
             _, warp = cv2.findTransformECC(template, rb, warp, cv2.MOTION_TRANSLATION,
                                            (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 200,
-                                            1e-8), None, 1)
+                                            1e-6), None, 1)
         except cv2.error:
             method = "phase-correlation"
             break
@@ -481,9 +483,12 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     # final photometric least squares with spline resampling: ECC's bilinear warps leave a
     # texture-dependent bias of up to ~0.2 px on smooth, large views
     try:
-        shifted, _ = refine_homography(a, b, _translation_matrix(dy, dx), motion="translation")
-        if abs(shifted[1, 2] - dy) < 1 and abs(shifted[0, 2] - dx) < 1:
-            dy, dx = float(shifted[1, 2]), float(shifted[0, 2])
+        (sa, sb), (off_y, off_x) = _translation_crops(a.shape, b.shape, dy, dx)
+        shifted, _ = refine_homography(a[sa], b[sb], _translation_matrix(dy - off_y, dx - off_x),
+                                       motion="translation")
+        ry, rx = float(shifted[1, 2]) + off_y, float(shifted[0, 2]) + off_x
+        if abs(ry - dy) < 1 and abs(rx - dx) < 1:
+            dy, dx = ry, rx
             method += "+photometric"
     except ValueError:
         pass
@@ -497,6 +502,23 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                          f"correlation {correlation:.2f} < {min_correlation}); the views may not "
                          "overlap, or the overlap has no texture")
     return float(dy), float(dx), info
+
+
+def _translation_crops(shape_a: tuple[int, int], shape_b: tuple[int, int], dy: float,
+                       dx: float, margin_px: int = 16):
+    """Crops of a and b (slices) holding their overlap for b(q) <-> a(q + (dy, dx)) plus a
+    margin, and the offset to subtract from the shift in the crops' coordinates (crop origins
+    on multiples of 4, so the refinement's pyramid samples as on the whole views)."""
+    slices_a, slices_b, offset = [], [], []
+    for n_a, n_b, t in zip(shape_a, shape_b, (dy, dx), strict=True):
+        lo = max(0, (int(np.floor(max(t, 0.0))) - margin_px) // 4 * 4)
+        hi = min(n_a, int(np.ceil(n_b + t)) + margin_px)
+        lo_b = max(0, (int(np.floor(lo - t)) - margin_px) // 4 * 4)
+        hi_b = min(n_b, int(np.ceil(hi - t)) + margin_px)
+        slices_a.append(slice(lo, hi))
+        slices_b.append(slice(lo_b, hi_b))
+        offset.append(lo - lo_b)
+    return (tuple(slices_a), tuple(slices_b)), tuple(offset)
 
 
 def _aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray,
@@ -826,8 +848,35 @@ def _canvas(transforms: list[np.ndarray], shape: tuple[int, int]) -> tuple[np.nd
     return _translation_matrix(-y0, -x0), out_shape
 
 
+def _footprint(m: np.ndarray, shape: tuple[int, int], out_shape: tuple[int, int]):
+    """The canvas box (row slice, column slice) a view of ``shape`` covers under ``m`` (view
+    pixels -> canvas pixels), with 4 px for the resampling kernels, and ``m`` into that box."""
+    rows, cols = shape
+    corners = np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]])
+    pts = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), m).reshape(-1, 2)
+    x0, y0 = (max(0, int(np.floor(v)) - 4) for v in pts.min(axis=0))
+    x1 = min(out_shape[1], int(np.ceil(pts[:, 0].max())) + 5)
+    y1 = min(out_shape[0], int(np.ceil(pts[:, 1].max())) + 5)
+    x1, y1 = max(x1, x0 + 1), max(y1, y0 + 1)
+    return (slice(y0, y1), slice(x0, x1)), _translation_matrix(-y0, -x0) @ m
+
+
+def _bounding_box(mask: np.ndarray) -> tuple[slice, slice] | None:
+    """Smallest (row slice, column slice) holding every True pixel, or None."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return None
+    cols = np.flatnonzero(mask.any(axis=0))
+    return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
+
+
 def _feather_weight(valid: np.ndarray) -> np.ndarray:
     """Distance (px) to the nearest invalid pixel or the view's border, float32."""
+    if valid.all():  # the distance to the border, without a distance transform
+        rows, cols = valid.shape
+        to_y = np.minimum(np.arange(1, rows + 1), np.arange(rows, 0, -1)).astype(np.float32)
+        to_x = np.minimum(np.arange(1, cols + 1), np.arange(cols, 0, -1)).astype(np.float32)
+        return np.minimum(to_y[:, None], to_x[None, :])
     padded = np.pad(valid, 1)
     return ndimage.distance_transform_edt(padded)[1:-1, 1:-1].astype(np.float32)
 
@@ -1028,15 +1077,17 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     warped = np.full((n_views, n_chan) + pano_shape, np.nan, np.float32)
     weights = np.zeros((n_views,) + pano_shape, np.float32)
     for k in range(n_views):
-        m = offset @ transforms[k]
+        # each view is resampled only into its footprint on the canvas (the rest stays empty)
+        box, m = _footprint(offset @ transforms[k], (rows, cols), pano_shape)
+        box_shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
         valid = np.isfinite(stack[k]).all(axis=0)
-        cover = _warp(valid.astype(np.float32), m, pano_shape, interp=cv2.INTER_LINEAR,
+        cover = _warp(valid.astype(np.float32), m, box_shape, interp=cv2.INTER_LINEAR,
                       border=cv2.BORDER_CONSTANT) > 0.999
-        weights[k] = np.where(cover, _warp(_feather_weight(valid), m, pano_shape,
-                                           interp=cv2.INTER_LINEAR), 0)
+        weights[k][box] = np.where(cover, _warp(_feather_weight(valid), m, box_shape,
+                                                interp=cv2.INTER_LINEAR), 0)
         for c in range(n_chan):
-            img = _warp(_fill_nan(stack[k, c]), m, pano_shape, interp=cv2.INTER_LANCZOS4)
-            warped[k, c] = np.where(cover, img, np.nan)
+            img = _warp(_fill_nan(stack[k, c]), m, box_shape, interp=cv2.INTER_LANCZOS4)
+            warped[k, c][box] = np.where(cover, img, np.nan)
     gains = np.ones((n_views, n_chan))
     pairs = _pairs(layout)
     if match_gain:
@@ -1056,16 +1107,24 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
             offset[0, 2] -= c0
             offset[1, 2] -= r0
     panorama = np.full((n_chan,) + pano_shape, np.nan, np.float32)
+    inv_total = 1.0 / np.maximum(total, 1e-12)
     for c in range(n_chan):
-        filled = np.nan_to_num(warped[:, c])
-        feather = (filled * weights).sum(axis=0) / np.maximum(total, 1e-12)
+        # view by view: one canvas-sized temporary instead of a (views, canvas) stack
+        feather = np.zeros(pano_shape, np.float32)
+        for k in range(n_views):
+            feather += np.nan_to_num(warped[k, c]) * weights[k]
+        feather *= inv_total
         if blend == "multiband":
-            feather = _multiband(filled, weights, feather)
+            feather = _multiband(np.nan_to_num(warped[:, c]), weights, feather)
         panorama[c] = np.where(covered, feather, np.nan)
+    del inv_total
     residuals = []
     for (a, b, _), info in zip(pairs, pair_info or [{} for _ in pairs], strict=True):
         both = (weights[a] > 0) & (weights[b] > 0)
-        res = _block_residual(warped[a].mean(axis=0), warped[b].mean(axis=0), both)
+        box = _bounding_box(both)
+        res = None if box is None else _block_residual(
+            warped[(a, slice(None)) + box].mean(axis=0),
+            warped[(b, slice(None)) + box].mean(axis=0), both[box])
         info["residual_px"] = res
         info["overlap_px_area"] = int(both.sum())
         if res is not None:
