@@ -148,7 +148,7 @@ def _deviate(d: np.ndarray, *, n: float, apex_deg: float, towards: tuple[int, in
     return out
 
 
-def _fill_nan(image: np.ndarray) -> np.ndarray:
+def fill_nan(image: np.ndarray) -> np.ndarray:
     """NaN replaced by the nearest finite value (so the resampling kernel does not spread NaN)."""
     bad = ~np.isfinite(image)
     if not bad.any():
@@ -266,7 +266,7 @@ def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.nd
                           borderValue=0) > 0.999
         cover &= ~bad
         for c in range(n_chan):
-            img = _fill_nan(stack[k, c].astype(np.float32))
+            img = fill_nan(stack[k, c].astype(np.float32))
             warped = cv2.remap(img, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
             out[k, c] = np.where(cover, warped, np.nan)
     return out, origin_xy[:, ::-1].copy()

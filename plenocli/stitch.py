@@ -29,7 +29,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.errors import InputError
-from plenocli.prismrig import PrismRig, undistort_views
+from plenocli.prismrig import PrismRig, fill_nan, undistort_views
 
 LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
 MODELS = ("translation", "homography")
@@ -87,17 +87,6 @@ def undistort(image: np.ndarray, k1: float) -> np.ndarray:
     map_y = (cy + (yy - cy) * scale).astype(np.float32)
     return cv2.remap(image.astype(np.float32), map_x, map_y, cv2.INTER_LANCZOS4,
                      borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
-
-
-def _fill_nan(image: np.ndarray) -> np.ndarray:
-    """Replace NaN by the nearest finite value (so that filters and warps do not spread NaN)."""
-    bad = ~np.isfinite(image)
-    if not bad.any():
-        return image
-    if bad.all():
-        return np.zeros_like(image)
-    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    return image[tuple(idx)]
 
 
 def _highpass(image: np.ndarray) -> np.ndarray:
@@ -445,7 +434,7 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     # sub-pixel refinement: ECC (translation) on the overlap of the raw views; ECC is invariant
     # to gain and offset, and the raw views resample without the bias a high-pass would add
     _, _, (y0, x0) = crops
-    ra, rb = _fill_nan(a).astype(np.float32), _fill_nan(b).astype(np.float32)
+    ra, rb = fill_nan(a).astype(np.float32), fill_nan(b).astype(np.float32)
     rows_ov, cols_ov = crops[0].shape
     has_nan = not (np.isfinite(a).all() and np.isfinite(b).all())
     ca = ra[y0:y0 + rows_ov, x0:x0 + cols_ov]
@@ -562,7 +551,7 @@ def _match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
-    img = _fill_nan(image)
+    img = fill_nan(image)
     lo, hi = np.percentile(img, [0.5, 99.5])
     return np.clip(255 * (img - lo) / max(hi - lo, 1e-12), 0, 255).astype(np.uint8)
 
@@ -693,8 +682,8 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
     if motion not in MODELS:
         raise ValueError(f"motion must be one of {MODELS}, got {motion!r}")
     valid_a, valid_b = np.isfinite(a), np.isfinite(b)
-    fa = _fill_nan(np.asarray(a, np.float64))
-    fb = _fill_nan(np.asarray(b, np.float64))
+    fa = fill_nan(np.asarray(a, np.float64))
+    fb = fill_nan(np.asarray(b, np.float64))
     h = np.asarray(h_ab, np.float64) / h_ab[2, 2]
     levels = int(max(0, np.ceil(np.log2(max(a.shape) / 1024))))
     info: dict = {}
@@ -1086,7 +1075,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         weights[k][box] = np.where(cover, _warp(_feather_weight(valid), m, box_shape,
                                                 interp=cv2.INTER_LINEAR), 0)
         for c in range(n_chan):
-            img = _warp(_fill_nan(stack[k, c]), m, box_shape, interp=cv2.INTER_LANCZOS4)
+            img = _warp(fill_nan(stack[k, c]), m, box_shape, interp=cv2.INTER_LANCZOS4)
             warped[k, c][box] = np.where(cover, img, np.nan)
     gains = np.ones((n_views, n_chan))
     pairs = _pairs(layout)
