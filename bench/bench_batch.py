@@ -1,6 +1,6 @@
 """Batch throughput: captures per minute with 1 and 2 worker processes on this machine.
 
-    python bench/bench_batch.py [--captures 6] [--size 1500x2000]
+    python bench/bench_batch.py [--captures 12] [--size 4480x6720]
 
 Writes synthetic dual-pixel captures (plenocli.synth.dualpixel) and a white image into a temporary
 folder, runs the batch template of tests/test_batch.py (decode -> bias -> flat, white shared) with
@@ -26,8 +26,8 @@ from tests.test_batch import make_shoot  # noqa: E402
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--captures", type=int, default=6)
-    parser.add_argument("--size", default="1500x2000", help="active area ROWSxCOLS")
+    parser.add_argument("--captures", type=int, default=12)
+    parser.add_argument("--size", default="4480x6720", help="active area ROWSxCOLS")
     parser.add_argument("--tmp", default=None, help="work folder (default: the system's temp)")
     args = parser.parse_args()
     rows, cols = (int(v) for v in args.size.split("x"))
@@ -46,10 +46,12 @@ def main() -> None:
         rates = {}
         for jobs in (1, 2):
             out = folder / f"jobs{jobs}"
-            # the shared white steps are copied in, so both runs time only the per-capture work
-            for name in ("white_frames.tif", "white_biased.tif"):
-                out.mkdir(exist_ok=True)
-                (out / name).write_bytes((folder / "warm" / name).read_bytes())
+            # the shared steps' outputs (white image, gain: the top level of the warm-up folder)
+            # are copied in, so both runs time only the per-capture work
+            out.mkdir(exist_ok=True)
+            for shared in (folder / "warm").iterdir():
+                if shared.is_file():
+                    (out / shared.name).write_bytes(shared.read_bytes())
             load = os.getloadavg()[0]
             start = time.perf_counter()
             report = run_batch(config, captures, out=out, jobs=jobs)
