@@ -26,9 +26,11 @@ def split_views(sum_frame: np.ndarray, a_frame: np.ndarray, *, sum_clipped: np.n
         raise ValueError(f"S and A differ in shape: {sum_frame.shape} vs {a_frame.shape}")
     views = np.empty((3, *sum_frame.shape), np.float32)
     np.subtract(sum_frame, a_frame, out=views[1], dtype=np.float32)
-    views[0] = a_frame
-    views[2] = sum_frame
-    views[0][a_clipped] = np.nan
-    views[2][sum_clipped] = np.nan
-    views[1][sum_clipped | a_clipped] = np.nan
+    np.copyto(views[0], a_frame)
+    np.copyto(views[2], sum_frame)
+    # copyto with a mask writes in one pass (boolean-index assignment gathers indices first)
+    np.copyto(views[0], np.nan, where=a_clipped)
+    np.copyto(views[2], np.nan, where=sum_clipped)
+    np.copyto(views[1], np.nan, where=sum_clipped)
+    np.copyto(views[1], np.nan, where=a_clipped)
     return views

@@ -41,7 +41,7 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
             raise InputError(f"{input}: frame {names[k]}: {err}") from err
         top, left, bottom, right = meta["active_area"]
         clip = frame[top:bottom, left:right] >= meta["white_level"][k]
-        out[clip] = np.nan
+        np.copyto(out, np.nan, where=clip)
         corrected.append(out)
         clipped.append(clip)
         levels.append(_summary(info, names[k]))
