@@ -10,7 +10,7 @@ from plenocli import hexgrid
 from plenocli.cfa import shift_pattern
 from plenocli.errors import InputError
 from plenocli.io import gridfile, raytrix, tiffio
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -70,7 +70,7 @@ def run(input: str, output: str, *, lattice: str = "hex", xml: str | None = None
     if preview:
         write_preview(preview, image, grid, cfa=cfa, protect=protect)
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
-             "%d lenses, residual RMS %.4f px, max %.4f px", input, output, lattice,
+             "%d lenses, residual RMS %.4f px, max %.4f px", shown(input), shown(output), lattice,
              grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy, report.lenses_total,
              report.residual_rms_px, report.residual_max_px)
     if other is not None:

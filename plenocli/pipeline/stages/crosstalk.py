@@ -14,7 +14,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import atomic_path, write_text
 from plenocli.pipeline.stages.stitch import _plain, select_views
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -110,7 +110,8 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
                   for c in captures]
         _write_png(preview, _heat_map(maps, titles), tuple(inputs))
     for c in captures:
-        log.info("crosstalk: %s: intended %s, r = %.2f %% (tiles %.2f .. %.2f %%)", c["input"],
+        log.info("crosstalk: %s: intended %s, r = %.2f %% (tiles %.2f .. %.2f %%)",
+                 shown(c["input"]),
                  c["intended"], 100 * c["r"], 100 * c["map_min"], 100 * c["map_max"])
 
 

@@ -14,7 +14,7 @@ from plenocli.io import tiffio
 from plenocli.io.gridfile import read_grid
 from plenocli.io.preview import write_png
 from plenocli.lensgrid import LensGrid
-from plenocli.progress import log
+from plenocli.progress import log, shown
 from plenocli.provenance import stage_record
 
 
@@ -115,8 +115,9 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         sharpness={"measure": "mean(Lap(I_s)^2) / var(I_s), I_s = Gaussian(sigma = s * pitch / 2)",
                    "lens_period_px": period, "scores": scores, "best_g": best})
     tiffio.write_image(output, stack, out_meta, protect=(input, grid))
-    log.info("refocus: %s -> %s (%d page(s) of %d x %d, view %s, %.1f %% covered%s)", input,
-             output, stack.shape[0], stack.shape[2], stack.shape[1], view, 100 * covered,
+    log.info("refocus: %s -> %s (%d page(s) of %d x %d, view %s, %.1f %% covered%s)",
+             shown(input), shown(output), stack.shape[0], stack.shape[2], stack.shape[1], view,
+             100 * covered,
              f", sharpest g = {best:g}" if sweep and best is not None else "")
     if preview:
         per = len(out_pages) // len(g_values)
