@@ -804,19 +804,20 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
 
 # ---------------------------------------------------------------------------------------------
 # global solve, warping, gains, blending
+def _difference_row(a: int, b: int, n_views: int) -> np.ndarray:
+    """Design-matrix row of a pair measurement x_b - x_a, with view 0 fixed (x_0 = 0)."""
+    row = np.zeros(n_views - 1)
+    if b:
+        row[b - 1] += 1
+    if a:
+        row[a - 1] -= 1
+    return row
+
+
 def _solve_translations(measured: list[tuple[int, int, np.ndarray]], n_views: int):
     """Least-squares positions p_k (p_0 = 0) from pair measurements p_b - p_a = d_ab."""
-    rows = []
-    rhs = []
-    for a, b, d in measured:
-        row = np.zeros(n_views - 1)
-        if b:
-            row[b - 1] += 1
-        if a:
-            row[a - 1] -= 1
-        rows.append(row)
-        rhs.append(d)
-    m, r = np.array(rows), np.array(rhs)
+    m = np.array([_difference_row(a, b, n_views) for a, b, _ in measured])
+    r = np.array([d for _, _, d in measured])
     pos, *_ = np.linalg.lstsq(m, r, rcond=None)
     closure = float(np.sqrt(np.mean(np.sum((m @ pos - r) ** 2, axis=1))))
     return np.vstack([np.zeros(2), pos]), closure
@@ -1297,12 +1298,7 @@ def _match_gains(warped: np.ndarray, weights: np.ndarray,
             mean_b = float(warped[b, c][both].mean()) if both.any() else 0.0
             if mean_a <= 0 or mean_b <= 0:
                 continue  # no usable overlap or signed data: leave this pair out
-            row = np.zeros(n_views - 1)
-            if b:
-                row[b - 1] += 1
-            if a:
-                row[a - 1] -= 1
-            rows.append(row)
+            rows.append(_difference_row(a, b, n_views))
             rhs.append(np.log(mean_a / mean_b))
         if rows:
             sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
