@@ -1,6 +1,6 @@
 """Batch throughput: captures per minute with 1 and 2 worker processes on this machine.
 
-    python bench/bench_batch.py [--captures 12] [--size 4480x6720]
+    python bench/bench_batch.py [--captures 16] [--size 4480x6720]
 
 Writes synthetic dual-pixel captures (plenocli.synth.dualpixel) and a white image into a temporary
 folder, runs the batch template of tests/test_batch.py (decode -> bias -> flat, white shared) with
@@ -28,7 +28,7 @@ from tests.test_batch import make_shoot  # noqa: E402
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--captures", type=int, default=12)
+    parser.add_argument("--captures", type=int, default=16)
     parser.add_argument("--size", default="4480x6720", help="active area ROWSxCOLS")
     parser.add_argument("--tmp", default=None, help="work folder (default: the system's temp)")
     args = parser.parse_args()
