@@ -9,6 +9,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from plenocli import __version__
 
 _HASHES: dict[tuple, str] = {}
@@ -32,16 +34,21 @@ def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
     return _HASHES[key]
 
 
-def _plain(value: Any) -> Any:
-    """Parameters as JSON/YAML-friendly values (paths as strings, tuples as lists)."""
+def json_safe(value: Any) -> Any:
+    """Plain JSON/YAML values: paths as strings, tuples and arrays as lists, numpy scalars as
+    Python numbers, NaN and infinities as None (JSON has no NaN)."""
     if isinstance(value, os.PathLike):
         return str(value)
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
     if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if hasattr(value, "item") and callable(value.item):  # numpy scalars
-        return value.item()
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
     return value
 
 
@@ -63,7 +70,7 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
         "software": "plenocli",
         "version": __version__,
         "stage": stage,
-        "parameters": _plain(parameters),
+        "parameters": json_safe(parameters),
         "inputs": hashed,
         "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
     }

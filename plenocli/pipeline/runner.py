@@ -19,7 +19,7 @@ from plenocli.errors import ConfigError, PlenocliError
 from plenocli.io.tiffio import read_meta
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
-from plenocli.provenance import _plain
+from plenocli.provenance import json_safe
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,7 @@ def _stale(step: Step, will_make: set[Path]) -> str | None:
         return "an input is newer than the outputs"
     recorded = _recorded_parameters(outputs[0]) if outputs else None
     if recorded is not None:
-        current = _plain({k: v for k, v in step.params.items()
+        current = json_safe({k: v for k, v in step.params.items()
                           if k not in step.stage.inputs and k not in step.stage.outputs})
         changed = [k for k in recorded if k in current and current[k] != recorded[k]]
         if changed:

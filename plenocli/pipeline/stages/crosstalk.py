@@ -13,9 +13,26 @@ from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import atomic_path, write_text
-from plenocli.pipeline.stages.stitch import _plain, select_views
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
+from plenocli.provenance import json_safe, stage_record
+
+
+def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:
+    """Pages of ``data`` named in ``views`` ("A,B"; names from the metadata, or page numbers)."""
+    names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+    if not views:
+        return data, names
+    wanted = [v.strip() for v in views.split(",") if v.strip()]
+    idx = []
+    for name in wanted:
+        if name in names:
+            idx.append(names.index(name))
+        elif name.isdigit() and int(name) < data.shape[0]:
+            idx.append(int(name))
+        else:
+            raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
+                             "pass --views with names from that list")
+    return data[idx], [names[k] for k in idx]
 
 
 def _intended_index(spec: str | None, names: list[str], path: str) -> int | None:
@@ -104,7 +121,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     doc = {"r": max(c["r"] for c in captures), "definition": "max flux on another view / flux "
            "on the intended view, over pixels finite in every view", "captures": captures,
            "provenance": record}
-    write_text(output, json.dumps(_plain(doc), indent=1, allow_nan=False), protect=tuple(inputs))
+    write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False), protect=tuple(inputs))
     if preview:
         titles = [f"{Path(c['input']).stem}: r {100 * c['r']:.1f} % ({c['intended']} intended)"
                   for c in captures]
@@ -159,7 +176,7 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
     params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
     record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
     doc = {"sweep": sweep, "intended": side, "provenance": record}
-    write_text(output, json.dumps(_plain(doc), indent=1, allow_nan=False),
+    write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False),
                protect=(inputs[0], grid))
     for row in sweep:
         log.info("crosstalk: m = %g px: r = %.2f %%", row["mask_width"], 100 * row["r"])

@@ -10,7 +10,7 @@ from plenocli.io.atomic import write_text
 from plenocli.io.lensfile import read_lens
 from plenocli.optics.analysis import lens_report
 from plenocli.optics.crosstalk import crosstalk_report
-from plenocli.provenance import stage_record
+from plenocli.provenance import json_safe, stage_record
 
 
 def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,
@@ -36,7 +36,7 @@ def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,
                       pixel_um=pixel_um, object_distance_mm=object_distance_mm,
                       prism_n=prism_n, prism_apex_deg=prism_apex_deg)
         doc = {**report, "provenance": stage_record("optics", params, {"input": input})}
-        write_text(json, _json.dumps(doc, indent=1, default=float, allow_nan=True) + "\n",
+        write_text(json, _json.dumps(json_safe(doc), indent=1, allow_nan=False) + "\n",
                    protect=(input,))
     return report
 

@@ -25,11 +25,7 @@ def load_grid(path: str, meta: dict, shape: tuple[int, int]) -> LensGrid:
         return read_grid(path)
     top, left, bottom, right = (int(v) for v in (meta.get("active_area")
                                                  or (0, 0, *shape)))
-    try:
-        return read_grid(path, image_shape=(bottom - top, right - left))
-    except TypeError as err:  # a read_grid without XML support
-        raise InputError(f"{path}: this plenocli cannot read RayCalibData XML grids; "
-                         "use a plenocli YAML grid") from err
+    return read_grid(path, image_shape=(bottom - top, right - left))
 
 
 def frame_region(shape: tuple[int, int], meta: dict, grid: LensGrid,

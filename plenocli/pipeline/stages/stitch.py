@@ -22,26 +22,7 @@ from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
 from plenocli.prismrig import PrismRig
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
-
-
-def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:
-    """Pages of ``data`` named in ``views`` ("A,B"; names from the metadata, or page numbers)."""
-    names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-    if not views:
-        return data, names
-    wanted = [v.strip() for v in views.split(",") if v.strip()]
-    idx = []
-    for name in wanted:
-        if name in names:
-            idx.append(names.index(name))
-        elif name.isdigit() and int(name) < data.shape[0]:
-            idx.append(int(name))
-        else:
-            raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
-                             "pass --views with names from that list")
-    return data[idx], [names[k] for k in idx]
-
+from plenocli.provenance import json_safe, stage_record
 
 CHANNELS = ("R", "G", "B")
 
@@ -138,10 +119,10 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                                                                "residual_px", "origin_px")})
     tiffio.write_image(output, pano.astype(np.float32), out_meta, protect=protect)
     if report:
-        write_text(report, json.dumps(_plain({**rep, "provenance": record}), indent=2,
+        write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
     if transform_out:
-        write_text(transform_out, json.dumps(_plain({"transform": rep["transform"],
+        write_text(transform_out, json.dumps(json_safe({"transform": rep["transform"],
                                                      "provenance": record}), indent=2),
                    protect=protect)
     if preview:
@@ -172,18 +153,3 @@ def load_rig(path: str) -> PrismRig:
         return PrismRig.from_dict(data)
     except ValueError as err:
         raise InputError(f"{file}: {err}; see configs/rigs/ for examples") from err
-
-
-def _plain(value):
-    """JSON-safe: NaN/inf -> null, numpy -> Python."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
