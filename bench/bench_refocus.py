@@ -23,7 +23,7 @@ import cv2
 import numba
 import numpy as np
 
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 from plenocli.refocus import refocus
 
 ROWS, COLS = 4480, 6720

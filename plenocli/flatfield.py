@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 from scipy.ndimage import median_filter
 
-from plenocli.cfa import positions
+from plenocli.model.cfa import positions
 
 REFERENCES = ("max", "percentile")
 

@@ -26,7 +26,7 @@ Method (paper section 5.2, made precise):
    ``b2 = R(60 deg) b1`` is linear in (o, b1): robust least squares over all lens centres gives
    pitch, rotation and offset; the residuals (centre - lattice) are the report.
 
-Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenocli.lensgrid``.
+Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenocli.model.lensgrid``.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ import numpy as np
 import scipy.fft
 
 from plenocli.errors import CalibrationError
-from plenocli.lensgrid import LATTICES, LensGrid
+from plenocli.model.lensgrid import LATTICES, LensGrid
 
 PITCH_RANGE_PX = (5.0, 80.0)   # search range; the documented working range is 6-60 px
 MIN_SIDE_PX = 48               # smaller images cannot hold a lattice worth fitting

@@ -12,7 +12,7 @@ the weight map counts samples and splatting conserves flux: sum(image * weight) 
 the splatted pixels (away from the borders).
 
 c_ij is the centre of the micro-image holding the pixel: the nearest lattice centre of the
-:class:`~plenocli.lensgrid.LensGrid` (same rule as ``LensGrid.nearest_index``), replaced by the
+:class:`LensGrid` (same rule as ``LensGrid.nearest_index``), replaced by the
 refined centre of that lens when the grid has one.
 
 Views select pixels by their offset (dx, dy) = (x, y) - c_ij from the micro-image centre (y down):
@@ -33,7 +33,7 @@ from dataclasses import replace
 import numpy as np
 from numba import njit, prange
 
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
 # (x sign, y sign) of the kept half-planes: -1 keeps d < -m/2, +1 keeps d > m/2, 0 keeps all.

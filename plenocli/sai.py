@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli.cfa import shift_pattern
-from plenocli.lensgrid import LensGrid
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.lensgrid import LensGrid
 
 CFA_LAYOUTS = ("pixel", "micro-image")
 

@@ -8,7 +8,7 @@ import yaml
 
 from plenocli.errors import InputError
 from plenocli.io import gridfile
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 
 def _grid(seed: int = 0) -> LensGrid:

@@ -7,7 +7,7 @@ import pytest
 
 from plenocli import hexgrid
 from plenocli.errors import CalibrationError
-from plenocli.lensgrid import LATTICES, LensGrid
+from plenocli.model.lensgrid import LATTICES, LensGrid
 from plenocli.synth.focused import raytrix_scene
 from plenocli.synth.whiteimage import white_image
 

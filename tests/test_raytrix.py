@@ -7,7 +7,7 @@ import pytest
 from plenocli import hexgrid
 from plenocli.errors import InputError
 from plenocli.io import gridfile, raytrix
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 
 def _xmls(realdata):

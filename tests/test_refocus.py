@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 from plenocli.refocus import (
     KERNELS,
     VIEWS,

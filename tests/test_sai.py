@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 from plenocli.sai import approximate_sai, demultiplex, sai_colours, view_names
 
 

@@ -6,7 +6,7 @@ from PIL import Image
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import atomic_path
-from plenocli.provenance import sha256_file, stage_record
+from plenocli.model.provenance import sha256_file, stage_record
 
 
 def test_round_trip_keeps_views_nan_and_metadata(tmp_path):

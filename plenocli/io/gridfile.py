@@ -11,7 +11,7 @@ import yaml
 
 from plenocli.errors import InputError
 from plenocli.io.atomic import write_text
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 # libyaml's emitter and parser when PyYAML was built with it (10-50x faster)
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)

@@ -7,8 +7,8 @@ import os
 import cv2
 import numpy as np
 
-from plenocli.cfa import half_size_rgb
 from plenocli.io.atomic import atomic_path
+from plenocli.model.cfa import half_size_rgb
 
 
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,

@@ -36,7 +36,7 @@ import numpy as np
 
 from plenocli.errors import InputError
 from plenocli.io.atomic import write_text
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 DEFAULT_LENS_TYPES = [
     {"id": 0, "offset": [0.0, 0.0], "depth_range": [1.0, 3.2]},

@@ -17,9 +17,9 @@ import yaml
 
 from plenocli.errors import ConfigError, PlenocliError
 from plenocli.io.tiffio import read_meta
+from plenocli.model.provenance import json_safe
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
-from plenocli.provenance import json_safe
 
 
 @dataclass(frozen=True)

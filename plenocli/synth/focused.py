@@ -32,8 +32,8 @@ import numpy as np
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.gridfile import write_grid
-from plenocli.lensgrid import LensGrid
-from plenocli.provenance import stage_record
+from plenocli.model.lensgrid import LensGrid
+from plenocli.model.provenance import stage_record
 
 CHANNELS = "RGB"
 

@@ -21,7 +21,7 @@ from scipy import ndimage
 
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
-from plenocli.provenance import stage_record
+from plenocli.model.provenance import stage_record
 
 LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
 VIEW_NAMES = {"1x2": ["L", "R"], "2x1": ["T", "B"], "2x2": ["S00", "S01", "S10", "S11"]}

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli.io.atomic import write_text
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 
 COLOUR_GAIN = {"R": 0.55, "G": 1.0, "B": 0.75}
 

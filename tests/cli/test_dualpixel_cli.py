@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io.tiffio import read_image
-from plenocli.provenance import sha256_file
+from plenocli.model.provenance import sha256_file
 from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -54,7 +54,7 @@ def test_plenocli_tiff_shows_provenance_and_history(tmp_path):
 
 def test_lens_grid_yaml(tmp_path):
     from plenocli.io.gridfile import write_grid
-    from plenocli.lensgrid import LensGrid
+    from plenocli.model.lensgrid import LensGrid
 
     grid = LensGrid(pitch_px=20.2, angle_rad=0.01, offset_xy=(3.0, 4.0), image_shape=(100, 120))
     write_grid(tmp_path / "g.yaml", grid, {"stage": "calibrate", "version": "0.1.0"})

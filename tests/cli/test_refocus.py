@@ -9,7 +9,7 @@ from click.testing import CliRunner
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
 from plenocli.io.gridfile import read_grid, write_grid
-from plenocli.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid
 from plenocli.pipeline.registry import get_stages
 from plenocli.sai import view_names
 from plenocli.synth.focused import write_raytrix_scene

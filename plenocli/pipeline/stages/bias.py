@@ -9,13 +9,13 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli import bias as bias_lib
-from plenocli.cfa import period, shift_pattern
 from plenocli.dualpixel import split_views
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
+from plenocli.model.cfa import period, shift_pattern
+from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, guard: int = 2,

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import hexgrid
-from plenocli.cfa import shift_pattern
 from plenocli.errors import InputError
 from plenocli.io import gridfile, raytrix, tiffio
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:

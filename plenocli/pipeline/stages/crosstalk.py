@@ -9,12 +9,12 @@ import cv2
 import numpy as np
 
 from plenocli import crosstalk as crosstalk_lib
-from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import atomic_path, write_text
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import json_safe, stage_record
 
 
 def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:

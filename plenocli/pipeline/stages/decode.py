@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from plenocli.cfa import shift_pattern
 from plenocli.io import raw, tiffio
 from plenocli.io.preview import write_png
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def run(input: str, output: str, *, camera: str = "auto", frames: str | None = None,

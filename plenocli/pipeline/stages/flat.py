@@ -8,8 +8,8 @@ from plenocli.errors import InputError
 from plenocli.flatfield import apply_gain, white_gain
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
+from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def run(input: str, output: str, *, white: str | None = None, gain: str | None = None,

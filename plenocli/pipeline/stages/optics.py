@@ -8,9 +8,9 @@ import math
 from plenocli.errors import ConfigError
 from plenocli.io.atomic import write_text
 from plenocli.io.lensfile import read_lens
+from plenocli.model.provenance import json_safe, stage_record
 from plenocli.optics.analysis import lens_report
 from plenocli.optics.crosstalk import crosstalk_report
-from plenocli.provenance import json_safe, stage_record
 
 
 def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,

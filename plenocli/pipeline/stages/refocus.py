@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.gridfile import read_grid
 from plenocli.io.preview import write_png
-from plenocli.lensgrid import LensGrid
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.lensgrid import LensGrid
+from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def load_grid(path: str, meta: dict, shape: tuple[int, int]) -> LensGrid:

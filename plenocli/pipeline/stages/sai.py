@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli import sai as sai_mod
-from plenocli.cfa import shift_pattern
 from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import stage_record
 from plenocli.pipeline.stages.refocus import frame_region, load_grid
 from plenocli.progress import log, shown
-from plenocli.provenance import stage_record
 
 
 def run(input: str, output: str, *, n: int = 2, grid: str | None = None,

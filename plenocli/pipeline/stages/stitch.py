@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import stitch as stitch_lib
-from plenocli.cfa import half_size_rgb, shift_pattern
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
+from plenocli.model.cfa import half_size_rgb, shift_pattern
+from plenocli.model.provenance import json_safe, stage_record
 from plenocli.prismrig import PrismRig
 from plenocli.progress import log, shown
-from plenocli.provenance import json_safe, stage_record
 
 CHANNELS = ("R", "G", "B")
 
