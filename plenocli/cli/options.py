@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 import sys
 
 import click
@@ -15,6 +16,49 @@ output_opt = click.option("-o", "--output", required=True, type=click.Path(dir_o
 preview_opt = click.option("--preview", type=click.Path(dir_okay=False), default=None,
                            help="Also write a PNG preview here.")
 input_arg = click.argument("input", type=click.Path(dir_okay=False))
+
+
+class FiniteFloat(click.ParamType):
+    """A finite float, optionally bounded: NaN and infinities are refused (click's FloatRange
+    lets NaN through, since every comparison with NaN is false).
+
+    ``min_open``/``max_open`` make a bound exclusive, e.g. ``FiniteFloat(min=0, min_open=True)``
+    for a strictly positive value.
+    """
+
+    name = "float"
+
+    def __init__(self, min: float | None = None, max: float | None = None, *,
+                 min_open: bool = False, max_open: bool = False):
+        self.min, self.max, self.min_open, self.max_open = min, max, min_open, max_open
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, bool):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        low_bad = self.min is not None and (number <= self.min if self.min_open
+                                            else number < self.min)
+        high_bad = self.max is not None and (number >= self.max if self.max_open
+                                             else number > self.max)
+        if low_bad or high_bad:
+            self.fail(f"{number:g} is not in the range {self._describe()}", param, ctx)
+        return number
+
+    def _describe(self) -> str:
+        parts = []
+        if self.min is not None:
+            parts.append(f"x{'>' if self.min_open else '>='}{self.min:g}")
+        if self.max is not None:
+            parts.append(f"x{'<' if self.max_open else '<='}{self.max:g}")
+        return " and ".join(parts) or "of finite numbers"
+
+    def __repr__(self) -> str:
+        return f"FiniteFloat({self._describe()})"
 
 
 def stage_command(func):
