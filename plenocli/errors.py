@@ -1,5 +1,7 @@
 """Errors the user sees as one line: what was wrong, with which value, and what to do."""
 
+import errno
+
 
 class PlenocliError(Exception):
     """Base class; the message is shown to the user as it is (no traceback unless --debug)."""
@@ -15,3 +17,30 @@ class ConfigError(PlenocliError):
 
 class CalibrationError(PlenocliError):
     """A calibration (lens grid, white image) cannot be estimated or does not fit the data."""
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind like Ctrl-C (temporaries removed), then exit 143."""
+
+
+_OS_HINTS = {
+    errno.EACCES: "permission denied; choose a folder you can write to",
+    errno.EPERM: "operation not permitted; choose a folder you can write to",
+    errno.EROFS: "read-only file system; choose another folder",
+    errno.ENOSPC: "no space left on the device; free some space or write elsewhere",
+    errno.EDQUOT: "disk quota exceeded; free some space or write elsewhere",
+    errno.ENAMETOOLONG: "file name too long; shorten it",
+    errno.ENOTDIR: "a part of the path is a file, not a folder",
+    errno.EISDIR: "it is a folder; give a file name",
+    errno.ENOENT: "no such file or folder",
+    errno.EEXIST: "it exists already",
+    errno.EIO: "input/output error on the device",
+    errno.EMFILE: "too many open files",
+}
+
+
+def os_error_message(err: OSError) -> str:
+    """One line for an operating-system error: the path and the cause, and what to do."""
+    path = err.filename if err.filename is not None else ""
+    cause = _OS_HINTS.get(err.errno, err.strerror or type(err).__name__)
+    return f"{path}: {cause}" if path else cause

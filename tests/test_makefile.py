@@ -63,10 +63,10 @@ def test_fragment_rules(tmp_path):
     fragment = make_fragment(load_config(single), single, base=tmp_path)
     assert "PLENOCLI ?= plenocli" in fragment
     assert ("o/shot00/views.tif single/o/view.png &: o/shot00/biased.tif o/gain.tif "
-            "single/shot00.yaml\n\t$(PLENOCLI) flat o/shot00/biased.tif --preview "
-            "single/o/view.png --gain o/gain.tif --output o/shot00/views.tif") in fragment
+            "single/shot00.yaml\n\t$(PLENOCLI) flat o/shot00/biased.tif --preview="
+            "single/o/view.png --gain=o/gain.tif --output=o/shot00/views.tif") in fragment
     assert ("o/shot00/frames.tif : captures/shot00.dng single/shot00.yaml\n"
-            "\t$(PLENOCLI) decode captures/shot00.dng --output o/shot00/frames.tif") in fragment
+            "\t$(PLENOCLI) decode captures/shot00.dng --output=o/shot00/frames.tif") in fragment
 
 
 def test_fragment_refuses_paths_make_cannot_hold(tmp_path):

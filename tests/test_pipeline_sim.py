@@ -66,7 +66,7 @@ def test_raytrix_prism_pipeline_from_the_config(tmp_path):
     for step in steps:  # every path under out/demo goes to the temp folder instead
         for key in (*step.stage.inputs, *step.stage.outputs):
             value = step.params.get(key)
-            if isinstance(value, list):
+            if isinstance(value, (list, tuple)):
                 step.params[key] = [_moved(v, out) for v in value]
             elif value:
                 step.params[key] = _moved(value, out)

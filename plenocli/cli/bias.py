@@ -14,7 +14,8 @@ from plenocli.cli import options
               help="Running mean of the per-row levels over this many rows of one colour.")
 @click.option("--guard", type=click.IntRange(min=0), default=2, show_default=True,
               help="Pixels ignored at each edge of an over-scan area.")
-@click.option("--crop", default=None, help="Central crop ROWSxCOLS of the active area, e.g. "
+@click.option("--crop", type=options.RowsCols(),
+              default=None, help="Central crop ROWSxCOLS of the active area, e.g. "
               "2000x2000 (CFA phase kept).")
 @options.preview_opt
 @options.stage_command

@@ -20,9 +20,11 @@ from plenocli.cli import options
                    "and --grid is needed (uses plenocli refocus).")
 @click.option("--grid", type=click.Path(dir_okay=False), default=None,
               help="Lens grid YAML (only with --mask-widths).")
-@click.option("--s", "s", type=float, default=0.2, show_default=True,
+@click.option("--s", "s", type=options.FiniteFloat(min=0, min_open=True),
+              default=0.2, show_default=True,
               help="Refocus scale s (only with --mask-widths).")
-@click.option("--g", "g", type=float, default=4.0, show_default=True,
+@click.option("--g", "g", type=options.FiniteFloat(min=0, min_open=True),
+              default=4.0, show_default=True,
               help="Refocus g (only with --mask-widths).")
 @options.stage_command
 def crosstalk(**params):

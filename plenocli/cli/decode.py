@@ -10,8 +10,10 @@ from plenocli.cli import options
               default="auto", show_default=True,
               help="Input kind; auto looks at the file's first bytes.")
 @click.option("--frames", default=None, help="Names for the frames, comma separated (e.g. S,A).")
-@click.option("--black", type=float, default=None, help="Black level (DN) when the file has none.")
-@click.option("--white", type=float, default=None, help="White (clipping) level in DN.")
+@click.option("--black", type=options.FiniteFloat(min=0),
+              default=None, help="Black level (DN) when the file has none.")
+@click.option("--white", type=options.FiniteFloat(min=0, min_open=True),
+              default=None, help="White (clipping) level in DN.")
 @click.option("--cfa", default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
 @click.option("--calib", type=click.Path(dir_okay=False), default=None,
               help="Raytrix RayCalibData XML (with --camera raytrix); stored in the metadata.")

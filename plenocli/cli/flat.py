@@ -14,9 +14,9 @@ from plenocli.cli import options
               help="Median filter size (pixels of one colour plane, odd).")
 @click.option("--reference", type=click.Choice(["max", "percentile"]), default="max",
               show_default=True, help="Normalise by the maximum (paper) or a percentile.")
-@click.option("--percentile", type=click.FloatRange(0, 100), default=99.5, show_default=True,
+@click.option("--percentile", type=options.FiniteFloat(0, 100), default=99.5, show_default=True,
               help="Percentile for --reference percentile.")
-@click.option("--floor", type=click.FloatRange(0, 1, max_open=True), default=0.05,
+@click.option("--floor", type=options.FiniteFloat(0, 1, max_open=True), default=0.05,
               show_default=True, help="Mask (NaN) pixels whose white is below floor x reference.")
 @click.option("--save-gain", type=click.Path(dir_okay=False), default=None,
               help="Also write the gain map, for reuse with --gain.")

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import signal
 import sys
+import warnings
 
 import click
 
-from plenocli.errors import PlenocliError
+from plenocli.errors import PlenocliError, Terminated, os_error_message
 from plenocli.progress import configure, working
 
 output_opt = click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
@@ -16,6 +19,19 @@ output_opt = click.option("-o", "--output", required=True, type=click.Path(dir_o
 preview_opt = click.option("--preview", type=click.Path(dir_okay=False), default=None,
                            help="Also write a PNG preview here.")
 input_arg = click.argument("input", type=click.Path(dir_okay=False))
+
+
+class RowsCols(click.ParamType):
+    """A size ROWSxCOLS of positive whole numbers, e.g. 2000x2000 (kept as that text)."""
+
+    name = "ROWSxCOLS"
+
+    def convert(self, value, param, ctx):
+        text = str(value).strip().lower()
+        rows, sep, cols = text.partition("x")
+        if not (sep and rows.isdigit() and cols.isdigit() and int(rows) > 0 and int(cols) > 0):
+            self.fail(f"{value!r} is not ROWSxCOLS (e.g. 2000x2000)", param, ctx)
+        return f"{int(rows)}x{int(cols)}"
 
 
 class FiniteFloat(click.ParamType):
@@ -62,7 +78,8 @@ class FiniteFloat(click.ParamType):
 
 
 def stage_command(func):
-    """Add -v/-q/--debug and turn PlenocliError (and any crash) into one line, exit 1."""
+    """Add -v/-q/--debug and make the command's edge: outputs checked and landed together
+    (for a registered stage), SIGTERM handled like Ctrl-C, and every error one line, exit 1."""
 
     @click.option("-v", "--verbose", count=True, help="More messages (-v).")
     @click.option("-q", "--quiet", is_flag=True, help="Only errors.")
@@ -72,22 +89,30 @@ def stage_command(func):
         configure(-1 if quiet else verbose)
         name = click.get_current_context().info_name or "plenocli"
         try:
-            with working(name):
-                return func(*args, **kwargs)
+            with _terminate_on_sigterm(), warnings.catch_warnings(), working(name):
+                if not debug:
+                    warnings.simplefilter("ignore")  # library chatter; errors say what matters
+                with _stage_edge(name, kwargs):
+                    return func(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
         except PlenocliError as err:
             if debug:
                 raise
             raise click.ClickException(str(err)) from err
-        except KeyboardInterrupt:
-            click.echo("plenocli: interrupted; no partial output was kept", err=True)
-            sys.exit(130)
+        except (KeyboardInterrupt, Terminated) as err:
+            what = "interrupted" if isinstance(err, KeyboardInterrupt) else "terminated"
+            click.echo(f"plenocli: {what}; no partial output was kept", err=True)
+            sys.exit(130 if isinstance(err, KeyboardInterrupt) else 143)
         except MemoryError as err:
             if debug:
                 raise
             raise click.ClickException("out of memory; try a smaller crop or a machine with "
                                        "more RAM") from err
+        except OSError as err:
+            if debug:
+                raise
+            raise click.ClickException(os_error_message(err)) from err
         except Exception as err:  # a bug: still one line, the traceback on request
             if debug:
                 raise
@@ -95,3 +120,29 @@ def stage_command(func):
                                        "(run again with --debug for the traceback)") from err
 
     return wrapper
+
+
+def _stage_edge(name: str, params: dict):
+    """The registered stage's guard (output checks, outputs landing together), if any."""
+    from plenocli.pipeline.registry import get_stages
+
+    stage = get_stages().get(name)
+    return stage.guard(params) if stage is not None else contextlib.nullcontext()
+
+
+@contextlib.contextmanager
+def _terminate_on_sigterm():
+    """Turn SIGTERM into an exception, so temporaries are removed as on Ctrl-C."""
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. a Dask worker): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

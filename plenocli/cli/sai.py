@@ -11,7 +11,8 @@ from plenocli.cli import options
 @click.option("--grid", type=click.Path(dir_okay=False), default=None,
               help="Square lens grid with a non-integer pitch: approximate SAIs (S-hat), "
                    "nearest pixel to each sub-aperture centre.")
-@click.option("--cfa-layout", default="pixel", show_default=True,
+@click.option("--cfa-layout", type=click.Choice(["pixel", "micro-image"]),
+              default="pixel", show_default=True,
               help="pixel: Bayer per pixel; micro-image: one colour per micro-image (quad-Bayer).")
 @options.preview_opt
 @options.stage_command

@@ -18,9 +18,11 @@ def _kind_names():
 @click.argument("kind", metavar="KIND", type=click.Choice(_kind_names()))
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
               help="Folder for the capture files and truth.json.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--seed", type=click.IntRange(min=0),
+              default=0, show_default=True, help="Random seed.")
 @click.option("--pixels", default=None, help="Sensor size, ROWSxCOLS or one number.")
-@click.option("--rays", type=int, default=None, help="Rays per pixel (optical kinds).")
+@click.option("--rays", type=click.IntRange(min=1),
+              default=None, help="Rays per pixel (optical kinds).")
 @click.option("--no-prisms", is_flag=True, default=None, help="Remove the prisms (optical kinds).")
 @click.option("--param", "extra", multiple=True, metavar="KEY=VALUE",
               help="Another option of the kind (repeatable), e.g. --param noise=0.")

@@ -1,14 +1,53 @@
-"""Atomic writes: a failed or interrupted stage never leaves a half-written file."""
+"""Atomic writes: a failed or interrupted stage never leaves a half-written file.
+
+Every file is written to a temporary beside its destination and renamed only on success. Inside
+:func:`outputs_together` (what every stage runs in), the renames wait until the whole stage has
+succeeded, so a command's outputs land together or not at all. Temporaries are named
+``.NAME.HOST-PID.XXXX.part``: one left by a killed run (its process gone) is removed the next time
+anything writes NAME.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
+import socket
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from plenocli.errors import InputError
+
+_PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar(
+    "plenocli_pending_outputs", default=None)
+_HOST = socket.gethostname().replace(".", "_").replace("-", "_") or "host"
+
+
+@contextlib.contextmanager
+def outputs_together() -> Iterator[None]:
+    """Hold back the renames of every atomic write in the block until the block succeeds.
+
+    On any exception (or Ctrl-C) inside the block every temporary is removed and no destination
+    is touched.
+    """
+    pending: list[tuple[Path, Path]] = []
+    token = _PENDING.set(pending)
+    try:
+        yield
+    except BaseException:
+        _discard(pending)
+        raise
+    finally:
+        _PENDING.reset(token)
+    landed = 0
+    try:
+        for tmp, dest in pending:
+            os.replace(tmp, dest)
+            landed += 1
+    except BaseException:
+        _discard(pending[landed:])
+        raise
 
 
 @contextlib.contextmanager
@@ -18,25 +57,32 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     The temporary file lives in the destination folder so that the final rename is atomic on
     POSIX file systems. On any exception (or Ctrl-C) the temporary file is removed and the
     destination is left as it was. ``protect`` lists input files that must never be overwritten.
+    Inside :func:`outputs_together` the rename waits for the end of the block.
     """
     dest = Path(path)
     for other in protect:
-        if other is not None and Path(other).exists() and dest.exists():
-            if os.path.samefile(other, dest):
-                raise InputError(
-                    f"output {dest} is also an input; choose another output path "
-                    "(plenocli never overwrites its inputs)"
-                )
+        if other is not None and _same_file(Path(other), dest):
+            raise InputError(f"output {dest} is also an input; choose another output path "
+                             "(plenocli never overwrites its inputs)")
     if dest.is_dir():
         raise InputError(f"output {dest} is a folder; give a file name")
+    pending = _PENDING.get()
+    if pending is not None and any(_same_path(dest, d) for _, d in pending):
+        raise InputError(f"{dest} is written twice by one command; give each output its own "
+                         "path")
     dest.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".part", dir=dest.parent)
+    remove_stale_temporaries(dest)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.{_HOST}-{os.getpid()}.",
+                                    suffix=".part", dir=dest.parent)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, 0o644)
-        os.replace(tmp, dest)
+        if pending is None:
+            os.replace(tmp, dest)
+        else:
+            pending.append((tmp, dest))
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -51,3 +97,79 @@ def write_bytes(path: str | os.PathLike, data: bytes, *, protect: tuple = ()) ->
 def write_text(path: str | os.PathLike, text: str, *, protect: tuple = ()) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     write_bytes(path, text.encode("utf-8"), protect=protect)
+
+
+def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
+    """Before any work: every output distinct from the others and from the inputs, not a
+    folder, with a name the file system takes, in a folder that exists or can be made and is
+    writable. Raises InputError naming the path and what to do."""
+    outputs, inputs = [Path(p) for p in outputs], [Path(p) for p in inputs]
+    for k, out in enumerate(outputs):
+        for other in outputs[:k]:
+            if _same_path(out, other):
+                raise InputError(f"{out} is given for two outputs; give each output its own path")
+        for src in inputs:
+            if _same_path(out, src):
+                raise InputError(f"output {out} is also an input; choose another output path "
+                                 "(plenocli never overwrites its inputs)")
+        if out.is_dir():
+            raise InputError(f"output {out} is a folder; give a file name")
+        _check_folder(out)
+
+
+def remove_stale_temporaries(dest: Path) -> None:
+    """Remove temporaries of ``dest`` left on this host by processes that no longer run."""
+    with contextlib.suppress(OSError):
+        for part in dest.parent.glob(f".{dest.name}.{_HOST}-*.part"):
+            pid = part.name[len(f".{dest.name}.{_HOST}-"):].split(".", 1)[0]
+            if pid.isdigit() and not _alive(int(pid)):
+                part.unlink(missing_ok=True)
+
+
+def _check_folder(out: Path) -> None:
+    name_max = 255
+    folder = out.parent
+    while not folder.exists():
+        if folder.is_symlink() or folder == folder.parent:
+            break
+        folder = folder.parent
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"cannot write {out}: {folder} is a file, not a folder")
+    with contextlib.suppress(OSError, ValueError):
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+    room = len(f"..{_HOST}-{os.getpid()}.xxxxxxxx.part")  # the temporary's prefix and suffix
+    too_long = [p for p in out.parent.parts if len(p.encode()) > name_max]
+    if too_long or len(out.name.encode()) + room > name_max:
+        raise InputError(f"cannot write {out}: a name in it is too long for this file system "
+                         f"takes ({name_max} bytes with a temporary's {room}); shorten it")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError(f"cannot write {out}: folder {folder} is not writable "
+                         "(permission or a read-only file system); choose another folder")
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    return os.path.abspath(a) == os.path.abspath(b) or _same_file(a, b)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _discard(pending: list[tuple[Path, Path]]) -> None:
+    for tmp, _ in pending:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+

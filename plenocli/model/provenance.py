@@ -3,6 +3,7 @@ sha256 of its inputs, so a result can be traced and reproduced."""
 
 from __future__ import annotations
 
+import contextvars
 import datetime as _dt
 import hashlib
 import os
@@ -14,6 +15,10 @@ import numpy as np
 from plenocli import __version__
 
 _HASHES: dict[tuple, str] = {}
+# The fully resolved parameters of the stage being run, set by its edge (Stage.guard), so that
+# every record holds all of them, defaults included, whatever subset a stage passes.
+RESOLVED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("plenocli_resolved",
+                                                                      default=None)
 
 
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
@@ -57,7 +62,12 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
 
     ``inputs`` maps a role (``input``, ``white``, ...) to a path or a list of paths; each file is
     hashed. Parameters that are paths are kept as given (the hashes identify the content).
+    Inside a stage run the edge's fully resolved parameters are recorded, with ``parameters``
+    on top (a stage may add derived values).
     """
+    resolved = RESOLVED.get()
+    if resolved is not None:
+        parameters = {**resolved, **parameters}
     hashed: list[dict] = []
     for role, value in inputs.items():
         paths = value if isinstance(value, (list, tuple)) else [value]

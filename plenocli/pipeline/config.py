@@ -53,23 +53,14 @@ _PLACEHOLDER = re.compile(r"\{(capture|name|out)\}")
 class Step:
     name: str
     stage: Stage
-    params: dict[str, Any]  # keyword names of stage.run, paths resolved
+    params: dict[str, Any]  # every parameter of the stage, resolved by its command; paths absolute
+    given: tuple[str, ...] = ()  # the parameters the config named (the rest are defaults)
 
     def input_paths(self) -> list[Path]:
-        return _paths(self.params, self.stage.inputs)
+        return self.stage.paths(self.params, self.stage.inputs)
 
     def output_paths(self) -> list[Path]:
-        return _paths(self.params, self.stage.outputs)
-
-
-def _paths(params: dict, names: tuple[str, ...]) -> list[Path]:
-    out: list[Path] = []
-    for name in names:
-        value = params.get(name)
-        if value is None:
-            continue
-        out.extend(Path(v) for v in (value if isinstance(value, (list, tuple)) else [value]))
-    return out
+        return self.stage.paths(self.params, self.stage.outputs)
 
 
 def closest(word: str, choices) -> str:
@@ -224,7 +215,7 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
                           f"{closest(str(stage_name), stages)}; add 'stage: NAME'")
     stage = stages[stage_name]
     valid = stage.parameters()
-    params: dict[str, Any] = {}
+    given: dict[str, Any] = {}
     for key, value in body.items():
         norm = str(key).replace("-", "_")
         if norm not in valid:
@@ -233,12 +224,16 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
                               f"{stage_name}{closest(str(key).replace('_', '-'), options)}")
         if norm in stage.inputs or norm in stage.outputs:
             value = _resolve(base, value)
-        params[norm] = value
-    missing = [k for k, d in valid.items() if d is inspect.Parameter.empty and k not in params]
+        given[norm] = value
+    missing = [k for k, d in valid.items() if d is inspect.Parameter.empty and k not in given]
     if missing:
         raise ConfigError(f"{path}: step {name!r}: missing {', '.join(missing)} "
                           f"(required by stage {stage_name})")
-    return Step(name, stage, params)
+    try:
+        params = stage.resolve(given)
+    except ConfigError as err:
+        raise ConfigError(f"{path}: step {name!r}: {err}") from err
+    return Step(name, stage, params, tuple(given))
 
 
 def _resolve(base: Path, value):

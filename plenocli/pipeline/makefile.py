@@ -9,7 +9,6 @@ is out of date, in parallel with ``make -j``. The command is ``$(PLENOCLI)`` (de
 
 from __future__ import annotations
 
-import inspect
 import os
 import re
 import shlex
@@ -19,7 +18,6 @@ from pathlib import Path
 from plenocli.errors import ConfigError
 from plenocli.pipeline.config import Step
 
-POSITIONAL = ("input", "inputs")  # stage parameters that are the command's arguments
 _UNSAFE = re.compile(r"[^\w.+,@=~/-]")  # spaces, :, $, #, quotes, globs: not in make names
 
 
@@ -62,27 +60,20 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
 
 
 def _recipe(step: Step, root: Path) -> str:
-    defaults = step.stage.parameters()
-    words = ["$(PLENOCLI)", step.stage.name]
-    options: list[str] = []
-    for key, value in step.params.items():
-        is_path = key in step.stage.inputs or key in step.stage.outputs
-        values = value if isinstance(value, (list, tuple)) else [value]
-        if is_path:
-            values = [None if v is None else _name(Path(v), root) for v in values]
-        if key in POSITIONAL:
-            words.extend(_quote(v) for v in values if v is not None)
-            continue
-        flag = "--" + key.replace("_", "-")
-        for v in values:
-            if v is None:
-                continue
-            if isinstance(v, bool):
-                if v != defaults.get(key, inspect.Parameter.empty):
-                    options.append(flag if v else "--no-" + key.replace("_", "-"))
-                continue
-            options.extend([flag, v if is_path else _quote(v)])
-    return " ".join(words + options)
+    """The shell command of a step: the values the config gave, in the command's own words."""
+    from plenocli.cli.params import argv_for
+
+    values = {}
+    for key in step.given:
+        value = step.params[key]
+        if key in step.stage.inputs or key in step.stage.outputs:
+            many = isinstance(value, (list, tuple))
+            names = [None if v is None else _name(Path(v), root)
+                     for v in (value if many else [value])]
+            value = names if many else names[0]
+        values[key] = value
+    words = argv_for(step.stage.command, values)
+    return " ".join(["$(PLENOCLI)", step.stage.name, *(_quote(w) for w in words)])
 
 
 def _quote(value) -> str:

@@ -1,62 +1,107 @@
 """The stage registry: every stage a config can name, with which parameters are files.
 
-A stage is a plain function ``run(**params)`` in ``plenocli.pipeline.stages.<name>``; its keyword
-names are the command's long option names (and positional argument names), so the CLI, YAML
-configs and ``--set`` all speak the same words. ``inputs`` and ``outputs`` name the parameters that
-are file paths, which is what the make-style runner needs.
+A stage is a plain function ``run(**params)`` in ``plenocli.pipeline.stages.<name>`` and a click
+command ``plenocli.cli.<name>``. The command is the one definition of the stage's parameters
+(type, range, choices, default): the shell, a YAML step and ``--set`` all go through it
+(:mod:`plenocli.cli.params`); this is the one place the pipeline reaches up to the commands.
+``inputs`` and ``outputs`` name the parameters that are file paths, which is what the make-style
+runner and the output checks need.
 """
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import inspect
-from collections.abc import Callable
+from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+from plenocli.errors import ConfigError
+from plenocli.io.atomic import check_outputs, outputs_together
+from plenocli.model.provenance import RESOLVED
 
 
 @dataclass(frozen=True)
 class Stage:
     name: str
-    run: Callable[..., Any]
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
 
+    @property
+    def run(self):
+        """The stage function ``run(**params)``."""
+        return importlib.import_module(f"plenocli.pipeline.stages.{self.name}").run
+
+    @property
+    def command(self):
+        """The click command that defines the stage's parameters."""
+        return getattr(importlib.import_module(f"plenocli.cli.{self.name}"), self.name)
+
     def parameters(self) -> dict[str, Any]:
         """Parameter names and defaults (``inspect.Parameter.empty`` when required)."""
-        return {n: p.default for n, p in inspect.signature(self.run).parameters.items()}
+        from plenocli.cli.params import defaults, stage_parameters
+
+        values = defaults(self.command)
+        return {name: inspect.Parameter.empty if p.required else values.get(name)
+                for name, p in stage_parameters(self.command).items()}
+
+    def resolve(self, values: dict[str, Any]) -> dict[str, Any]:
+        """Every parameter, converted and checked by the command's own types (ConfigError)."""
+        from plenocli.cli.params import resolve
+
+        return resolve(self.command, values)
+
+    def paths(self, params: dict[str, Any], roles: tuple[str, ...]) -> list[Path]:
+        """The file paths held by the parameters named in ``roles``."""
+        out: list[Path] = []
+        for name in roles:
+            value = params.get(name)
+            if value is None:
+                continue
+            out.extend(Path(v) for v in (value if isinstance(value, (list, tuple)) else [value]))
+        return out
+
+    @contextlib.contextmanager
+    def guard(self, params: dict[str, Any]) -> Iterator[None]:
+        """The edge of one stage run: outputs checked before any work, and landed together.
+
+        Outputs must be distinct from each other and from the inputs, in writable folders;
+        every file the stage writes inside the block is renamed into place only when the whole
+        stage succeeded (nothing is left behind otherwise).
+        """
+        check_outputs(self.paths(params, self.outputs), self.paths(params, self.inputs))
+        token = RESOLVED.set(dict(params))
+        try:
+            with outputs_together():
+                yield
+        finally:
+            RESOLVED.reset(token)
 
 
-def _stages() -> dict[str, Stage]:
-    from plenocli.pipeline.stages import (
-        bias,
-        calibrate,
-        crosstalk,
-        decode,
-        flat,
-        optics,
-        refocus,
-        sai,
-        stitch,
-    )
-
-    table = [
-        Stage("decode", decode.run, inputs=("input", "calib"), outputs=("output", "preview")),
-        Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
-        Stage("flat", flat.run, inputs=("input", "white", "gain"),
-              outputs=("output", "save_gain", "preview")),
-        Stage("calibrate", calibrate.run, inputs=("input", "compare"),
-              outputs=("output", "xml", "preview")),
-        Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
-        Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
-        Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),
-              outputs=("output", "preview")),
-        Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
-              outputs=("output", "transform_out", "report", "preview")),
-        Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
-    ]
-    return {s.name: s for s in table}
+_TABLE = (
+    Stage("decode", inputs=("input", "calib"), outputs=("output", "preview")),
+    Stage("bias", inputs=("input",), outputs=("output", "preview")),
+    Stage("flat", inputs=("input", "white", "gain"), outputs=("output", "save_gain", "preview")),
+    Stage("calibrate", inputs=("input", "compare"), outputs=("output", "xml", "preview")),
+    Stage("refocus", inputs=("input", "grid"), outputs=("output", "preview")),
+    Stage("sai", inputs=("input", "grid"), outputs=("output", "preview")),
+    Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview")),
+    Stage("stitch", inputs=("inputs", "transform_in", "rig"),
+          outputs=("output", "transform_out", "report", "preview")),
+    Stage("optics", inputs=("input",), outputs=("json",)),
+)
 
 
 def get_stages() -> dict[str, Stage]:
     """All registered stages by name."""
-    return _stages()
+    return {s.name: s for s in _TABLE}
+
+
+def get_stage(name: str) -> Stage:
+    """One stage by name (ConfigError naming the stages when unknown)."""
+    stages = get_stages()
+    if name not in stages:
+        raise ConfigError(f"unknown stage {name!r}; stages: {', '.join(stages)}")
+    return stages[name]

@@ -1,8 +1,9 @@
 """The make-style runner: run the steps of a config in order, skipping up-to-date ones.
 
 A step is up to date when all its outputs exist, are newer than all its inputs, the parameters
-recorded in its first output's provenance equal the step's parameters now, and no step before it
-in this run was (or would be) rerun to make one of its inputs.
+recorded in its first output's provenance equal the step's fully resolved parameters now
+(defaults included, so removing a key from a config reruns the step when its default differs),
+and no step before it in this run was (or would be) rerun to make one of its inputs.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 
 import yaml
 
-from plenocli.errors import ConfigError, PlenocliError
+from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
 from plenocli.io.tiffio import read_meta
 from plenocli.model.provenance import json_safe
 from plenocli.pipeline.config import Step
@@ -65,9 +66,12 @@ def run_pipeline(steps: list[Step], *, force: bool = False,
         log.info("run      %-16s (%s: %s)", d.step.name, d.step.stage.name, d.reason)
         start = time.monotonic()
         try:
-            d.step.stage.run(**d.step.params)
+            with d.step.stage.guard(d.step.params):
+                d.step.stage.run(**d.step.params)
         except PlenocliError as err:
             raise type(err)(f"step {d.step.name!r}: {err}") from err
+        except OSError as err:
+            raise InputError(f"step {d.step.name!r}: {os_error_message(err)}") from err
         log.debug("         %-16s %.2f s", d.step.name, time.monotonic() - start)
     return decisions
 
@@ -86,12 +90,15 @@ def _stale(step: Step, will_make: set[Path]) -> str | None:
     if newest_input > oldest_output:
         return "an input is newer than the outputs"
     recorded = _recorded_parameters(outputs[0]) if outputs else None
-    if recorded is not None:
-        current = json_safe({k: v for k, v in step.params.items()
-                          if k not in step.stage.inputs and k not in step.stage.outputs})
-        changed = [k for k in recorded if k in current and current[k] != recorded[k]]
-        if changed:
-            return f"parameter {changed[0]} changed"
+    if recorded is None:
+        return None
+    paths = (*step.stage.inputs, *step.stage.outputs)
+    current = json_safe({k: v for k, v in step.params.items() if k not in paths})
+    for key, value in current.items():
+        if key not in recorded:
+            return f"parameter {key} not recorded in {outputs[0].name}"
+        if recorded[key] != value:
+            return f"parameter {key} changed ({recorded[key]!r} -> {value!r})"
     return None
 
 

@@ -1,0 +1,129 @@
+"""The edge of every stage: outputs checked before any work and landed together, operating-system
+errors and signals as one line, temporaries of killed runs cleaned."""
+
+import errno
+import hashlib
+import os
+import signal
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import atomic
+
+ROOT = Path(__file__).resolve().parents[2]
+CAPTURE = ROOT / "fixtures" / "dualpixel" / "capture.dng"
+
+
+@pytest.fixture
+def frames(tmp_path):
+    """A decoded capture to feed bias."""
+    out = tmp_path / "frames.tif"
+    result = CliRunner().invoke(cli, ["decode", str(CAPTURE), "-o", str(out), "-q"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def one_line(result) -> str:
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1, result.output
+    assert "Traceback" not in result.output and "internal error" not in result.output
+    return lines[0]
+
+
+def digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_two_outputs_on_one_path_are_refused_before_any_work(tmp_path, frames):
+    out = tmp_path / "b.tif"
+    result = invoke("bias", frames, "-o", out, "--preview", out)
+    assert result.exit_code == 1
+    assert "given for two outputs" in one_line(result)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames.tif"]
+
+
+def test_an_output_that_is_an_input_is_refused(tmp_path, frames):
+    before = digest(frames)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", frames)
+    assert result.exit_code == 1 and "also an input" in one_line(result)
+    assert digest(frames) == before
+
+
+def test_when_the_second_output_fails_the_first_is_not_left(tmp_path, frames, monkeypatch):
+    import plenocli.pipeline.stages.bias as stage
+
+    def disk_full(path, *args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(stage, "write_png", disk_full)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", tmp_path / "b.png")
+    assert result.exit_code == 1
+    assert "no space left" in one_line(result)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames.tif"]  # no b.tif, no .part
+
+
+def _under_a_file(folder: Path) -> Path:
+    (folder / "file").write_text("x")
+    return folder / "file" / "b.tif"
+
+
+def _a_folder(folder: Path) -> Path:
+    (folder / "folder.tif").mkdir()
+    return folder / "folder.tif"
+
+
+@pytest.mark.parametrize("make_bad, code, expected", [
+    (_under_a_file, 1, "is a file, not a folder"),
+    (lambda d: d / ("x" * 300 + ".tif"), 1, "too long"),
+    (_a_folder, 2, "is a directory"),  # click's own check of -o: a usage error
+])
+def test_unwritable_outputs_are_one_line(tmp_path, frames, make_bad, code, expected):
+    result = invoke("bias", frames, "-o", make_bad(tmp_path))
+    assert result.exit_code == code
+    assert expected in result.output.strip().splitlines()[-1]
+
+
+def test_a_read_only_folder_is_one_line(tmp_path, frames, monkeypatch):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(atomic.os, "access",  # root ignores permission bits: say it is read-only
+                        lambda p, mode: False if Path(p) == folder else real_access(p, mode))
+    result = invoke("bias", frames, "-o", folder / "b.tif")
+    assert result.exit_code == 1
+    assert "not writable" in one_line(result)
+
+
+def test_sigterm_is_handled_like_ctrl_c(tmp_path, frames, monkeypatch):
+    import plenocli.pipeline.stages.bias as stage
+
+    real_write = stage.tiffio.write_image
+
+    def write_then_terminated(path, *args, **kwargs):
+        real_write(path, *args, **kwargs)  # the temporary exists now; a SIGTERM arrives
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(stage.tiffio, "write_image", write_then_terminated)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif")
+    assert result.exit_code == 143
+    assert "terminated; no partial output was kept" in one_line(result)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["frames.tif"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
+
+
+def test_temporaries_of_killed_runs_are_removed(tmp_path, frames):
+    out = tmp_path / "b.tif"
+    host = atomic._HOST
+    dead = tmp_path / f".b.tif.{host}-{2**22 + 12345}.abcd1234.part"
+    live = tmp_path / f".b.tif.{host}-{os.getpid()}.efgh5678.part"
+    dead.write_bytes(b"left by SIGKILL")
+    live.write_bytes(b"another run still writing")
+    assert invoke("bias", frames, "-o", out, "-q").exit_code == 0
+    assert out.is_file() and not dead.exists() and live.exists()

@@ -1,0 +1,121 @@
+"""One parameter path: the shell, a YAML step and --set give the same checks and the same
+resolved parameters; the runner reruns a step whose resolved parameters changed."""
+
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.errors import ConfigError
+from plenocli.io.tiffio import read_meta
+from plenocli.pipeline.config import load_config
+from plenocli.pipeline.registry import get_stages
+from plenocli.pipeline.runner import plan, run_pipeline
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# (stage, option, value as a YAML scalar would give it, value as typed in a shell)
+BAD_VALUES = [
+    ("bias", "smooth", -3, "-3"),
+    ("bias", "smooth", 1.5, "1.5"),
+    ("bias", "smooth", "abc", "abc"),
+    ("bias", "guard", -5, "-5"),
+    ("bias", "crop", 12345, "12345"),
+    ("bias", "overscan", "sideways", "sideways"),
+    ("decode", "black", float("nan"), "nan"),
+    ("decode", "white", -5, "-5"),
+    ("flat", "percentile", 101, "101"),
+    ("flat", "floor", float("inf"), "inf"),
+    ("refocus", "s", 0, "0"),
+    ("refocus", "g", "abc", "abc"),
+    ("refocus", "view", "sideways", "sideways"),
+    ("refocus", "mask-width", -1, "-1"),
+    ("stitch", "overlap", 1.5, "1.5"),
+    ("optics", "sensor-mm", float("nan"), "nan"),
+]
+
+
+def _argv(stage: str, option: str, value: str) -> list[str]:
+    required = {"refocus": ["--grid", "g.yaml"], "flat": [], "optics": []}.get(stage, [])
+    out = [] if stage == "optics" else ["-o", "out.tif"]
+    return [stage, "in.tif", *out, *required, f"--{option}", value]
+
+
+def _config(tmp_path: Path, stage: str, extra: str = "") -> Path:
+    body = {"refocus": "    grid: g.yaml\n"}.get(stage, "")
+    out = "" if stage == "optics" else "    output: out.tif\n"
+    path = tmp_path / "c.yaml"
+    key = "inputs" if stage == "stitch" else "input"
+    path.write_text(f"steps:\n  {stage}:\n    {key}: in.tif\n{out}{body}{extra}")
+    return path
+
+
+@pytest.mark.parametrize("stage, option, yaml_value, shell_value", BAD_VALUES)
+def test_a_bad_value_fails_the_same_way_everywhere(tmp_path, stage, option, yaml_value,
+                                                   shell_value):
+    result = CliRunner().invoke(cli, _argv(stage, option, shell_value))
+    assert result.exit_code == 2
+    shell_message = result.output.strip().splitlines()[-1].removeprefix("Error: ")
+
+    config = _config(tmp_path, stage, f"    {option}: {yaml_value!r}\n".replace("nan", ".nan")
+                     .replace("inf", ".inf"))
+    with pytest.raises(ConfigError) as from_yaml:
+        load_config(config)
+    with pytest.raises(ConfigError) as from_set:
+        load_config(_config(tmp_path, stage), [f"{stage}.{option}={shell_value}"])
+    for err in (from_yaml.value, from_set.value):
+        assert str(err).endswith(shell_message), (str(err), shell_message)
+        assert f"step '{stage}'" in str(err)
+    assert not list(tmp_path.glob("out*"))
+
+
+def test_resolved_parameters_include_every_default(tmp_path):
+    step = load_config(_config(tmp_path, "bias", "    smooth: 9\n"))[0]
+    assert step.params["smooth"] == 9
+    assert step.params["guard"] == 2 and step.params["overscan"] == "auto"
+    assert set(step.params) == set(get_stages()["bias"].parameters())
+    assert step.given == ("input", "output", "smooth")
+
+
+def test_set_values_are_parsed_like_shell_words(tmp_path):
+    step = load_config(_config(tmp_path, "bias"), ["bias.smooth=9", "bias.crop=20X30"])[0]
+    assert step.params["smooth"] == 9 and step.params["crop"] == "20x30"
+
+
+@pytest.fixture
+def project(tmp_path):
+    (tmp_path / "configs").mkdir()
+    shutil.copy(ROOT / "configs" / "demo_dualpixel.yaml", tmp_path / "configs")
+    shutil.copytree(ROOT / "fixtures" / "dualpixel", tmp_path / "fixtures" / "dualpixel")
+    return tmp_path / "configs" / "demo_dualpixel.yaml"
+
+
+def test_removing_a_parameter_reruns_the_step(project):
+    text = project.read_text()
+    assert re.search(r"^    smooth: \d+", text, re.M), "the demo config sets bias smooth"
+    run_pipeline(load_config(project))
+    project.write_text(re.sub(r"^    smooth: \d+.*\n", "", text, count=2, flags=re.M))
+    decisions = {d.step.name: d for d in plan(load_config(project))}
+    assert decisions["bias"].run and decisions["flat"].run
+    assert re.match(r"parameter smooth changed \(\d+ -> 0\)", decisions["bias"].reason)
+    assert not decisions["decode"].run
+
+
+def test_outputs_record_every_resolved_parameter(project):
+    run_pipeline(load_config(project))
+    out = project.parent.parent / "out" / "demo" / "dualpixel"
+    recorded = read_meta(out / "capture_biased.tif")["provenance"]["parameters"]
+    assert set(recorded) == set(get_stages()["bias"].parameters())
+    assert recorded["guard"] == 2 and recorded["crop"] is None  # defaults recorded too
+    assert not [d for d in plan(load_config(project)) if d.run]
+
+
+def test_dry_run_says_which_parameter_changed(project, caplog):
+    run_pipeline(load_config(project))
+    result = CliRunner().invoke(cli, ["run", str(project), "--dry-run", "--set", "flat.median=7"])
+    assert result.exit_code == 0, result.output
+    said = result.output + caplog.text  # the log goes to the handler of the first configure()
+    assert re.search(r"would run\s+flat .*parameter median changed \(\d+ -> 7\)", said)
