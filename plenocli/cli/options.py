@@ -99,7 +99,7 @@ def stage_command(func):
         except PlenocliError as err:
             if debug:
                 raise
-            raise click.ClickException(str(err)) from err
+            raise click.ClickException(" ".join(str(err).split())) from err  # one line
         except (KeyboardInterrupt, Terminated) as err:
             what = "interrupted" if isinstance(err, KeyboardInterrupt) else "terminated"
             click.echo(f"plenocli: {what}; no partial output was kept", err=True)
@@ -116,8 +116,9 @@ def stage_command(func):
         except Exception as err:  # a bug: still one line, the traceback on request
             if debug:
                 raise
-            raise click.ClickException(f"internal error: {type(err).__name__}: {err} "
-                                       "(run again with --debug for the traceback)") from err
+            raise click.ClickException(f"internal error: {type(err).__name__}: "
+                                       f"{' '.join(str(err).split())} (run again with --debug "
+                                       "for the traceback; please report it)") from err
 
     return wrapper
 

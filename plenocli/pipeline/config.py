@@ -134,8 +134,8 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
         doc = yaml.safe_load(p.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
-                if "{" in p.read_text(encoding="utf-8", errors="replace") else "")
-        raise ConfigError(f"{p}: not valid YAML ({str(err).splitlines()[0]}){hint}") from err
+                if _PLACEHOLDER.search(p.read_text(encoding="utf-8", errors="replace")) else "")
+        raise ConfigError(f"{p}: not valid YAML ({yaml_problem(err)}){hint}") from err
     if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict) or not doc["steps"]:
         raise ConfigError(f"{p}: a config needs a 'steps:' mapping of step names to stages")
     for key in doc:
@@ -147,6 +147,14 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     template = Template(p, raw_steps, None if doc.get("out") is None else str(doc["out"]))
     _check_per_capture_outputs(template)
     return template
+
+
+def yaml_problem(err: Exception) -> str:
+    """A YAML error in a few words: where and what (PyYAML's own text spans several lines)."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None) or str(err)
+    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+    return where + " ".join(str(problem).split())
 
 
 def _unflow(value):
@@ -205,7 +213,11 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if step not in steps:
             raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
-        steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else None
+        try:
+            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else None
+        except yaml.YAMLError as err:
+            raise ConfigError(f"--set {item!r}: the value is not valid YAML "
+                              f"({yaml_problem(err)}); quote it") from err
 
 
 def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> Step:
