@@ -28,7 +28,6 @@ demosaicing); the result has three channels R, G, B.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 from numba import njit, prange
@@ -229,18 +228,6 @@ def centre_table(grid: LensGrid) -> tuple[np.ndarray, np.ndarray, int, int]:
     cx[idx[:, 0] - imin, idx[:, 1] - jmin] = xy[:, 0]
     cy[idx[:, 0] - imin, idx[:, 1] - jmin] = xy[:, 1]
     return cx, cy, int(imin), int(jmin)
-
-
-def shift_grid(grid: LensGrid, dx: float, dy: float) -> LensGrid:
-    """The same lens grid in coordinates shifted by (dx, dy) pixels: centre -> centre - (dx, dy).
-
-    Used to express a grid in the coordinates of a crop whose pixel (0, 0) is grid pixel (dx, dy).
-    """
-    centres = None if grid.centres_xy is None else np.asarray(grid.centres_xy) - (dx, dy)
-    return replace(grid, offset_xy=(grid.offset_xy[0] - dx, grid.offset_xy[1] - dy),
-                   centres_xy=centres, image_shape=None,
-                   sensor_origin=(grid.sensor_origin[0] + int(round(dy)),
-                                  grid.sensor_origin[1] + int(round(dx))))
 
 
 def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight):
