@@ -19,16 +19,15 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from plenocli.errors import InputError
+from plenocli.model.cfa import check_pattern
 
 
 def _colour_masks(shape: tuple[int, int], cfa: str | None) -> dict[str, np.ndarray]:
     """Boolean masks of each colour of a 2 x 2 pattern (greens pooled); {} for no mosaic."""
     if not cfa:
         return {}
-    if len(cfa) != 4 or set(cfa.upper()) - set("RGB"):
-        raise ValueError(f"cfa must be a 2 x 2 pattern such as 'RGGB', got {cfa!r}")
     masks: dict[str, np.ndarray] = {}
-    for k, colour in enumerate(cfa.upper()):
+    for k, colour in enumerate(check_pattern(cfa)):
         m = masks.setdefault(colour, np.zeros(shape, bool))
         m[k // 2::2, k % 2::2] = True
     return masks

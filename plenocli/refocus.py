@@ -32,6 +32,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from plenocli.model.cfa import check_pattern
 from plenocli.model.lensgrid import LensGrid
 
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
@@ -256,9 +257,8 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
         raise ValueError(f"radius must be a positive number of pixels, got {radius}")
     if not (np.isfinite(min_weight) and min_weight >= 0):
         raise ValueError(f"min_weight must be >= 0, got {min_weight}")
-    if cfa is not None and (len(cfa) != 4 or set(cfa.upper()) - set(CHANNELS)
-                            or cfa.upper().count("G") != 2):
-        raise ValueError(f"cfa must be a 2 x 2 Bayer pattern such as RGGB, got {cfa!r}")
+    if cfa is not None:
+        check_pattern(cfa)
 
 
 def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0,
