@@ -83,7 +83,7 @@ def _flush(line, lo, hi, n2, table, Y, bins, half, out_r0, out_r1, off, buf):
 
 
 @njit(cache=True, parallel=True)
-def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,
+def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,  # noqa: C901, PLR0915 (numba kernel)
            xsign, ysign, half_mask, radius2, chan_map, table, band_rows, band_out, buf_off,
            buf, rows_out, cols_out):
     """Splat ``frame`` into ``buf`` (total band rows, cols_out, 2 * channels).
