@@ -34,6 +34,15 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
     return np.concatenate(out, axis=1)
 
 
+def view_mosaic(stack: np.ndarray, n: int, channels: list[str]) -> np.ndarray:
+    """N x N sub-aperture views (view-major pages of ``len(channels)`` channels each) in their
+    N x N arrangement: an RGB picture when the channels are R, G, B, else their mean."""
+    tiles = stack.reshape(n * n, len(channels), *stack.shape[1:]).astype(np.float32)
+    tiles = np.moveaxis(tiles, 1, -1) if channels == ["R", "G", "B"] else tiles.mean(axis=1)
+    rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
+    return np.concatenate(rows, axis=0)
+
+
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
               max_side: int = 2048, protect: tuple = ()) -> None:
     """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or

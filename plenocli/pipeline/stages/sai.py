@@ -8,7 +8,7 @@ from plenocli import sai as sai_mod
 from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area, frame_grid
-from plenocli.io.preview import write_png
+from plenocli.io.preview import view_mosaic, write_png
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -57,9 +57,5 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     log.info("sai: %s -> %s (%d views%s of %d x %d%s)", shown(input), shown(output), n * n,
              f" x {len(pages)} channels" if len(pages) > 1 else "", stack.shape[2],
              stack.shape[1], ", approximate S-hat" if framing.grid else "")
-    if preview:  # the views in their N x N arrangement, in colour when the input is RGB
-        tiles = stack.reshape(n * n, len(pages), *stack.shape[1:]).astype(np.float32)
-        rgb = pages == ["R", "G", "B"]
-        tiles = np.moveaxis(tiles, 1, -1) if rgb else tiles.mean(axis=1)
-        rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
-        write_png(preview, np.concatenate(rows, axis=0), protect=protect)
+    if preview:
+        write_png(preview, view_mosaic(stack, n, pages), protect=protect)
