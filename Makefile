@@ -14,6 +14,7 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,dask]'
+	$(BIN)/python -m plenocli.warmup  # numba kernels compiled once, into their cache
 	touch $@
 
 # Simulated captures with ground truth for the demos (seeded: the same files every time).
@@ -50,8 +51,11 @@ test-fast: $(STAMP)
 bench: $(STAMP)
 	for b in bench/bench_*.py; do echo "== $$b"; PYTHONPATH=. $(BIN)/python $$b || exit 1; done
 
+# ruff (with complexity ceilings, see pyproject.toml), the file/function length rules and the
+# layers (imports point down, no stage imports a stage, only the CLI imports click)
 lint: $(STAMP)
 	$(BIN)/ruff check plenocli tests bench
+	$(BIN)/python -m pytest -q -p no:cacheprovider tests/test_code_size.py tests/test_layers.py
 
 clean:
 	rm -rf out .pytest_cache

@@ -10,7 +10,6 @@ Inputs are never modified; functions return new arrays.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 OVERSCAN_MODES = ("auto", "left", "top", "both", "none")
 
@@ -84,6 +83,8 @@ def _smooth(levels: np.ndarray, length: int, period: int, *, axis: int) -> np.nd
         seq = levels[tuple(sel)]
         window = min(length + (length + 1) % 2, seq.shape[axis] - (seq.shape[axis] + 1) % 2)
         if window >= 3:
+            from scipy.signal import savgol_filter  # 0.6 s to import: only when smoothing
+
             out[tuple(sel)] = savgol_filter(seq, window, 1, axis=axis, mode="interp")
     return out
 

@@ -19,16 +19,15 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from plenocli.errors import InputError
+from plenocli.model.cfa import check_pattern
 
 
 def _colour_masks(shape: tuple[int, int], cfa: str | None) -> dict[str, np.ndarray]:
     """Boolean masks of each colour of a 2 x 2 pattern (greens pooled); {} for no mosaic."""
     if not cfa:
         return {}
-    if len(cfa) != 4 or set(cfa.upper()) - set("RGB"):
-        raise ValueError(f"cfa must be a 2 x 2 pattern such as 'RGGB', got {cfa!r}")
     masks: dict[str, np.ndarray] = {}
-    for k, colour in enumerate(cfa.upper()):
+    for k, colour in enumerate(check_pattern(cfa)):
         m = masks.setdefault(colour, np.zeros(shape, bool))
         m[k // 2::2, k % 2::2] = True
     return masks
@@ -154,3 +153,19 @@ def mask_width_sweep(make_views: Callable[[float], tuple[np.ndarray, np.ndarray]
                         "map_max": res["map_max"],
                         "flux_intended": float(np.nanmean(main))})
     return results
+
+
+def refocus_mask_sweep(frame: np.ndarray, grid, mask_widths: Sequence[float], *,
+                       s: float = 0.2, g: float = 4.0, intended: str = "left",
+                       tile_px: int = 64) -> list[dict]:
+    """``mask_width_sweep`` of a Raytrix white ``frame`` (rows, cols) with one pupil half
+    masked: left and right views refocused (``plenocli.refocus.refocus``, scale ``s``,
+    parameter ``g``) with the lens ``grid`` (a ``LensGrid`` in the frame's pixels)."""
+    from plenocli.refocus import refocus  # numba kernels: loaded only for a sweep
+
+    def make_views(m: float) -> tuple[np.ndarray, np.ndarray]:
+        left, _ = refocus(frame, grid, s=s, g=g, view="left", mask_width=m)
+        right, _ = refocus(frame, grid, s=s, g=g, view="right", mask_width=m)
+        return left, right
+
+    return mask_width_sweep(make_views, mask_widths, intended=intended, tile_px=tile_px)

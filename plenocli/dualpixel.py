@@ -1,8 +1,66 @@
-"""Dual-pixel views: the right half-pixel image B from the sum S and the left image A."""
+"""Dual-pixel views: the right half-pixel image B from the sum S and the left image A, and the
+views of a decoded capture (each frame bias-corrected with its own over-scan)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
+
+from plenocli.bias import subtract_overscan
+from plenocli.model.cfa import period
+
+DUAL_PIXEL_FRAMES = ("S", "A")   # a Canon DPRAW's frame 0 = A + B, frame 1 = A
+DUAL_PIXEL_VIEWS = ("A", "B", "S")
+
+
+@dataclass(frozen=True)
+class CaptureViews:
+    """Bias-corrected views of one capture's active area.
+
+    ``views`` (V, rows, cols) float32 in DN above black, NaN where derived from a clipped raw
+    pixel; ``names`` and ``white_level`` (DN above black is bounded by it) per view;
+    ``levels`` the bias levels measured for each input frame (``plenocli.bias``'s dict).
+    """
+
+    views: np.ndarray
+    names: tuple[str, ...]
+    white_level: tuple[float, ...]
+    levels: tuple[dict, ...]
+
+
+def capture_views(frames: np.ndarray, *, names: Sequence[str], active_area, masked_areas,
+                  black_level: Sequence, white_level: Sequence[float], cfa: str | None,
+                  overscan: str = "auto", smooth: int = 0, guard: int = 2) -> CaptureViews:
+    """Bias-correct each frame of a decoded capture (frames, rows, cols) with its own
+    over-scan and crop it to ``active_area``; frames named S, A (dual pixel) become views
+    A, B = S - A and S (see ``split_views``), other frames stay as they are.
+
+    ``black_level`` (per frame, 4 values) is used with ``overscan="none"``; pixels at or above
+    a frame's ``white_level`` are clipped. Raises ValueError naming the frame.
+    """
+    top, left, bottom, right = active_area
+    corrected, levels, clipped = [], [], []
+    for k, frame in enumerate(frames):
+        try:
+            out, info = subtract_overscan(
+                frame, active_area=active_area, masked_areas=masked_areas, overscan=overscan,
+                period=period(cfa), smooth=smooth, guard=guard, black_level=black_level[k])
+        except ValueError as err:
+            raise ValueError(f"frame {names[k]}: {err}") from err
+        clip = frame[top:bottom, left:right] >= white_level[k]
+        np.copyto(out, np.nan, where=clip)
+        corrected.append(out)
+        clipped.append(clip)
+        levels.append(info)
+    if tuple(names[:2]) == DUAL_PIXEL_FRAMES:
+        views = split_views(corrected[0], corrected[1], sum_clipped=clipped[0],
+                            a_clipped=clipped[1])
+        # B is bounded by S
+        return CaptureViews(views, DUAL_PIXEL_VIEWS,
+                            (white_level[1], white_level[0], white_level[0]), tuple(levels))
+    return CaptureViews(np.stack(corrected), tuple(names), tuple(white_level), tuple(levels))
 
 
 def split_views(sum_frame: np.ndarray, a_frame: np.ndarray, *, sum_clipped: np.ndarray,

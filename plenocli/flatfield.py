@@ -107,8 +107,23 @@ def _symmetric_borders(plane: np.ndarray, out: np.ndarray, half: int) -> None:
                                       mode="nearest")[inner, hc]
 
 
+def white_gains(whites: np.ndarray, *, names=None, cfa: str | None = None,
+                **options) -> np.ndarray:
+    """``white_gain`` of each view of ``whites`` (views, rows, cols): each view (A and B of a
+    dual-pixel sensor) has its own fall-off. ``options`` as for ``white_gain``; a ValueError
+    names the view (by ``names[k]``, else its index)."""
+    gains = np.empty(whites.shape, np.float32)
+    for k, plane in enumerate(whites):
+        try:
+            gains[k] = white_gain(plane, cfa=cfa, **options)
+        except ValueError as err:
+            raise ValueError(f"view {names[k] if names else k}: {err}") from err
+    return gains
+
+
 def apply_gain(frame: np.ndarray, gain: np.ndarray) -> np.ndarray:
-    """``frame * gain`` as float32; NaN where the gain is masked."""
+    """``frame * gain`` as float32 (any shape, e.g. a stack of views and their gains); NaN
+    where the gain is masked."""
     if frame.shape != gain.shape:
         raise ValueError(f"frame {frame.shape} and gain {gain.shape} differ in shape")
     return np.multiply(frame, gain, dtype=np.float32)

@@ -28,11 +28,11 @@ demosaicing); the result has three channels R, G, B.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 from numba import njit, prange
 
+from plenocli.model.cfa import check_pattern
 from plenocli.model.lensgrid import LensGrid
 
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
@@ -83,7 +83,7 @@ def _flush(line, lo, hi, n2, table, Y, bins, half, out_r0, out_r1, off, buf):
 
 
 @njit(cache=True, parallel=True)
-def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,
+def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,  # noqa: C901, PLR0915 (numba kernel)
            xsign, ysign, half_mask, radius2, chan_map, table, band_rows, band_out, buf_off,
            buf, rows_out, cols_out):
     """Splat ``frame`` into ``buf`` (total band rows, cols_out, 2 * channels).
@@ -231,18 +231,6 @@ def centre_table(grid: LensGrid) -> tuple[np.ndarray, np.ndarray, int, int]:
     return cx, cy, int(imin), int(jmin)
 
 
-def shift_grid(grid: LensGrid, dx: float, dy: float) -> LensGrid:
-    """The same lens grid in coordinates shifted by (dx, dy) pixels: centre -> centre - (dx, dy).
-
-    Used to express a grid in the coordinates of a crop whose pixel (0, 0) is grid pixel (dx, dy).
-    """
-    centres = None if grid.centres_xy is None else np.asarray(grid.centres_xy) - (dx, dy)
-    return replace(grid, offset_xy=(grid.offset_xy[0] - dx, grid.offset_xy[1] - dy),
-                   centres_xy=centres, image_shape=None,
-                   sensor_origin=(grid.sensor_origin[0] + int(round(dy)),
-                                  grid.sensor_origin[1] + int(round(dx))))
-
-
 def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight):
     if not isinstance(grid, LensGrid):
         raise TypeError(f"grid must be a LensGrid, got {type(grid).__name__}")
@@ -269,9 +257,8 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
         raise ValueError(f"radius must be a positive number of pixels, got {radius}")
     if not (np.isfinite(min_weight) and min_weight >= 0):
         raise ValueError(f"min_weight must be >= 0, got {min_weight}")
-    if cfa is not None and (len(cfa) != 4 or set(cfa.upper()) - set(CHANNELS)
-                            or cfa.upper().count("G") != 2):
-        raise ValueError(f"cfa must be a 2 x 2 Bayer pattern such as RGGB, got {cfa!r}")
+    if cfa is not None:
+        check_pattern(cfa)
 
 
 def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0,

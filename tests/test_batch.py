@@ -293,22 +293,60 @@ def test_scheduler_without_dask_is_one_line(shoot, monkeypatch):
 
 # ----------------------------------------------------------------------------------- Ctrl-C
 
+# Loaded by every interpreter of the batch (parent, fork server, workers) through PYTHONPATH:
+# each per-capture bias output is written in full to its temporary file, then held there (a
+# marker file says so) until the worker is stopped. Ctrl-C then always lands mid-write, with
+# no capture able to finish: no timing involved.
+HOLD_BIASED_WRITES = """\
+import contextlib, os, time
+from pathlib import Path
+
+import plenocli.io.tiffio as tiffio
+
+_write = tiffio.atomic_path
+
+
+@contextlib.contextmanager
+def _held(path, **kwargs):
+    with _write(path, **kwargs) as tmp:
+        yield tmp
+        if Path(path).name == "biased.tif":
+            Path(os.environ["PLENOCLI_TEST_MARKERS"], Path(path).parent.name).touch()
+            while True:
+                time.sleep(3600)  # until SIGTERM stops the worker
+
+
+tiffio.atomic_path = _held
+"""
+
+
 def test_ctrl_c_leaves_no_partial_output(tmp_path):
-    config, captures = make_shoot(tmp_path, 6, corrupt=None, rows=600, cols=800)
-    out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    config, captures = make_shoot(tmp_path, 4, corrupt=None)
+    out, hook, markers = tmp_path / "out", tmp_path / "hook", tmp_path / "markers"
+    hook.mkdir()
+    markers.mkdir()
+    (hook / "sitecustomize.py").write_text(HOLD_BIASED_WRITES)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(hook), str(ROOT)]),
+           "PLENOCLI_TEST_MARKERS": str(markers)}
     proc = subprocess.Popen([sys.executable, "-m", "plenocli", "batch", str(config), "--inputs",
                              str(tmp_path / "captures" / "*.dng"), "-j", "2", "--out", str(out)],
                             env=env, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 60
-    while not list(out.glob("shot*/frames.tif")) and time.monotonic() < deadline:
-        time.sleep(0.02)  # wait until the workers are busy with captures
-    proc.send_signal(signal.SIGINT)
-    _, stderr = proc.communicate(timeout=60)
+    try:
+        deadline = time.monotonic() + 300
+        while not any(markers.iterdir()):  # a worker holds a written biased.tif.part
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < deadline, "no capture reached bias"
+            time.sleep(0.05)
+        held = list(out.rglob(".biased.tif.*.part"))
+        assert held and held[0].stat().st_size > 0  # the interrupt lands mid-write
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
     assert proc.returncode == 130, stderr
     assert "interrupted; no partial output was kept" in stderr
     assert not list(out.rglob("*.part")), "a temporary file was left behind"
     for tif in out.rglob("*.tif"):
         pixels(tif)  # every file present is complete
-    views = list(out.rglob("views.tif"))
-    assert len(views) < len(captures)  # it really stopped early
+    assert not list(out.rglob("biased.tif")) and not list(out.rglob("views.tif"))

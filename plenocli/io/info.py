@@ -164,63 +164,80 @@ def _describe_json(p: Path) -> dict:
 def format_info(info: dict) -> str:
     """Human-readable lines for a :func:`describe` result."""
     lines = [f"{info['file']}: {_title(info)} ({_size(info['bytes'])})"]
-
-    def add(label: str, value) -> None:
-        if value is not None and value != [] and value != {}:
-            lines.append(f"  {label:<14} {_short(value)}")
-
-    kind = info["kind"]
-    if kind in ("raw", "plenocli-tiff", "image"):
-        count = info.get("frames", info.get("pages"))
-        add("size", f"{count} x {info['rows']} x {info['cols']} {info['dtype']} "
-                    "(views x rows x cols)")
-        add("camera", info.get("camera_model"))
-        for key in IMAGE_KEYS:
-            add(key.replace("_", " "), info.get(key))
-        if kind == "image":
-            add("values", f"min {info['min']:g}, max {info['max']:g}")
-        for s in info.get("active_stats", []):
-            add(f"view {s['view']}", f"active area min {s['min']}, max {s['max']}, "
-                                     f"mean {s['mean']} DN")
-        for key, value in (info.get("extra") or {}).items():
-            add(key.replace("_", " "), value)
-    elif kind == "lens-grid":
-        for key in ("lattice", "pitch_px", "angle_deg", "offset_xy", "image_shape",
-                    "sensor_origin", "lens_count"):
-            add(key.replace("_", " "), info.get(key))
-        for key, value in (info.get("extra") or {}).items():
-            add(key.replace("_", " "), value)
-    elif kind == "pipeline-config":
-        add("description", (info.get("description") or "").strip() or None)
-        add("out", info.get("out"))
-        for name, stage in info["steps"].items():
-            add(f"step {name}", f"stage {stage}")
-    elif kind == "raytrix-calibration":
-        calib = info["calibration"]
-        add("lens pitch", f"{calib['diameter']:g} px (diameter)")
-        add("rotation", f"{calib['rotation']:g} rad")
-        add("offset", f"{_short(calib['offset'])} px from the image centre, y up")
-        for key in ("lens_base_x", "lens_base_y", "lens_border", "tcp", "sub_grid_base",
-                    "distortion", "lens_types", "k_matrix"):
-            add(key.replace("_", " "), calib.get(key))
-    elif kind == "xml":
-        add("root", f"<{info['root']}> {_short(info['attributes']) if info['attributes'] else ''}")
-        for key, value in info["fields"].items():
-            add(key, value)
-    else:
-        add("keys", info.get("keys"))
+    fields = _KIND_FIELDS.get(info["kind"], _other_fields)(info)
     record = info.get("provenance")
     if record:
+        lines += _field_lines(fields)
         lines.append(f"  made by        plenocli {record.get('version')} {record.get('stage')} "
                      f"on {record.get('created')}")
-        add("parameters", record.get("parameters"))
-        for item in record.get("inputs", []):
-            add(f"input {item.get('role')}",
-                f"{item.get('path')} (sha256 {str(item.get('sha256'))[:12]}...)")
-    for k, past in enumerate(info.get("history") or [], 1):
-        add(f"history {k}", f"{past.get('stage')} {_short(past.get('parameters'))} "
-                            f"on {past.get('created')}")
-    return "\n".join(lines)
+        fields = [("parameters", record.get("parameters"))]
+        fields += [(f"input {item.get('role')}",
+                    f"{item.get('path')} (sha256 {str(item.get('sha256'))[:12]}...)")
+                   for item in record.get("inputs", [])]
+    fields += [(f"history {k}", f"{past.get('stage')} {_short(past.get('parameters'))} "
+                                f"on {past.get('created')}")
+               for k, past in enumerate(info.get("history") or [], 1)]
+    return "\n".join(lines + _field_lines(fields))
+
+
+def _field_lines(fields: list[tuple[str, object]]) -> list[str]:
+    """One indented ``label value`` line per field that has a value."""
+    return [f"  {label:<14} {_short(value)}" for label, value in fields
+            if value is not None and value != [] and value != {}]
+
+
+def _extra_fields(info: dict) -> list[tuple[str, object]]:
+    return [(key.replace("_", " "), value) for key, value in (info.get("extra") or {}).items()]
+
+
+def _image_fields(info: dict) -> list[tuple[str, object]]:
+    count = info.get("frames", info.get("pages"))
+    fields = [("size", f"{count} x {info['rows']} x {info['cols']} {info['dtype']} "
+                       "(views x rows x cols)"),
+              ("camera", info.get("camera_model"))]
+    fields += [(key.replace("_", " "), info.get(key)) for key in IMAGE_KEYS]
+    if info["kind"] == "image":
+        fields.append(("values", f"min {info['min']:g}, max {info['max']:g}"))
+    fields += [(f"view {s['view']}", f"active area min {s['min']}, max {s['max']}, "
+                                     f"mean {s['mean']} DN")
+               for s in info.get("active_stats", [])]
+    return fields + _extra_fields(info)
+
+
+def _grid_fields(info: dict) -> list[tuple[str, object]]:
+    keys = ("lattice", "pitch_px", "angle_deg", "offset_xy", "image_shape", "sensor_origin",
+            "lens_count")
+    return [(key.replace("_", " "), info.get(key)) for key in keys] + _extra_fields(info)
+
+
+def _config_fields(info: dict) -> list[tuple[str, object]]:
+    return ([("description", (info.get("description") or "").strip() or None),
+             ("out", info.get("out"))]
+            + [(f"step {name}", f"stage {stage}") for name, stage in info["steps"].items()])
+
+
+def _raytrix_fields(info: dict) -> list[tuple[str, object]]:
+    calib = info["calibration"]
+    keys = ("lens_base_x", "lens_base_y", "lens_border", "tcp", "sub_grid_base", "distortion",
+            "lens_types", "k_matrix")
+    return ([("lens pitch", f"{calib['diameter']:g} px (diameter)"),
+             ("rotation", f"{calib['rotation']:g} rad"),
+             ("offset", f"{_short(calib['offset'])} px from the image centre, y up")]
+            + [(key.replace("_", " "), calib.get(key)) for key in keys])
+
+
+def _xml_fields(info: dict) -> list[tuple[str, object]]:
+    attributes = _short(info["attributes"]) if info["attributes"] else ""
+    return [("root", f"<{info['root']}> {attributes}"), *info["fields"].items()]
+
+
+def _other_fields(info: dict) -> list[tuple[str, object]]:
+    return [("keys", info.get("keys"))]
+
+
+_KIND_FIELDS = {"raw": _image_fields, "plenocli-tiff": _image_fields, "image": _image_fields,
+                "lens-grid": _grid_fields, "pipeline-config": _config_fields,
+                "raytrix-calibration": _raytrix_fields, "xml": _xml_fields}
 
 
 def _title(info: dict) -> str:

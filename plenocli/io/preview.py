@@ -7,8 +7,10 @@ import os
 import cv2
 import numpy as np
 
-from plenocli.io.atomic import atomic_path
+from plenocli.io.atomic import write_bytes
 from plenocli.model.cfa import half_size_rgb
+
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
 
 
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
@@ -32,6 +34,15 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
     return np.concatenate(out, axis=1)
 
 
+def view_mosaic(stack: np.ndarray, n: int, channels: list[str]) -> np.ndarray:
+    """N x N sub-aperture views (view-major pages of ``len(channels)`` channels each) in their
+    N x N arrangement: an RGB picture when the channels are R, G, B, else their mean."""
+    tiles = stack.reshape(n * n, len(channels), *stack.shape[1:]).astype(np.float32)
+    tiles = np.moveaxis(tiles, 1, -1) if channels == ["R", "G", "B"] else tiles.mean(axis=1)
+    rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
+    return np.concatenate(rows, axis=0)
+
+
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
               max_side: int = 2048, protect: tuple = ()) -> None:
     """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or
@@ -44,10 +55,57 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
         size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
     img = to_display(img)
-    if img.ndim == 3:
-        img = img[..., ::-1]  # OpenCV writes BGR
-    with atomic_path(path, protect=protect) as tmp:
-        ok, buf = cv2.imencode(".png", img)
-        if not ok:
-            raise OSError(f"could not encode PNG for {path}")
-        tmp.write_bytes(buf.tobytes())
+    write_picture(path, img[..., ::-1] if img.ndim == 3 else img, protect=protect)
+
+
+def write_picture(path: str | os.PathLike, picture: np.ndarray, *, protect: tuple = ()) -> None:
+    """Write a ready-made uint8 picture, grey (rows, cols) or BGR (rows, cols, 3), as PNG:
+    the one PNG encoder of plenocli (atomic, never over an input)."""
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(picture, np.uint8))
+    if not ok:
+        raise OSError(f"could not encode PNG for {path}")
+    write_bytes(path, buf.tobytes(), protect=protect)
+
+
+def write_heat_map(path: str | os.PathLike, maps: list[np.ndarray], titles: list[str], *,
+                   protect: tuple = ()) -> None:
+    """Write ratio maps (e.g. cross-talk r per tile) side by side as a heat map PNG."""
+    write_picture(path, heat_map(maps, titles), protect=protect)
+
+
+def heat_map(maps: list[np.ndarray], titles: list[str], min_side: int = 240) -> np.ndarray:
+    """BGR uint8 picture: each map of ratios as a heat map (viridis, NaN grey) under its
+    title, with a colour bar in percent. The scale runs from 0 to the next 5 % above the
+    largest value, so a uniform map reads as its value, not as "maximum"."""
+    finite = [float(np.nanmax(m)) for m in maps if np.isfinite(m).any()]
+    top = max(0.05, np.ceil(max(finite + [0.0]) * 20) / 20)
+    tiles = [_heat_tile(m, title, top, min_side) for m, title in zip(maps, titles, strict=True)]
+    height = max(t.shape[0] for t in tiles)
+    padded = [np.pad(t, ((0, height - t.shape[0]), (0, 8), (0, 0)), constant_values=255)
+              for t in tiles]
+    return np.hstack([*padded, *_colour_bar(height, top)])
+
+
+def _heat_tile(ratios: np.ndarray, title: str, top: float, min_side: int) -> np.ndarray:
+    scaled = np.clip(np.nan_to_num(ratios / top, nan=0.0), 0, 1)
+    img = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
+    img[~np.isfinite(ratios)] = 128
+    cell = max(1, int(np.ceil(min_side / max(ratios.shape))))
+    img = np.repeat(np.repeat(img, cell, axis=0), cell, axis=1)
+    label = np.full((24, img.shape[1], 3), 255, np.uint8)
+    cv2.putText(label, title, (4, 17), _FONT, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.vstack([label, img])
+
+
+def _colour_bar(height: int, top: float) -> tuple[np.ndarray, np.ndarray]:
+    """The viridis bar from ``top`` down to 0 and its tick labels in percent."""
+    bar_values = np.linspace(1, 0, height - 24)[:, None]
+    bar = cv2.applyColorMap(np.round(255 * np.repeat(bar_values, 16, axis=1)).astype(np.uint8),
+                            cv2.COLORMAP_VIRIDIS)
+    bar = np.vstack([np.full((24, 16, 3), 255, np.uint8), bar])
+    ticks = np.full((height, 56, 3), 255, np.uint8)
+    for frac in (0.0, 0.5, 1.0):
+        y = 24 + int(round((1 - frac) * (height - 25)))
+        cv2.putText(ticks, f"{100 * frac * top:.0f} %", (4, min(max(y + 4, 32), height - 2)),
+                    _FONT, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    return bar, ticks

@@ -21,6 +21,7 @@ import numpy as np
 import tifffile
 
 from plenocli.errors import InputError
+from plenocli.model.cfa import check_pattern, is_bayer
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
 CFA_LETTERS = "RGBG"  # DNG CFAPattern codes 0, 1, 2 (3 would be a second green)
@@ -114,11 +115,10 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
 
 
 def _check_cfa(cfa: str) -> str:
-    pattern = cfa.upper()
-    if len(pattern) != 4 or set(pattern) - set("RGB") or pattern.count("G") != 2:
-        raise InputError(f"CFA pattern {cfa!r} is not a 2 x 2 Bayer pattern "
-                         "(one of RGGB, BGGR, GRBG, GBRG)")
-    return pattern
+    try:
+        return check_pattern(cfa)
+    except ValueError as err:
+        raise InputError(f"--cfa: {err}") from err
 
 
 def _decode_canon(path, *, require_dual: bool) -> tuple[np.ndarray, dict]:
@@ -169,7 +169,7 @@ def _rawpy_meta(raw) -> dict:
     if top - CANON_OB_FIRST >= 8:
         masked.append([CANON_OB_FIRST, left, top, right])
     return {
-        "cfa": cfa if set(cfa) <= set("RGB") and cfa.count("G") == 2 else None,
+        "cfa": cfa if is_bayer(cfa) else None,
         "origin": [0, 0],
         "white_level": [float(raw.white_level)],
         "active_area": [top, left, bottom, right],

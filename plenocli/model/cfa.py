@@ -4,6 +4,27 @@ from __future__ import annotations
 
 import numpy as np
 
+BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
+
+
+def check_pattern(cfa: str) -> str:
+    """``cfa`` upper-cased, if it is a 2 x 2 Bayer pattern (two greens on a diagonal, one red,
+    one blue); else ValueError naming it. The one CFA check of plenocli.
+
+    >>> check_pattern("rggb")
+    'RGGB'
+    """
+    pattern = cfa.upper() if isinstance(cfa, str) else cfa
+    if pattern not in BAYER_PATTERNS:
+        raise ValueError(f"cfa {cfa!r} is not a 2 x 2 Bayer pattern "
+                         f"(one of {', '.join(BAYER_PATTERNS)})")
+    return pattern
+
+
+def is_bayer(cfa: str | None) -> bool:
+    """True for one of the four 2 x 2 Bayer patterns (any case)."""
+    return isinstance(cfa, str) and cfa.upper() in BAYER_PATTERNS
+
 
 def shift_pattern(cfa: str | None, row: int, col: int) -> str | None:
     """The 2 x 2 pattern seen from pixel (row, col) of a mosaic whose (0, 0) pattern is ``cfa``.

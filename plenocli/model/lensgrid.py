@@ -17,7 +17,7 @@ calibrated on one crop can be used on another.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -99,6 +99,18 @@ class LensGrid:
                   & (xy[:, 1] >= 0) & (xy[:, 1] <= rows - 1))
         idx = np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)[inside]
         return idx, xy[inside]
+
+    def shifted(self, dx: float, dy: float) -> LensGrid:
+        """The same grid in coordinates shifted by (dx, dy) pixels: centre -> centre - (dx, dy).
+
+        For a crop whose pixel (0, 0) is this grid's pixel (dx, dy); the result has no
+        ``image_shape`` (the crop's size is the caller's) and the crop's ``sensor_origin``.
+        """
+        centres = None if self.centres_xy is None else np.asarray(self.centres_xy) - (dx, dy)
+        return replace(self, offset_xy=(self.offset_xy[0] - dx, self.offset_xy[1] - dy),
+                       centres_xy=centres, image_shape=None,
+                       sensor_origin=(self.sensor_origin[0] + int(round(dy)),
+                                      self.sensor_origin[1] + int(round(dx))))
 
     def to_dict(self, *, lens_rows: bool = True) -> dict:
         """Human-readable, YAML-ready description (centres as lists). With ``lens_rows=False``

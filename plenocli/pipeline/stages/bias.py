@@ -8,12 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli import bias as bias_lib
-from plenocli.dualpixel import split_views
+from plenocli.dualpixel import capture_views
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
-from plenocli.model.cfa import period, shift_pattern
+from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -29,32 +28,19 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
         raise InputError(f"{input}: made by stage {meta.get('provenance', {}).get('stage')!r}, "
                          "but bias needs the output of plenocli decode")
     cfa = meta.get("cfa")
-    names = list(meta["views"])
-    corrected, levels, clipped = [], [], []
-    for k, frame in enumerate(frames):
-        try:
-            out, info = bias_lib.subtract_overscan(
-                frame, active_area=meta["active_area"], masked_areas=meta.get("masked_areas"),
-                overscan=overscan, period=period(cfa), smooth=smooth, guard=guard,
-                black_level=meta["black_level"][k])
-        except ValueError as err:
-            raise InputError(f"{input}: frame {names[k]}: {err}") from err
-        top, left, bottom, right = meta["active_area"]
-        clip = frame[top:bottom, left:right] >= meta["white_level"][k]
-        np.copyto(out, np.nan, where=clip)
-        corrected.append(out)
-        clipped.append(clip)
-        levels.append(_summary(info, names[k]))
+    try:
+        corrected = capture_views(
+            frames, names=list(meta["views"]), active_area=meta["active_area"],
+            masked_areas=meta.get("masked_areas"), black_level=meta["black_level"],
+            white_level=meta["white_level"], cfa=cfa, overscan=overscan, smooth=smooth,
+            guard=guard)
+    except ValueError as err:
+        raise InputError(f"{input}: {err}") from err
+    del frames
+    views, names = corrected.views, list(corrected.names)
+    levels = [_summary(info, name)
+              for info, name in zip(corrected.levels, meta["views"], strict=True)]
     top, left = meta["active_area"][:2]
-    white_level = list(meta["white_level"])
-    if names[:2] == ["S", "A"]:
-        views = split_views(corrected[0], corrected[1], sum_clipped=clipped[0],
-                            a_clipped=clipped[1])
-        names = ["A", "B", "S"]
-        white_level = [white_level[1], white_level[0], white_level[0]]  # B is bounded by S
-    else:
-        views = np.stack(corrected)
-    del corrected
     row0, col0 = 0, 0
     if crop:
         views, row0, col0 = _central_crop(views, crop, even=bool(cfa))
@@ -67,7 +53,7 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
     out_meta = tiffio.derived_meta(meta, record, views=names, cfa=new_cfa, origin=origin,
                                    active_area=[0, 0, rows, cols], masked_areas=[],
                                    black_level=[[0.0] * 4] * len(names),
-                                   white_level=white_level,
+                                   white_level=list(corrected.white_level),
                                    bias_levels=levels,
                                    clipped_pixels=int(np.isnan(views).any(axis=0).sum()))
     tiffio.write_image(output, views, out_meta, protect=(input,))

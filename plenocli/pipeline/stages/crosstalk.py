@@ -5,14 +5,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from plenocli import crosstalk as crosstalk_lib
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
-from plenocli.io.atomic import atomic_path, write_text
-from plenocli.model.cfa import shift_pattern
+from plenocli.io.atomic import write_text
+from plenocli.io.framing import active_area, frame_grid, sensor_image
+from plenocli.io.preview import write_heat_map
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
 
@@ -46,38 +46,6 @@ def _intended_index(spec: str | None, names: list[str], path: str) -> int | None
                      "--intended with a view name (or 'auto' for the brightest view)")
 
 
-def _heat_map(maps: list[np.ndarray], names: list[str], min_side: int = 240) -> np.ndarray:
-    """BGR uint8 picture: each r map as a heat map (viridis, NaN grey) under its name, with a
-    colour bar in percent. The scale runs from 0 to the next 5 % above the largest r, so a
-    uniform map reads as its value, not as "maximum"."""
-    finite = [float(np.nanmax(m)) for m in maps if np.isfinite(m).any()]
-    top = max(0.05, np.ceil(max(finite + [0.0]) * 20) / 20)
-    font = cv2.FONT_HERSHEY_SIMPLEX
-    tiles = []
-    for m, name in zip(maps, names, strict=True):
-        scaled = np.clip(np.nan_to_num(m / top, nan=0.0), 0, 1)
-        img = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
-        img[~np.isfinite(m)] = 128
-        cell = max(1, int(np.ceil(min_side / max(m.shape))))
-        img = np.repeat(np.repeat(img, cell, axis=0), cell, axis=1)
-        label = np.full((24, img.shape[1], 3), 255, np.uint8)
-        cv2.putText(label, name, (4, 17), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
-        tiles.append(np.vstack([label, img]))
-    height = max(t.shape[0] for t in tiles)
-    bar_values = np.linspace(1, 0, height - 24)[:, None]
-    bar = cv2.applyColorMap(np.round(255 * np.repeat(bar_values, 16, axis=1)).astype(np.uint8),
-                            cv2.COLORMAP_VIRIDIS)
-    bar = np.vstack([np.full((24, 16, 3), 255, np.uint8), bar])
-    ticks = np.full((height, 56, 3), 255, np.uint8)
-    for frac in (0.0, 0.5, 1.0):
-        y = 24 + int(round((1 - frac) * (height - 25)))
-        cv2.putText(ticks, f"{100 * frac * top:.0f} %", (4, min(max(y + 4, 32), height - 2)),
-                    font, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
-    padded = [np.pad(t, ((0, height - t.shape[0]), (0, 8), (0, 0)), constant_values=255)
-              for t in tiles]
-    return np.hstack([*padded, bar, ticks])
-
-
 def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None = None,
         intended: str | None = None, tile: int = 64, preview: str | None = None,
         mask_widths: str | None = None, grid: str | None = None, s: float = 0.2,
@@ -94,28 +62,8 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     if len(specs) not in (1, len(inputs)):
         raise ConfigError(f"--intended has {len(specs)} names for {len(inputs)} inputs; give one "
                           "name, or one per input")
-    captures, maps = [], []
-    for k, path in enumerate(inputs):
-        data, meta = tiffio.read_image(path)
-        # e.g. --views A,B after bias: the sum view S must not count as "another view"
-        data, names = select_views(data, meta, views)
-        cfa = meta.get("cfa")
-        area = meta.get("active_area")
-        if area:
-            top, left, bottom, right = area
-            data = data[:, top:bottom, left:right]
-            cfa = shift_pattern(cfa, top, left)
-        idx = _intended_index(specs[k if len(specs) > 1 else 0], names, path)
-        res = crosstalk_lib.crosstalk_ratio(data, intended=idx, tile_px=tile, cfa=cfa)
-        maps.append(res["map"])
-        captures.append({
-            "input": path, "views": names, "intended": names[res["intended"]],
-            "r": res["r"], "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
-            "map_min": res["map_min"], "map_max": res["map_max"], "tile_px": tile,
-            "valid_fraction": res["valid_fraction"], "cfa": cfa,
-            "per_colour": {c: {"r": d["r"], "map": d["map"]} for c, d in res["per_colour"].items()},
-            "map": res["map"],
-        })
+    captures = [_measure(path, views, specs[k if len(specs) > 1 else 0], tile)
+                for k, path in enumerate(inputs)]
     params = dict(views=views, intended=intended, tile=tile)
     record = stage_record("crosstalk", params, {"inputs": inputs})
     doc = {"r": max(c["r"] for c in captures), "definition": "max flux on another view / flux "
@@ -125,19 +73,30 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     if preview:
         titles = [f"{Path(c['input']).stem}: r {100 * c['r']:.1f} % ({c['intended']} intended)"
                   for c in captures]
-        _write_png(preview, _heat_map(maps, titles), tuple(inputs))
+        write_heat_map(preview, [c["map"] for c in captures], titles, protect=tuple(inputs))
     for c in captures:
         log.info("crosstalk: %s: intended %s, r = %.2f %% (tiles %.2f .. %.2f %%)",
                  shown(c["input"]),
                  c["intended"], 100 * c["r"], 100 * c["map_min"], 100 * c["map_max"])
 
 
-def _write_png(path: str, bgr: np.ndarray, protect: tuple) -> None:
-    with atomic_path(path, protect=protect) as tmp:
-        ok, buf = cv2.imencode(".png", bgr)
-        if not ok:
-            raise OSError(f"could not encode PNG for {path}")
-        tmp.write_bytes(buf.tobytes())
+def _measure(path: str, views: str | None, intended: str | None, tile: int) -> dict:
+    """The cross-talk of one masked capture, as its entry in the report."""
+    data, meta = tiffio.read_image(path)
+    # e.g. --views A,B after bias: the sum view S must not count as "another view"
+    data, names = select_views(data, meta, views)
+    framing = active_area(meta, data.shape[1:])
+    cfa = framing.cfa
+    idx = _intended_index(intended, names, path)
+    res = crosstalk_lib.crosstalk_ratio(framing.crop(data), intended=idx, tile_px=tile, cfa=cfa)
+    return {
+        "input": path, "views": names, "intended": names[res["intended"]],
+        "r": res["r"], "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
+        "map_min": res["map_min"], "map_max": res["map_max"], "tile_px": tile,
+        "valid_fraction": res["valid_fraction"], "cfa": cfa,
+        "per_colour": {c: {"r": d["r"], "map": d["map"]} for c, d in res["per_colour"].items()},
+        "map": res["map"],
+    }
 
 
 def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: int,
@@ -152,27 +111,19 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
         raise ConfigError("--mask-widths takes exactly one input: the frames TIFF of a white "
                           "capture with one pupil half masked")
     if not grid:
-        raise ConfigError("--mask-widths needs --grid GRID.yaml (the lens grid of the capture)")
-    try:
-        from plenocli.refocus import refocus
-    except ImportError as err:
-        raise ConfigError("--mask-widths needs the refocus module (plenocli.refocus), which is "
-                          "not available in this installation; update plenocli") from err
-    from plenocli.io.gridfile import read_grid
-
+        raise ConfigError("--mask-widths needs --grid: the lens grid of the capture (YAML from "
+                          "plenocli calibrate, or the camera's RayCalibData XML)")
     side = intended or "left"
     if side not in ("left", "right"):
         raise ConfigError(f"with --mask-widths, --intended is 'left' or 'right', got {side!r}")
     data, meta = tiffio.read_image(inputs[0])
-    frame = data[0].astype(np.float32)
-    lens_grid = read_grid(grid)
-
-    def make_views(m: float):
-        left, _ = refocus(frame, lens_grid, s=s, g=g, view="left", mask_width=m)
-        right, _ = refocus(frame, lens_grid, s=s, g=g, view="right", mask_width=m)
-        return left, right
-
-    sweep = crosstalk_lib.mask_width_sweep(make_views, widths, intended=side, tile_px=tile)
+    framing = frame_grid(grid, meta, data.shape[1:], frames_path=inputs[0])
+    frame = framing.crop(sensor_image(data, meta))
+    try:
+        sweep = crosstalk_lib.refocus_mask_sweep(frame, framing.grid, widths, s=s, g=g,
+                                                 intended=side, tile_px=tile)
+    except ValueError as err:
+        raise ConfigError(f"crosstalk --mask-widths: {err}") from err
     params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
     record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
     doc = {"sweep": sweep, "intended": side, "provenance": record}

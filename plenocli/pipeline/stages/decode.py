@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from plenocli.io import raw, tiffio
+from plenocli.io.framing import active_area
 from plenocli.io.preview import write_png
-from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -23,7 +23,6 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
              shown(input), shown(output), meta["camera"], data.shape[0],
              ",".join(meta["views"]), data.shape[2], data.shape[1], meta.get("cfa") or "none")
     if preview:
-        top, left, bottom, right = meta["active_area"]
-        write_png(preview, data[0, top:bottom, left:right].astype("float32"),
-                  cfa=shift_pattern(meta.get("cfa"), top, left), protect=(input,))
+        area = active_area(meta, data.shape[1:])
+        write_png(preview, area.crop(data[0]).astype("float32"), cfa=area.cfa, protect=(input,))
 

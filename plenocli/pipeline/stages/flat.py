@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.flatfield import apply_gain, white_gain
+from plenocli.flatfield import apply_gain, white_gains
 from plenocli.io import tiffio
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
@@ -24,21 +24,17 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
     ref, ref_meta = tiffio.read_image(source)
     _check_match(input, meta, views, source, ref_meta, ref)
     if white is not None:
-        gains = np.empty(ref.shape, np.float32)
-        for k, plane in enumerate(ref):
-            try:
-                gains[k] = white_gain(plane, cfa=meta.get("cfa"), median_px=median,
-                                      reference=reference, percentile=percentile, floor=floor)
-            except ValueError as err:
-                raise InputError(f"{white}: view {ref_meta.get('views', ['?'] * 99)[k]}: {err}") \
-                    from err
+        try:
+            gains = white_gains(ref, names=ref_meta.get("views"), cfa=meta.get("cfa"),
+                                median_px=median, reference=reference, percentile=percentile,
+                                floor=floor)
+        except ValueError as err:
+            raise InputError(f"{white}: {err}") from err
     else:
         if ref_meta.get("provenance", {}).get("stage") != "flat-gain":
             raise InputError(f"{gain}: not a gain map; make one with plenocli flat --save-gain")
         gains = ref.astype(np.float32, copy=False)
-    corrected = np.empty(views.shape, np.float32)
-    for k, (view, view_gain) in enumerate(zip(views, gains, strict=True)):
-        corrected[k] = apply_gain(view, view_gain)
+    corrected = apply_gain(views, gains)
     params = dict(median=median, reference=reference, percentile=percentile, floor=floor)
     inputs = {"input": input, "white": white, "gain": gain}
     record = stage_record("flat", params, inputs)

@@ -7,10 +7,9 @@ import numpy as np
 from plenocli import sai as sai_mod
 from plenocli.errors import ConfigError
 from plenocli.io import tiffio
-from plenocli.io.preview import write_png
-from plenocli.model.cfa import shift_pattern
+from plenocli.io.framing import active_area, frame_grid
+from plenocli.io.preview import view_mosaic, write_png
 from plenocli.model.provenance import stage_record
-from plenocli.pipeline.stages.refocus import frame_region, load_grid
 from plenocli.progress import log, shown
 
 
@@ -24,19 +23,16 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
     pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
-    lens_grid = load_grid(grid, meta, data.shape[1:]) if grid else None
-    if lens_grid is not None:
-        r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
-    else:  # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
-        r0, c0, r1, c1 = (int(v) for v in (meta.get("active_area")
-                                           or (0, 0, *data.shape[1:])))
-    cfa = shift_pattern(meta.get("cfa"), r0, c0)
+    # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
+    framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
+               else active_area(meta, data.shape[1:]))
+    cfa = framing.cfa
     per_page = []
     for page in data:
-        crop = page[r0:r1, c0:c1]
-        if lens_grid is not None:
+        crop = framing.crop(page)
+        if framing.grid is not None:
             try:
-                out, _ = sai_mod.approximate_sai(crop.astype(np.float32), crop_grid, n)
+                out, _ = sai_mod.approximate_sai(crop.astype(np.float32), framing.grid, n)
             except ValueError as err:
                 raise ConfigError(f"{grid}: {err}") from err
         else:
@@ -54,17 +50,12 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
         meta, record, views=names, cfa=colours[0] if same else None, view_colours=colours,
         origin=None, active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
         black_level=None, white_level=None,
-        sai={"n": n, "approximate": lens_grid is not None, "cfa_layout": cfa_layout,
-             "crop_sensor_origin": [int((meta.get("origin") or [0, 0])[0]) + r0,
-                                    int((meta.get("origin") or [0, 0])[1]) + c0]})
+        sai={"n": n, "approximate": framing.grid is not None, "cfa_layout": cfa_layout,
+             "crop_sensor_origin": list(framing.sensor_origin)})
     protect = (input,) + ((grid,) if grid else ())
     tiffio.write_image(output, stack, out_meta, protect=protect)
     log.info("sai: %s -> %s (%d views%s of %d x %d%s)", shown(input), shown(output), n * n,
              f" x {len(pages)} channels" if len(pages) > 1 else "", stack.shape[2],
-             stack.shape[1], ", approximate S-hat" if lens_grid else "")
-    if preview:  # the views in their N x N arrangement, in colour when the input is RGB
-        tiles = stack.reshape(n * n, len(pages), *stack.shape[1:]).astype(np.float32)
-        rgb = pages == ["R", "G", "B"]
-        tiles = np.moveaxis(tiles, 1, -1) if rgb else tiles.mean(axis=1)
-        rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
-        write_png(preview, np.concatenate(rows, axis=0), protect=protect)
+             stack.shape[1], ", approximate S-hat" if framing.grid else "")
+    if preview:
+        write_png(preview, view_mosaic(stack, n, pages), protect=protect)

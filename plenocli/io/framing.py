@@ -1,0 +1,129 @@
+"""Framing: which part of a frames file a stage works on, and a lens grid in that part's pixels.
+
+Every stage that crops to the active area or takes ``--grid`` (refocus, sai, crosstalk, ...)
+goes through here, so that a crop, a CFA phase and a grid line up the same way everywhere.
+
+Metadata facts used (see ``plenocli.io.tiffio``): ``origin`` is the full-sensor (row, col) of
+the file's pixel (0, 0); ``active_area`` is (top, left, bottom, right) of the light-sensitive
+pixels; ``cfa`` is the pattern at pixel (0, 0); ``views`` names the pages (``R, G, B`` for a
+demosaiced colour image).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from plenocli.errors import InputError
+from plenocli.io.gridfile import read_grid
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.lensgrid import LensGrid
+
+COLOUR_PAGES = ["R", "G", "B"]
+
+
+@dataclass(frozen=True)
+class Framing:
+    """A rectangle of a frames file: rows ``top:bottom``, columns ``left:right``.
+
+    ``cfa`` is the Bayer pattern at the rectangle's first pixel, ``sensor_origin`` that pixel's
+    full-sensor (row, col), ``grid`` the lens grid in the rectangle's pixel coordinates (None
+    when no grid was given).
+    """
+
+    top: int
+    left: int
+    bottom: int
+    right: int
+    cfa: str | None
+    sensor_origin: tuple[int, int]
+    grid: LensGrid | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.bottom - self.top, self.right - self.left
+
+    def crop(self, pages: np.ndarray) -> np.ndarray:
+        """The rectangle of ``pages`` (..., rows, cols): a view, not a copy."""
+        return pages[..., self.top:self.bottom, self.left:self.right]
+
+
+def _origin(meta: dict) -> tuple[int, int]:
+    row, col = (int(v) for v in (meta.get("origin") or (0, 0)))
+    return row, col
+
+
+def _area(meta: dict, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    top, left, bottom, right = (int(v) for v in (meta.get("active_area") or (0, 0, *shape)))
+    return top, left, bottom, right
+
+
+def _framing(meta: dict, top: int, left: int, bottom: int, right: int,
+             grid: LensGrid | None = None) -> Framing:
+    o_row, o_col = _origin(meta)
+    return Framing(top, left, bottom, right, shift_pattern(meta.get("cfa"), top, left),
+                   (o_row + top, o_col + left), grid)
+
+
+def active_area(meta: dict, shape: tuple[int, int]) -> Framing:
+    """The active (light-sensitive) area of a frames file of page ``shape`` (rows, cols);
+    the whole page when the metadata has none."""
+    return _framing(meta, *_area(meta, shape))
+
+
+def load_grid(path: str | os.PathLike, meta: dict, shape: tuple[int, int]) -> LensGrid:
+    """Read a lens grid for frames with ``meta`` and page ``shape``.
+
+    A plenocli YAML grid carries its own ``sensor_origin`` and ``image_shape``. A RayCalibData
+    XML gives its offset from the image centre: it is placed on the frames' active area (the
+    sensor image the camera software calibrated), at that area's sensor origin.
+    """
+    if Path(path).suffix.lower() != ".xml":
+        return read_grid(path)
+    region = active_area(meta, shape)
+    return replace(read_grid(path, image_shape=region.shape), sensor_origin=region.sensor_origin)
+
+
+def grid_framing(meta: dict, shape: tuple[int, int], grid: LensGrid, *,
+                 frames_path: str = "frames", grid_path: str = "grid") -> Framing:
+    """The part of the frames that ``grid`` describes, with the grid in that part's pixels.
+
+    The grid's image (``image_shape`` at ``sensor_origin``: the white image it was calibrated
+    on) must lie inside the frames; a grid without a size covers the frames' active area.
+    """
+    rows, cols = shape
+    f_row, f_col = _origin(meta)
+    g_row, g_col = (int(v) for v in grid.sensor_origin)
+    if grid.image_shape is not None:
+        g_rows, g_cols = (int(v) for v in grid.image_shape)
+        top, left = g_row - f_row, g_col - f_col
+        bottom, right = top + g_rows, left + g_cols
+        if top < 0 or left < 0 or bottom > rows or right > cols:
+            raise InputError(
+                f"{grid_path} was calibrated on a {g_cols} x {g_rows} image at sensor origin "
+                f"({g_row}, {g_col}) but {frames_path} is {cols} x {rows} at ({f_row}, {f_col}); "
+                "use a grid calibrated on a white image of the same camera and crop")
+    else:
+        top, left, bottom, right = _area(meta, shape)
+    dx, dy = f_col + left - g_col, f_row + top - g_row
+    return _framing(meta, top, left, bottom, right, grid.shifted(dx, dy) if (dx or dy) else grid)
+
+
+def frame_grid(grid_path: str | os.PathLike, meta: dict, shape: tuple[int, int], *,
+               frames_path: str = "frames") -> Framing:
+    """Read the grid at ``grid_path`` and frame it on frames with ``meta`` and page ``shape``:
+    the one way every stage that takes ``--grid`` lines a grid up with its frames."""
+    grid = load_grid(grid_path, meta, shape)
+    return grid_framing(meta, shape, grid, frames_path=str(frames_path),
+                        grid_path=str(grid_path))
+
+
+def sensor_image(pages: np.ndarray, meta: dict) -> np.ndarray:
+    """One (rows, cols) float32 sensor image of a frames file: the mean of the colour pages of
+    a demosaiced image (R, G, B), else the first page (the first frame of a raw capture)."""
+    if list(meta.get("views") or []) == COLOUR_PAGES:
+        return pages.astype(np.float32).mean(axis=0)
+    return pages[0].astype(np.float32)

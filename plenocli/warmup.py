@@ -1,0 +1,41 @@
+"""Compile plenocli's numba kernels into numba's on-disk cache (``cache=True``).
+
+A kernel is compiled the first time it is called with a new type signature; with
+``cache=True`` the machine code is kept beside the module (``__pycache__/*.nbi, *.nbc``) and
+later processes load it instead of compiling. Without a warm cache the first ``plenocli
+refocus`` on a fresh install spends about 10 s compiling. ``make`` runs this module right after
+installing; after a manual ``pip install`` run ``python -m plenocli.warmup`` once. The kernels
+are called on tiny inputs with exactly the argument types the stages use, so every signature a
+stage needs is cached. See docs/startup.md.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def warm_refocus() -> None:
+    """Every refocus kernel signature: mono and Bayer frames (float32 after conversion)."""
+    from plenocli.model.lensgrid import LensGrid
+    from plenocli.refocus import refocus
+
+    grid = LensGrid(pitch_px=8.0, angle_rad=0.1, offset_xy=(20.0, 20.0), image_shape=(48, 48))
+    frame = np.ones((48, 48), np.uint16)
+    refocus(frame, grid, s=0.5, g=2.0)
+    refocus(frame, grid, s=0.5, g=2.0, view="left", cfa="RGGB")
+
+
+WARMERS = {"refocus": warm_refocus}
+
+
+def main() -> None:
+    for name, warm in WARMERS.items():
+        start = time.perf_counter()
+        warm()
+        print(f"plenocli warm-up: {name} kernels ready ({time.perf_counter() - start:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()

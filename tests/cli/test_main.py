@@ -1,0 +1,44 @@
+"""The command group: lazy loading, pipeline order, short help strings that match."""
+
+from __future__ import annotations
+
+import importlib
+import subprocess
+import sys
+
+import click
+from click.testing import CliRunner
+
+from plenocli.cli.main import COMMANDS, cli
+
+
+def test_every_listed_command_exists_with_the_same_short_help():
+    for name, short_help in COMMANDS.items():
+        command = getattr(importlib.import_module(f"plenocli.cli.{name}"), name)
+        assert isinstance(command, click.Command)
+        assert command.short_help == short_help, name
+
+
+def test_help_lists_commands_in_pipeline_order():
+    result = CliRunner().invoke(cli, ["--help"])
+    assert result.exit_code == 0
+    listed = [line.split()[0] for line in result.output.split("Commands:")[1].splitlines()
+              if line.strip()]
+    assert listed == list(COMMANDS)
+
+
+def test_help_imports_no_command_module():
+    code = ("import sys; from plenocli.cli.main import cli\n"
+            "try:\n    cli(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in sys.modules if m.startswith(('plenocli.cli.', 'numpy', "
+            "'scipy', 'cv2', 'numba', 'tifffile')) and m != 'plenocli.cli.main']\n"
+            "print(','.join(heavy), file=sys.stderr)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          check=True)
+    assert done.stderr.strip() == ""
+
+
+def test_unknown_command_is_a_usage_error():
+    result = CliRunner().invoke(cli, ["no-such-stage"])
+    assert result.exit_code == 2
+    assert "No such command" in result.output

@@ -1,0 +1,98 @@
+"""plenocli sai --grid (approximate S-hat on frames with margins) and plenocli decode --camera
+raytrix --calib (the RayCalibData XML kept in the metadata, then used by refocus)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import raytrix, tiffio
+from plenocli.io.gridfile import write_grid
+from plenocli.model.lensgrid import LensGrid
+
+ROWS, COLS, TOP, LEFT = 40, 50, 4, 6
+PITCH, OFFSET = 5.0, (7.3, 6.6)   # square lattice, not a whole number of pixels per lens / 2
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def code(row, col):
+    """Each active-area pixel holds its own position, so a view says where it sampled."""
+    return np.float32(row * 1000 + col)
+
+
+def test_sai_with_a_square_grid_samples_the_subaperture_centres(tmp_path):
+    frames = np.full((ROWS + TOP + 3, COLS + LEFT + 2), -1.0, np.float32)
+    r, c = np.mgrid[0:ROWS, 0:COLS]
+    frames[TOP:TOP + ROWS, LEFT:LEFT + COLS] = code(r, c)
+    tiffio.write_image(tmp_path / "frames.tif", frames,
+                       {"views": ["raw"], "origin": [0, 0],
+                        "active_area": [TOP, LEFT, TOP + ROWS, LEFT + COLS]})
+    grid = LensGrid(PITCH, 0.0, OFFSET, lattice="square", image_shape=(ROWS, COLS),
+                    sensor_origin=(TOP, LEFT))
+    write_grid(tmp_path / "grid.yaml", grid, {})
+    out = tmp_path / "views.tif"
+    result = invoke("sai", tmp_path / "frames.tif", "-n", 2, "--grid", tmp_path / "grid.yaml",
+                    "-o", out)
+    assert result.exit_code == 0, result.output
+    views, meta = tiffio.read_image(out)
+    # lens centres inside the 40 x 50 image: x = 2.3 + 5 k (10 of them), y = 1.6 + 5 k (8)
+    lens_x, lens_y = 2.3 + PITCH * np.arange(10), 1.6 + PITCH * np.arange(8)
+    assert views.shape == (4, 8, 10)
+    for i in range(2):
+        for j in range(2):   # sub-aperture (i, j) sits (j - 1/2, i - 1/2) * P / 2 off the centre
+            cols = np.round(lens_x + (j - 0.5) * PITCH / 2).astype(int)
+            rows = np.round(lens_y + (i - 0.5) * PITCH / 2).astype(int)
+            np.testing.assert_array_equal(views[2 * i + j], code(rows[:, None], cols[None, :]))
+    assert meta["views"] == ["S00", "S01", "S10", "S11"]
+    assert meta["sai"]["approximate"] is True
+    assert meta["sai"]["crop_sensor_origin"] == [TOP, LEFT]
+
+
+def test_sai_refuses_a_hex_grid(tmp_path):
+    tiffio.write_image(tmp_path / "f.tif", np.zeros((20, 20), np.float32), {"views": ["raw"]})
+    write_grid(tmp_path / "hex.yaml", LensGrid(5.0, 0.0, (3.0, 3.0), image_shape=(20, 20)), {})
+    result = invoke("sai", tmp_path / "f.tif", "--grid", tmp_path / "hex.yaml",
+                    "-o", tmp_path / "v.tif")
+    assert result.exit_code == 1
+    assert "square lens lattice" in result.output
+    assert not (tmp_path / "v.tif").exists()
+
+
+@pytest.fixture
+def raytrix_png(tmp_path):
+    rng = np.random.default_rng(5)
+    rgb = rng.integers(0, 256, (60, 80, 3), np.uint8)
+    cv2.imwrite(str(tmp_path / "frame0.png"), rgb[..., ::-1])  # OpenCV writes BGR
+    grid = LensGrid(9.0, 0.0, (40.0, 30.0), image_shape=(60, 80))
+    raytrix.write_calib(tmp_path / "calib.xml", raytrix.calib_from_grid(grid))
+    return tmp_path, rgb
+
+
+def test_decode_raytrix_keeps_the_calibration(raytrix_png):
+    folder, rgb = raytrix_png
+    out = folder / "frames.tif"
+    result = invoke("decode", folder / "frame0.png", "--camera", "raytrix",
+                    "--calib", folder / "calib.xml", "-o", out)
+    assert result.exit_code == 0, result.output
+    frames, meta = tiffio.read_image(out)
+    np.testing.assert_array_equal(frames, np.moveaxis(rgb, -1, 0))
+    assert meta["views"] == ["R", "G", "B"] and meta["camera"] == "raytrix"
+    assert meta["raytrix_calib"] == raytrix.read_calib(folder / "calib.xml")
+    assert meta["raytrix_calib"]["diameter"] == pytest.approx(9.0)
+    roles = {item["role"] for item in meta["provenance"]["inputs"]}
+    assert {"input", "calib"} <= roles
+
+
+def test_decode_raytrix_without_calib_fails_cleanly(raytrix_png):
+    folder, _ = raytrix_png
+    result = invoke("decode", folder / "frame0.png", "--camera", "raytrix",
+                    "-o", folder / "frames.tif")
+    assert result.exit_code == 1
+    assert "needs the RayCalibData XML" in result.output
+    assert not (folder / "frames.tif").exists()
