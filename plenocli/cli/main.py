@@ -8,6 +8,7 @@ from plenocli.cli.bias import bias
 from plenocli.cli.calibrate import calibrate
 from plenocli.cli.crosstalk import crosstalk
 from plenocli.cli.decode import decode
+from plenocli.cli.develop import develop
 from plenocli.cli.flat import flat
 from plenocli.cli.info import info
 from plenocli.cli.optics import optics
@@ -45,6 +46,7 @@ for command in (
     sai,
     crosstalk,
     stitch,
+    develop,
     run,
     batch,
     info,

@@ -32,6 +32,7 @@ def _stages() -> dict[str, Stage]:
         calibrate,
         crosstalk,
         decode,
+        develop,
         flat,
         optics,
         refocus,
@@ -52,6 +53,8 @@ def _stages() -> dict[str, Stage]:
               outputs=("output", "preview")),
         Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
               outputs=("output", "transform_out", "report", "preview")),
+        Stage("develop", develop.run, inputs=("input", "wb_from"),
+              outputs=("output", "linear", "preview")),
         Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
     ]
     return {s.name: s for s in table}

@@ -1,0 +1,105 @@
+"""Developing views into colour images: which pages form a colour view, then demosaic, white
+balance and the camera matrix (scene-referred), then scaling and a display space
+(output-referred).
+
+A views file holds colour in one of three ways (its metadata says which):
+
+- Bayer mosaics: ``cfa`` (every page) or ``view_colours`` (a 2 x 2 pattern per page, e.g. the
+  half-resolution mosaic of each quad-Bayer SAI);
+- RGB triplets: pages named ``R, G, B`` or ``NAME.R, NAME.G, NAME.B``;
+- anything else is monochrome, and asking it for colour is an error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocli.colour.balance import apply_gains, normalised_gains
+from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
+from plenocli.colour.matrix import apply_matrix, srgb_to_space
+
+
+@dataclass(frozen=True)
+class ColourView:
+    """One colour view of a views file: its name, the pages it is made of, and its CFA pattern
+    (None when the pages already are R, G, B)."""
+
+    name: str
+    pages: tuple[int, ...]
+    cfa: str | None
+
+
+def colour_views(names: list[str], *, cfa: str | None = None,
+                 view_colours: list | None = None) -> list[ColourView]:
+    """The colour views of a views file, from its page names and CFA metadata.
+
+    Raises ValueError (one line, what to do) for monochrome data, an unknown CFA, or views that
+    each hold a single colour.
+    """
+    if view_colours and any(c is not None for c in view_colours):
+        if len(view_colours) != len(names):
+            raise ValueError(f"{len(view_colours)} view colours for {len(names)} views")
+        if all(c is not None and len(str(c)) == 1 for c in view_colours):
+            raise ValueError("each view holds a single colour (SAIs of a per-pixel Bayer "
+                             "sensor); no view can be made colour on its own")
+        return [ColourView(n, (k,), check_pattern(c)) for k, (n, c)
+                in enumerate(zip(names, view_colours, strict=True))]
+    if cfa:
+        pattern = check_pattern(cfa)
+        return [ColourView(n, (k,), pattern) for k, n in enumerate(names)]
+    by_prefix: dict[str, dict[str, int]] = {}
+    for k, name in enumerate(names):
+        prefix, _, channel = name.rpartition(".")
+        by_prefix.setdefault(prefix, {})[channel] = k
+    if by_prefix and all(set(ch) == set("RGB") for ch in by_prefix.values()):
+        return [ColourView(prefix or "RGB", tuple(ch[c] for c in "RGB"), None)
+                for prefix, ch in by_prefix.items()]
+    raise ValueError(f"views {', '.join(names)} carry no colour (no CFA pattern and no R, G, B "
+                     "pages): a monochrome capture cannot be developed in colour")
+
+
+def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD
+               ) -> np.ndarray:
+    """Camera RGB (rows, cols, 3) float32 of one colour view (demosaiced when it is Bayer)."""
+    if view.cfa is None:
+        return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
+    return demosaic(pages[view.pages[0]], view.cfa, method=method)
+
+
+def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None) -> np.ndarray:
+    """Scene-referred linear sRGB (camera units): white balance, then the camera matrix
+    (``None``: camera RGB is taken as linear sRGB)."""
+    balanced = apply_gains(camera, gains)
+    if camera_to_srgb is None:
+        return balanced
+    return apply_matrix(balanced, camera_to_srgb)
+
+
+def exposure_scale(scene: np.ndarray, *, exposure_ev: float = 0.0,
+                   white_percentile: float = 99.0) -> float:
+    """The factor that maps the ``white_percentile`` of the scene's finite values to 1 (like
+    dcraw's auto-brightness), times 2 ** exposure_ev."""
+    if not np.isfinite(exposure_ev):
+        raise ValueError(f"exposure_ev must be finite, got {exposure_ev}")
+    sample = scene[::4, ::4].ravel()  # a 1/16 sample: the percentile of 30 MP costs seconds
+    sample = sample[np.isfinite(sample)]
+    if sample.size == 0:
+        raise ValueError("the image has no finite pixel (everything masked)")
+    reference = float(np.percentile(sample, white_percentile))
+    if reference <= 0:
+        raise ValueError(f"the {white_percentile:g}th percentile of the image is {reference:g} "
+                         "(not positive): nothing to expose")
+    return float(2.0 ** exposure_ev / reference)
+
+
+def output_rgb(scene: np.ndarray, space: str, scale: float) -> np.ndarray:
+    """Linear RGB of the output ``space`` with white at 1 (not yet clipped or encoded)."""
+    matrix = srgb_to_space(space) * scale
+    return apply_matrix(scene, matrix)
+
+
+def checked_gains(gains) -> np.ndarray:
+    """Gains as three positive numbers with green 1 (ValueError otherwise)."""
+    return normalised_gains(gains)
