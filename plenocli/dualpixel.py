@@ -34,3 +34,83 @@ def split_views(sum_frame: np.ndarray, a_frame: np.ndarray, *, sum_clipped: np.n
     np.copyto(views[1], np.nan, where=sum_clipped)
     np.copyto(views[1], np.nan, where=a_clipped)
     return views
+
+
+def highlight_split(white_a: np.ndarray, white_s: np.ndarray, *, cfa: str | None,
+                    size: int = 15) -> np.ndarray:
+    """The per-pixel A/S split of a dual-pixel sensor, measured on a white image.
+
+    The split varies slowly across the frame (left-right fall-off of the half-pixels) and with
+    colour, so it is averaged over ``size`` x ``size`` pixels of the same CFA colour (a box mean
+    of A divided by a box mean of S: photon noise averages out, a linear trend is kept).
+
+    Parameters
+    ----------
+    white_a, white_s : ndarray, (rows, cols)
+        A and S of a white image, processed like the capture (DN above black, or flat-fielded
+        with the same gains); NaN pixels are left out.
+    cfa : 2 x 2 pattern of the frames, or None for a monochrome sensor.
+    size : odd box size in pixels of one colour plane.
+
+    Returns
+    -------
+    ndarray float32, (rows, cols): A / S, NaN where the white gives no estimate.
+    """
+    import cv2
+
+    if white_a.shape != white_s.shape:
+        raise ValueError(f"white A and S differ in shape: {white_a.shape} vs {white_s.shape}")
+    if size < 1 or size % 2 == 0:
+        raise ValueError(f"size must be a positive odd number of pixels, got {size}")
+    split = np.full(white_a.shape, np.nan, np.float32)
+    step = 2 if cfa else 1
+    for r in range(step):
+        for c in range(step):
+            a = np.asarray(white_a[r::step, c::step], np.float32)
+            s = np.asarray(white_s[r::step, c::step], np.float32)
+            valid = np.isfinite(a) & np.isfinite(s)
+            box = {"ksize": (size, size), "normalize": False, "borderType": cv2.BORDER_REFLECT}
+            sum_a = cv2.boxFilter(np.where(valid, a, 0).astype(np.float32), -1, **box)
+            sum_s = cv2.boxFilter(np.where(valid, s, 0).astype(np.float32), -1, **box)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = sum_a / sum_s
+            ratio[~((sum_s > 0) & (ratio > 0) & (ratio < 1))] = np.nan
+            split[r::step, c::step] = ratio
+    return split
+
+
+def recover_highlights(a_view: np.ndarray, s_view: np.ndarray, split: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Rebuild the sum S where it clipped but the half-pixel A did not: S = A / split.
+
+    Parameters
+    ----------
+    a_view, s_view : ndarray, (rows, cols)
+        A and S views (NaN where clipped), e.g. from :func:`split_views`.
+    split : ndarray, (rows, cols)
+        A / S measured on a white image (:func:`highlight_split`).
+
+    Returns
+    -------
+    views : ndarray float32, (3, rows, cols)
+        A, B = S - A, and S, with S and B rebuilt where S was NaN and A and the split are finite;
+        NaN stays where A clipped as well.
+    rebuilt : ndarray of bool, (rows, cols)
+        The pixels whose S (and B) were rebuilt.
+
+    Limits: the split is the white image's; where the scene's light reaches the pupil unlike a
+    uniform white (defocused edges, strong parallax) A / S differs and the rebuilt S is off by the
+    same factor.
+    """
+    if not (a_view.shape == s_view.shape == split.shape):
+        raise ValueError(f"A, S and split differ in shape: {a_view.shape}, {s_view.shape}, "
+                         f"{split.shape}")
+    s = np.asarray(s_view, np.float32).copy()
+    a = np.asarray(a_view, np.float32)
+    rebuilt = ~np.isfinite(s) & np.isfinite(a) & np.isfinite(split)
+    s[rebuilt] = a[rebuilt] / split[rebuilt]
+    views = np.empty((3, *s.shape), np.float32)
+    views[0] = a
+    np.subtract(s, a, out=views[1])
+    views[2] = s
+    return views, rebuilt

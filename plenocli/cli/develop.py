@@ -46,6 +46,9 @@ class WhiteBalance(click.ParamType):
               help="Exposure (EV) on top of the automatic white point (99th percentile = 1).")
 @click.option("--quality", type=click.IntRange(1, 100), default=95, show_default=True,
               help="JPEG quality.")
+@click.option("--recover-highlights", type=click.Path(dir_okay=False), default=None,
+              help="Dual-pixel: rebuild S (and B) from A where only S clipped, with the A/S "
+                   "split of this white image (views A, B, S, processed like INPUT).")
 @click.option("--linear", type=click.Path(dir_okay=False), default=None,
               help="Also write the scene-referred linear sRGB as a float32 TIFF (R, G, B pages).")
 @options.preview_opt

@@ -53,7 +53,7 @@ def _stages() -> dict[str, Stage]:
               outputs=("output", "preview")),
         Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
               outputs=("output", "transform_out", "report", "preview")),
-        Stage("develop", develop.run, inputs=("input", "wb_from"),
+        Stage("develop", develop.run, inputs=("input", "wb_from", "recover_highlights"),
               outputs=("output", "linear", "preview")),
         Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
     ]

@@ -111,3 +111,22 @@ def _colourchecker() -> list[tuple[str, np.ndarray]]:
                                     chromatic_adaptation_transform="CAT02")
             out.append((name, np.clip(rgb, 0.0, 1.0).astype(np.float32)))
     return out
+
+
+def camera_sampled(scene: np.ndarray, factor: int) -> np.ndarray:
+    """What a camera's pixels record of a ``scene`` rendered ``factor`` times finer: each pixel
+    integrates its own area (box mean of factor x factor), then a 4-spot optical low-pass filter
+    (the birefringent plate of most Bayer cameras) averages each pixel with its neighbours one
+    pixel right, down and diagonally.
+
+    ``scene`` (rows * factor, cols * factor[, channels]) -> (rows, cols[, channels]) float32.
+    """
+    if factor < 1:
+        raise ValueError(f"factor must be >= 1, got {factor}")
+    img = np.asarray(scene, np.float32)
+    rows, cols = img.shape[0] // factor, img.shape[1] // factor
+    img = img[:rows * factor, :cols * factor]
+    pixels = img.reshape(rows, factor, cols, factor, *img.shape[2:]).mean(axis=(1, 3))
+    shifted = np.pad(pixels, [(0, 1), (0, 1)] + [(0, 0)] * (pixels.ndim - 2), mode="edge")
+    return (0.25 * (shifted[:-1, :-1] + shifted[1:, :-1] + shifted[:-1, 1:] + shifted[1:, 1:])
+            ).astype(np.float32)

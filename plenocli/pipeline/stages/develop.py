@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from plenocli import dualpixel
 from plenocli.colour import balance, export
 from plenocli.colour import develop as dev
 from plenocli.colour import matrix as colour_matrix
@@ -27,7 +28,8 @@ PREVIEW_SIDE = 1024
 def run(input: str, output: str, *, view: str | None = None, method: str = "menon2007",
         wb: str = "as-shot", wb_from: str | None = None, matrix: str = "as-shot",
         space: str = "srgb", exposure: float = 0.0, quality: int = 95,
-        linear: str | None = None, preview: str | None = None) -> None:
+        recover_highlights: str | None = None, linear: str | None = None,
+        preview: str | None = None) -> None:
     """Develop one colour view of ``input`` into ``output`` (see ``plenocli develop --help``)."""
     if method not in METHODS:
         raise ConfigError(f"--method {method}: choose one of {', '.join(METHODS)}")
@@ -46,6 +48,9 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
     except ValueError as err:
         raise InputError(f"{input}: {err}") from err
     chosen = _choose(views, view, input)
+    rebuilt = None
+    if recover_highlights:
+        data, rebuilt = _recover(data, names, cfa, recover_highlights, input, meta)
     gains, gains_from = _gains(wb, wb_from, meta, chosen, input)
     to_srgb = _camera_matrix(matrix, meta, input)
     try:
@@ -58,9 +63,12 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
         raise InputError(f"{input}: view {chosen.name}: {err}") from err
     params = dict(view=chosen.name, method=method if chosen.cfa else None, wb=wb,
                   wb_from=wb_from, matrix=matrix, space=space, exposure=exposure,
-                  quality=quality, gains=gains.tolist(), scale=scale,
+                  quality=quality, recover_highlights=recover_highlights,
+                  rebuilt_pixels=None if rebuilt is None else int(rebuilt.sum()),
+                  gains=gains.tolist(), scale=scale,
                   camera_to_srgb=None if to_srgb is None else to_srgb.tolist())
-    record = stage_record("develop", params, {"input": input, "wb_from": wb_from})
+    record = stage_record("develop", params, {"input": input, "wb_from": wb_from,
+                                              "recover_highlights": recover_highlights})
     description = json_safe({"plenocli": record, "history": meta.get("history", [])})
     try:
         body = export.image_bytes(encoded, fmt, space=space, exif=meta.get("exif"),
@@ -68,7 +76,9 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
         preview_body = _preview_bytes(encoded, space, description) if preview else None
     except ValueError as err:
         raise ConfigError(str(err)) from err
-    protect = (input,) + ((wb_from,) if wb_from else ())
+    protect = (input,) + tuple(p for p in (wb_from, recover_highlights) if p)
+    if linear and rebuilt is not None:  # the mask plane: 1 where S (and B) were rebuilt
+        scene = np.concatenate([scene, rebuilt[..., np.newaxis].astype(np.float32)], axis=-1)
     _write_together(output, body, linear, scene, meta, record, preview, preview_body, protect)
     log.info("develop: %s view %s -> %s (%s, %s, gains %s)", shown(input), chosen.name,
              shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains))
@@ -82,6 +92,41 @@ def _active(data: np.ndarray, meta: dict) -> tuple[np.ndarray, str | None]:
         top, left, bottom, right = (int(v) for v in area)
         return data[:, top:bottom, left:right], shift_pattern(cfa, top, left)
     return data, cfa
+
+
+def _stages(meta: dict) -> list[str]:
+    records = [*meta.get("history", []), meta.get("provenance") or {}]
+    return [r.get("stage") for r in records if r.get("stage") in ("bias", "flat")]
+
+
+def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: str,
+             path: str, meta: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Dual-pixel highlight recovery: S (and B) rebuilt from A where only S clipped."""
+    white, white_meta = tiffio.read_image(white_path)
+    if _stages(white_meta) != _stages(meta):
+        raise InputError(f"--recover-highlights {white_path}: the white image went through "
+                         f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
+                         f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
+                         "split must be measured in the same units (process both alike)")
+    white, white_cfa = _active(white, white_meta)
+    white_names = list(white_meta.get("views") or [])
+    for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
+        if not {"A", "B", "S"} <= set(views_):
+            raise InputError(f"--recover-highlights: {file} ({label}) has views "
+                             f"{', '.join(views_) or 'unnamed'}; dual-pixel A, B and S are needed "
+                             "(bias output)")
+    if white.shape[1:] != data.shape[1:] or white_cfa != cfa:
+        raise InputError(f"--recover-highlights {white_path}: the white image "
+                         f"({white.shape[2]}x{white.shape[1]}, CFA {white_cfa}) does not match "
+                         f"{path} ({data.shape[2]}x{data.shape[1]}, CFA {cfa}); process both alike")
+    split = dualpixel.highlight_split(white[white_names.index("A")],
+                                      white[white_names.index("S")], cfa=cfa)
+    ia, ib, is_ = (names.index(v) for v in "ABS")
+    rebuilt_views, rebuilt = dualpixel.recover_highlights(data[ia], data[is_], split)
+    out = data.astype(np.float32, copy=True)
+    out[ia], out[ib], out[is_] = rebuilt_views
+    log.info("develop: %d clipped S pixels rebuilt from A", int(rebuilt.sum()))
+    return out, rebuilt
 
 
 def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.ColourView:
@@ -168,7 +213,8 @@ def _write_together(output, body, linear, scene, meta, record, preview, preview_
             stack.enter_context(atomic_path(preview, protect=protect)).write_bytes(preview_body)
         if linear:
             linear_meta = tiffio.derived_meta(
-                meta, record, views=["R", "G", "B"], cfa=None, view_colours=None,
+                meta, record, views=["R", "G", "B", "rebuilt"][:scene.shape[-1]], cfa=None,
+                view_colours=None,
                 active_area=[0, 0, *scene.shape[:2]], masked_areas=[], origin=None,
                 colour_space="linear sRGB (D65), scene-referred, camera units")
             tiffio.write_image(linear, np.moveaxis(scene, -1, 0), linear_meta, protect=protect)
