@@ -37,12 +37,13 @@ def split_views(sum_frame: np.ndarray, a_frame: np.ndarray, *, sum_clipped: np.n
 
 
 def highlight_split(white_a: np.ndarray, white_s: np.ndarray, *, cfa: str | None,
-                    size: int = 15) -> np.ndarray:
+                    degree: int = 4) -> np.ndarray:
     """The per-pixel A/S split of a dual-pixel sensor, measured on a white image.
 
-    The split varies slowly across the frame (left-right fall-off of the half-pixels) and with
-    colour, so it is averaged over ``size`` x ``size`` pixels of the same CFA colour (a box mean
-    of A divided by a box mean of S: photon noise averages out, a linear trend is kept).
+    The split varies smoothly across the frame (left-right fall-off of the half-pixels) and with
+    colour, so each CFA colour plane gets a 2-D polynomial of ``degree`` in the normalised pixel
+    coordinates, fitted by least squares to A = split * S (photon noise averages out over the
+    whole plane, and the frame's edges are not biased as a moving average would be).
 
     Parameters
     ----------
@@ -50,32 +51,37 @@ def highlight_split(white_a: np.ndarray, white_s: np.ndarray, *, cfa: str | None
         A and S of a white image, processed like the capture (DN above black, or flat-fielded
         with the same gains); NaN pixels are left out.
     cfa : 2 x 2 pattern of the frames, or None for a monochrome sensor.
-    size : odd box size in pixels of one colour plane.
+    degree : polynomial degree (total) of the split over the frame.
 
     Returns
     -------
-    ndarray float32, (rows, cols): A / S, NaN where the white gives no estimate.
+    ndarray float32, (rows, cols): A / S.
     """
-    import cv2
-
     if white_a.shape != white_s.shape:
         raise ValueError(f"white A and S differ in shape: {white_a.shape} vs {white_s.shape}")
-    if size < 1 or size % 2 == 0:
-        raise ValueError(f"size must be a positive odd number of pixels, got {size}")
-    split = np.full(white_a.shape, np.nan, np.float32)
+    if not 0 <= degree <= 8:
+        raise ValueError(f"degree must be between 0 and 8, got {degree}")
+    rows, cols = white_a.shape
+    split = np.empty(white_a.shape, np.float32)
     step = 2 if cfa else 1
+    powers = [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
     for r in range(step):
         for c in range(step):
-            a = np.asarray(white_a[r::step, c::step], np.float32)
-            s = np.asarray(white_s[r::step, c::step], np.float32)
-            valid = np.isfinite(a) & np.isfinite(s)
-            box = {"ksize": (size, size), "normalize": False, "borderType": cv2.BORDER_REFLECT}
-            sum_a = cv2.boxFilter(np.where(valid, a, 0).astype(np.float32), -1, **box)
-            sum_s = cv2.boxFilter(np.where(valid, s, 0).astype(np.float32), -1, **box)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = sum_a / sum_s
-            ratio[~((sum_s > 0) & (ratio > 0) & (ratio < 1))] = np.nan
-            split[r::step, c::step] = ratio
+            yy, xx = np.mgrid[r:rows:step, c:cols:step]
+            x, y = 2.0 * xx / max(cols - 1, 1) - 1.0, 2.0 * yy / max(rows - 1, 1) - 1.0
+            basis = np.stack([x**i * y**j for i, j in powers], axis=-1)
+            a = np.asarray(white_a[r::step, c::step], np.float64)
+            s = np.asarray(white_s[r::step, c::step], np.float64)
+            valid = np.isfinite(a) & np.isfinite(s) & (s > 0)
+            if valid.sum() < 4 * len(powers):
+                raise ValueError("the white image has too few valid pixels to measure the A/S "
+                                 "split")
+            design = basis[valid] * s[valid, np.newaxis]
+            coef, *_ = np.linalg.lstsq(design, a[valid], rcond=None)
+            split[r::step, c::step] = basis @ coef
+    if not np.all((split > 0) & (split < 1)):
+        raise ValueError("the A/S split measured on the white image leaves (0, 1); is it a "
+                         "dual-pixel white with views A and S?")
     return split
 
 
