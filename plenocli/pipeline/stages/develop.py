@@ -41,7 +41,7 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
     except ValueError as err:
         raise ConfigError(str(err)) from err
     data, meta = tiffio.read_image(input)
-    data, cfa = _active(data, meta)
+    data, cfa = _active(_levels(data, meta), meta)
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
@@ -84,6 +84,21 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
              shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains))
 
 
+def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
+    """Raw integer frames (decode output) as DN above black, NaN where they reached the white
+    level; processed (float) views are returned as they are."""
+    if data.dtype.kind not in "ui":
+        return data
+    out = data.astype(np.float32)
+    blacks = meta.get("black_level") or [[0.0] * 4] * len(data)
+    whites = meta.get("white_level") or [float("inf")] * len(data)
+    for k, frame in enumerate(out):
+        np.copyto(frame, np.nan, where=data[k] >= whites[k])
+        for p in range(4):
+            frame[p // 2::2, p % 2::2] -= np.float32(blacks[k][p])
+    return out
+
+
 def _active(data: np.ndarray, meta: dict) -> tuple[np.ndarray, str | None]:
     """The light-sensitive area and its CFA pattern (the pattern moves with the crop)."""
     cfa = meta.get("cfa")
@@ -108,7 +123,7 @@ def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: st
                          f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
                          f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
                          "split must be measured in the same units (process both alike)")
-    white, white_cfa = _active(white, white_meta)
+    white, white_cfa = _active(_levels(white, white_meta), white_meta)
     white_names = list(white_meta.get("views") or [])
     for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
         if not {"A", "B", "S"} <= set(views_):
@@ -164,7 +179,7 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
 
 def _gains_from_white(path: str, view_name: str) -> np.ndarray:
     data, meta = tiffio.read_image(path)
-    data, cfa = _active(data, meta)
+    data, cfa = _active(_levels(data, meta), meta)
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
