@@ -85,3 +85,17 @@ def test_unknown_patterns_are_refused(cfa):
 def test_unknown_method_is_refused():
     with pytest.raises(ValueError, match="method"):
         dm.demosaic(np.zeros((8, 8), np.float32), "RGGB", method="ahd")
+
+
+@pytest.mark.parametrize("pattern", PATTERNS)
+def test_menon_equals_the_colour_demosaicing_reference(pattern):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour_demosaicing
+
+    frame = np.random.default_rng(8).random((46, 58))
+    reference = colour_demosaicing.demosaicing_CFA_Bayer_Menon2007(frame, pattern)
+    ours = dm.demosaic(frame.astype(np.float32), pattern, method="menon2007")
+    np.testing.assert_allclose(ours, reference, rtol=0, atol=2e-6)

@@ -5,7 +5,9 @@ Methods (measured in docs/colour.md; the default is chosen there):
 ``opencv-ea``   OpenCV's edge-aware demosaicing (``COLOR_Bayer*2RGB_EA``), on 16-bit data
 ``opencv-vng``  OpenCV's variable number of gradients (8-bit only in OpenCV: quantised)
 ``malvar2004``  Malvar, He & Cutler 2004 (``colour-demosaicing``)
-``menon2007``   Menon, Andriani & Calvagno 2007, DDFAPD with refining (``colour-demosaicing``)
+``menon2007``   Menon, Andriani & Calvagno 2007, DDFAPD with refining: colour-demosaicing's
+                algorithm on OpenCV float32 filters (``plenocli.colour.menon``, 50 x faster,
+                equal to the reference within float32 rounding: checked by the tests)
 ``bilinear``    bilinear interpolation (``colour-demosaicing``): the fast option
 
 NaN pixels (clipped or otherwise unknown) are filled from their valid neighbours of the same
@@ -21,6 +23,8 @@ import warnings
 
 import cv2
 import numpy as np
+
+from plenocli.colour.menon import menon2007
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
 METHODS = ("opencv-ea", "opencv-vng", "malvar2004", "menon2007", "bilinear")
@@ -161,8 +165,9 @@ def _demosaic_colour(data: np.ndarray, pattern: str, method: str) -> np.ndarray:
         warnings.simplefilter("ignore")
         import colour_demosaicing as cd
 
+    if method == "menon2007":
+        return menon2007(data, pattern)
     function = {"malvar2004": cd.demosaicing_CFA_Bayer_Malvar2004,
-                "menon2007": cd.demosaicing_CFA_Bayer_Menon2007,
                 "bilinear": cd.demosaicing_CFA_Bayer_bilinear}[method]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
