@@ -16,9 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plenocli.colour.balance import apply_gains, normalised_gains
+from plenocli.colour.balance import normalised_gains
 from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
-from plenocli.colour.matrix import apply_matrix, srgb_to_space
+from plenocli.colour.export import encode
+from plenocli.colour.matrix import srgb_to_space
+
+BAND_ROWS = 256  # rows per matrix product: bounds the temporaries to a few MB per band
 
 
 @dataclass(frozen=True)
@@ -68,13 +71,27 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
     return demosaic(pages[view.pages[0]], view.cfa, method=method)
 
 
-def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None) -> np.ndarray:
+def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,
+              in_place: bool = False) -> np.ndarray:
     """Scene-referred linear sRGB (camera units): white balance, then the camera matrix
-    (``None``: camera RGB is taken as linear sRGB)."""
-    balanced = apply_gains(camera, gains)
-    if camera_to_srgb is None:
-        return balanced
-    return apply_matrix(balanced, camera_to_srgb)
+    (``None``: camera RGB is taken as linear sRGB). One 3 x 3 product per pixel, band by band;
+    ``in_place`` overwrites ``camera`` (float32) instead of allocating a second image."""
+    combined = np.diag(normalised_gains(gains))
+    if camera_to_srgb is not None:
+        combined = np.asarray(camera_to_srgb, np.float64) @ combined
+    return _per_band(camera, combined, in_place=in_place)
+
+
+def _per_band(rgb: np.ndarray, matrix: np.ndarray, *, in_place: bool,
+              encode_space: str | None = None) -> np.ndarray:
+    out = rgb if in_place else np.empty(rgb.shape, np.float32)
+    m = np.asarray(matrix, np.float32).T
+    for start in range(0, rgb.shape[0], BAND_ROWS):
+        band = np.asarray(rgb[start:start + BAND_ROWS], np.float32) @ m
+        if encode_space is not None:
+            band = encode(band, encode_space)
+        out[start:start + BAND_ROWS] = band
+    return out
 
 
 def exposure_scale(scene: np.ndarray, *, exposure_ev: float = 0.0,
@@ -94,10 +111,12 @@ def exposure_scale(scene: np.ndarray, *, exposure_ev: float = 0.0,
     return float(2.0 ** exposure_ev / reference)
 
 
-def output_rgb(scene: np.ndarray, space: str, scale: float) -> np.ndarray:
-    """Linear RGB of the output ``space`` with white at 1 (not yet clipped or encoded)."""
-    matrix = srgb_to_space(space) * scale
-    return apply_matrix(scene, matrix)
+def output_encoded(scene: np.ndarray, space: str, scale: float, *,
+                   in_place: bool = False) -> np.ndarray:
+    """Scene RGB to the output ``space``, scaled so that ``scale * scene = 1`` is white, clipped
+    to [0, 1] and encoded (see :func:`plenocli.colour.export.encode`)."""
+    return _per_band(scene, srgb_to_space(space) * scale, in_place=in_place,
+                     encode_space=space)
 
 
 def checked_gains(gains) -> np.ndarray:

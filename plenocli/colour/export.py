@@ -101,7 +101,9 @@ def _tiff_bytes(encoded: np.ndarray, icc: bytes, exif: dict, text: str) -> bytes
         else:
             tags.append((tag, "s", 0, str(value), True))
     buffer = io.BytesIO()
-    data = np.round(encoded * 65535).astype(np.uint16)
+    data = np.empty(encoded.shape, np.uint16)
+    for start in range(0, encoded.shape[0], 256):  # band by band: no full-size float temporary
+        data[start:start + 256] = np.rint(encoded[start:start + 256] * np.float32(65535))
     tifffile.imwrite(buffer, data, photometric="rgb", description=text, metadata=None,
                      software=f"plenocli {__version__}", extratags=sorted(tags))
     return buffer.getvalue()

@@ -54,11 +54,11 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
     gains, gains_from = _gains(wb, wb_from, meta, chosen, input)
     to_srgb = _camera_matrix(matrix, meta, input)
     try:
-        camera = dev.camera_rgb(data, chosen, method=method)
-        scene = dev.scene_rgb(camera, gains=gains, camera_to_srgb=to_srgb)
-        del camera
+        scene = dev.scene_rgb(dev.camera_rgb(data, chosen, method=method), gains=gains,
+                              camera_to_srgb=to_srgb, in_place=True)
+        del data
         scale = dev.exposure_scale(scene, exposure_ev=exposure)
-        encoded = export.encode(dev.output_rgb(scene, space, scale), space)
+        encoded = dev.output_encoded(scene, space, scale, in_place=not linear)
     except ValueError as err:
         raise InputError(f"{input}: view {chosen.name}: {err}") from err
     params = dict(view=chosen.name, method=method if chosen.cfa else None, wb=wb,
