@@ -171,3 +171,18 @@ def test_colour_views_refuse_mono_and_single_colour_views():
     assert [v.cfa for v in views] == ["RGGB", "RGGB"]
     views = dev.colour_views(["S00.R", "S00.G", "S00.B", "S01.R", "S01.G", "S01.B"])
     assert [(v.name, v.pages) for v in views] == [("S00", (0, 1, 2)), ("S01", (3, 4, 5))]
+
+
+def test_bayer_previews_are_in_the_cameras_colour(tmp_path):
+    """A grey scene through the camera's filters shows grey (not green) in a preview, with the
+    as-shot gains and, without them, with a grey-world balance."""
+    import cv2
+
+    from plenocli.io.preview import write_png
+
+    frame = mosaic(np.full((64, 96, 3), 0.4) * CAMERA_GAIN, "RGGB").astype(np.float32)
+    for colour in ({"as_shot_wb": list(1 / CAMERA_GAIN), "xyz_to_camera": None}, None):
+        write_png(tmp_path / "p.png", frame, cfa="RGGB", colour=colour)
+        bgr = cv2.imread(str(tmp_path / "p.png")).astype(int)
+        assert bgr.shape == (32, 48, 3)
+        assert np.abs(bgr - bgr[..., 1:2]).max() <= 1 and bgr.mean() > 200

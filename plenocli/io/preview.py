@@ -33,9 +33,11 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
-              max_side: int = 2048, protect: tuple = ()) -> None:
+              max_side: int = 2048, protect: tuple = (), colour: dict | None = None) -> None:
     """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or
-    (views, rows, cols) views side by side."""
+    (views, rows, cols) views side by side. Bayer data is shown in colour with the camera's
+    white balance and matrix from ``colour`` (the frames' metadata), else grey-world balanced."""
+    bayer = bool(cfa)
     if image.ndim == 3 and image.shape[-1] != 3:
         image, cfa = views_side_by_side(image, cfa), None
     img = np.asarray(half_size_rgb(image, cfa) if cfa and image.ndim == 2 else image, np.float32)
@@ -43,7 +45,12 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
     if scale > 1:  # shrink first: the stretch below then works on a few megapixels, not 60
         size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-    img = to_display(img)
+    if bayer and img.ndim == 3:
+        from plenocli.colour.preview import display_colour
+
+        img = display_colour(img, colour)
+    else:
+        img = to_display(img)
     if img.ndim == 3:
         img = img[..., ::-1]  # OpenCV writes BGR
     with atomic_path(path, protect=protect) as tmp:

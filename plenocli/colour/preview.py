@@ -1,0 +1,40 @@
+"""Colour previews of Bayer data: the camera's white balance and colour matrix when the raw
+gave them, a grey-world balance otherwise, then an sRGB picture for the PNG writer."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli.colour.balance import gains_from_neutral, normalised_gains
+from plenocli.colour.matrix import camera_to_srgb
+
+
+def display_colour(camera: np.ndarray, colour: dict | None = None, *,
+                   white_percentile: float = 99.0) -> np.ndarray:
+    """uint8 sRGB (rows, cols, 3) of camera RGB (rows, cols, 3); NaN shows black.
+
+    ``colour`` is the frames' ``colour`` metadata (``as_shot_wb``, ``xyz_to_camera``); missing
+    parts fall back to a grey-world balance and no matrix, so a preview never fails.
+    """
+    rgb = np.asarray(camera, np.float32)
+    finite = np.isfinite(rgb).all(axis=-1)
+    if not finite.any():
+        return np.zeros(rgb.shape, np.uint8)
+    colour = colour or {}
+    try:
+        gains = normalised_gains(colour["as_shot_wb"])
+    except (KeyError, TypeError, ValueError):
+        try:
+            gains = gains_from_neutral(rgb[finite].mean(axis=0))
+        except ValueError:
+            gains = np.ones(3)
+    combined = np.diag(gains)
+    try:
+        combined = camera_to_srgb(colour["xyz_to_camera"]) @ combined
+    except (KeyError, TypeError, ValueError):
+        pass
+    out = np.nan_to_num(rgb @ combined.T.astype(np.float32), nan=0.0)
+    reference = float(np.percentile(out[finite], white_percentile))
+    out = np.clip(out / max(reference, 1e-12), 0.0, 1.0)
+    out = np.where(out <= 0.0031308, 12.92 * out, 1.055 * np.power(out, 1 / 2.4) - 0.055)
+    return np.round(255 * out).astype(np.uint8)
