@@ -117,8 +117,3 @@ def output_encoded(scene: np.ndarray, space: str, scale: float, *,
     to [0, 1] and encoded (see :func:`plenocli.colour.export.encode`)."""
     return _per_band(scene, srgb_to_space(space) * scale, in_place=in_place,
                      encode_space=space)
-
-
-def checked_gains(gains) -> np.ndarray:
-    """Gains as three positive numbers with green 1 (ValueError otherwise)."""
-    return normalised_gains(gains)

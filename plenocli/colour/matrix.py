@@ -60,10 +60,3 @@ def camera_to_srgb(xyz_to_camera) -> np.ndarray:
 def srgb_to_space(space: str) -> np.ndarray:
     """Linear sRGB -> linear ``space`` (both D65, no adaptation needed)."""
     return np.linalg.inv(rgb_to_xyz(space)) @ rgb_to_xyz("srgb")
-
-
-def apply_matrix(rgb: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """``matrix @ pixel`` for every pixel of ``rgb`` (..., 3), float32, NaN kept."""
-    m = np.asarray(matrix, np.float32)
-    flat = np.asarray(rgb, np.float32).reshape(-1, 3)
-    return (flat @ m.T).reshape(np.shape(rgb))

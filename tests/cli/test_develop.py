@@ -167,3 +167,27 @@ def test_bytes_of_the_tiff_are_the_output(tmp_path):
     assert invoke("develop", tmp_path / "f.tif", "-o", tmp_path / "c.png").exit_code == 0
     assert not list(tmp_path.glob(".*part"))
     assert Image.open(io.BytesIO((tmp_path / "c.png").read_bytes())).format == "PNG"
+
+
+def test_quad_bayer_sais_are_half_resolution_mosaics(tmp_path):
+    """sai --cfa-layout micro-image: each SAI is a Bayer mosaic of its own; develop makes it RGB
+    at the SAI's resolution."""
+    colour = np.array([0.8, 0.3, 0.1])
+    rows, cols = 64, 96
+    block = np.indices((rows, cols)) // 2 % 2  # the 2 x 2 micro-image's place in RGGB
+    channel = np.array([[0, 1], [1, 2]])[block[0], block[1]]
+    frame = np.round(20000 * colour[channel]).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "quad.tif", frame)
+    assert invoke("decode", tmp_path / "quad.tif", "--cfa", "RGGB", "-o",
+                  tmp_path / "f.tif").exit_code == 0
+    result = invoke("sai", tmp_path / "f.tif", "-n", 2, "--cfa-layout", "micro-image", "-o",
+                    tmp_path / "views.tif")
+    assert result.exit_code == 0, result.output
+    result = invoke("develop", tmp_path / "views.tif", "--view", "S10", "--wb", "1,1,1",
+                    "--matrix", "none", "-o", tmp_path / "s10.png", "--linear",
+                    tmp_path / "lin.tif")
+    assert result.exit_code == 0, result.output
+    lin, _ = read_image(tmp_path / "lin.tif")
+    assert lin.shape == (3, rows // 2, cols // 2)
+    inner = np.moveaxis(lin, 0, -1)[4:-4, 4:-4]
+    np.testing.assert_allclose(inner, np.broadcast_to(20000 * colour, inner.shape), rtol=1e-3)
