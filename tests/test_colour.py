@@ -171,6 +171,8 @@ def test_colour_views_refuse_mono_and_single_colour_views():
     assert [v.cfa for v in views] == ["RGGB", "RGGB"]
     views = dev.colour_views(["S00.R", "S00.G", "S00.B", "S01.R", "S01.G", "S01.B"])
     assert [(v.name, v.pages) for v in views] == [("S00", (0, 1, 2)), ("S01", (3, 4, 5))]
+    sweep = dev.colour_views(["R@g3", "G@g3", "B@g3", "R@g4", "G@g4", "B@g4"])
+    assert [(v.name, v.pages) for v in sweep] == [("RGB@g3", (0, 1, 2)), ("RGB@g4", (3, 4, 5))]
 
 
 def test_bayer_previews_are_in_the_cameras_colour(tmp_path):

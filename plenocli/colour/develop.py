@@ -6,7 +6,8 @@ A views file holds colour in one of three ways (its metadata says which):
 
 - Bayer mosaics: ``cfa`` (every page) or ``view_colours`` (a 2 x 2 pattern per page, e.g. the
   half-resolution mosaic of each quad-Bayer SAI);
-- RGB triplets: pages named ``R, G, B`` or ``NAME.R, NAME.G, NAME.B``;
+- RGB triplets: pages named ``R, G, B`` or ``NAME.R, NAME.G, NAME.B`` (a refocus sweep's
+  ``R@g4, G@g4, B@g4`` is view ``RGB@g4``);
 - anything else is monochrome, and asking it for colour is an error.
 """
 
@@ -54,11 +55,12 @@ def colour_views(names: list[str], *, cfa: str | None = None,
         return [ColourView(n, (k,), pattern) for k, n in enumerate(names)]
     by_prefix: dict[str, dict[str, int]] = {}
     for k, name in enumerate(names):
-        prefix, _, channel = name.rpartition(".")
-        by_prefix.setdefault(prefix, {})[channel] = k
+        base, at, tag = name.partition("@")  # refocus sweeps: R@g4, left.R@g4, ...
+        prefix, _, channel = base.rpartition(".")
+        by_prefix.setdefault((prefix or "RGB") + at + tag, {})[channel] = k
     if by_prefix and all(set(ch) == set("RGB") for ch in by_prefix.values()):
-        return [ColourView(prefix or "RGB", tuple(ch[c] for c in "RGB"), None)
-                for prefix, ch in by_prefix.items()]
+        return [ColourView(view, tuple(ch[c] for c in "RGB"), None)
+                for view, ch in by_prefix.items()]
     raise ValueError(f"views {', '.join(names)} carry no colour (no CFA pattern and no R, G, B "
                      "pages): a monochrome capture cannot be developed in colour")
 
