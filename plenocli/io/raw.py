@@ -183,10 +183,12 @@ def _rawpy_meta(raw) -> dict:
 def _rawpy_colour(raw, desc: str) -> dict:
     """As-shot white balance (R, G, B multipliers) and XYZ -> camera matrix (rows R, G, B)."""
     index = [desc.index(c) for c in "RGB"] if set("RGB") <= set(desc) else None
-    if index is None:
+    wb_all, matrix_all = (getattr(raw, "camera_whitebalance", None),
+                          getattr(raw, "rgb_xyz_matrix", None))
+    if index is None or wb_all is None or matrix_all is None:
         return {"as_shot_wb": None, "xyz_to_camera": None}
-    wb = [float(raw.camera_whitebalance[i]) for i in index]
-    matrix = np.asarray(raw.rgb_xyz_matrix, np.float64)[index]
+    wb = [float(wb_all[i]) for i in index]
+    matrix = np.asarray(matrix_all, np.float64)[index]
     return {"as_shot_wb": wb if min(wb) > 0 else None,
             "xyz_to_camera": matrix.tolist() if np.any(matrix) else None}
 
@@ -213,8 +215,13 @@ def camera_exif(path) -> dict:
             out[name] = value[0] / value[1]
     for name, key in (("ISO", "ISOSpeedRatings"), ("LensModel", "LensModel"),
                       ("DateTimeOriginal", "DateTimeOriginal")):
-        if exif.get(key) not in (None, ""):
-            out[name] = exif[key] if not isinstance(exif[key], bytes) else exif[key].decode()
+        value = exif.get(key)
+        if isinstance(value, (tuple, list)):  # ISO may list several values
+            value = value[0] if value else None
+        if isinstance(value, bytes):
+            value = value.decode("ascii", "replace").strip("\0 ")
+        if value not in (None, ""):
+            out[name] = int(value) if name == "ISO" else str(value)
     return out
 
 
