@@ -194,13 +194,13 @@ def test_libraw_colour_metadata_is_mapped_by_colour_index():
     """LibRaw indexes white balance and matrix rows by colour (color_desc), not by position."""
     from types import SimpleNamespace
 
-    from plenocli.io.raw import _rawpy_colour
+    from plenocli.io.rawmeta import rawpy_colour
 
     cam_xyz = np.array([[0.6, -0.1, -0.05], [-0.4, 1.2, 0.2], [-0.1, 0.17, 0.62], [0, 0, 0]])
     raw = SimpleNamespace(camera_whitebalance=[1.5, 1.0, 2.5, 1.0], rgb_xyz_matrix=cam_xyz)
-    colour = _rawpy_colour(raw, "BGRG")  # blue is colour 0 here
+    colour = rawpy_colour(raw, "BGRG")  # blue is colour 0 here
     assert colour["as_shot_wb"] == [2.5, 1.0, 1.5]
     np.testing.assert_array_equal(colour["xyz_to_camera"], cam_xyz[[2, 1, 0]])
-    empty = _rawpy_colour(SimpleNamespace(camera_whitebalance=[0, 0, 0, 0],
+    empty = rawpy_colour(SimpleNamespace(camera_whitebalance=[0, 0, 0, 0],
                                           rgb_xyz_matrix=np.zeros((4, 3))), "RGBG")
     assert empty == {"as_shot_wb": None, "xyz_to_camera": None}
