@@ -204,3 +204,16 @@ def test_libraw_colour_metadata_is_mapped_by_colour_index():
     empty = rawpy_colour(SimpleNamespace(camera_whitebalance=[0, 0, 0, 0],
                                           rgb_xyz_matrix=np.zeros((4, 3))), "RGBG")
     assert empty == {"as_shot_wb": None, "xyz_to_camera": None}
+
+
+def test_raw_frame_previews_take_off_the_black_level(tmp_path):
+    import cv2
+
+    from plenocli.io.preview import write_png
+
+    scene = np.ones((64, 96, 3))
+    scene[:, :48] = 0.0  # half the frame black: it must show black, not the black level
+    frame = 2048 + mosaic(scene * 8000 * CAMERA_GAIN, "RGGB").astype(np.float32)
+    write_png(tmp_path / "p.png", frame, cfa="RGGB")
+    bgr = cv2.imread(str(tmp_path / "p.png")).astype(int)
+    assert bgr[:, :20].max() <= 2 and bgr[:, 30:].min() >= 250
