@@ -15,16 +15,18 @@ def display_colour(camera: np.ndarray, colour: dict | None = None, *,
 
     ``colour`` is the frames' ``colour`` metadata (``as_shot_wb``, ``xyz_to_camera``); missing
     parts fall back to a grey-world balance and no matrix, so a preview never fails. The black
-    point is the 0.5th percentile of the darkest channel (never below 0): raw frames still hold
-    their black level.
+    point is the 0.5th percentile of the darkest channel (never below 0) when that is under half
+    the highlights: raw frames still hold their black level.
     """
     rgb = np.asarray(camera, np.float32)
     finite = np.isfinite(rgb).all(axis=-1)
     if not finite.any():
         return np.zeros(rgb.shape, np.uint8)
     # raw frames still hold their black level: a low percentile is the preview's black point
+    # (taken off only when it is well below the highlights: a uniform white keeps its level)
     black = max(0.0, float(np.percentile(rgb[finite].min(axis=-1), 0.5)))
-    rgb = rgb - np.float32(black)
+    if black < 0.5 * float(np.percentile(rgb[finite].max(axis=-1), 99.0)):
+        rgb = rgb - np.float32(black)
     colour = colour or {}
     try:
         gains = normalised_gains(colour["as_shot_wb"])
