@@ -92,3 +92,89 @@ def split_views(sum_frame: np.ndarray, a_frame: np.ndarray, *, sum_clipped: np.n
     np.copyto(views[1], np.nan, where=sum_clipped)
     np.copyto(views[1], np.nan, where=a_clipped)
     return views
+
+
+def highlight_split(white_a: np.ndarray, white_s: np.ndarray, *, cfa: str | None,
+                    degree: int = 4) -> np.ndarray:
+    """The per-pixel A/S split of a dual-pixel sensor, measured on a white image.
+
+    The split varies smoothly across the frame (left-right fall-off of the half-pixels) and with
+    colour, so each CFA colour plane gets a 2-D polynomial of ``degree`` in the normalised pixel
+    coordinates, fitted by least squares to A = split * S (photon noise averages out over the
+    whole plane, and the frame's edges are not biased as a moving average would be).
+
+    Parameters
+    ----------
+    white_a, white_s : ndarray, (rows, cols)
+        A and S of a white image, processed like the capture (DN above black, or flat-fielded
+        with the same gains); NaN pixels are left out.
+    cfa : 2 x 2 pattern of the frames, or None for a monochrome sensor.
+    degree : polynomial degree (total) of the split over the frame.
+
+    Returns
+    -------
+    ndarray float32, (rows, cols): A / S.
+    """
+    if white_a.shape != white_s.shape:
+        raise ValueError(f"white A and S differ in shape: {white_a.shape} vs {white_s.shape}")
+    if not 0 <= degree <= 8:
+        raise ValueError(f"degree must be between 0 and 8, got {degree}")
+    rows, cols = white_a.shape
+    split = np.empty(white_a.shape, np.float32)
+    step = 2 if cfa else 1
+    powers = [(i, j) for i in range(degree + 1) for j in range(degree + 1 - i)]
+    for r in range(step):
+        for c in range(step):
+            yy, xx = np.mgrid[r:rows:step, c:cols:step]
+            x, y = 2.0 * xx / max(cols - 1, 1) - 1.0, 2.0 * yy / max(rows - 1, 1) - 1.0
+            basis = np.stack([x**i * y**j for i, j in powers], axis=-1)
+            a = np.asarray(white_a[r::step, c::step], np.float64)
+            s = np.asarray(white_s[r::step, c::step], np.float64)
+            valid = np.isfinite(a) & np.isfinite(s) & (s > 0)
+            if valid.sum() < 4 * len(powers):
+                raise ValueError("the white image has too few valid pixels to measure the A/S "
+                                 "split")
+            design = basis[valid] * s[valid, np.newaxis]
+            coef, *_ = np.linalg.lstsq(design, a[valid], rcond=None)
+            split[r::step, c::step] = basis @ coef
+    if not np.all((split > 0) & (split < 1)):
+        raise ValueError("the A/S split measured on the white image leaves (0, 1); is it a "
+                         "dual-pixel white with views A and S?")
+    return split
+
+
+def recover_highlights(a_view: np.ndarray, s_view: np.ndarray, split: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Rebuild the sum S where it clipped but the half-pixel A did not: S = A / split.
+
+    Parameters
+    ----------
+    a_view, s_view : ndarray, (rows, cols)
+        A and S views (NaN where clipped), e.g. from :func:`split_views`.
+    split : ndarray, (rows, cols)
+        A / S measured on a white image (:func:`highlight_split`).
+
+    Returns
+    -------
+    views : ndarray float32, (3, rows, cols)
+        A, B = S - A, and S, with S and B rebuilt where S was NaN and A and the split are finite;
+        NaN stays where A clipped as well.
+    rebuilt : ndarray of bool, (rows, cols)
+        The pixels whose S (and B) were rebuilt.
+
+    Limits: the split is the white image's; where the scene's light reaches the pupil unlike a
+    uniform white (defocused edges, strong parallax) A / S differs and the rebuilt S is off by the
+    same factor.
+    """
+    if not (a_view.shape == s_view.shape == split.shape):
+        raise ValueError(f"A, S and split differ in shape: {a_view.shape}, {s_view.shape}, "
+                         f"{split.shape}")
+    s = np.asarray(s_view, np.float32).copy()
+    a = np.asarray(a_view, np.float32)
+    rebuilt = ~np.isfinite(s) & np.isfinite(a) & np.isfinite(split)
+    s[rebuilt] = a[rebuilt] / split[rebuilt]
+    views = np.empty((3, *s.shape), np.float32)
+    views[0] = a
+    np.subtract(s, a, out=views[1])
+    views[2] = s
+    return views, rebuilt

@@ -30,7 +30,8 @@ def ran(decisions):
 
 def test_runs_everything_then_nothing(project):
     steps = load_config(project)
-    assert ran(run_pipeline(steps)) == ["decode_white", "bias_white", "decode", "bias", "flat"]
+    assert ran(run_pipeline(steps)) == ["decode_white", "bias_white", "decode", "bias", "flat",
+                                        "develop"]
     out = project.parent.parent / "out" / "demo" / "dualpixel"
     assert (out / "views.tif").is_file() and (out / "views_A_B.png").is_file()
     assert ran(run_pipeline(load_config(project))) == []
@@ -41,21 +42,21 @@ def test_changed_input_reruns_it_and_what_depends_on_it(project):
     capture = project.parent.parent / "fixtures" / "dualpixel" / "capture.dng"
     later = time.time() + 5
     os.utime(capture, (later, later))
-    assert ran(run_pipeline(load_config(project))) == ["decode", "bias", "flat"]
+    assert ran(run_pipeline(load_config(project))) == ["decode", "bias", "flat", "develop"]
 
 
 def test_changed_parameter_reruns(project):
     run_pipeline(load_config(project))
     steps = load_config(project, ["bias.smooth=3"])
-    assert ran(plan(steps)) == ["bias", "flat"]
+    assert ran(plan(steps)) == ["bias", "flat", "develop"]
 
 
 def test_force_and_dry_run(project):
     decisions = run_pipeline(load_config(project), dry_run=True)
-    assert len(ran(decisions)) == 5
+    assert len(ran(decisions)) == 6
     assert not (project.parent.parent / "out").exists()  # a dry run writes nothing
     run_pipeline(load_config(project))
-    assert len(ran(plan(load_config(project), force=True))) == 5
+    assert len(ran(plan(load_config(project), force=True))) == 6
 
 
 def test_relative_paths_resolve_against_the_config_folder(project, monkeypatch, tmp_path):

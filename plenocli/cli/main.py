@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "sai": "Sub-aperture images of an N x N plenoptic sensor (Eq. 1).",
     "crosstalk": "Measure sub-aperture cross-talk from masked white captures.",
     "stitch": "Stitch 2 or 4 views into an extended-FOV panorama.",
+    "develop": "Develop a colour view into a photograph (TIFF, JPEG, PNG).",
     "run": "Run a pipeline config (make-style).",
     "batch": "Run a pipeline template over many captures, in parallel.",
     "info": "Show what a raw, plenocli TIFF, lens grid or XML file holds.",

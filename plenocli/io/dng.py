@@ -22,12 +22,16 @@ def write_dng(path: str | os.PathLike, frames: np.ndarray, *, cfa: str | None,
               black_levels: Sequence[float], white_level: int,
               active_area: Sequence[int], masked_areas: Sequence[Sequence[int]] = (),
               frame_names: Sequence[str] | None = None,
-              model: str = "plenocli synthetic") -> None:
+              model: str = "plenocli synthetic",
+              as_shot_neutral: Sequence[float] | None = None,
+              color_matrix: Sequence[float] | None = None) -> None:
     """Write uint16 ``frames`` (frames, rows, cols) as a multi-frame DNG, atomically.
 
     ``black_levels`` is one level per frame (DN), written as the DNG BlackLevel tag; the real
     per-row bias lives in the pixel data and its masked areas. ``active_area`` and each masked
-    area are ``[top, left, bottom, right]``.
+    area are ``[top, left, bottom, right]``. ``as_shot_neutral`` (camera R, G, B of white) and
+    ``color_matrix`` (9 values, XYZ -> camera, row-major, written as ColorMatrix1 for D65) are
+    the colour tags of DNG 1.4.
     """
     data = np.asarray(frames)
     if data.ndim == 2:
@@ -49,9 +53,19 @@ def write_dng(path: str | os.PathLike, frames: np.ndarray, *, cfa: str | None,
                 ]
                 if masked_flat:
                     tags.append((50830, "I", len(masked_flat), tuple(masked_flat), True))
+                if as_shot_neutral is not None:
+                    tags.append((50728, "2I", 3, _rational(as_shot_neutral), True))
+                if color_matrix is not None:
+                    tags += [(50721, "2i", 9, _rational(color_matrix), True),
+                             (50778, "H", 1, (21,), True)]  # CalibrationIlluminant1 = D65
                 if cfa:
                     tags += [(33421, "H", 2, (2, 2), True),  # CFARepeatPatternDim
                              (33422, "B", 4, tuple(CFA_CODES[c] for c in cfa), True)]
                 tw.write(np.ascontiguousarray(frame), photometric=32803 if cfa else "minisblack",
                          compression=None, subfiletype=0, description=names[k], metadata=None,
                          extratags=tags)
+
+
+def _rational(values: Sequence[float], denominator: int = 1_000_000) -> tuple[int, ...]:
+    """(S)RATIONAL tag values: numerator, denominator pairs."""
+    return tuple(v for x in values for v in (int(round(float(x) * denominator)), denominator))

@@ -9,6 +9,7 @@ import numpy as np
 
 from plenocli.io.atomic import write_bytes
 from plenocli.model.cfa import half_size_rgb
+from plenocli.model.colour import camera_to_srgb, gains_from_neutral, normalised_gains
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 
@@ -44,9 +45,11 @@ def view_mosaic(stack: np.ndarray, n: int, channels: list[str]) -> np.ndarray:
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
-              max_side: int = 2048, protect: tuple = ()) -> None:
+              max_side: int = 2048, protect: tuple = (), colour: dict | None = None) -> None:
     """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or
-    (views, rows, cols) views side by side."""
+    (views, rows, cols) views side by side. Bayer data is shown in colour with the camera's
+    white balance and matrix from ``colour`` (the frames' metadata), else grey-world balanced."""
+    bayer = bool(cfa)
     if image.ndim == 3 and image.shape[-1] != 3:
         image, cfa = views_side_by_side(image, cfa), None
     img = np.asarray(half_size_rgb(image, cfa) if cfa and image.ndim == 2 else image, np.float32)
@@ -54,7 +57,10 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
     if scale > 1:  # shrink first: the stretch below then works on a few megapixels, not 60
         size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-    img = to_display(img)
+    if bayer and img.ndim == 3:
+        img = display_colour(img, colour)
+    else:
+        img = to_display(img)
     write_picture(path, img[..., ::-1] if img.ndim == 3 else img, protect=protect)
 
 
@@ -109,3 +115,41 @@ def _colour_bar(height: int, top: float) -> tuple[np.ndarray, np.ndarray]:
         cv2.putText(ticks, f"{100 * frac * top:.0f} %", (4, min(max(y + 4, 32), height - 2)),
                     _FONT, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
     return bar, ticks
+
+
+def display_colour(camera: np.ndarray, colour: dict | None = None, *,
+                   white_percentile: float = 99.0) -> np.ndarray:
+    """uint8 sRGB (rows, cols, 3) of camera RGB (rows, cols, 3); NaN shows black.
+
+    ``colour`` is the frames' ``colour`` metadata (``as_shot_wb``, ``xyz_to_camera``); missing
+    parts fall back to a grey-world balance and no matrix, so a preview never fails. The black
+    point is the 0.5th percentile of the darkest channel (never below 0) when that is under half
+    the highlights: raw frames still hold their black level.
+    """
+    rgb = np.asarray(camera, np.float32)
+    finite = np.isfinite(rgb).all(axis=-1)
+    if not finite.any():
+        return np.zeros(rgb.shape, np.uint8)
+    # raw frames still hold their black level: a low percentile is the preview's black point
+    # (taken off only when it is well below the highlights: a uniform white keeps its level)
+    black = max(0.0, float(np.percentile(rgb[finite].min(axis=-1), 0.5)))
+    if black < 0.5 * float(np.percentile(rgb[finite].max(axis=-1), 99.0)):
+        rgb = rgb - np.float32(black)
+    colour = colour or {}
+    try:
+        gains = normalised_gains(colour["as_shot_wb"])
+    except (KeyError, TypeError, ValueError):
+        try:
+            gains = gains_from_neutral(rgb[finite].mean(axis=0))
+        except ValueError:
+            gains = np.ones(3)
+    combined = np.diag(gains)
+    try:
+        combined = camera_to_srgb(colour["xyz_to_camera"]) @ combined
+    except (KeyError, TypeError, ValueError):
+        pass
+    out = np.nan_to_num(rgb @ combined.T.astype(np.float32), nan=0.0)
+    reference = float(np.percentile(out[finite], white_percentile))
+    out = np.clip(out / max(reference, 1e-12), 0.0, 1.0)
+    out = np.where(out <= 0.0031308, 12.92 * out, 1.055 * np.power(out, 1 / 2.4) - 0.055)
+    return np.round(255 * out).astype(np.uint8)

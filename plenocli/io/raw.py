@@ -21,6 +21,7 @@ import numpy as np
 import tifffile
 
 from plenocli.errors import InputError
+from plenocli.io import rawmeta
 from plenocli.model.cfa import check_pattern, is_bayer
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
@@ -111,6 +112,8 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         meta["white_level"] = [float(np.iinfo(frames.dtype).max)
                                if frames.dtype.kind in "ui" else float("inf")] * n
     meta["camera"] = kind
+    if kind in ("canon-dp", "dng"):
+        meta["exif"] = rawmeta.camera_exif(path)
     return frames, meta
 
 
@@ -174,6 +177,7 @@ def _rawpy_meta(raw) -> dict:
         "white_level": [float(raw.white_level)],
         "active_area": [top, left, bottom, right],
         "masked_areas": masked,
+        "colour": rawmeta.rawpy_colour(raw, desc),
     }
 
 
@@ -234,6 +238,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             masked_flat = _tag(first, 50830, None)
             masked_flat = [int(v) for v in masked_flat] if masked_flat is not None else []
             masked = [masked_flat[i:i + 4] for i in range(0, len(masked_flat), 4)]
+            colour = rawmeta.dng_colour(first, tif.pages[0])
     except (tifffile.TiffFileError, OSError, EOFError, IndexError, KeyError) as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     except ValueError as err:
@@ -242,7 +247,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
         names = [f"frame{k}" for k in range(len(names))]
     return np.stack(frames), {
         "cfa": cfa, "origin": [0, 0], "black_level": blacks, "white_level": whites,
-        "active_area": active, "masked_areas": masked, "views": names,
+        "active_area": active, "masked_areas": masked, "views": names, "colour": colour,
     }
 
 

@@ -90,6 +90,8 @@ _TABLE = (
     Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview")),
     Stage("stitch", inputs=("inputs", "transform_in", "rig"),
           outputs=("output", "transform_out", "report", "preview")),
+    Stage("develop", inputs=("input", "wb_from", "recover_highlights"),
+          outputs=("output", "linear", "preview")),
     Stage("optics", inputs=("input",), outputs=("json",)),
 )
 

@@ -1,0 +1,122 @@
+"""Demosaic + colour of a full-size 6880 x 4544 Bayer view, and demosaicing accuracy.
+
+Speed. Baseline, measured in the same run: ``rawpy.postprocess()`` (LibRaw's whole development:
+its AHD demosaic, white balance, colour matrix, 8-bit sRGB) of the same raw, written as a DNG with
+plenocli's own writer. Timed against it: plenocli's default demosaic of the view, as-shot white
+balance, camera matrix, exposure and sRGB encoding (``colour.develop``), file I/O excluded on
+both sides as far as LibRaw allows (its time includes reading the DNG). Targets: ratio <= 1.5;
+peak memory (numpy allocations, tracemalloc) <= 3 x the float32 RGB output.
+
+Accuracy. The simulator's ColorChecker chart as a camera samples it (pixel area + 4-spot optical
+low-pass filter), mosaicked (RGGB) then demosaiced by every method: PSNR and CIE dE2000 (mean,
+95th percentile), 8 pixels from the edges left out. Also the letters chart (sharper, harder).
+
+    python bench/bench_develop.py [--rows 4544 --cols 6880] [--skip-speed]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import rawpy
+
+from plenocli.colour import demosaic as dm
+from plenocli.colour import develop as dev
+from plenocli.colour.metrics import colour_error
+from plenocli.io.dng import write_dng
+from plenocli.model.colour import camera_to_srgb, rgb_to_xyz
+from plenocli.synth.chart import camera_sampled, colour_chart, test_chart
+
+CAMERA = np.array([[0.80, 0.15, 0.05], [0.10, 0.80, 0.10], [0.05, 0.20, 0.75]]) \
+    * np.array([[0.55], [1.0], [0.7]])
+
+
+def accuracy(rows: int, cols: int) -> None:
+    charts = {"ColorChecker": camera_sampled(colour_chart(rows * 4, cols * 4)[0], 4),
+              "letters": camera_sampled(test_chart(rows * 4, cols * 4) ** 2.2, 4)}
+    print(f"accuracy, {cols} x {rows} px charts, RGGB mosaic -> RGB "
+          "(PSNR dB | dE2000 mean | dE2000 p95 | s):")
+    for name, truth in charts.items():
+        mosaic = dm.mosaic(truth, "RGGB")
+        for method in dm.METHODS:
+            start = time.perf_counter()
+            rgb = dm.demosaic(mosaic, "RGGB", method=method)
+            took = time.perf_counter() - start
+            e = colour_error(rgb, truth)
+            mark = " (default)" if method == dm.DEFAULT_METHOD else ""
+            print(f"  {name:12s} {method:11s} {e.psnr_db:6.2f} | {e.delta_e_mean:5.2f} | "
+                  f"{e.delta_e_p95:5.2f} | {took:5.2f}{mark}")
+
+
+def develop_view(mosaic: np.ndarray, gains, to_srgb) -> np.ndarray:
+    view = dev.ColourView("S", (0,), "RGGB")
+    scene = dev.scene_rgb(dev.camera_rgb(mosaic[np.newaxis], view), gains=gains,
+                          camera_to_srgb=to_srgb, in_place=True)
+    scale = dev.exposure_scale(scene)
+    return dev.output_encoded(scene, "srgb", scale, in_place=True)
+
+
+def speed(rows: int, cols: int, repeat: int) -> None:
+    rng = np.random.default_rng(0)
+    chart = colour_chart(rows, cols)[0]
+    camera = chart @ CAMERA.T
+    camera *= 0.9 + 0.2 * rng.random((rows, 1, 1), dtype=np.float32)  # some texture
+    raw = np.round(512 + 12000 * dm.mosaic(camera, "RGGB")).astype(np.uint16)
+    del chart, camera
+    xyz_to_camera = CAMERA @ np.linalg.inv(rgb_to_xyz("srgb"))
+    neutral = CAMERA.sum(axis=1)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "view.dng"
+        write_dng(path, raw, cfa="RGGB", black_levels=[512], white_level=16383,
+                  active_area=[0, 0, rows, cols], as_shot_neutral=neutral,
+                  color_matrix=xyz_to_camera.ravel())
+
+        def libraw():
+            with rawpy.imread(str(path)) as r:
+                return r.postprocess()
+
+        base = min(_timed(libraw) for _ in range(repeat))
+    mosaic = (raw.astype(np.float32) - 512)
+    del raw
+    gains, to_srgb = neutral[1] / neutral, camera_to_srgb(xyz_to_camera)
+    ours = min(_timed(lambda: develop_view(mosaic, gains, to_srgb)) for _ in range(repeat))
+    tracemalloc.start()
+    out = develop_view(mosaic, gains, to_srgb)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    rgb_bytes = rows * cols * 3 * 4
+    print(f"speed, {cols} x {rows} view:")
+    print(f"  rawpy.postprocess (baseline)     {base:6.2f} s")
+    print(f"  plenocli demosaic + colour       {ours:6.2f} s   ratio {ours / base:.2f} "
+          "(target <= 1.5)")
+    print(f"  peak memory {peak / 2**20:7.0f} MiB = {peak / rgb_bytes:.2f} x the float32 RGB "
+          f"output ({rgb_bytes / 2**20:.0f} MiB; target <= 3)")
+    del out
+
+
+def _timed(func) -> float:
+    start = time.perf_counter()
+    func()
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rows", type=int, default=4544)
+    parser.add_argument("--cols", type=int, default=6880)
+    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--chart-rows", type=int, default=768)
+    parser.add_argument("--skip-speed", action="store_true")
+    args = parser.parse_args()
+    accuracy(args.chart_rows, args.chart_rows * 3 // 2)
+    if not args.skip_speed:
+        speed(args.rows, args.cols, args.repeat)
+
+
+if __name__ == "__main__":
+    main()

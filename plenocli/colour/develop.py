@@ -1,0 +1,121 @@
+"""Developing views into colour images: which pages form a colour view, then demosaic, white
+balance and the camera matrix (scene-referred), then scaling and a display space
+(output-referred).
+
+A views file holds colour in one of three ways (its metadata says which):
+
+- Bayer mosaics: ``cfa`` (every page) or ``view_colours`` (a 2 x 2 pattern per page, e.g. the
+  half-resolution mosaic of each quad-Bayer SAI);
+- RGB triplets: pages named ``R, G, B`` or ``NAME.R, NAME.G, NAME.B`` (a refocus sweep's
+  ``R@g4, G@g4, B@g4`` is view ``RGB@g4``);
+- anything else is monochrome, and asking it for colour is an error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocli.colour.balance import normalised_gains
+from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
+from plenocli.io.photo import encode
+from plenocli.model.colour import srgb_to_space
+
+BAND_ROWS = 256  # rows per matrix product: bounds the temporaries to a few MB per band
+
+
+@dataclass(frozen=True)
+class ColourView:
+    """One colour view of a views file: its name, the pages it is made of, and its CFA pattern
+    (None when the pages already are R, G, B)."""
+
+    name: str
+    pages: tuple[int, ...]
+    cfa: str | None
+
+
+def colour_views(names: list[str], *, cfa: str | None = None,
+                 view_colours: list | None = None) -> list[ColourView]:
+    """The colour views of a views file, from its page names and CFA metadata.
+
+    Raises ValueError (one line, what to do) for monochrome data, an unknown CFA, or views that
+    each hold a single colour.
+    """
+    if view_colours and any(c is not None for c in view_colours):
+        if len(view_colours) != len(names):
+            raise ValueError(f"{len(view_colours)} view colours for {len(names)} views")
+        if all(c is not None and len(str(c)) == 1 for c in view_colours):
+            raise ValueError("each view holds a single colour (SAIs of a per-pixel Bayer "
+                             "sensor); no view can be made colour on its own")
+        return [ColourView(n, (k,), check_pattern(c)) for k, (n, c)
+                in enumerate(zip(names, view_colours, strict=True))]
+    if cfa:
+        pattern = check_pattern(cfa)
+        return [ColourView(n, (k,), pattern) for k, n in enumerate(names)]
+    by_prefix: dict[str, dict[str, int]] = {}
+    for k, name in enumerate(names):
+        base, at, tag = name.partition("@")  # refocus sweeps: R@g4, left.R@g4, ...
+        prefix, _, channel = base.rpartition(".")
+        by_prefix.setdefault((prefix or "RGB") + at + tag, {})[channel] = k
+    if by_prefix and all(set(ch) == set("RGB") for ch in by_prefix.values()):
+        return [ColourView(view, tuple(ch[c] for c in "RGB"), None)
+                for view, ch in by_prefix.items()]
+    raise ValueError(f"views {', '.join(names)} carry no colour (no CFA pattern and no R, G, B "
+                     "pages): a monochrome capture cannot be developed in colour")
+
+
+def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD
+               ) -> np.ndarray:
+    """Camera RGB (rows, cols, 3) float32 of one colour view (demosaiced when it is Bayer)."""
+    if view.cfa is None:
+        return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
+    return demosaic(pages[view.pages[0]], view.cfa, method=method)
+
+
+def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,
+              in_place: bool = False) -> np.ndarray:
+    """Scene-referred linear sRGB (camera units): white balance, then the camera matrix
+    (``None``: camera RGB is taken as linear sRGB). One 3 x 3 product per pixel, band by band;
+    ``in_place`` overwrites ``camera`` (float32) instead of allocating a second image."""
+    combined = np.diag(normalised_gains(gains))
+    if camera_to_srgb is not None:
+        combined = np.asarray(camera_to_srgb, np.float64) @ combined
+    return _per_band(camera, combined, in_place=in_place)
+
+
+def _per_band(rgb: np.ndarray, matrix: np.ndarray, *, in_place: bool,
+              encode_space: str | None = None) -> np.ndarray:
+    out = rgb if in_place else np.empty(rgb.shape, np.float32)
+    m = np.asarray(matrix, np.float32).T
+    for start in range(0, rgb.shape[0], BAND_ROWS):
+        band = np.asarray(rgb[start:start + BAND_ROWS], np.float32) @ m
+        if encode_space is not None:
+            band = encode(band, encode_space)
+        out[start:start + BAND_ROWS] = band
+    return out
+
+
+def exposure_scale(scene: np.ndarray, *, exposure_ev: float = 0.0,
+                   white_percentile: float = 99.0) -> float:
+    """The factor that maps the ``white_percentile`` of the scene's finite values to 1 (like
+    dcraw's auto-brightness), times 2 ** exposure_ev."""
+    if not np.isfinite(exposure_ev):
+        raise ValueError(f"exposure_ev must be finite, got {exposure_ev}")
+    sample = scene[::4, ::4].ravel()  # a 1/16 sample: the percentile of 30 MP costs seconds
+    sample = sample[np.isfinite(sample)]
+    if sample.size == 0:
+        raise ValueError("the image has no finite pixel (everything masked)")
+    reference = float(np.percentile(sample, white_percentile))
+    if reference <= 0:
+        raise ValueError(f"the {white_percentile:g}th percentile of the image is {reference:g} "
+                         "(not positive): nothing to expose")
+    return float(2.0 ** exposure_ev / reference)
+
+
+def output_encoded(scene: np.ndarray, space: str, scale: float, *,
+                   in_place: bool = False) -> np.ndarray:
+    """Scene RGB to the output ``space``, scaled so that ``scale * scene = 1`` is white, clipped
+    to [0, 1] and encoded (see :func:`plenocli.io.photo.encode`)."""
+    return _per_band(scene, srgb_to_space(space) * scale, in_place=in_place,
+                     encode_space=space)

@@ -1,0 +1,109 @@
+"""Output-referred images: encode linear RGB for a display space and build the file's bytes.
+
+A 16-bit TIFF (tifffile) or an 8-bit JPEG / PNG (Pillow), each with the space's ICC profile,
+the camera's EXIF tags carried over (make, model, exposure, aperture, ISO, lens, date) and the
+plenocli provenance (JSON) in ImageDescription. The bytes are returned: the stage writes them
+atomically.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from fractions import Fraction
+
+import numpy as np
+
+from plenocli.io.icc import profile_bytes
+from plenocli.model.colour import OUTPUT_SPACES
+
+FORMATS = {".tif": "tiff", ".tiff": "tiff", ".jpg": "jpeg", ".jpeg": "jpeg", ".png": "png"}
+# EXIF tags carried over: name in the frames' metadata -> (tag, TIFF type, in the EXIF sub-IFD)
+EXIF_TAGS = {"Make": (271, "s", False), "Model": (272, "s", False),
+             "ExposureTime": (33434, "2I", True), "FNumber": (33437, "2I", True),
+             "ISO": (34855, "H", True), "DateTimeOriginal": (36867, "s", True),
+             "FocalLength": (37386, "2I", True), "LensModel": (42036, "s", True)}
+EXIF_IFD = 0x8769
+
+
+def output_format(path: str) -> str:
+    """``tiff``, ``jpeg`` or ``png`` from a file name; ValueError for anything else."""
+    suffix = "." + str(path).rsplit(".", 1)[-1].lower() if "." in str(path) else ""
+    if suffix not in FORMATS:
+        raise ValueError(f"output {path}: unknown image type {suffix or '(none)'}; use .tif "
+                         "(16-bit), .jpg or .png (8-bit)")
+    return FORMATS[suffix]
+
+
+def encode(rgb: np.ndarray, space: str) -> np.ndarray:
+    """Linear RGB of ``space`` (..., 3), already scaled so that 1 is white, to the space's
+    encoding in [0, 1]: the sRGB curve for sRGB and Display P3, none for linear Rec.2020.
+    NaN (masked) pixels become 0."""
+    if space not in OUTPUT_SPACES:
+        raise ValueError(f"colour space {space!r} unknown; choose one of "
+                         f"{', '.join(OUTPUT_SPACES)}")
+    x = np.clip(np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0), 0.0, 1.0)
+    if space == "rec2020-linear":
+        return x
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def image_bytes(encoded: np.ndarray, fmt: str, *, space: str, exif: dict | None,
+                description: dict, quality: int = 95) -> bytes:
+    """The bytes of an image file holding ``encoded`` (rows, cols, 3) in [0, 1]."""
+    if fmt not in ("tiff", "jpeg", "png"):
+        raise ValueError(f"fmt must be tiff, jpeg or png, got {fmt!r}")
+    if fmt != "tiff" and space == "rec2020-linear":
+        raise ValueError("linear Rec.2020 needs 16 bits: write a .tif, or choose --space srgb "
+                         "or display-p3 for JPEG/PNG")
+    icc = profile_bytes(space)
+    text = json.dumps(description, allow_nan=False)
+    exif = {k: v for k, v in (exif or {}).items() if k in EXIF_TAGS and v not in (None, "")}
+    if fmt == "tiff":
+        return _tiff_bytes(encoded, icc, exif, text)
+    from PIL import Image
+
+    image = Image.fromarray(np.round(encoded * 255).astype(np.uint8), mode="RGB")
+    pil_exif = Image.Exif()
+    pil_exif[270] = text
+    for name, value in exif.items():
+        tag, kind, in_sub = EXIF_TAGS[name]
+        target = pil_exif.get_ifd(EXIF_IFD) if in_sub else pil_exif
+        target[tag] = _pil_value(value, kind)
+    buffer = io.BytesIO()
+    options = {"quality": int(quality), "subsampling": 0} if fmt == "jpeg" else {}
+    image.save(buffer, format=fmt.upper(), icc_profile=icc, exif=pil_exif.tobytes(), **options)
+    return buffer.getvalue()
+
+
+def _pil_value(value, kind: str):
+    if kind == "2I":
+        from PIL.TiffImagePlugin import IFDRational
+
+        f = Fraction(float(value)).limit_denominator(100000)
+        return IFDRational(f.numerator, f.denominator)
+    return int(value) if kind == "H" else str(value)
+
+
+def _tiff_bytes(encoded: np.ndarray, icc: bytes, exif: dict, text: str) -> bytes:
+    import tifffile
+
+    from plenocli import __version__
+
+    tags = [(34675, "B", len(icc), icc, True)]  # InterColorProfile
+    for name, value in exif.items():  # written in IFD 0, where TIFF readers list them
+        tag, kind, _ = EXIF_TAGS[name]
+        if kind == "2I":
+            f = Fraction(float(value)).limit_denominator(100000)
+            tags.append((tag, "2I", 1, (f.numerator, f.denominator), True))
+        elif kind == "H":
+            tags.append((tag, "H", 1, (int(value),), True))
+        else:
+            tags.append((tag, "s", 0, str(value), True))
+    buffer = io.BytesIO()
+    data = np.empty(encoded.shape, np.uint16)
+    for start in range(0, encoded.shape[0], 256):  # band by band: no full-size float temporary
+        data[start:start + 256] = np.rint(encoded[start:start + 256] * np.float32(65535))
+    tifffile.imwrite(buffer, data, photometric="rgb", description=text, metadata=None,
+                     software=f"plenocli {__version__}", extratags=sorted(tags))
+    return buffer.getvalue()

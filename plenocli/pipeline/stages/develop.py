@@ -1,0 +1,236 @@
+"""Stage ``develop``: views TIFF -> a colour photograph (TIFF 16-bit, JPEG or PNG) with ICC
+profile, the camera's EXIF and provenance; optionally the scene-referred linear RGB as float TIFF.
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from plenocli import dualpixel
+from plenocli.colour import balance
+from plenocli.colour import develop as dev
+from plenocli.colour.demosaic import METHODS
+from plenocli.errors import ConfigError, InputError
+from plenocli.io import photo as export
+from plenocli.io import tiffio
+from plenocli.io.atomic import atomic_path
+from plenocli.model import colour as colour_matrix
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import json_safe, stage_record
+from plenocli.progress import log, shown
+
+PREVIEW_SIDE = 1024
+
+
+def run(input: str, output: str, *, view: str | None = None, method: str = "menon2007",
+        wb: str = "as-shot", wb_from: str | None = None, matrix: str = "as-shot",
+        space: str = "srgb", exposure: float = 0.0, quality: int = 95,
+        recover_highlights: str | None = None, linear: str | None = None,
+        preview: str | None = None) -> None:
+    """Develop one colour view of ``input`` into ``output`` (see ``plenocli develop --help``)."""
+    if method not in METHODS:
+        raise ConfigError(f"--method {method}: choose one of {', '.join(METHODS)}")
+    if space not in colour_matrix.OUTPUT_SPACES:
+        raise ConfigError(f"--space {space}: choose one of "
+                          f"{', '.join(colour_matrix.OUTPUT_SPACES)}")
+    try:
+        fmt = export.output_format(output)
+    except ValueError as err:
+        raise ConfigError(str(err)) from err
+    data, meta = tiffio.read_image(input)
+    data, cfa = _active(_levels(data, meta), meta)
+    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    try:
+        views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
+    except ValueError as err:
+        raise InputError(f"{input}: {err}") from err
+    chosen = _choose(views, view, input)
+    rebuilt = None
+    if recover_highlights:
+        data, rebuilt = _recover(data, names, cfa, recover_highlights, input, meta)
+    gains, gains_from = _gains(wb, wb_from, meta, chosen, input)
+    to_srgb = _camera_matrix(matrix, meta, input)
+    try:
+        scene = dev.scene_rgb(dev.camera_rgb(data, chosen, method=method), gains=gains,
+                              camera_to_srgb=to_srgb, in_place=True)
+        del data
+        scale = dev.exposure_scale(scene, exposure_ev=exposure)
+        encoded = dev.output_encoded(scene, space, scale, in_place=not linear)
+    except ValueError as err:
+        raise InputError(f"{input}: view {chosen.name}: {err}") from err
+    params = dict(view=chosen.name, method=method if chosen.cfa else None, wb=wb,
+                  wb_from=wb_from, matrix=matrix, space=space, exposure=exposure,
+                  quality=quality, recover_highlights=recover_highlights,
+                  rebuilt_pixels=None if rebuilt is None else int(rebuilt.sum()),
+                  gains=gains.tolist(), scale=scale,
+                  camera_to_srgb=None if to_srgb is None else to_srgb.tolist())
+    record = stage_record("develop", params, {"input": input, "wb_from": wb_from,
+                                              "recover_highlights": recover_highlights})
+    description = json_safe({"plenocli": record, "history": meta.get("history", [])})
+    try:
+        body = export.image_bytes(encoded, fmt, space=space, exif=meta.get("exif"),
+                                  description=description, quality=quality)
+        preview_body = _preview_bytes(encoded, space, description) if preview else None
+    except ValueError as err:
+        raise ConfigError(str(err)) from err
+    protect = (input,) + tuple(p for p in (wb_from, recover_highlights) if p)
+    if linear and rebuilt is not None:  # the mask plane: 1 where S (and B) were rebuilt
+        scene = np.concatenate([scene, rebuilt[..., np.newaxis].astype(np.float32)], axis=-1)
+    _write_together(output, body, linear, scene, meta, record, preview, preview_body, protect)
+    log.info("develop: %s view %s -> %s (%s, %s, gains %s)", shown(input), chosen.name,
+             shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains))
+
+
+def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
+    """Raw integer frames (decode output) as DN above black, NaN where they reached the white
+    level; processed (float) views are returned as they are."""
+    if data.dtype.kind not in "ui":
+        return data
+    out = data.astype(np.float32)
+    blacks = meta.get("black_level") or [[0.0] * 4] * len(data)
+    whites = meta.get("white_level") or [float("inf")] * len(data)
+    for k, frame in enumerate(out):
+        np.copyto(frame, np.nan, where=data[k] >= whites[k])
+        for p in range(4):
+            frame[p // 2::2, p % 2::2] -= np.float32(blacks[k][p])
+    return out
+
+
+def _active(data: np.ndarray, meta: dict) -> tuple[np.ndarray, str | None]:
+    """The light-sensitive area and its CFA pattern (the pattern moves with the crop)."""
+    cfa = meta.get("cfa")
+    area = meta.get("active_area")
+    if area and list(area) != [0, 0, *data.shape[1:]]:
+        top, left, bottom, right = (int(v) for v in area)
+        return data[:, top:bottom, left:right], shift_pattern(cfa, top, left)
+    return data, cfa
+
+
+def _stages(meta: dict) -> list[str]:
+    records = [*meta.get("history", []), meta.get("provenance") or {}]
+    return [r.get("stage") for r in records if r.get("stage") in ("bias", "flat")]
+
+
+def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: str,
+             path: str, meta: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Dual-pixel highlight recovery: S (and B) rebuilt from A where only S clipped."""
+    white, white_meta = tiffio.read_image(white_path)
+    if _stages(white_meta) != _stages(meta):
+        raise InputError(f"--recover-highlights {white_path}: the white image went through "
+                         f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
+                         f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
+                         "split must be measured in the same units (process both alike)")
+    white, white_cfa = _active(_levels(white, white_meta), white_meta)
+    white_names = list(white_meta.get("views") or [])
+    for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
+        if not {"A", "B", "S"} <= set(views_):
+            raise InputError(f"--recover-highlights: {file} ({label}) has views "
+                             f"{', '.join(views_) or 'unnamed'}; dual-pixel A, B and S are needed "
+                             "(bias output)")
+    if white.shape[1:] != data.shape[1:] or white_cfa != cfa:
+        raise InputError(f"--recover-highlights {white_path}: the white image "
+                         f"({white.shape[2]}x{white.shape[1]}, CFA {white_cfa}) does not match "
+                         f"{path} ({data.shape[2]}x{data.shape[1]}, CFA {cfa}); process both alike")
+    split = dualpixel.highlight_split(white[white_names.index("A")],
+                                      white[white_names.index("S")], cfa=cfa)
+    ia, ib, is_ = (names.index(v) for v in "ABS")
+    rebuilt_views, rebuilt = dualpixel.recover_highlights(data[ia], data[is_], split)
+    out = data.astype(np.float32, copy=True)
+    out[ia], out[ib], out[is_] = rebuilt_views
+    log.info("develop: %d clipped S pixels rebuilt from A", int(rebuilt.sum()))
+    return out, rebuilt
+
+
+def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.ColourView:
+    if name is None:
+        if len(views) == 1:
+            return views[0]
+        raise ConfigError(f"{path} holds {len(views)} colour views "
+                          f"({', '.join(v.name for v in views)}); choose one with --view")
+    for v in views:
+        if v.name == name:
+            return v
+    raise ConfigError(f"--view {name}: no such view in {path} "
+                      f"(views: {', '.join(v.name for v in views)})")
+
+
+def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, path: str
+           ) -> tuple[np.ndarray, str]:
+    """White-balance gains from --wb-from, --wb R,G,B or the raw's as-shot metadata."""
+    if wb_from is not None:
+        if wb != "as-shot":
+            raise ConfigError("give --wb or --wb-from, not both")
+        return _gains_from_white(wb_from, chosen.name), "white image"
+    if wb != "as-shot":
+        try:
+            return balance.normalised_gains([float(v) for v in wb.split(",")]), "--wb"
+        except ValueError as err:
+            raise ConfigError(f"--wb {wb}: give three positive gains R,G,B (e.g. 2.1,1,1.6) "
+                              "or as-shot") from err
+    as_shot = (meta.get("colour") or {}).get("as_shot_wb")
+    if as_shot is None:
+        raise InputError(f"{path}: no as-shot white balance in the metadata; give --wb R,G,B "
+                         "or --wb-from WHITE.tif")
+    return balance.normalised_gains(as_shot), "as shot"
+
+
+def _gains_from_white(path: str, view_name: str) -> np.ndarray:
+    data, meta = tiffio.read_image(path)
+    data, cfa = _active(_levels(data, meta), meta)
+    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    try:
+        views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
+        white = next((v for v in views if v.name == view_name), views[0])
+        if white.cfa:
+            return balance.gains_from_mosaic(data[white.pages[0]], white.cfa)
+        return balance.gains_from_rgb(np.stack([data[k] for k in white.pages], axis=-1))
+    except ValueError as err:
+        raise InputError(f"--wb-from {path}: {err}") from err
+
+
+def _camera_matrix(choice: str, meta: dict, path: str) -> np.ndarray | None:
+    if choice == "none":
+        return None
+    if choice != "as-shot":
+        raise ConfigError(f"--matrix {choice}: choose as-shot or none")
+    xyz_to_camera = (meta.get("colour") or {}).get("xyz_to_camera")
+    if xyz_to_camera is None:
+        raise InputError(f"{path}: no camera colour matrix in the metadata; use --matrix none "
+                         "to take camera RGB as linear sRGB")
+    try:
+        return colour_matrix.camera_to_srgb(xyz_to_camera)
+    except ValueError as err:
+        raise InputError(f"{path}: {err}") from err
+
+
+def _preview_bytes(encoded: np.ndarray, space: str, description: dict) -> bytes:
+    scale = max(encoded.shape[:2]) / PREVIEW_SIDE
+    small = encoded
+    if scale > 1:
+        size = (round(encoded.shape[1] / scale), round(encoded.shape[0] / scale))
+        small = cv2.resize(encoded.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+    return export.image_bytes(small, "png", space=space, exif=None, description=description)
+
+
+def _write_together(output, body, linear, scene, meta, record, preview, preview_body,
+                    protect) -> None:
+    """All outputs land together or none: each is written to a temporary file first."""
+    targets = [p for p in (output, linear, preview) if p]
+    if len({str(Path(p).resolve()) for p in targets}) != len(targets):
+        raise ConfigError("-o, --linear and --preview must be different files")
+    with ExitStack() as stack:
+        tmp = stack.enter_context(atomic_path(output, protect=protect))
+        tmp.write_bytes(body)
+        if preview:
+            stack.enter_context(atomic_path(preview, protect=protect)).write_bytes(preview_body)
+        if linear:
+            linear_meta = tiffio.derived_meta(
+                meta, record, views=["R", "G", "B", "rebuilt"][:scene.shape[-1]], cfa=None,
+                view_colours=None,
+                active_area=[0, 0, *scene.shape[:2]], masked_areas=[], origin=None,
+                colour_space="linear sRGB (D65), scene-referred, camera units")
+            tiffio.write_image(linear, np.moveaxis(scene, -1, 0), linear_meta, protect=protect)
