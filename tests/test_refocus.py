@@ -72,7 +72,7 @@ def reference_sums(frame, grid, *, s, g, view, mask_width, kernel, radius=None, 
 @pytest.mark.parametrize("view,kernel,g,cfa,radius", [
     ("full", "lanczos3", 4.0, None, None),
     ("left", "lanczos2", 3.0, None, None),
-    ("q10", "lanczos4", -2.5, None, None),
+    ("q10", "lanczos4", 2.5, None, None),
     ("bottom", "bilinear", 4.0, "GRBG", None),
     ("full", "lanczos3", 1.0, None, 6.0),
 ])
