@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import math
 import sys
+import warnings
 
 import click
 
@@ -72,7 +73,9 @@ def stage_command(func):
         configure(-1 if quiet else verbose)
         name = click.get_current_context().info_name or "plenocli"
         try:
-            with working(name):
+            with working(name), warnings.catch_warnings():
+                if not debug:  # numpy's RuntimeWarnings print source lines, not news
+                    warnings.simplefilter("ignore", RuntimeWarning)
                 return func(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise

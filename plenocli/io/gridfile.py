@@ -115,7 +115,8 @@ def read_grid(path: str | os.PathLike, *,
             doc = yaml.load(text, Loader=_LOADER)
         return LensGrid.from_dict(doc["lens_grid"])
     except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{p}: not a YAML lens grid ({err})") from err
+        reason = " ".join(str(err).replace('"<unicode string>", ', "").split())
+        raise InputError(f"{p}: not a YAML lens grid ({reason})") from err
     except (KeyError, TypeError, ValueError, OverflowError) as err:
         raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "
                          "make one with plenocli calibrate") from err

@@ -13,12 +13,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tifffile
 import yaml
 
 from plenocli.errors import InputError
 from plenocli.io import raw as raw_io
-from plenocli.io.tiffio import read_meta
+from plenocli.io.tiffio import open_tiff, read_meta
 
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
               "masked_areas")
@@ -38,7 +37,7 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_xml(p)}
     if suffix == ".json":
         return {**head, **_describe_json(p)}
-    kind = raw_io.sniff(p)
+    kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
         return {**head, **_describe_raw(p)}
     if kind == "image":
@@ -52,7 +51,7 @@ def _describe_raw(p: Path) -> dict:
     frames, meta = raw_io.decode(p)
     model = None
     if meta["camera"] == "dng":
-        with tifffile.TiffFile(p) as tif:
+        with open_tiff(p) as tif:
             tags = tif.pages[0].tags
             model = next((str(tags[c].value) for c in TIFF_MODEL_TAGS if c in tags), None)
     top, left, bottom, right = meta["active_area"]
@@ -68,7 +67,7 @@ def _describe_raw(p: Path) -> dict:
 
 
 def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
-    with tifffile.TiffFile(p) as tif:
+    with open_tiff(p) as tif:
         page = tif.pages[0]
         shape, dtype, count = page.shape, str(page.dtype), len(tif.pages)
     extra = {k: v for k, v in meta.items()

@@ -21,6 +21,7 @@ import numpy as np
 import tifffile
 
 from plenocli.errors import InputError
+from plenocli.io import tiffio
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
 CFA_LETTERS = "RGBG"  # DNG CFAPattern codes 0, 1, 2 (3 would be a second green)
@@ -43,7 +44,7 @@ def sniff(path: str | os.PathLike) -> str:
         if head[8:10] == b"CR":
             return "canon-dp"
         try:
-            with tifffile.TiffFile(p) as tif:
+            with tiffio.open_tiff(p) as tif:
                 if 50706 in tif.pages[0].tags:  # DNGVersion
                     return "dng"
         except (tifffile.TiffFileError, ValueError, OSError, IndexError) as err:
@@ -100,6 +101,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if cfa:
         meta["cfa"] = _check_cfa(cfa)
     n = frames.shape[0]
+    tiffio.check_real_dtype(path, frames.dtype)
     if black is not None:
         meta["black_level"] = [[float(black)] * 4 for _ in range(n)]
     if white is not None:
@@ -109,8 +111,23 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("white_level") is None:
         meta["white_level"] = [float(np.iinfo(frames.dtype).max)
                                if frames.dtype.kind in "ui" else float("inf")] * n
+    _check_levels(path, meta["black_level"], meta["white_level"])
+    tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
+                          frames.shape)
     meta["camera"] = kind
     return frames, meta
+
+
+def _check_levels(path, blacks: list, whites: list) -> None:
+    """Black levels finite and >= 0, white levels above them (+inf: a float image's)."""
+    for black, white in zip(blacks, whites, strict=True):
+        low = np.asarray(black, np.float64)
+        if not (np.all(np.isfinite(low)) and np.all(low >= 0)):
+            raise InputError(f"{path}: black level {black} must be finite and >= 0 DN "
+                             "(--black)")
+        if not white > low.max():  # also refuses NaN
+            raise InputError(f"{path}: white level {white:g} must be above the black level "
+                             f"{low.max():g} DN (--white)")
 
 
 def _check_cfa(cfa: str) -> str:
@@ -191,7 +208,7 @@ def _tag(page, code, default=None):
 
 def _decode_dng(path) -> tuple[np.ndarray, dict]:
     try:
-        with tifffile.TiffFile(path) as tif:
+        with tiffio.open_tiff(path) as tif:
             raws = [pg for pg in _raw_pages(tif)
                     if pg.photometric in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
                     and not (int(pg.subfiletype) & 1)]
@@ -199,6 +216,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                 raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
             frames, blacks, whites, names = [], [], [], []
             for k, page in enumerate(raws):
+                tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
                 try:
                     data = page.asarray()
                 except ValueError as err:
@@ -263,7 +281,8 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
     data = None
     if p.suffix.lower() in (".tif", ".tiff"):
         try:
-            data = tifffile.imread(p)
+            with tiffio.open_tiff(p) as tif:
+                data = tif.asarray()
         except (tifffile.TiffFileError, ValueError, OSError, EOFError) as err:
             raise InputError(f"{p}: unreadable TIFF ({err}); the file may be truncated") from err
     else:
