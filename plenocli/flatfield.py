@@ -49,6 +49,8 @@ def white_gain(white: np.ndarray, *, cfa: str | None = None, median_px: int = 5,
         raise ValueError(f"median_px must be a positive odd number, got {median_px}")
     if not 0 <= floor < 1:
         raise ValueError(f"floor must be in [0, 1), got {floor}")
+    if not 0 <= percentile <= 100:  # also refuses NaN
+        raise ValueError(f"percentile must be in [0, 100], got {percentile}")
     step = 2 if cfa else 1
     if white.ndim != 2:
         raise ValueError(f"white must be 2-D (rows, cols), got shape {white.shape}")

@@ -121,6 +121,19 @@ def inputs(tmp_path_factory) -> Path:
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **bad}))
     (d / "not_yaml.yaml").write_text("lens_grid: [unclosed\n")
+    import cv2
+
+    sensor = (rng.random((64, 64)) * 60000).astype(np.uint16)
+    for suffix in (".png", ".bmp"):
+        ok, encoded = cv2.imencode(suffix, sensor if suffix == ".png" else sensor >> 8)
+        assert ok
+        (d / f"trunc{suffix}").write_bytes(encoded.tobytes()[: encoded.size // 2])
+    tifffile.imwrite(d / "zlib.tif", sensor, compression="zlib")
+    packed = (d / "zlib.tif").read_bytes()
+    (d / "zlib_trunc.tif").write_bytes(packed[: len(packed) // 2])
+    _plain_tiff(d / "inf.tif", np.full((16, 16), np.inf, np.float32))
+    _plain_tiff(d / "volume.tif", rng.random((2, 3, 16, 16)).astype(np.float32))
+    (d / "garbage.tif").write_bytes(b"II*\x00" + rng.integers(0, 255, 500, np.uint8).tobytes())
     (d / "empty.tif").write_bytes(b"")
     return d
 
@@ -240,6 +253,19 @@ CASES = [
      ("truncated",)),
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
     ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1, ()),
+    *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
+      for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
+                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
+                          ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",))]],
+    ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
+     1, ("distinct",)),
+    ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
+     1, ("3 frame names",)),
+    ("decode-calib-without-raytrix", ["decode", "{i}/dp.dng", "--calib", "{i}/rt/calib.xml",
+                                      "-o", "{o}/d.tif"], 1, ("--calib",)),
+    ("decode-raytrix-bad-calib", ["decode", "{i}/f512.tif", "--camera", "raytrix", "--calib",
+                                  "{i}/calib_basis_zero.xml", "-o", "{o}/d.tif"], 1,
+     ("lens_base",)),
     ("decode-cfa-bad", ["decode", "{i}/f512.tif", "--cfa", "RRGB", "-o", "{o}/d.tif"], 1,
      ("CFA",)),
     # flat
@@ -251,7 +277,29 @@ CASES = [
      ("no valid pixel",)),
     ("flat-truncated-white", ["flat", "{i}/biased.tif", "--white", "{i}/truncated.tif", "-o",
                               "{o}/f.tif"], 1, ("truncated",)),
+    ("flat-percentile-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif",
+                             "--reference", "percentile", "--percentile", "nan", "-o",
+                             "{o}/f.tif"], 1, ("percentile",)),
+    ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
+                        "-o", "{o}/f.tif"], 1, ("floor",)),
+    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "-o",
+                            "{o}/f.tif"], 1, ("not a gain",)),
+    ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
+                               "{o}/f.tif"], 1, ("white image",)),
+    # refocus and sai: other options
+    *[(f"refocus-{opt}-{value}", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                                  f"--{opt}", value, "-o", "{o}/r.tif"], 1, (opt.split("-")[0],))
+      for opt, value in [("radius", "nan"), ("radius", "-1"), ("min-weight", "nan"),
+                         ("mask-width", "inf"), ("mask-width", "-1")]],
+    ("sai-grid-hex", ["sai", "{i}/rt/frames.tif", "-n", "2", "--grid", "{i}/rt/grid.yaml", "-o",
+                      "{o}/v.tif"], 1, ("square",)),
+    ("sai-cfa-layout", ["sai", "{i}/f512.tif", "--cfa-layout", "diagonal", "-o", "{o}/v.tif"],
+     1, ("cfa-layout",)),
     # info
+    ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
+    ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),
+    ("info-bad-xml", ["info", "{i}/calib_basis_zero.xml"], 1, ("lens_base",)),
+    ("info-bad-yaml", ["info", "{i}/not_yaml.yaml"], 1, ("YAML",)),
     ("info-truncated", ["info", "{i}/truncated.tif"], 1, ("truncated",)),
     ("info-huge-header", ["info", "{i}/huge.tif"], 1, ("200000",)),
     ("info-empty", ["info", "{i}/empty.tif"], 1, ()),

@@ -47,7 +47,7 @@ def sniff(path: str | os.PathLike) -> str:
             with tiffio.open_tiff(p) as tif:
                 if 50706 in tif.pages[0].tags:  # DNGVersion
                     return "dng"
-        except (tifffile.TiffFileError, ValueError, OSError, IndexError) as err:
+        except tiffio.READ_ERRORS as err:
             raise InputError(f"{p}: a TIFF header but an unreadable file ({err}); "
                              "is it truncated?") from err
         return "image"
@@ -94,6 +94,9 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     elif calib is not None:
         raise InputError(f"--calib is for --camera raytrix, not {kind}")
     if frame_names:
+        if len(set(frame_names)) != len(frame_names) or not all(frame_names):
+            raise InputError(f"frame names {','.join(frame_names)!r} must be distinct and "
+                             "non-empty (e.g. --frames S,A)")
         if len(frame_names) != frames.shape[0]:
             raise InputError(f"{path}: {len(frame_names)} frame names given "
                              f"({','.join(frame_names)}) for {frames.shape[0]} frames")
@@ -252,9 +255,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             masked_flat = _tag(first, 50830, None)
             masked_flat = [int(v) for v in masked_flat] if masked_flat is not None else []
             masked = [masked_flat[i:i + 4] for i in range(0, len(masked_flat), 4)]
-    except (tifffile.TiffFileError, OSError, EOFError, IndexError, KeyError) as err:
-        raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
-    except ValueError as err:
+    except tiffio.READ_ERRORS as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     if len(set(names)) != len(names):
         names = [f"frame{k}" for k in range(len(names))]
@@ -283,11 +284,13 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
         try:
             with tiffio.open_tiff(p) as tif:
                 data = tif.asarray()
-        except (tifffile.TiffFileError, ValueError, OSError, EOFError) as err:
+        except tiffio.READ_ERRORS as err:
             raise InputError(f"{p}: unreadable TIFF ({err}); the file may be truncated") from err
     else:
         import cv2
 
+        # silent: a damaged file becomes our one line, not OpenCV's log
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
         data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         if data is None:
             raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")

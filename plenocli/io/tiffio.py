@@ -22,6 +22,7 @@ import json
 import logging
 import os
 import re
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -38,6 +39,10 @@ FORMAT_VERSION = 1
 # page is 30 times a full-frame raw; a larger claim is damage, not a sensor.
 MAX_PAGE_PIXELS = 2 ** 30
 COMPRESSION_NONE = 1
+# What reading a damaged file raises, from tifffile or the codec of a compressed page (zlib,
+# imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
+READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
+               RuntimeError, zlib.error)
 
 
 def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
@@ -56,8 +61,9 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
         for name, page in zip(names, data, strict=True):
             if not _has_finite(page):
                 raise InputError(f"{path}: view {name} of the result holds no valid pixel (all "
-                                 "NaN: every input pixel clipped, masked or outside the grid); "
-                                 "nothing was written: check the inputs with plenocli info")
+                                 "NaN or infinite: every input pixel clipped, masked or outside "
+                                 "the grid); nothing was written: check the inputs with "
+                                 "plenocli info")
     description = json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
     with atomic_path(path, protect=protect) as tmp:
         with tifffile.TiffWriter(tmp) as tw:
@@ -119,11 +125,13 @@ def check_page(path: Path, page) -> None:
                          f" samples, more than plenocli reads ({MAX_PAGE_PIXELS} per page); the "
                          "file is damaged or not a sensor image")
     check_real_dtype(path, page.dtype)
-    if int(page.compression) == COMPRESSION_NONE and page.databytecounts:
+    if page.databytecounts:
         size = path.stat().st_size
         end = max(int(o) + int(c) for o, c in zip(page.dataoffsets, page.databytecounts,
                                                    strict=True))
-        if end > size or sum(int(c) for c in page.databytecounts) < page.nbytes:
+        short = (int(page.compression) == COMPRESSION_NONE
+                 and sum(int(c) for c in page.databytecounts) < page.nbytes)
+        if end > size or short:
             raise InputError(f"{path}: truncated TIFF (the header places pixel data up to byte "
                              f"{end}, the file has {size} bytes); copy or write it again")
 
@@ -151,7 +159,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
                 data = _stack_pages(p, [page.asarray() for page in tif.pages])
-    except (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError) as err:
+    except READ_ERRORS as err:
         raise InputError(f"{p}: not a readable TIFF image ({err}); "
                          "pass an image written by plenocli or a plain TIFF") from err
     meta: dict = {}
@@ -215,13 +223,15 @@ def read_meta(path: str | os.PathLike) -> dict:
     try:
         with open_tiff(path) as tif:
             description = tif.pages[0].description if tif.pages else ""
-    except (tifffile.TiffFileError, ValueError, OSError, InputError):
+    except (*READ_ERRORS, InputError):
         return {}
     try:
         parsed = json.loads(description) if description else {}
     except json.JSONDecodeError:
         return {}
-    return {k: v for k, v in parsed.items() if k != FORMAT_KEY} if isinstance(parsed, dict) else {}
+    if not isinstance(parsed, dict) or FORMAT_KEY not in parsed:
+        return {}  # another program's JSON (tifffile writes {"shape": ...}) is not ours
+    return {k: v for k, v in parsed.items() if k != FORMAT_KEY}
 
 
 def derived_meta(source: dict, record: dict, **changes) -> dict:
