@@ -173,5 +173,8 @@ def _check_centres(centres, indices) -> None:
     if not np.all(np.abs(xy) <= MAX_COORD_PX):
         raise ValueError("centres_xy must hold finite pixel coordinates; "
                          f"{int(np.sum(~(np.abs(xy) <= MAX_COORD_PX)))} values are not")
-    if ij.size and np.ptp(ij, axis=0).max() > MAX_COORD_PX:
-        raise ValueError("indices span more lenses than any sensor holds")
+    if ij.size:  # tables indexed by (i, j) are allocated from this span: keep it compact
+        span = np.ptp(ij, axis=0).astype(np.float64) + 1
+        if span[0] * span[1] > 16 * len(ij) + 1024:
+            raise ValueError(f"lens indices span {int(span[0])} x {int(span[1])} lattice places "
+                             f"for {len(ij)} lenses; they must be a compact block of the lattice")
