@@ -122,6 +122,9 @@ def approximate_sai(frame: np.ndarray, grid: LensGrid, n: int) -> tuple[np.ndarr
     if grid.lattice != "square":
         raise ValueError("approximate SAIs need a square lens lattice (ideal plenoptic sensor); "
                          f"this grid is {grid.lattice}: use refocus views for hex grids")
+    if grid.pitch_px < n:
+        raise ValueError(f"a micro-image of {grid.pitch_px:g} px cannot hold {n} x {n} "
+                         "sub-apertures of at least one pixel; use a smaller n")
     shaped = grid if grid.image_shape or grid.centres_xy is not None else None
     if shaped is None:
         from dataclasses import replace

@@ -121,6 +121,32 @@ def inputs(tmp_path_factory) -> Path:
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **bad}))
     (d / "not_yaml.yaml").write_text("lens_grid: [unclosed\n")
+    for name, change in {"meta_black": {"black_level": "abc"},
+                         "meta_black_short": {"black_level": [[0] * 4]},
+                         "meta_white": {"white_level": [None, None]},
+                         "meta_cfa": {"cfa": "XYZW"}, "meta_cfa_int": {"cfa": 5},
+                         "meta_masked": {"masked_areas": "x"},
+                         "meta_provenance": {"provenance": "x"}}.items():
+        tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
+    for name, text in {
+        "grid_int": "lens_grid: 5\n",
+        "grid_pitch_text": "lens_grid: {pitch_px: abc, angle_rad: 0, offset_xy: [0, 0]}\n",
+        "grid_offset_short": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0]}\n",
+        "grid_lattice": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                        "lattice: tri}\n",
+        "grid_origin_nan": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                           "sensor_origin: [.nan, 0]}\n",
+        "grid_origin_negative": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                                "sensor_origin: [-5, 0]}\n",
+        "grid_lens_row_short": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                               "lenses: {rows: [[0, 0, 1]]}}\n",
+        "grid_shape_3d": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                         "image_shape: [3, 4, 5]}\n",
+        "grid_square_tiny": "lens_grid: {pitch_px: 1, angle_rad: 0, offset_xy: [0, 0], "
+                            "lattice: square}\n",
+    }.items():
+        (d / f"{name}.yaml").write_text(text)
     import cv2
 
     sensor = (rng.random((64, 64)) * 60000).astype(np.uint16)
@@ -295,6 +321,24 @@ CASES = [
                       "{o}/v.tif"], 1, ("square",)),
     ("sai-cfa-layout", ["sai", "{i}/f512.tif", "--cfa-layout", "diagonal", "-o", "{o}/v.tif"],
      1, ("cfa-layout",)),
+    # metadata a stage reads, edited or damaged
+    *[(f"bias-{name}", ["bias", f"{{i}}/{name}.tif", "-o", "{o}/b.tif"], 1, (word,))
+      for name, word in [("meta_black", "black_level"), ("meta_black_short", "black_level"),
+                         ("meta_white", "white_level"), ("meta_cfa", "cfa"),
+                         ("meta_cfa_int", "cfa"), ("meta_masked", "masked area"),
+                         ("meta_provenance", "provenance")]],
+    ("sai-meta-cfa", ["sai", "{i}/meta_cfa.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("cfa",)),
+    *[(f"refocus-{name}", ["refocus", "{i}/rt/frames.tif", "--grid", f"{{i}}/{name}.yaml",
+                           "-o", "{o}/r.tif"], 1, (word,))
+      for name, word in [("grid_int", "lens grid"), ("grid_pitch_text", "abc"),
+                         ("grid_offset_short", "offset_xy"), ("grid_lattice", "lattice"),
+                         ("grid_origin_nan", "sensor_origin"),
+                         ("grid_origin_negative", "sensor_origin"),
+                         ("grid_lens_row_short", "lens grid"),
+                         ("grid_shape_3d", "image_shape")]],
+    ("sai-grid-pitch-below-n", ["sai", "{i}/rt/frames.tif", "--grid", "{i}/grid_square_tiny.yaml",
+                                "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
+    ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
     # info
     ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
     ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),

@@ -117,6 +117,6 @@ def read_grid(path: str | os.PathLike, *,
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         reason = " ".join(str(err).replace('"<unicode string>", ', "").split())
         raise InputError(f"{p}: not a YAML lens grid ({reason})") from err
-    except (KeyError, TypeError, ValueError, OverflowError) as err:
+    except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
         raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "
                          "make one with plenocli calibrate") from err

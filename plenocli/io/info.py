@@ -18,6 +18,7 @@ import yaml
 from plenocli.errors import InputError
 from plenocli.io import raw as raw_io
 from plenocli.io.tiffio import open_tiff, read_meta
+from plenocli.model.lensgrid import LensGrid
 
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
               "masked_areas")
@@ -91,6 +92,10 @@ def _describe_yaml(p: Path) -> dict:
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise InputError(f"{p}: not valid YAML ({str(err).splitlines()[0]})") from err
     if isinstance(doc, dict) and isinstance(doc.get("lens_grid"), dict):
+        try:  # a grid no stage would accept is said so, not described
+            LensGrid.from_dict(doc["lens_grid"])
+        except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
+            raise InputError(f"{p}: not a usable lens grid (missing or bad {err})") from err
         grid = dict(doc["lens_grid"])
         lenses = grid.pop("lenses", None)
         others = {k: v for k, v in doc.items() if k not in ("lens_grid", "provenance")}

@@ -171,6 +171,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
         if isinstance(parsed, dict) and FORMAT_KEY in parsed:
             meta = {k: v for k, v in parsed.items() if k != FORMAT_KEY}
     check_geometry(p, meta, data.shape)
+    check_levels(p, meta, data.shape[0])
     return data, meta
 
 
@@ -194,6 +195,40 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
                                    and all(isinstance(v, int) for v in origin)):
         raise InputError(f"{path}: origin {origin!r} is not two whole numbers [row, col]")
+
+
+def check_levels(path, meta: dict, views: int) -> None:
+    """CFA pattern, levels and records in ``meta`` must be what the stages read: a Bayer
+    pattern or null, per view 4 finite black levels and a white level above them."""
+    cfa = meta.get("cfa")
+    if cfa is not None and not (isinstance(cfa, str) and len(cfa) == 4
+                                and set(cfa) <= set("RGB") and cfa.count("G") == 2):
+        raise InputError(f"{path}: cfa {cfa!r} in the metadata is not a 2 x 2 Bayer pattern "
+                         "(RGGB, BGGR, GRBG, GBRG); the file was edited or damaged")
+    blacks, whites = meta.get("black_level"), meta.get("white_level")
+    if blacks is not None and not (
+            isinstance(blacks, list) and len(blacks) == views
+            and all(isinstance(b, list) and len(b) == 4 and all(_finite(v) for v in b)
+                    for b in blacks)):
+        raise InputError(f"{path}: black_level {blacks!r} is not 4 finite levels per view "
+                         f"({views} views); the file was edited or damaged")
+    if whites is not None and not (
+            isinstance(whites, list) and len(whites) == views
+            and all(_number(w) and w == w for w in whites)):  # w == w: not NaN
+        raise InputError(f"{path}: white_level {whites!r} is not one level per view "
+                         f"({views} views); the file was edited or damaged")
+    for key, kind in (("provenance", dict), ("history", list)):
+        if meta.get(key) is not None and not isinstance(meta[key], kind):
+            raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
+                             "was edited or damaged")
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _finite(value) -> bool:
+    return _number(value) and abs(value) < float("inf")
 
 
 def _inside(area, shape) -> bool:

@@ -50,6 +50,11 @@ class LensGrid:
         _check_point("offset_xy", self.offset_xy)
         if self.image_shape is not None:
             _check_shape(self.image_shape)
+        if not (len(self.sensor_origin) == 2
+                and all(float(v).is_integer() and 0 <= v <= MAX_COORD_PX
+                        for v in self.sensor_origin)):
+            raise ValueError(f"sensor_origin must be two whole numbers >= 0 (row, col), got "
+                             f"{self.sensor_origin}")
         if (self.centres_xy is None) != (self.indices is None):
             raise ValueError("centres_xy and indices go together")
         if self.centres_xy is not None:
@@ -147,8 +152,8 @@ class LensGrid:
         return cls(pitch_px=float(data["pitch_px"]), angle_rad=float(data["angle_rad"]),
                    offset_xy=tuple(float(v) for v in data["offset_xy"]),
                    lattice=data.get("lattice", "hex"),
-                   image_shape=tuple(int(v) for v in shape) if shape else None,
-                   sensor_origin=tuple(int(v) for v in data.get("sensor_origin", (0, 0))),
+                   image_shape=_whole("image_shape", shape) if shape else None,
+                   sensor_origin=_whole("sensor_origin", data.get("sensor_origin", (0, 0))),
                    centres_xy=centres, indices=indices)
 
 
@@ -178,3 +183,14 @@ def _check_centres(centres, indices) -> None:
         if span[0] * span[1] > 16 * len(ij) + 1024:
             raise ValueError(f"lens indices span {int(span[0])} x {int(span[1])} lattice places "
                              f"for {len(ij)} lenses; they must be a compact block of the lattice")
+
+
+def _whole(name: str, values) -> tuple[int, ...]:
+    """``values`` as whole numbers; a ValueError naming ``name`` for NaN, 1.5 or text."""
+    try:
+        numbers = [float(v) for v in values]
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must hold whole numbers, got {values!r}") from err
+    if not all(v.is_integer() and abs(v) <= MAX_COORD_PX for v in numbers):
+        raise ValueError(f"{name} must hold whole numbers, got {values!r}")
+    return tuple(int(v) for v in numbers)
