@@ -126,3 +126,44 @@ def test_metadata_geometry_must_fit_the_image(tmp_path, meta, words):
                      metadata=None)
     with pytest.raises(InputError, match=words):
         tiffio.read_image(tmp_path / "a.tif")
+
+
+@pytest.fixture(scope="module")
+def pristine(tmp_path_factory):
+    from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+
+    folder = tmp_path_factory.mktemp("pristine")
+    raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
+    write_dualpixel_raw(folder / "dp.dng", raw, truth)
+    views = np.random.default_rng(0).random((2, 40, 50)).astype(np.float32)
+    tiffio.write_image(folder / "p.tif", views, {"views": ["a", "b"],
+                                                 "active_area": [0, 0, 40, 50],
+                                                 "masked_areas": []})
+    return folder
+
+
+@pytest.mark.parametrize("name", ["dp.dng", "p.tif"])
+@pytest.mark.parametrize("seed", range(150))
+def test_damaged_files_are_read_or_refused_in_one_line(pristine, tmp_path, name, seed):
+    """Seeded damage (cut anywhere, or bytes changed in the header or anywhere): every reader
+    returns a result or raises InputError, nothing else."""
+    from plenocli.io import raw
+    from plenocli.io.info import describe
+
+    rng = np.random.default_rng(seed)
+    data = bytearray((pristine / name).read_bytes())
+    if seed % 3 == 0:
+        data = data[: int(rng.integers(8, len(data)))]
+    else:
+        reach = 600 if seed % 3 == 1 else len(data)
+        for _ in range(int(rng.integers(1, 6))):
+            where = int(rng.integers(0, reach))
+            data[where] = int(rng.integers(0, 256))
+    damaged = tmp_path / name
+    damaged.write_bytes(bytes(data))
+    for read in (tiffio.read_image, raw.decode, describe):
+        try:
+            read(damaged)
+        except InputError as err:
+            assert "\n" not in str(err)
+

@@ -99,8 +99,13 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
     logger.addHandler(collect)
     logger.propagate = False
     try:
-        with tifffile.TiffFile(p) as tif:
-            pages = list(tif.pages)
+        with contextlib.ExitStack() as stack:
+            try:
+                tif = stack.enter_context(tifffile.TiffFile(p))
+                pages = list(tif.pages)
+            except TypeError as err:  # a tag of the wrong count or type: tifffile trips on it
+                raise InputError(f"{p}: damaged TIFF (a malformed tag: {err}); copy or write "
+                                 "it again") from err
             damage = [m for m in collect.messages
                       if any(w in m.lower() for w in ("offset", "truncat", "corrupt", "invalid"))]
             if damage:
@@ -118,7 +123,12 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
 def check_page(path: Path, page) -> None:
     """Refuse a page whose header claims more than MAX_PAGE_PIXELS, a sample type that is not a
     real number (complex, bool), or uncompressed pixel data beyond the end of the file."""
-    shape = tuple(int(v) for v in page.shape)
+    try:
+        shape = tuple(int(v) for v in page.shape)
+        compression = int(page.compression)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"{path}: damaged TIFF (a malformed tag: {err}); copy or write it "
+                         "again") from err
     pixels = int(np.prod(shape, dtype=np.float64))
     if pixels > MAX_PAGE_PIXELS:
         raise InputError(f"{path}: the TIFF header claims an image of {' x '.join(map(str, shape))}"
@@ -126,10 +136,10 @@ def check_page(path: Path, page) -> None:
                          "file is damaged or not a sensor image")
     check_real_dtype(path, page.dtype)
     if page.databytecounts:
-        size = path.stat().st_size
+        size = Path(path).stat().st_size
         end = max(int(o) + int(c) for o, c in zip(page.dataoffsets, page.databytecounts,
                                                    strict=True))
-        short = (int(page.compression) == COMPRESSION_NONE
+        short = (compression == COMPRESSION_NONE
                  and sum(int(c) for c in page.databytecounts) < page.nbytes)
         if end > size or short:
             raise InputError(f"{path}: truncated TIFF (the header places pixel data up to byte "
