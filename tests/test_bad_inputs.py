@@ -339,6 +339,13 @@ CASES = [
     ("sai-grid-pitch-below-n", ["sai", "{i}/rt/frames.tif", "--grid", "{i}/grid_square_tiny.yaml",
                                 "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
     ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
+    # batch
+    ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
+     2, ()),
+    ("batch-timeout-nan", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout",
+                           "nan"], 2, ()),
+    ("batch-inputs-none", ["batch", "{i}/none.yaml", "--inputs", "{i}/nothing/*.dng"], 1,
+     ("matches no file",)),
     # info
     ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
     ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),

@@ -403,3 +403,11 @@ def test_batch_parent_death_takes_its_workers(tmp_path, sig, code):
     assert not list(out.rglob("*.part")), "a temporary file was left behind"
     for tif in out.rglob("*.tif"):
         pixels(tif)  # every file present is complete
+
+
+def test_captures_within_the_time_limit_are_done(shoot, tmp_path):
+    _, config, captures = shoot
+    fine = [c for c in captures if c.stem != CORRUPT][:2]
+    report = run_batch(config, fine, out=tmp_path / "out", jobs=1, timeout=120)
+    assert [r.status for r in report.results] == ["done", "done"]
+    assert not list((tmp_path / "out").rglob("*.part"))

@@ -305,6 +305,9 @@ def sigterm_stops() -> Iterator[None]:
     def stop(signum, frame):
         raise Terminated
 
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may handle signals (e.g. plenocli called from a thread)
+        return
     previous = signal.signal(signal.SIGTERM, stop)
     try:
         yield
