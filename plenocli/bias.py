@@ -197,7 +197,7 @@ def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int
     along = {"left": areas["left"] and areas["left"][2] - areas["left"][0],
              "top": areas["top"] and areas["top"][3] - areas["top"][1]}
     span = {"none": shape[0], "left": along["left"], "top": along["top"],
-            "both": max(along["left"] or 0, along["top"] or 0)}[mode] // max(period, 1)
+            "both": min(along["left"] or 0, along["top"] or 0)}[mode] // max(period, 1)
     if smooth > max(span, 1):
         raise ValueError(f"smooth {smooth} is longer than the {span} rows or columns of one "
                          f"colour it smooths; use at most {span}")

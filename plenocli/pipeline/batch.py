@@ -168,6 +168,9 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
         raise ConfigError(f"--jobs {jobs}: give 1 or more worker processes")
     if timeout is not None and not (0 < timeout < 1e7):  # also refuses NaN
         raise ConfigError(f"--timeout {timeout}: give a positive number of seconds")
+    if timeout is not None and scheduler:
+        raise ConfigError("--timeout limits local worker processes; with --scheduler set the "
+                          "Dask workers' own limits instead")
     template = read_template(config, overrides)
     if not template.per_capture_steps():
         raise ConfigError(f"{config}: no step uses {{capture}} or {{name}}, so there is nothing "
