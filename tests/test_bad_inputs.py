@@ -417,3 +417,27 @@ def test_read_only_output_folder_is_one_line(inputs, tmp_path):
     finally:
         out.chmod(0o700)
     assert_one_line(result, 1, ("ermission",))
+
+
+@LEAD
+def test_sigterm_on_a_stage_is_one_line_and_exit_143(inputs, tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "plenocli", "refocus",
+                             str(inputs / "rt" / "frames.tif"), "--grid",
+                             str(inputs / "rt" / "grid.yaml"), "--g", "1:900:1", "-o",
+                             str(out / "r.tif")], env={**os.environ, "PYTHONPATH": str(root)},
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(3)  # imported, compiled and sweeping
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 143, stderr
+    assert len(stderr.strip().splitlines()) == 1
+    assert not list(out.iterdir())
