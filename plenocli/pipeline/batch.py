@@ -42,6 +42,7 @@ CRASHED = ("the worker process died while processing it (a crash in a decoder, o
            "memory); run it alone with plenocli run to see more")
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
 GRACE_SECONDS = 10.0  # after a stop request, how long a worker may take to clean up
+EXIT_OVERRAN = 128 + signal.SIGALRM  # a worker stopped by its watchdog past the time limit
 
 
 class Terminated(KeyboardInterrupt):
@@ -243,7 +244,7 @@ def _watchdog(batch_pid: int, parent_pid: int) -> None:
     while True:
         time.sleep(WATCH_SECONDS)
         if time.monotonic() > _hard_stop:
-            os._exit(128 + signal.SIGALRM)
+            os._exit(EXIT_OVERRAN)
         if os.getppid() != parent_pid or not _alive(batch_pid):
             _hard_stop = min(_hard_stop, time.monotonic() + GRACE_SECONDS)
             os.kill(os.getpid(), signal.SIGTERM)
@@ -351,19 +352,18 @@ def _pool_results(jobs: int, config: str, captures: list[str], kwargs: dict,
                   timeout: float | None = None) -> Iterator[CaptureResult]:
     """Results as they complete. Captures caught in a crashed pool are retried, then run one
     worker at a time so that a capture that kills its worker fails alone."""
-    crashed = yield from _pool_round(jobs, config, captures, kwargs, timeout)
+    crashed, _ = yield from _pool_round(jobs, config, captures, kwargs, timeout)
     for capture in crashed:  # alone now, so that a crash is attributed to the right capture
-        start = time.monotonic()
-        if (yield from _pool_round(1, config, [capture], kwargs, timeout)):
-            seconds = time.monotonic() - start
-            overran = timeout is not None and seconds >= timeout
+        again, overran = yield from _pool_round(1, config, [capture], kwargs, timeout)
+        if again:
             yield CaptureResult(capture, Path(capture).stem, "failed",
-                                timed_out(timeout) if overran else CRASHED, seconds)
+                                timed_out(timeout) if overran else CRASHED)
 
 
 def _pool_round(jobs: int, config: str, captures: list[str], kwargs: dict,
                 timeout: float | None) -> Iterator[CaptureResult]:
-    """One process pool over ``captures``; yields results, returns the crashed captures."""
+    """One process pool over ``captures``; yields results, returns (the crashed captures,
+    whether a worker was stopped by its watchdog for running past the time limit)."""
     crashed: list[str] = []
     with _one_thread_per_worker():
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=_context(),
@@ -371,6 +371,7 @@ def _pool_round(jobs: int, config: str, captures: list[str], kwargs: dict,
         try:
             futures = {pool.submit(_worker_task, config, c, kwargs, timeout): c
                        for c in captures}
+            workers = list((pool._processes or {}).values())  # started on submit
             remaining = set(futures)
             while remaining:
                 finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
@@ -387,7 +388,9 @@ def _pool_round(jobs: int, config: str, captures: list[str], kwargs: dict,
             _terminate(pool)
             raise
         pool.shutdown(wait=True)
-    return crashed
+    for worker in workers if crashed else ():
+        worker.join(GRACE_SECONDS)
+    return crashed, any(w.exitcode == EXIT_OVERRAN for w in workers if crashed)
 
 
 def _terminate(pool: ProcessPoolExecutor) -> None:
