@@ -44,6 +44,7 @@ VIEWS = {
 CHANNELS = "RGB"
 MAX_G_VALUES = 1000          # a focal sweep longer than this is a typo, not a plan
 MAX_OUTPUT_PIXELS = 2 ** 28  # ~268 Mpx per channel: far beyond any sensor at s <= 1
+MAX_STACK_PIXELS = 2 ** 31   # a whole sweep's pages together: 8 GiB of float32
 # Voronoi-cell circumradius / pitch: no pixel is farther than this from its nearest lattice centre.
 _CELL_RADIUS = {"hex": 1.0 / math.sqrt(3.0), "square": 1.0 / math.sqrt(2.0)}
 
@@ -255,14 +256,19 @@ def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight)
     check_output_size(frame.shape, s)
 
 
-def check_output_size(shape: tuple[int, int], s: float) -> None:
-    """Raise ValueError when a (rows, cols) frame refocused at scale ``s`` would be absurdly
-    large (more than MAX_OUTPUT_PIXELS per channel), before anything is allocated."""
+def check_output_size(shape: tuple[int, int], s: float, *, pages: int = 1) -> None:
+    """Raise ValueError, before anything is allocated, when a (rows, cols) frame refocused at
+    scale ``s`` would be absurdly large: more than MAX_OUTPUT_PIXELS per page, or more than
+    MAX_STACK_PIXELS for all ``pages`` of a sweep (g values x channels)."""
     rows_out, cols_out = output_shape(shape, s)
     if rows_out * cols_out > MAX_OUTPUT_PIXELS:
         raise ValueError(f"s = {s:g} makes a {cols_out} x {rows_out} image from a "
                          f"{shape[1]} x {shape[0]} frame; s is the output size relative to the "
                          "sensor image (paper: 0.2): use s <= 1")
+    if pages * rows_out * cols_out > MAX_STACK_PIXELS:
+        raise ValueError(f"{pages} pages of {cols_out} x {rows_out} pixels are more than "
+                         f"{MAX_STACK_PIXELS * 4 / 2 ** 30:g} GiB; sweep fewer g values or "
+                         "use a smaller s")
 
 
 def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: str,

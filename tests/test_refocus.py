@@ -282,3 +282,13 @@ def test_absurd_output_size_is_refused_before_allocating():
         refocus(np.zeros((120, 160), np.float32), GRID, s=1000.0)
     with pytest.raises(ValueError, match="g must be a positive"):
         refocus(np.zeros((12, 16), np.float32), GRID, g=0.0)
+
+
+def test_a_sweep_too_large_for_memory_is_refused_up_front():
+    from plenocli.refocus import MAX_STACK_PIXELS, check_output_size
+
+    rows_out, cols_out = output_shape((4480, 6720), 1.0)
+    pages = MAX_STACK_PIXELS // (rows_out * cols_out) + 1
+    check_output_size((4480, 6720), 1.0, pages=pages - 1)
+    with pytest.raises(ValueError, match=f"{pages} pages"):
+        check_output_size((4480, 6720), 1.0, pages=pages)

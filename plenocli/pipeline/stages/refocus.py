@@ -72,7 +72,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     lens_grid = load_grid(grid, meta, data.shape[1:])
     r0, c0, r1, c1, crop_grid = frame_region(data.shape[1:], meta, lens_grid, input, grid)
     try:
-        rf.check_output_size((r1 - r0, c1 - c0), s)
+        rf.check_output_size((r1 - r0, c1 - c0), s,
+                             pages=len(g_values) * data.shape[0] * (3 if meta.get("cfa") else 1))
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     cfa = shift_pattern(meta.get("cfa"), r0, c0)
