@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +54,11 @@ def _huge_header_tiff(path: Path) -> None:
         ifd += struct.pack("<HH", value, 0) if kind == 3 else struct.pack("<I", value)
     body = b"II*\x00" + struct.pack("<I", 8) + ifd + struct.pack("<I", 0)
     path.write_bytes(body + bytes(831 - len(body)))
+
+
+def _png_chunk(kind: bytes, body: bytes) -> bytes:
+    return (struct.pack(">I", len(body)) + kind + body
+            + struct.pack(">I", zlib.crc32(kind + body)))
 
 
 def _write_grid_yaml(path: Path, base: dict, **changes) -> None:
@@ -158,6 +164,10 @@ def inputs(tmp_path_factory) -> Path:
     packed = (d / "zlib.tif").read_bytes()
     (d / "zlib_trunc.tif").write_bytes(packed[: len(packed) // 2])
     _plain_tiff(d / "inf.tif", np.full((16, 16), np.inf, np.float32))
+    (d / "huge.png").write_bytes(
+        b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", struct.pack(">IIBBBBB", 200000, 200000,
+                                                                16, 0, 0, 0, 0))
+        + _png_chunk(b"IDAT", zlib.compress(bytes(100))) + _png_chunk(b"IEND", b""))
     _plain_tiff(d / "volume.tif", rng.random((2, 3, 16, 16)).astype(np.float32))
     (d / "garbage.tif").write_bytes(b"II*\x00" + rng.integers(0, 255, 500, np.uint8).tobytes())
     (d / "empty.tif").write_bytes(b"")
@@ -282,7 +292,8 @@ CASES = [
     *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
       for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
                           ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
-                          ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",))]],
+                          ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
+                          ("huge.png", ("more than",))]],
     ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
      1, ("distinct",)),
     ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
@@ -349,6 +360,7 @@ CASES = [
     # info
     ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
     ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),
+    ("info-huge-png", ["info", "{i}/huge.png"], 1, ("more than",)),
     ("info-bad-xml", ["info", "{i}/calib_basis_zero.xml"], 1, ("lens_base",)),
     ("info-bad-yaml", ["info", "{i}/not_yaml.yaml"], 1, ("YAML",)),
     ("info-truncated", ["info", "{i}/truncated.tif"], 1, ("truncated",)),

@@ -291,7 +291,15 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
 
         # silent: a damaged file becomes our one line, not OpenCV's log
         cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-        data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        try:
+            data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        except cv2.error as err:  # OpenCV refuses headers beyond 2^30 pixels before allocating
+            if "CV_IO_MAX_IMAGE_PIXELS" in str(err):
+                raise InputError(f"{p}: the header claims an image of more than "
+                                 f"{tiffio.MAX_PAGE_PIXELS} pixels; the file is damaged or not "
+                                 "a sensor image") from err
+            raise InputError(f"{p}: unreadable image; the file may be truncated or of another "
+                             "type") from err
         if data is None:
             raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")
         if data.ndim == 3:
