@@ -119,20 +119,10 @@ def subtract_overscan(frame: np.ndarray, *, active_area, masked_areas, overscan:
         ``mode``, and the estimated levels (``row_levels`` per row and phase, ``column_levels``),
         with their mean per colour position.
     """
-    if overscan not in OVERSCAN_MODES:
-        raise ValueError(f"overscan must be one of {OVERSCAN_MODES}, got {overscan!r}")
+    mode, left_area, top_area = _choose_areas(frame.shape, active_area, masked_areas,
+                                              overscan=overscan, guard=guard, smooth=smooth,
+                                              period=period)
     top, left, bottom, right = (int(v) for v in active_area)
-    left_area = _area_beside(masked_areas, active_area, side="left", guard=guard)
-    top_area = _area_beside(masked_areas, active_area, side="top", guard=guard)
-    mode = overscan
-    if mode == "auto":
-        mode = "left" if left_area else "top" if top_area else "none"
-    if mode in ("left", "both") and not left_area:
-        raise ValueError("no usable over-scan columns left of the active area "
-                         "(use --overscan top or none)")
-    if mode in ("top", "both") and not top_area:
-        raise ValueError("no usable over-scan rows above the active area "
-                         "(use --overscan left or none)")
 
     out = frame[top:bottom, left:right].astype(np.float32)
     info: dict = {"mode": mode}
@@ -169,6 +159,54 @@ def subtract_overscan(frame: np.ndarray, *, active_area, masked_areas, overscan:
             out[first::period, :] -= levels_c[p, None, left:right].astype(np.float32)
         info["column_levels"] = levels_c[:, left:right]
     return out, info
+
+
+def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int, smooth: int,
+                  period: int):
+    """(mode, left area, top area) after checking every option against the frame: the active
+    area inside it, a guard that leaves over-scan pixels, a smoothing no longer than the
+    over-scan it smooths."""
+    if overscan not in OVERSCAN_MODES:
+        raise ValueError(f"overscan must be one of {OVERSCAN_MODES}, got {overscan!r}")
+    for name, value in (("guard", guard), ("smooth", smooth)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+            raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+    top, left, bottom, right = (int(v) for v in active_area)
+    if not (0 <= top < bottom <= shape[0] and 0 <= left < right <= shape[1]):
+        raise ValueError(f"active_area {list(active_area)} is not inside the "
+                         f"{shape[1]} x {shape[0]} frame")
+    areas = {side: _area_beside(masked_areas, active_area, side=side, guard=guard)
+             for side in ("left", "top")}
+    bare = {side: _area_beside(masked_areas, active_area, side=side, guard=0)
+            for side in ("left", "top")}
+    mode = overscan
+    if mode == "auto":
+        usable = [side for side in ("left", "top") if areas[side]]
+        guarded = [side for side in ("left", "top") if bare[side]]
+        mode = usable[0] if usable else guarded[0] if guarded else "none"
+    for side, across in (("left", "columns"), ("top", "rows")):
+        if mode in (side, "both") and not areas[side]:
+            if bare[side]:
+                width = _width(bare[side], side)
+                raise ValueError(f"guard {guard} leaves no over-scan pixel in the {width} "
+                                 f"{across} of the {side} over-scan; use --guard "
+                                 f"{max((width - 4) // 2, 0)} or less")
+            other = "top" if side == "left" else "left"
+            where = "left of" if side == "left" else "above"
+            raise ValueError(f"no usable over-scan {across} {where} the active area "
+                             f"(use --overscan {other} or none)")
+    along = {"left": areas["left"] and areas["left"][2] - areas["left"][0],
+             "top": areas["top"] and areas["top"][3] - areas["top"][1]}
+    span = {"none": shape[0], "left": along["left"], "top": along["top"],
+            "both": min(along["left"] or 0, along["top"] or 0)}[mode] // max(period, 1)
+    if smooth > max(span, 1):
+        raise ValueError(f"smooth {smooth} is longer than the {span} rows or columns of one "
+                         f"colour it smooths; use at most {span}")
+    return mode, areas["left"], areas["top"]
+
+
+def _width(area, side: str) -> int:
+    return area[3] - area[1] if side == "left" else area[2] - area[0]
 
 
 def _fill_edges(levels: np.ndarray, start: int, stop: int) -> np.ndarray:

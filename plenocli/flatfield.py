@@ -49,10 +49,21 @@ def white_gain(white: np.ndarray, *, cfa: str | None = None, median_px: int = 5,
         raise ValueError(f"median_px must be a positive odd number, got {median_px}")
     if not 0 <= floor < 1:
         raise ValueError(f"floor must be in [0, 1), got {floor}")
-    gain = np.full(white.shape, np.nan, np.float32)
+    if not 0 <= percentile <= 100:  # also refuses NaN
+        raise ValueError(f"percentile must be in [0, 100], got {percentile}")
     step = 2 if cfa else 1
+    if white.ndim != 2:
+        raise ValueError(f"white must be 2-D (rows, cols), got shape {white.shape}")
+    plane_side = min(white.shape) // step
+    if median_px > plane_side:  # before any filter allocates its windows
+        largest = max(plane_side - 1 + plane_side % 2, 1)
+        raise ValueError(f"median_px {median_px} is larger than the image ({plane_side} pixels "
+                         f"of one colour across); use at most {largest}")
+    gain = np.full(white.shape, np.nan, np.float32)
     for r, c in positions(cfa):
         plane = np.asarray(white[r::step, c::step], np.float32)
+        if not np.isfinite(plane).any():
+            raise ValueError("the white image has no valid pixel (all NaN: clipped or masked)")
         smooth = _median(plane, median_px)
         finite = smooth[np.isfinite(smooth)]
         if finite.size == 0:

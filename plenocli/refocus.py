@@ -42,6 +42,9 @@ VIEWS = {
     "q00": (-1, -1), "q01": (1, -1), "q10": (-1, 1), "q11": (1, 1),
 }
 CHANNELS = "RGB"
+MAX_G_VALUES = 1000          # a focal sweep longer than this is a typo, not a plan
+MAX_OUTPUT_PIXELS = 2 ** 28  # ~268 Mpx per channel: far beyond any sensor at s <= 1
+MAX_STACK_PIXELS = 2 ** 31   # a whole sweep's pages together: 8 GiB of float32
 # Voronoi-cell circumradius / pitch: no pixel is farther than this from its nearest lattice centre.
 _CELL_RADIUS = {"hex": 1.0 / math.sqrt(3.0), "square": 1.0 / math.sqrt(2.0)}
 
@@ -238,6 +241,22 @@ def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight)
         raise ValueError(f"frame must be 2-D (rows, cols), got shape {frame.shape}")
     check_options(s=s, g=g, view=view, mask_width=mask_width, kernel=kernel, radius=radius,
                   cfa=cfa, min_weight=min_weight)
+    check_output_size(frame.shape, s)
+
+
+def check_output_size(shape: tuple[int, int], s: float, *, pages: int = 1) -> None:
+    """Raise ValueError, before anything is allocated, when a (rows, cols) frame refocused at
+    scale ``s`` would be absurdly large: more than MAX_OUTPUT_PIXELS per page, or more than
+    MAX_STACK_PIXELS for all ``pages`` of a sweep (g values x channels)."""
+    rows_out, cols_out = output_shape(shape, s)
+    if rows_out * cols_out > MAX_OUTPUT_PIXELS:
+        raise ValueError(f"s = {s:g} makes a {cols_out} x {rows_out} image from a "
+                         f"{shape[1]} x {shape[0]} frame; s is the output size relative to the "
+                         "sensor image (paper: 0.2): use s <= 1")
+    if pages * rows_out * cols_out > MAX_STACK_PIXELS:
+        raise ValueError(f"{pages} pages of {cols_out} x {rows_out} pixels are more than "
+                         f"{MAX_STACK_PIXELS * 4 / 2 ** 30:g} GiB; sweep fewer g values or "
+                         "use a smaller s")
 
 
 def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: str,
@@ -245,8 +264,8 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
     """Raise ValueError naming the first refocus option that is out of range."""
     if not (np.isfinite(s) and s > 0):
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
-    if not np.isfinite(g):
-        raise ValueError(f"g must be a finite number (paper: 4), got {g}")
+    if not (np.isfinite(g) and g > 0):
+        raise ValueError(f"g must be a positive number (paper: 4), got {g}")
     if view not in VIEWS:
         raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if kernel not in KERNELS:
@@ -421,22 +440,37 @@ def sharpness(image: np.ndarray, *, lens_period_px: float | None = None) -> floa
 
 
 def parse_g(text: str | float) -> list[float]:
-    """g values from "4", "2,3,4" or a range "start:stop:step" (stop included when on a step)."""
+    """g values from "4", "2,3,4" or a range "start:stop:step" (stop included when on a step).
+
+    Every value must be positive and finite, and a sweep holds at most MAX_G_VALUES values
+    (checked before the list is built: ``0:1e9:1`` is refused at once)."""
     if isinstance(text, (int, float)):
-        return [float(text)]
-    spec = str(text).strip()
-    try:
-        if ":" in spec:
-            parts = [float(p) for p in spec.split(":")]
-            if len(parts) != 3 or parts[2] <= 0 or parts[1] < parts[0]:
-                raise ValueError(spec)
-            n = int(math.floor((parts[1] - parts[0]) / parts[2] + 1e-9)) + 1
-            values = [parts[0] + k * parts[2] for k in range(n)]
-        else:
-            values = [float(p) for p in spec.split(",") if p.strip()]
-    except ValueError as err:
-        raise ValueError(f"g must be a number, a list like 2,3,4 or a range like 2:6:0.5 "
-                         f"(start:stop:step, step > 0), got {text!r}") from err
-    if not values or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"g must hold finite numbers, got {text!r}")
+        values = [float(text)]
+    else:
+        values = _g_values(str(text).strip(), text)
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f"g must hold positive finite numbers (paper: 4), got {text!r}")
     return [round(v, 10) for v in values]
+
+
+def _g_values(spec: str, text) -> list[float]:
+    usage = (f"g must be a number, a list like 2,3,4 or a range like 2:6:0.5 "
+             f"(start:stop:step, step > 0), got {text!r}")
+    try:
+        parts = [float(p) for p in (spec.split(":") if ":" in spec else spec.split(","))
+                 if p.strip() or ":" in spec]
+    except ValueError as err:
+        raise ValueError(usage) from err
+    if ":" in spec:
+        if (len(parts) != 3 or not all(math.isfinite(p) for p in parts) or parts[2] <= 0
+                or parts[1] < parts[0]):
+            raise ValueError(usage)
+        count = int(math.floor((parts[1] - parts[0]) / parts[2] + 1e-9)) + 1
+    else:
+        count = len(parts)
+    if count > MAX_G_VALUES:
+        raise ValueError(f"g {text!r} asks for {count} refocus planes; a sweep holds at most "
+                         f"{MAX_G_VALUES} (use a larger step)")
+    if ":" in spec:
+        return [parts[0] + k * parts[2] for k in range(count)]
+    return parts

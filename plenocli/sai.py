@@ -32,6 +32,7 @@ from plenocli.model.cfa import shift_pattern
 from plenocli.model.lensgrid import LensGrid
 
 CFA_LAYOUTS = ("pixel", "micro-image")
+MIN_LENSES = 4  # micro-images per side: fewer make views too small to be images
 
 
 def view_names(n: int) -> list[str]:
@@ -52,7 +53,8 @@ def demultiplex(frame: np.ndarray, n: int) -> np.ndarray:
     ----------
     frame : ndarray, (rows, cols)
         Sensor image; micro-image (k, l) covers rows k*N .. k*N+N-1, columns l*N .. l*N+N-1.
-        Trailing rows/columns that do not fill a whole micro-image are ignored.
+        Its size must be a whole number of micro-images, at least MIN_LENSES of them per side
+        (a frame that is not is refused, with the crop that would fit).
     n : int
         Pixels per micro-image side.
 
@@ -66,9 +68,15 @@ def demultiplex(frame: np.ndarray, n: int) -> np.ndarray:
     if frame.ndim != 2:
         raise ValueError(f"frame must be 2-D (rows, cols), got shape {frame.shape}")
     rows, cols = frame.shape[0] // n, frame.shape[1] // n
-    if rows == 0 or cols == 0:
-        raise ValueError(f"frame of shape {frame.shape} is smaller than one {n} x {n} micro-image")
-    blocks = frame[: rows * n, : cols * n].reshape(rows, n, cols, n)
+    if min(rows, cols) < MIN_LENSES:
+        raise ValueError(f"a {frame.shape[1]} x {frame.shape[0]} frame holds "
+                         f"{cols} x {rows} micro-images of {n} x {n} pixels; the views need "
+                         f"at least {MIN_LENSES} x {MIN_LENSES} (check n)")
+    if (rows * n, cols * n) != frame.shape:
+        raise ValueError(f"a {frame.shape[1]} x {frame.shape[0]} frame is not a whole number of "
+                         f"{n} x {n} micro-images: check n, or crop the frame to "
+                         f"{cols * n} x {rows * n} pixels from its first micro-image")
+    blocks = frame.reshape(rows, n, cols, n)
     return np.ascontiguousarray(blocks.transpose(1, 3, 0, 2).reshape(n * n, rows, cols))
 
 
@@ -114,12 +122,19 @@ def approximate_sai(frame: np.ndarray, grid: LensGrid, n: int) -> tuple[np.ndarr
     if grid.lattice != "square":
         raise ValueError("approximate SAIs need a square lens lattice (ideal plenoptic sensor); "
                          f"this grid is {grid.lattice}: use refocus views for hex grids")
+    if grid.pitch_px < n:
+        raise ValueError(f"a micro-image of {grid.pitch_px:g} px cannot hold {n} x {n} "
+                         "sub-apertures of at least one pixel; use a smaller n")
     shaped = grid if grid.image_shape or grid.centres_xy is not None else None
     if shaped is None:
         from dataclasses import replace
 
         shaped = replace(grid, image_shape=frame.shape)
     indices, centres = shaped.lens_centres()
+    if len(indices) < MIN_LENSES * MIN_LENSES:
+        raise ValueError(f"the grid has {len(indices)} lenses on a {frame.shape[1]} x "
+                         f"{frame.shape[0]} frame; the views need at least "
+                         f"{MIN_LENSES} x {MIN_LENSES}")
     basis = grid.basis()
     # column index: the lattice vector more aligned with +x; flip so indices grow along +x / +y
     col_axis = int(np.argmax(np.abs(basis[:, 0])))

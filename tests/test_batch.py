@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -154,7 +155,7 @@ def test_corrupt_capture_fails_alone_with_its_reason(batch_run):
     assert first.exit_code == 1
     failures = [ln for ln in first.stderr.splitlines() if ln.startswith("failed: ")]
     assert len(failures) == 1 and f"{CORRUPT}.dng" in failures[0]
-    assert "step 'decode'" in failures[0] and "failed to read" in failures[0]  # decoder's
+    assert "step 'decode'" in failures[0] and "truncated" in failures[0]
     table = {ln.split()[0]: ln.split()[1] for ln in first.stderr.splitlines()
              if ln.startswith("shot")}
     assert table[CORRUPT] == "failed"
@@ -350,3 +351,101 @@ def test_ctrl_c_leaves_no_partial_output(tmp_path):
     for tif in out.rglob("*.tif"):
         pixels(tif)  # every file present is complete
     assert not list(out.rglob("biased.tif")) and not list(out.rglob("views.tif"))
+
+
+# ------------------------------------------------------- crashes, time limits, dying parents
+
+def _fake_capture(config, capture, **kwargs):
+    """Stands in for run_capture in forked workers: the capture's name says what it does."""
+    import plenocli.pipeline.batch as batch_mod
+
+    name = Path(capture).stem
+    if name == "crash":
+        os._exit(3)
+    if name == "slow":
+        time.sleep(60)
+    if name == "stuck":  # a stage that swallows every interruption (stuck in compiled code)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                time.sleep(60)
+            except BaseException:
+                pass
+    return batch_mod.CaptureResult(capture, name, "done", "ok")
+
+
+@pytest.fixture
+def forked_pool(monkeypatch):
+    """Workers forked from this process, so that they see the patched run_capture."""
+    import multiprocessing
+
+    import plenocli.pipeline.batch as batch_mod
+
+    monkeypatch.setattr(batch_mod, "_context", lambda: multiprocessing.get_context("fork"))
+    monkeypatch.setattr(batch_mod, "run_capture", _fake_capture)
+    monkeypatch.setattr(batch_mod, "GRACE_SECONDS", 0.5)
+    return batch_mod
+
+
+def test_crash_and_time_limit_fail_their_capture_only(forked_pool):
+    captures = ["/x/crash.dng", "/x/slow.dng", "/x/fine.dng", "/x/stuck.dng"]
+    start = time.monotonic()
+    results = {r.name: r for r in forked_pool._pool_results(2, "cfg", captures, {}, 0.5)}
+    assert time.monotonic() - start < 20
+    assert results["fine"].status == "done"
+    assert results["crash"].status == "failed" and "died" in results["crash"].detail
+    for name in ("slow", "stuck"):
+        assert results[name].status == "failed", results[name]
+        assert "ran past --timeout 0.5 s" in results[name].detail
+
+
+def test_timeout_must_be_positive(shoot):
+    _, config, captures = shoot
+    with pytest.raises(ConfigError, match="--timeout"):
+        run_batch(config, captures[:1], timeout=float("nan"))
+
+
+def _group_gone(pgid: int, seconds: float) -> bool:
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGKILL, -9)])
+def test_batch_parent_death_takes_its_workers(tmp_path, sig, code):
+    config, captures = make_shoot(tmp_path, 4, corrupt=None, rows=600, cols=800)
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "plenocli", "batch", str(config), "--inputs",
+                             str(tmp_path / "captures" / "*.dng"), "-j", "2", "--out", str(out)],
+                            env=env, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list(out.glob("shot*/frames.tif")) and time.monotonic() < deadline:
+            time.sleep(0.02)  # the workers are busy with captures
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=30)  # a lingering worker would hold the pipe
+        assert proc.returncode == code, stderr
+        if sig == signal.SIGTERM:
+            assert stderr.strip().splitlines()[-1] == (
+                "plenocli: terminated; no partial output was kept")
+        assert _group_gone(proc.pid, 15), "a worker, the fork server or the tracker lingers"
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert not list(out.rglob("*.part")), "a temporary file was left behind"
+    for tif in out.rglob("*.tif"):
+        pixels(tif)  # every file present is complete
+
+
+def test_captures_within_the_time_limit_are_done(shoot, tmp_path):
+    _, config, captures = shoot
+    fine = [c for c in captures if c.stem != CORRUPT][:2]
+    report = run_batch(config, fine, out=tmp_path / "out", jobs=1, timeout=120)
+    assert [r.status for r in report.results] == ["done", "done"]
+    assert not list((tmp_path / "out").rglob("*.part"))

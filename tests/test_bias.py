@@ -85,3 +85,28 @@ def test_bad_mode_and_missing_area_name_the_problem():
         subtract_overscan(frame, active_area=[6, 10, 40, 60], masked_areas=[], overscan="right")
     with pytest.raises(ValueError, match="no usable over-scan columns"):
         subtract_overscan(frame, active_area=[6, 10, 40, 60], masked_areas=[], overscan="left")
+
+
+AREAS = dict(active_area=[6, 10, 40, 60], masked_areas=[[6, 0, 40, 10], [0, 10, 6, 60]])
+
+
+@pytest.mark.parametrize("options,words", [
+    (dict(guard=99999), "guard 99999 leaves no over-scan pixel"),
+    (dict(guard=4, overscan="left"), "use --guard 3 or less"),
+    (dict(smooth=100000), "smooth 100000 is longer than the 17 rows"),
+    (dict(smooth=-1), "smooth must be a whole number"),
+    (dict(guard=1.5), "guard must be a whole number"),
+    (dict(active_area=[6, 10, 41, 60]), "not inside the 60 x 40 frame"),
+    (dict(active_area=[6, 10, 6, 60]), "not inside"),
+])
+def test_options_that_do_not_fit_the_frame_are_refused(options, words):
+    frame, _ = frame_with_bias()
+    with pytest.raises(ValueError, match=words):
+        subtract_overscan(frame, **{**AREAS, **options})
+
+
+def test_top_overscan_missing_is_named():
+    frame, _ = frame_with_bias()
+    with pytest.raises(ValueError, match="no usable over-scan rows above"):
+        subtract_overscan(frame, active_area=AREAS["active_area"],
+                          masked_areas=AREAS["masked_areas"][:1], overscan="top")

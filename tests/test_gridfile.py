@@ -100,3 +100,27 @@ def test_broken_yaml_is_one_input_error(tmp_path):
     path.write_text(path.read_text().replace("lattice: hex", "lattice: [hex"))
     with pytest.raises(InputError, match="not a YAML lens grid"):
         gridfile.read_grid(path)
+
+
+@pytest.mark.parametrize("change,words", [
+    ({"angle_rad": float("nan")}, "angle_rad"), ({"pitch_px": float("inf")}, "pitch_px"),
+    ({"pitch_px": 0.01}, "pitch_px"), ({"offset_xy": [float("nan"), 0.0]}, "offset_xy"),
+    ({"image_shape": [0, 10]}, "image_shape"), ({"image_shape": [1e300, 10]}, "image_shape"),
+])
+def test_grids_that_describe_no_lattice_are_refused(tmp_path, change, words):
+    doc = {"lens_grid": {"lattice": "hex", "pitch_px": 20.0, "angle_rad": 0.1,
+                         "offset_xy": [3.0, 4.0], **change}}
+    (tmp_path / "g.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(InputError, match=words):
+        gridfile.read_grid(tmp_path / "g.yaml")
+
+
+@pytest.mark.parametrize("centres,indices,words", [
+    ([[1.0, np.nan]], [[0, 0]], "finite"),
+    ([[1.0, 2.0], [3.0, 4.0]], [[0, 0], [0, 100000]], "compact block"),
+    ([[1.0, 2.0]], [[0, 0], [0, 1]], "shapes"),
+])
+def test_lens_tables_must_be_finite_and_compact(centres, indices, words):
+    with pytest.raises(ValueError, match=words):
+        LensGrid(pitch_px=20.0, angle_rad=0.0, offset_xy=(0.0, 0.0),
+                 centres_xy=np.array(centres), indices=np.array(indices))

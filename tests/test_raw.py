@@ -122,3 +122,23 @@ def test_bad_cfa_is_refused(tmp_path):
     tifffile.imwrite(tmp_path / "x.tif", np.zeros((4, 4), np.uint16))
     with pytest.raises(InputError, match="not a 2 x 2 Bayer pattern"):
         rawio.decode(tmp_path / "x.tif", cfa="RGGX")
+
+
+@pytest.mark.parametrize("levels,words", [
+    (dict(black=float("nan")), "black level"), (dict(black=-3.0), "black level"),
+    (dict(white=-5.0), "white level"), (dict(white=float("nan")), "white level"),
+    (dict(black=900.0, white=800.0), "white level 800 must be above the black level 900"),
+])
+def test_levels_must_be_finite_and_ordered(tmp_path, levels, words):
+    tifffile.imwrite(tmp_path / "s.tif", np.ones((8, 8), np.uint16))
+    with pytest.raises(InputError, match=words):
+        rawio.decode(tmp_path / "s.tif", **levels)
+
+
+def test_dng_active_area_beyond_the_image_is_refused(tmp_path):
+    from plenocli.io.dng import write_dng
+
+    write_dng(tmp_path / "x.dng", np.zeros((1, 16, 16), np.uint16), cfa="RGGB",
+              black_levels=[0], white_level=1000, active_area=[0, 0, 4000, 6000])
+    with pytest.raises(InputError, match="active_area"):
+        rawio.decode(tmp_path / "x.dng")

@@ -72,7 +72,7 @@ def reference_sums(frame, grid, *, s, g, view, mask_width, kernel, radius=None, 
 @pytest.mark.parametrize("view,kernel,g,cfa,radius", [
     ("full", "lanczos3", 4.0, None, None),
     ("left", "lanczos2", 3.0, None, None),
-    ("q10", "lanczos4", -2.5, None, None),
+    ("q10", "lanczos4", 2.5, None, None),
     ("bottom", "bilinear", 4.0, "GRBG", None),
     ("full", "lanczos3", 1.0, None, 6.0),
 ])
@@ -261,3 +261,34 @@ def test_sharpness_ignores_the_lens_pattern_and_prefers_detail():
     assert (sharpness(blurred + lens * blurred.std(), lens_period_px=period)
             < sharpness(detail, lens_period_px=period))
     assert sharpness(blurred + lens) > sharpness(blurred)  # an unsmoothed Laplacian is fooled
+
+
+@pytest.mark.parametrize("text,words", [
+    ("0", "positive"), ("-1", "positive"), ("2,-3", "positive"), ("nan", "positive"),
+    ("0:1e9:1", "1000000001 refocus planes"), ("1:1001:1", "at most 1000"),
+    ("inf:5:1", "start:stop:step"),
+])
+def test_parse_g_refuses_values_and_sweeps_up_front(text, words):
+    with pytest.raises(ValueError, match=words):
+        parse_g(text)
+
+
+def test_parse_g_keeps_a_sweep_of_1000():
+    assert len(parse_g("1:1000:1")) == 1000
+
+
+def test_absurd_output_size_is_refused_before_allocating():
+    with pytest.raises(ValueError, match="s = 1000"):
+        refocus(np.zeros((120, 160), np.float32), GRID, s=1000.0)
+    with pytest.raises(ValueError, match="g must be a positive"):
+        refocus(np.zeros((12, 16), np.float32), GRID, g=0.0)
+
+
+def test_a_sweep_too_large_for_memory_is_refused_up_front():
+    from plenocli.refocus import MAX_STACK_PIXELS, check_output_size
+
+    rows_out, cols_out = output_shape((4480, 6720), 1.0)
+    pages = MAX_STACK_PIXELS // (rows_out * cols_out) + 1
+    check_output_size((4480, 6720), 1.0, pages=pages - 1)
+    with pytest.raises(ValueError, match=f"{pages} pages"):
+        check_output_size((4480, 6720), 1.0, pages=pages)

@@ -31,15 +31,28 @@ def test_demultiplex_returns_the_views_exactly(n, dtype):
     assert view_names(n)[-1] == f"S{n - 1}{n - 1}"
 
 
-def test_demultiplex_is_eq1_and_ignores_partial_micro_images():
-    frame = np.arange(7 * 9).reshape(7, 9)
+def test_demultiplex_is_eq1():
+    frame = np.arange(8 * 10).reshape(8, 10)
     out = demultiplex(frame, 2)
-    assert out.shape == (4, 3, 4)
+    assert out.shape == (4, 4, 5)
     for i in range(2):
         for j in range(2):
-            for k in range(3):
-                for m in range(4):
+            for k in range(4):
+                for m in range(5):
                     assert out[i * 2 + j, k, m] == frame[k * 2 + i, m * 2 + j]
+
+
+@pytest.mark.parametrize("shape,n,words", [
+    ((512, 512), 7, ["not a whole number", "511 x 511"]),
+    ((509, 511), 2, ["not a whole number", "510 x 508"]),
+    ((3, 3), 2, ["1 x 1 micro-images", "at least 4 x 4"]),
+    ((8, 40), 4, ["10 x 2 micro-images"]),
+])
+def test_demultiplex_refuses_partial_or_too_few_micro_images(shape, n, words):
+    with pytest.raises(ValueError) as err:
+        demultiplex(np.zeros(shape, np.float32), n)
+    for word in words:
+        assert word in str(err.value)
 
 
 @pytest.mark.parametrize("bad", [0, -1, 1.5, True])

@@ -1,3 +1,5 @@
+import json
+
 import numpy as np
 import pytest
 import tifffile
@@ -68,3 +70,100 @@ def test_foreign_and_broken_files(tmp_path):
         tiffio.read_image(tmp_path / "bad.tif")
     with pytest.raises(InputError, match="no such file"):
         tiffio.read_image(tmp_path / "missing.tif")
+
+
+@pytest.mark.parametrize("views", [
+    np.full((2, 8, 8), np.nan, np.float32),
+    np.stack([np.ones((8, 8), np.float32), np.full((8, 8), np.inf, np.float32)]),
+])
+def test_a_view_without_a_finite_pixel_is_not_written(tmp_path, views):
+    with pytest.raises(InputError, match="no valid pixel"):
+        tiffio.write_image(tmp_path / "out.tif", views, {})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_view_with_one_finite_pixel_is_written(tmp_path):
+    views = np.full((300, 8), np.nan, np.float32)
+    views[299, 7] = 1.0  # past the first band the check looks at
+    tiffio.write_image(tmp_path / "out.tif", views, {})
+    assert np.isfinite(tiffio.read_image(tmp_path / "out.tif")[0]).sum() == 1
+
+
+@pytest.mark.parametrize("dtype", [np.complex64, np.bool_, np.int8])
+def test_samples_that_are_not_real_sensor_values_are_refused(tmp_path, dtype):
+    tifffile.imwrite(tmp_path / "x.tif", np.zeros((4, 4), dtype))
+    with pytest.raises(InputError, match="not real-valued"):
+        tiffio.read_image(tmp_path / "x.tif")
+
+
+def test_truncation_is_found_in_the_header_before_reading(tmp_path):
+    tiffio.write_image(tmp_path / "a.tif", np.ones((3, 64, 64), np.float32), {"views": list("abc")})
+    data = (tmp_path / "a.tif").read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="truncated|damaged") as err:
+        tiffio.read_image(tmp_path / "cut.tif")
+    assert "tifffile" not in str(err.value) and "\n" not in str(err.value)
+    assert tiffio.read_meta(tmp_path / "cut.tif") == {}
+
+
+def test_a_header_claiming_a_huge_image_is_refused_before_allocating(tmp_path, monkeypatch):
+    tifffile.imwrite(tmp_path / "a.tif", np.zeros((64, 64), np.uint16))
+    monkeypatch.setattr(tiffio, "MAX_PAGE_PIXELS", 64 * 64 - 1)
+    with pytest.raises(InputError, match="64 x 64 samples"):
+        tiffio.read_image(tmp_path / "a.tif")
+
+
+@pytest.mark.parametrize("meta,words", [
+    ({"active_area": [0, 0, 9, 8]}, "active_area"),
+    ({"active_area": [4, 0, 4, 8]}, "active_area"),
+    ({"masked_areas": [[0, 0, 8, 2.5]]}, "masked area"),
+    ({"views": ["a", "b"]}, "names"),
+    ({"origin": [0.5, 0]}, "origin"),
+])
+def test_metadata_geometry_must_fit_the_image(tmp_path, meta, words):
+    description = json.dumps({tiffio.FORMAT_KEY: 1, **meta})
+    tifffile.imwrite(tmp_path / "a.tif", np.zeros((8, 8), np.float32), description=description,
+                     metadata=None)
+    with pytest.raises(InputError, match=words):
+        tiffio.read_image(tmp_path / "a.tif")
+
+
+@pytest.fixture(scope="module")
+def pristine(tmp_path_factory):
+    from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+
+    folder = tmp_path_factory.mktemp("pristine")
+    raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
+    write_dualpixel_raw(folder / "dp.dng", raw, truth)
+    views = np.random.default_rng(0).random((2, 40, 50)).astype(np.float32)
+    tiffio.write_image(folder / "p.tif", views, {"views": ["a", "b"],
+                                                 "active_area": [0, 0, 40, 50],
+                                                 "masked_areas": []})
+    return folder
+
+
+@pytest.mark.parametrize("name", ["dp.dng", "p.tif"])
+@pytest.mark.parametrize("seed", range(150))
+def test_damaged_files_are_read_or_refused_in_one_line(pristine, tmp_path, name, seed):
+    """Seeded damage (cut anywhere, or bytes changed in the header or anywhere): every reader
+    returns a result or raises InputError, nothing else."""
+    from plenocli.io import raw
+    from plenocli.io.info import describe
+
+    rng = np.random.default_rng(seed)
+    data = bytearray((pristine / name).read_bytes())
+    if seed % 3 == 0:
+        data = data[: int(rng.integers(8, len(data)))]
+    else:
+        reach = 600 if seed % 3 == 1 else len(data)
+        for _ in range(int(rng.integers(1, 6))):
+            where = int(rng.integers(0, reach))
+            data[where] = int(rng.integers(0, 256))
+    damaged = tmp_path / name
+    damaged.write_bytes(bytes(data))
+    for read in (tiffio.read_image, raw.decode, describe):
+        try:
+            read(damaged)
+        except InputError as err:
+            assert "\n" not in str(err)
+

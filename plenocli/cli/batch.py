@@ -18,8 +18,11 @@ from plenocli.cli import options
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Send the captures to this dask.distributed scheduler (tcp://host:8786) "
                    "instead of local processes; needs pip install 'plenocli[dask]'.")
+@click.option("--timeout", type=options.FiniteFloat(min=0, min_open=True), default=None,
+              metavar="SECONDS", help="Stop a capture that runs longer than this in its worker "
+              "and report it as failed.")
 @options.stage_command
-def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler):
+def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, timeout):
     """Run the pipeline template CONFIG over many captures.
 
     In CONFIG, per-capture steps read "{capture}" and write under "{out}/{name}/" ({name} is the
@@ -34,15 +37,28 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler):
     """
     import logging
     import os
+    import sys
 
     from plenocli.errors import PlenocliError
-    from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
+    from plenocli.pipeline.batch import (
+        Terminated,
+        expand_inputs,
+        format_summary,
+        run_batch,
+        sigterm_stops,
+    )
     from plenocli.progress import log
 
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
-                       force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler)
+    try:
+        with sigterm_stops():
+            report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
+                               force=force, dry_run=dry_run, jobs=jobs or 1,
+                               scheduler=scheduler, timeout=timeout)
+    except Terminated:
+        click.echo("plenocli: terminated; no partial output was kept", err=True)
+        sys.exit(143)
     if log.isEnabledFor(logging.INFO):  # -q keeps only the failures
         click.echo(format_summary(report), err=True)
     for failure in report.failed:

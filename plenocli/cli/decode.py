@@ -14,7 +14,8 @@ from plenocli.cli import options
               default=None, help="Black level (DN) when the file has none.")
 @click.option("--white", type=options.FiniteFloat(min=0, min_open=True),
               default=None, help="White (clipping) level in DN.")
-@click.option("--cfa", default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
+@click.option("--cfa", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
+              default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
 @click.option("--calib", type=click.Path(dir_okay=False), default=None,
               help="Raytrix RayCalibData XML (with --camera raytrix); stored in the metadata.")
 @options.preview_opt

@@ -104,7 +104,10 @@ def read_grid(path: str | os.PathLike, *,
         if image_shape is None:
             raise InputError(f"{p}: a Raytrix XML grid needs the image size (its offset is from "
                              "the image centre); pass the image it belongs to")
-        return raytrix.grid_from_calib(calib, image_shape)
+        try:
+            return raytrix.grid_from_calib(calib, image_shape)
+        except ValueError as err:
+            raise InputError(f"{p}: not a usable lens grid ({err})") from err
     try:
         text = p.read_text(encoding="utf-8")
         doc = _fast_load(text)
@@ -112,7 +115,8 @@ def read_grid(path: str | os.PathLike, *,
             doc = yaml.load(text, Loader=_LOADER)
         return LensGrid.from_dict(doc["lens_grid"])
     except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{p}: not a YAML lens grid ({err})") from err
-    except (KeyError, TypeError, ValueError) as err:
+        reason = " ".join(str(err).replace('"<unicode string>", ', "").split())
+        raise InputError(f"{p}: not a YAML lens grid ({reason})") from err
+    except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
         raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "
                          "make one with plenocli calibrate") from err

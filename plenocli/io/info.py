@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tifffile
 import yaml
 
 from plenocli.errors import InputError
 from plenocli.io import raw as raw_io
-from plenocli.io.tiffio import read_meta
+from plenocli.io.tiffio import open_tiff, read_meta
+from plenocli.model.lensgrid import LensGrid
 
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
               "masked_areas")
@@ -38,7 +38,7 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_xml(p)}
     if suffix == ".json":
         return {**head, **_describe_json(p)}
-    kind = raw_io.sniff(p)
+    kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
         return {**head, **_describe_raw(p)}
     if kind == "image":
@@ -52,7 +52,7 @@ def _describe_raw(p: Path) -> dict:
     frames, meta = raw_io.decode(p)
     model = None
     if meta["camera"] == "dng":
-        with tifffile.TiffFile(p) as tif:
+        with open_tiff(p) as tif:
             tags = tif.pages[0].tags
             model = next((str(tags[c].value) for c in TIFF_MODEL_TAGS if c in tags), None)
     top, left, bottom, right = meta["active_area"]
@@ -68,7 +68,7 @@ def _describe_raw(p: Path) -> dict:
 
 
 def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
-    with tifffile.TiffFile(p) as tif:
+    with open_tiff(p) as tif:
         page = tif.pages[0]
         shape, dtype, count = page.shape, str(page.dtype), len(tif.pages)
     extra = {k: v for k, v in meta.items()
@@ -92,6 +92,10 @@ def _describe_yaml(p: Path) -> dict:
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise InputError(f"{p}: not valid YAML ({str(err).splitlines()[0]})") from err
     if isinstance(doc, dict) and isinstance(doc.get("lens_grid"), dict):
+        try:  # a grid no stage would accept is said so, not described
+            LensGrid.from_dict(doc["lens_grid"])
+        except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
+            raise InputError(f"{p}: not a usable lens grid (missing or bad {err})") from err
         grid = dict(doc["lens_grid"])
         lenses = grid.pop("lenses", None)
         others = {k: v for k, v in doc.items() if k not in ("lens_grid", "provenance")}

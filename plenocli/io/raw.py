@@ -21,7 +21,7 @@ import numpy as np
 import tifffile
 
 from plenocli.errors import InputError
-from plenocli.io import rawmeta
+from plenocli.io import rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
@@ -45,10 +45,10 @@ def sniff(path: str | os.PathLike) -> str:
         if head[8:10] == b"CR":
             return "canon-dp"
         try:
-            with tifffile.TiffFile(p) as tif:
+            with tiffio.open_tiff(p) as tif:
                 if 50706 in tif.pages[0].tags:  # DNGVersion
                     return "dng"
-        except (tifffile.TiffFileError, ValueError, OSError, IndexError) as err:
+        except tiffio.READ_ERRORS as err:
             raise InputError(f"{p}: a TIFF header but an unreadable file ({err}); "
                              "is it truncated?") from err
         return "image"
@@ -94,7 +94,25 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         meta["raytrix_calib"] = raytrix.read_calib(calib)
     elif calib is not None:
         raise InputError(f"--calib is for --camera raytrix, not {kind}")
+    _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
+                       white=white)
+    _check_levels(path, meta["black_level"], meta["white_level"])
+    tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
+                          frames.shape)
+    meta["camera"] = kind
+    if kind in ("canon-dp", "dng"):
+        meta["exif"] = rawmeta.camera_exif(path)
+    return frames, meta
+
+
+def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa, black,
+                       white) -> None:
+    """Frame names, CFA and levels given by the user (they win over the file's), and the
+    defaults of a file that has none."""
     if frame_names:
+        if len(set(frame_names)) != len(frame_names) or not all(frame_names):
+            raise InputError(f"frame names {','.join(frame_names)!r} must be distinct and "
+                             "non-empty (e.g. --frames S,A)")
         if len(frame_names) != frames.shape[0]:
             raise InputError(f"{path}: {len(frame_names)} frame names given "
                              f"({','.join(frame_names)}) for {frames.shape[0]} frames")
@@ -102,6 +120,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if cfa:
         meta["cfa"] = _check_cfa(cfa)
     n = frames.shape[0]
+    tiffio.check_real_dtype(path, frames.dtype)
     if black is not None:
         meta["black_level"] = [[float(black)] * 4 for _ in range(n)]
     if white is not None:
@@ -111,10 +130,18 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("white_level") is None:
         meta["white_level"] = [float(np.iinfo(frames.dtype).max)
                                if frames.dtype.kind in "ui" else float("inf")] * n
-    meta["camera"] = kind
-    if kind in ("canon-dp", "dng"):
-        meta["exif"] = rawmeta.camera_exif(path)
-    return frames, meta
+
+
+def _check_levels(path, blacks: list, whites: list) -> None:
+    """Black levels finite and >= 0, white levels above them (+inf: a float image's)."""
+    for black, white in zip(blacks, whites, strict=True):
+        low = np.asarray(black, np.float64)
+        if not (np.all(np.isfinite(low)) and np.all(low >= 0)):
+            raise InputError(f"{path}: black level {black} must be finite and >= 0 DN "
+                             "(--black)")
+        if not white > low.max():  # also refuses NaN
+            raise InputError(f"{path}: white level {white:g} must be above the black level "
+                             f"{low.max():g} DN (--white)")
 
 
 def _check_cfa(cfa: str) -> str:
@@ -195,7 +222,7 @@ def _tag(page, code, default=None):
 
 def _decode_dng(path) -> tuple[np.ndarray, dict]:
     try:
-        with tifffile.TiffFile(path) as tif:
+        with tiffio.open_tiff(path) as tif:
             raws = [pg for pg in _raw_pages(tif)
                     if pg.photometric in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
                     and not (int(pg.subfiletype) & 1)]
@@ -203,6 +230,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                 raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
             frames, blacks, whites, names = [], [], [], []
             for k, page in enumerate(raws):
+                tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
                 try:
                     data = page.asarray()
                 except ValueError as err:
@@ -239,9 +267,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             masked_flat = [int(v) for v in masked_flat] if masked_flat is not None else []
             masked = [masked_flat[i:i + 4] for i in range(0, len(masked_flat), 4)]
             colour = rawmeta.dng_colour(first, tif.pages[0])
-    except (tifffile.TiffFileError, OSError, EOFError, IndexError, KeyError) as err:
-        raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
-    except ValueError as err:
+    except tiffio.READ_ERRORS as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     if len(set(names)) != len(names):
         names = [f"frame{k}" for k in range(len(names))]
@@ -268,13 +294,24 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
     data = None
     if p.suffix.lower() in (".tif", ".tiff"):
         try:
-            data = tifffile.imread(p)
-        except (tifffile.TiffFileError, ValueError, OSError, EOFError) as err:
+            with tiffio.open_tiff(p) as tif:
+                data = tif.asarray()
+        except tiffio.READ_ERRORS as err:
             raise InputError(f"{p}: unreadable TIFF ({err}); the file may be truncated") from err
     else:
         import cv2
 
-        data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        # silent: a damaged file becomes our one line, not OpenCV's log
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+        try:
+            data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        except cv2.error as err:  # OpenCV refuses headers beyond 2^30 pixels before allocating
+            if "CV_IO_MAX_IMAGE_PIXELS" in str(err):
+                raise InputError(f"{p}: the header claims an image of more than "
+                                 f"{tiffio.MAX_PAGE_PIXELS} pixels; the file is damaged or not "
+                                 "a sensor image") from err
+            raise InputError(f"{p}: unreadable image; the file may be truncated or of another "
+                             "type") from err
         if data is None:
             raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")
         if data.ndim == 3:

@@ -119,9 +119,32 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
     except ValueError as err:
         raise InputError(f"{source}: bad RayCalibData ({err}); the file may be truncated") \
             from err
-    if not calib["diameter"] > 0:
-        raise InputError(f"{source}: diameter {calib['diameter']} must be positive")
+    try:
+        check_calib(calib)
+    except ValueError as err:
+        raise InputError(f"{source}: {err}; the calibration is damaged, use the camera's "
+                         "RayCalibData file") from err
     return calib
+
+
+def check_calib(calib: dict) -> None:
+    """Raise ValueError naming the first lattice field of ``calib`` that cannot describe a lens
+    grid: non-finite numbers, a diameter below one pixel, a zero or degenerate lens basis."""
+    if not 1.0 <= calib["diameter"] <= 1e6:   # false for NaN
+        raise ValueError(f"diameter {calib['diameter']} must be a lens pitch from 1 to 1e6 px")
+    for key in ("offset", "rotation", "lens_base_x", "lens_base_y"):
+        values = np.asarray(calib[key], float)
+        if not np.all(np.abs(values) <= 1e6):
+            raise ValueError(f"{key} {calib[key]} must hold finite numbers")
+    bx = np.asarray(calib["lens_base_x"], float)
+    by = np.asarray(calib["lens_base_y"], float)
+    nx, ny = float(np.hypot(*bx)), float(np.hypot(*by))
+    if not (nx > 1e-6 and ny > 1e-6):
+        raise ValueError(f"lens_base_x {list(bx)} and lens_base_y {list(by)} must be non-zero "
+                         "vectors")
+    if abs(float(bx[0] * by[1] - bx[1] * by[0])) < 0.1 * nx * ny:  # sin(angle) < 0.1
+        raise ValueError(f"lens_base_x {list(bx)} and lens_base_y {list(by)} are (nearly) "
+                         "parallel: they span no lattice")
 
 
 def read_calib(path: str | os.PathLike) -> dict:
@@ -194,6 +217,7 @@ def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     """The lattice of a Raytrix calibration as a ``LensGrid`` of an image of ``image_shape``
     (rows, cols). Lens (0, 0) is the centre lens; b1, b2 are the Raytrix base vectors (ordered
     so that b2 is b1 turned by +60 deg in image coordinates)."""
+    check_calib(calib)
     rows, cols = image_shape
     d = float(calib["diameter"])
     bx = np.asarray(calib["lens_base_x"], float)

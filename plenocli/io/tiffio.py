@@ -17,8 +17,13 @@ holds a JSON object with everything later stages need:
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import os
+import re
+import zlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -27,9 +32,18 @@ import tifffile
 from plenocli import __version__
 from plenocli.errors import InputError
 from plenocli.io.atomic import atomic_path
+from plenocli.model.cfa import is_bayer
 
 FORMAT_KEY = "plenocli_format"
 FORMAT_VERSION = 1
+# Sizes read from a header are checked before anything is allocated: 2^30 pixels (1 Gpx) per
+# page is 30 times a full-frame raw; a larger claim is damage, not a sensor.
+MAX_PAGE_PIXELS = 2 ** 30
+COMPRESSION_NONE = 1
+# What reading a damaged file raises, from tifffile or the codec of a compressed page (zlib,
+# imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
+READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
+               RuntimeError, zlib.error)
 
 
 def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
@@ -43,6 +57,14 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
     names = meta.get("views")
     if names is not None and len(names) != data.shape[0]:
         raise ValueError(f"{len(names)} view names for {data.shape[0]} views")
+    names = names or [f"view {k}" for k in range(data.shape[0])]
+    if data.dtype.kind == "f":
+        for name, page in zip(names, data, strict=True):
+            if not _has_finite(page):
+                raise InputError(f"{path}: view {name} of the result holds no valid pixel (all "
+                                 "NaN or infinite: every input pixel clipped, masked or outside "
+                                 "the grid); nothing was written: check the inputs with "
+                                 "plenocli info")
     description = json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
     with atomic_path(path, protect=protect) as tmp:
         with tifffile.TiffWriter(tmp) as tw:
@@ -52,13 +74,94 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                          software=f"plenocli {__version__}")
 
 
+def _has_finite(page: np.ndarray, rows: int = 64) -> bool:
+    """Whether ``page`` holds a finite value; stops at the first band that does (cheap)."""
+    return any(np.isfinite(page[r:r + rows]).any() for r in range(0, page.shape[0], rows))
+
+
+class _Collect(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+@contextlib.contextmanager
+def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
+    """Open a TIFF whose every page header is sane (see :func:`check_page`).
+
+    tifffile logs damage it reads past (``invalid page offset``) instead of raising: that is
+    collected here (no stray line on the terminal) and becomes one InputError."""
+    p = Path(path)
+    logger = logging.getLogger("tifffile")
+    collect, propagate = _Collect(), logger.propagate
+    logger.addHandler(collect)
+    logger.propagate = False
+    try:
+        with contextlib.ExitStack() as stack:
+            try:
+                tif = stack.enter_context(tifffile.TiffFile(p))
+                pages = list(tif.pages)
+            except TypeError as err:  # a tag of the wrong count or type: tifffile trips on it
+                raise InputError(f"{p}: damaged TIFF (a malformed tag: {err}); copy or write "
+                                 "it again") from err
+            damage = [m for m in collect.messages
+                      if any(w in m.lower() for w in ("offset", "truncat", "corrupt", "invalid"))]
+            if damage:
+                reason = re.sub(r"<[^>]*>\s*", "", damage[0].splitlines()[0]).strip()
+                raise InputError(f"{p}: damaged TIFF ({reason}); the file may be truncated: "
+                                 "copy or write it again")
+            for page in pages:
+                check_page(p, page)
+            yield tif
+    finally:
+        logger.removeHandler(collect)
+        logger.propagate = propagate
+
+
+def check_page(path: Path, page) -> None:
+    """Refuse a page whose header claims more than MAX_PAGE_PIXELS, a sample type that is not a
+    real number (complex, bool), or uncompressed pixel data beyond the end of the file."""
+    try:
+        shape = tuple(int(v) for v in page.shape)
+        compression = int(page.compression)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"{path}: damaged TIFF (a malformed tag: {err}); copy or write it "
+                         "again") from err
+    pixels = int(np.prod(shape, dtype=np.float64))
+    if pixels > MAX_PAGE_PIXELS:
+        raise InputError(f"{path}: the TIFF header claims an image of {' x '.join(map(str, shape))}"
+                         f" samples, more than plenocli reads ({MAX_PAGE_PIXELS} per page); the "
+                         "file is damaged or not a sensor image")
+    check_real_dtype(path, page.dtype)
+    if page.databytecounts:
+        size = Path(path).stat().st_size
+        end = max(int(o) + int(c) for o, c in zip(page.dataoffsets, page.databytecounts,
+                                                   strict=True))
+        short = (compression == COMPRESSION_NONE
+                 and sum(int(c) for c in page.databytecounts) < page.nbytes)
+        if end > size or short:
+            raise InputError(f"{path}: truncated TIFF (the header places pixel data up to byte "
+                             f"{end}, the file has {size} bytes); copy or write it again")
+
+
+def check_real_dtype(path, dtype) -> None:
+    """Sensor and plenocli images hold real numbers: unsigned or 16+ bit integers, or floats."""
+    dtype = np.dtype(dtype) if dtype is not None else None
+    if dtype is None or dtype.kind not in "uif" or (dtype.kind == "i" and dtype.itemsize < 2):
+        raise InputError(f"{path}: samples of type {dtype} are not real-valued sensor data "
+                         "(expected unsigned integers, 16/32-bit integers or floats)")
+
+
 def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     """Read a TIFF as (views, rows, cols) and its plenocli metadata ({} for a foreign TIFF)."""
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: no such file")
     try:
-        with tifffile.TiffFile(p) as tif:
+        with open_tiff(p) as tif:
             if not tif.pages:
                 raise InputError(f"{p}: the TIFF holds no image")
             description = tif.pages[0].description
@@ -67,7 +170,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
                 data = _stack_pages(p, [page.asarray() for page in tif.pages])
-    except (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError) as err:
+    except READ_ERRORS as err:
         raise InputError(f"{p}: not a readable TIFF image ({err}); "
                          "pass an image written by plenocli or a plain TIFF") from err
     meta: dict = {}
@@ -78,7 +181,72 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             parsed = None
         if isinstance(parsed, dict) and FORMAT_KEY in parsed:
             meta = {k: v for k, v in parsed.items() if k != FORMAT_KEY}
+    check_geometry(p, meta, data.shape)
+    check_levels(p, meta, data.shape[0])
     return data, meta
+
+
+def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
+    """The geometry in ``meta`` must fit (views, rows, cols) ``shape``: view names one per page,
+    ``active_area`` and each masked area inside the image, ``origin`` two whole numbers."""
+    names = meta.get("views")
+    if names is not None and (not isinstance(names, list) or len(names) != shape[0]):
+        raise InputError(f"{path}: metadata names {names!r} for {shape[0]} pages; the file was "
+                         "edited or damaged: write it again")
+    areas = [("active_area", meta.get("active_area"))]
+    areas += [("masked area", a) for a in (meta.get("masked_areas") or [])]
+    for what, area in areas:
+        if area is None:
+            continue
+        if not _inside(area, shape[-2:]):
+            raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
+                             f"rectangle inside the {shape[-1]} x {shape[-2]} image; the file "
+                             "was edited or damaged: decode the capture again")
+    origin = meta.get("origin")
+    if origin is not None and not (isinstance(origin, list) and len(origin) == 2
+                                   and all(isinstance(v, int) for v in origin)):
+        raise InputError(f"{path}: origin {origin!r} is not two whole numbers [row, col]")
+
+
+def check_levels(path, meta: dict, views: int) -> None:
+    """CFA pattern, levels and records in ``meta`` must be what the stages read: a Bayer
+    pattern or null, per view 4 finite black levels and a white level above them."""
+    cfa = meta.get("cfa")
+    if cfa is not None and not is_bayer(cfa):
+        raise InputError(f"{path}: cfa {cfa!r} in the metadata is not a 2 x 2 Bayer pattern "
+                         "(RGGB, BGGR, GRBG, GBRG); the file was edited or damaged")
+    blacks, whites = meta.get("black_level"), meta.get("white_level")
+    if blacks is not None and not (
+            isinstance(blacks, list) and len(blacks) == views
+            and all(isinstance(b, list) and len(b) == 4 and all(_finite(v) for v in b)
+                    for b in blacks)):
+        raise InputError(f"{path}: black_level {blacks!r} is not 4 finite levels per view "
+                         f"({views} views); the file was edited or damaged")
+    if whites is not None and not (
+            isinstance(whites, list) and len(whites) == views
+            and all(_number(w) and w == w for w in whites)):  # w == w: not NaN
+        raise InputError(f"{path}: white_level {whites!r} is not one level per view "
+                         f"({views} views); the file was edited or damaged")
+    for key, kind in (("provenance", dict), ("history", list)):
+        if meta.get(key) is not None and not isinstance(meta[key], kind):
+            raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
+                             "was edited or damaged")
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _finite(value) -> bool:
+    return _number(value) and abs(value) < float("inf")
+
+
+def _inside(area, shape) -> bool:
+    if not (isinstance(area, (list, tuple)) and len(area) == 4
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in area)):
+        return False
+    top, left, bottom, right = area
+    return 0 <= top < bottom <= shape[0] and 0 <= left < right <= shape[1]
 
 
 def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
@@ -98,15 +266,17 @@ def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
 def read_meta(path: str | os.PathLike) -> dict:
     """Only the plenocli metadata of a TIFF (cheap: no pixel data is read)."""
     try:
-        with tifffile.TiffFile(path) as tif:
+        with open_tiff(path) as tif:
             description = tif.pages[0].description if tif.pages else ""
-    except (tifffile.TiffFileError, ValueError, OSError):
+    except (*READ_ERRORS, InputError):
         return {}
     try:
         parsed = json.loads(description) if description else {}
     except json.JSONDecodeError:
         return {}
-    return {k: v for k, v in parsed.items() if k != FORMAT_KEY} if isinstance(parsed, dict) else {}
+    if not isinstance(parsed, dict) or FORMAT_KEY not in parsed:
+        return {}  # another program's JSON (tifffile writes {"shape": ...}) is not ours
+    return {k: v for k, v in parsed.items() if k != FORMAT_KEY}
 
 
 def derived_meta(source: dict, record: dict, **changes) -> dict:

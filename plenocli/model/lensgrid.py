@@ -22,6 +22,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 LATTICES = {"hex": np.pi / 3, "square": np.pi / 2}
+# A lens narrower than a pixel, or a lattice (or its image) beyond this many pixels, is not a
+# plenoptic sensor: refusing such grids keeps lens tables and loops from exploding.
+MIN_PITCH_PX = 1.0
+MAX_COORD_PX = 1e6
 
 
 @dataclass(frozen=True)
@@ -38,10 +42,23 @@ class LensGrid:
     def __post_init__(self):
         if self.lattice not in LATTICES:
             raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {self.lattice!r}")
-        if not self.pitch_px > 0:
-            raise ValueError(f"pitch_px must be positive, got {self.pitch_px}")
+        if not MIN_PITCH_PX <= self.pitch_px <= MAX_COORD_PX:  # also false for NaN
+            raise ValueError(f"pitch_px must be a number of pixels from {MIN_PITCH_PX:g} to "
+                             f"{MAX_COORD_PX:g}, got {self.pitch_px}")
+        if not np.isfinite(self.angle_rad):
+            raise ValueError(f"angle_rad must be a finite angle, got {self.angle_rad}")
+        _check_point("offset_xy", self.offset_xy)
+        if self.image_shape is not None:
+            _check_shape(self.image_shape)
+        if not (len(self.sensor_origin) == 2
+                and all(float(v).is_integer() and 0 <= v <= MAX_COORD_PX
+                        for v in self.sensor_origin)):
+            raise ValueError(f"sensor_origin must be two whole numbers >= 0 (row, col), got "
+                             f"{self.sensor_origin}")
         if (self.centres_xy is None) != (self.indices is None):
             raise ValueError("centres_xy and indices go together")
+        if self.centres_xy is not None:
+            _check_centres(self.centres_xy, self.indices)
 
     def basis(self) -> np.ndarray:
         """(2, 2) array whose rows are the lattice vectors b1, b2 in pixels (x, y)."""
@@ -147,6 +164,45 @@ class LensGrid:
         return cls(pitch_px=float(data["pitch_px"]), angle_rad=float(data["angle_rad"]),
                    offset_xy=tuple(float(v) for v in data["offset_xy"]),
                    lattice=data.get("lattice", "hex"),
-                   image_shape=tuple(int(v) for v in shape) if shape else None,
-                   sensor_origin=tuple(int(v) for v in data.get("sensor_origin", (0, 0))),
+                   image_shape=_whole("image_shape", shape) if shape else None,
+                   sensor_origin=_whole("sensor_origin", data.get("sensor_origin", (0, 0))),
                    centres_xy=centres, indices=indices)
+
+
+def _check_point(name: str, xy) -> None:
+    values = np.asarray(xy, float)
+    if values.shape != (2,) or not np.all(np.abs(values) <= MAX_COORD_PX):  # false for NaN
+        raise ValueError(f"{name} must be two finite pixel coordinates (|v| <= {MAX_COORD_PX:g}),"
+                         f" got {xy}")
+
+
+def _check_shape(shape) -> None:
+    if (len(shape) != 2 or not all(float(v).is_integer() and 0 < v <= MAX_COORD_PX
+                                   for v in shape)):
+        raise ValueError(f"image_shape must be two positive whole numbers of pixels, got {shape}")
+
+
+def _check_centres(centres, indices) -> None:
+    xy, ij = np.asarray(centres), np.asarray(indices)
+    if xy.ndim != 2 or xy.shape[1:] != (2,) or ij.shape != xy.shape:
+        raise ValueError(f"centres_xy and indices must both be (lenses, 2) arrays, got shapes "
+                         f"{xy.shape} and {ij.shape}")
+    if not np.all(np.abs(xy) <= MAX_COORD_PX):
+        raise ValueError("centres_xy must hold finite pixel coordinates; "
+                         f"{int(np.sum(~(np.abs(xy) <= MAX_COORD_PX)))} values are not")
+    if ij.size:  # tables indexed by (i, j) are allocated from this span: keep it compact
+        span = np.ptp(ij, axis=0).astype(np.float64) + 1
+        if span[0] * span[1] > 16 * len(ij) + 1024:
+            raise ValueError(f"lens indices span {int(span[0])} x {int(span[1])} lattice places "
+                             f"for {len(ij)} lenses; they must be a compact block of the lattice")
+
+
+def _whole(name: str, values) -> tuple[int, ...]:
+    """``values`` as whole numbers; a ValueError naming ``name`` for NaN, 1.5 or text."""
+    try:
+        numbers = [float(v) for v in values]
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{name} must hold whole numbers, got {values!r}") from err
+    if not all(v.is_integer() and abs(v) <= MAX_COORD_PX for v in numbers):
+        raise ValueError(f"{name} must hold whole numbers, got {values!r}")
+    return tuple(int(v) for v in numbers)

@@ -14,11 +14,14 @@ worker, e.g. on a shared file system).
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import glob
 import logging
 import multiprocessing
 import os
 import signal
+import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -37,6 +40,22 @@ THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
 DASK_CONNECT_TIMEOUT = "20s"
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
            "memory); run it alone with plenocli run to see more")
+WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
+GRACE_SECONDS = 10.0  # after a stop request, how long a worker may take to clean up
+EXIT_OVERRAN = 128 + signal.SIGALRM  # a worker stopped by its watchdog past the time limit
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM: stops like Ctrl-C (every ``except KeyboardInterrupt`` cleans up), exit 143."""
+
+
+class CaptureTimeout(BaseException):
+    """A capture ran past its time limit (BaseException: no stage may swallow it)."""
+
+
+def timed_out(seconds: float) -> str:
+    return (f"ran past --timeout {seconds:g} s and was stopped; run it alone with plenocli run, "
+            "or give a larger --timeout")
 
 
 @dataclass(frozen=True)
@@ -137,16 +156,22 @@ def run_capture(config: str, capture: str, *, overrides: Sequence[str] = (),
 def run_batch(config: str | Path, captures: Sequence[str | Path], *,
               overrides: Sequence[str] = (), out: str | Path | None = None,
               force: bool = False, dry_run: bool = False, jobs: int = 1,
-              scheduler: str | None = None) -> BatchReport:
+              scheduler: str | None = None, timeout: float | None = None) -> BatchReport:
     """Run the template ``config`` over ``captures``: shared steps once, then every capture.
 
-    ``jobs``: worker processes on this machine (1 runs in this process); ``scheduler``: the
-    address of a dask.distributed scheduler (then ``jobs`` is not used). Raises only for problems
-    of the whole batch (bad config, a shared step failing, no Dask); a capture's failure is in
-    its :class:`CaptureResult`.
+    ``jobs``: worker processes on this machine (1 runs in this process unless ``timeout`` is
+    given); ``scheduler``: the address of a dask.distributed scheduler (then ``jobs`` is not
+    used); ``timeout``: seconds one capture may take in a worker before it is stopped and
+    reported as failed. Raises only for problems of the whole batch (bad config, a shared step
+    failing, no Dask); a capture's failure is in its :class:`CaptureResult`.
     """
     if jobs < 1:
         raise ConfigError(f"--jobs {jobs}: give 1 or more worker processes")
+    if timeout is not None and not (0 < timeout < 1e7):  # also refuses NaN
+        raise ConfigError(f"--timeout {timeout}: give a positive number of seconds")
+    if timeout is not None and scheduler:
+        raise ConfigError("--timeout limits local worker processes; with --scheduler set the "
+                          "Dask workers' own limits instead")
     template = read_template(config, overrides)
     if not template.per_capture_steps():
         raise ConfigError(f"{config}: no step uses {{capture}} or {{name}}, so there is nothing "
@@ -164,10 +189,11 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
                   upstream=upstream)
     if scheduler:
         results = _dask_results(scheduler, str(config), captures, kwargs)
-    elif jobs == 1 or len(captures) == 1:
+    elif (jobs == 1 or len(captures) == 1) and timeout is None:
         results = (run_capture(str(config), c, **kwargs) for c in captures)
     else:
-        results = _pool_results(min(jobs, len(captures)), str(config), captures, kwargs)
+        results = _pool_results(min(jobs, len(captures)), str(config), captures, kwargs,
+                                timeout)
     by_capture = {r.capture: r for r in progress(results, "captures", total=len(captures))}
     return BatchReport(shared, [by_capture[c] for c in captures])
 
@@ -191,13 +217,57 @@ def _run_shared(template: Template, *, out, force: bool, dry_run: bool) -> list[
 # ---------------------------------------------------------------- worker processes (this machine)
 
 _busy = False  # in a worker: is a capture being processed (then SIGTERM must clean up)
+_hard_stop = float("inf")  # in a worker: monotonic time after which it exits, cleaned up or not
+PR_SET_PDEATHSIG = 1
 
 
-def _init_worker() -> None:
+def _init_worker(batch_pid: int) -> None:
     """Worker set-up: Ctrl-C is the parent's business; SIGTERM unwinds a running capture so
-    that atomic writes remove their temporary files, then the worker exits."""
+    that atomic writes remove their temporary files, then the worker exits. A worker never
+    outlives the batch: the kernel sends it SIGTERM when its parent (the fork server, which
+    exits with the batch) dies, and a watchdog thread checks the batch process itself."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    signal.signal(signal.SIGALRM, _on_alarm)
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    threading.Thread(target=_watchdog, args=(batch_pid, os.getppid()), daemon=True,
+                     name="plenocli-watchdog").start()
+
+
+def _watchdog(batch_pid: int, parent_pid: int) -> None:
+    """Stop this worker when the batch process is gone, or when a capture overran its time
+    limit and its stage did not unwind (stuck in compiled code)."""
+    global _hard_stop
+    while True:
+        time.sleep(WATCH_SECONDS)
+        if time.monotonic() > _hard_stop:
+            os._exit(EXIT_OVERRAN)
+        if os.getppid() != parent_pid or not _alive(batch_pid):
+            _hard_stop = min(_hard_stop, time.monotonic() + GRACE_SECONDS)
+            os.kill(os.getpid(), signal.SIGTERM)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs. A killed batch stays a zombie until its caller reaps it
+    (and a zombie still answers kill(pid, 0)), so /proc's state is read where there is one."""
+    if os.path.exists("/proc/self/stat"):
+        try:
+            with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+                return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+        except FileNotFoundError:
+            return False
+        except (OSError, IndexError):
+            pass
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def _on_sigterm(signum, frame) -> None:
@@ -206,15 +276,47 @@ def _on_sigterm(signum, frame) -> None:
     os._exit(128 + signum)
 
 
-def _worker_task(config: str, capture: str, kwargs: dict) -> CaptureResult:
-    global _busy
+def _on_alarm(signum, frame) -> None:
+    if _busy:
+        raise CaptureTimeout
+
+
+def _worker_task(config: str, capture: str, kwargs: dict,
+                 timeout: float | None = None) -> CaptureResult:
+    global _busy, _hard_stop
     _busy = True
+    start = time.monotonic()
+    if timeout is not None:
+        _hard_stop = start + timeout + GRACE_SECONDS
+        signal.setitimer(signal.ITIMER_REAL, timeout)
     try:
         return run_capture(config, capture, **kwargs)
+    except CaptureTimeout:
+        return CaptureResult(capture, Path(capture).stem, "failed", timed_out(timeout),
+                             time.monotonic() - start)
     except KeyboardInterrupt:
         os._exit(128 + signal.SIGTERM)
     finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
         _busy = False
+        _hard_stop = float("inf")
+
+
+@contextlib.contextmanager
+def sigterm_stops() -> Iterator[None]:
+    """While the batch runs, SIGTERM raises :class:`Terminated` (a KeyboardInterrupt), so the
+    workers are stopped and temporary files removed as for Ctrl-C."""
+    def stop(signum, frame):
+        raise Terminated
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # only the main thread may handle signals (e.g. plenocli called from a thread)
+        return
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 @contextlib.contextmanager
@@ -246,25 +348,30 @@ def _context():
     return context
 
 
-def _pool_results(jobs: int, config: str, captures: list[str],
-                  kwargs: dict) -> Iterator[CaptureResult]:
+def _pool_results(jobs: int, config: str, captures: list[str], kwargs: dict,
+                  timeout: float | None = None) -> Iterator[CaptureResult]:
     """Results as they complete. Captures caught in a crashed pool are retried, then run one
     worker at a time so that a capture that kills its worker fails alone."""
-    crashed = yield from _pool_round(jobs, config, captures, kwargs)
+    crashed, _ = yield from _pool_round(jobs, config, captures, kwargs, timeout)
     for capture in crashed:  # alone now, so that a crash is attributed to the right capture
-        if (yield from _pool_round(1, config, [capture], kwargs)):
-            yield CaptureResult(capture, Path(capture).stem, "failed", CRASHED)
+        again, overran = yield from _pool_round(1, config, [capture], kwargs, timeout)
+        if again:
+            yield CaptureResult(capture, Path(capture).stem, "failed",
+                                timed_out(timeout) if overran else CRASHED)
 
 
-def _pool_round(jobs: int, config: str, captures: list[str],
-                kwargs: dict) -> Iterator[CaptureResult]:
-    """One process pool over ``captures``; yields results, returns the crashed captures."""
+def _pool_round(jobs: int, config: str, captures: list[str], kwargs: dict,
+                timeout: float | None) -> Iterator[CaptureResult]:
+    """One process pool over ``captures``; yields results, returns (the crashed captures,
+    whether a worker was stopped by its watchdog for running past the time limit)."""
     crashed: list[str] = []
     with _one_thread_per_worker():
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=_context(),
-                                   initializer=_init_worker)
+                                   initializer=_init_worker, initargs=(os.getpid(),))
         try:
-            futures = {pool.submit(_worker_task, config, c, kwargs): c for c in captures}
+            futures = {pool.submit(_worker_task, config, c, kwargs, timeout): c
+                       for c in captures}
+            workers = list((pool._processes or {}).values())  # started on submit
             remaining = set(futures)
             while remaining:
                 finished, remaining = wait(remaining, return_when=FIRST_COMPLETED)
@@ -273,11 +380,17 @@ def _pool_round(jobs: int, config: str, captures: list[str],
                         yield future.result()
                     except BrokenProcessPool:
                         crashed.append(futures[future])
+                    except CaptureTimeout:  # the alarm rang as the capture finished
+                        capture = futures[future]
+                        yield CaptureResult(capture, Path(capture).stem, "failed",
+                                            timed_out(timeout))
         except BaseException:  # Ctrl-C or the consumer stopped: no worker may outlive us
             _terminate(pool)
             raise
         pool.shutdown(wait=True)
-    return crashed
+    for worker in workers if crashed else ():
+        worker.join(GRACE_SECONDS)
+    return crashed, any(w.exitcode == EXIT_OVERRAN for w in workers if crashed)
 
 
 def _terminate(pool: ProcessPoolExecutor) -> None:

@@ -230,7 +230,7 @@ def _write_together(output, body, linear, scene, meta, record, preview, preview_
         if linear:
             linear_meta = tiffio.derived_meta(
                 meta, record, views=["R", "G", "B", "rebuilt"][:scene.shape[-1]], cfa=None,
-                view_colours=None,
+                view_colours=None, black_level=None, white_level=None,
                 active_area=[0, 0, *scene.shape[:2]], masked_areas=[], origin=None,
                 colour_space="linear sRGB (D65), scene-referred, camera units")
             tiffio.write_image(linear, np.moveaxis(scene, -1, 0), linear_meta, protect=protect)

@@ -31,6 +31,11 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     data, meta = tiffio.read_image(input)
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=input)
+    try:
+        rf.check_output_size((framing.bottom - framing.top, framing.right - framing.left), s,
+                             pages=len(g_values) * data.shape[0] * (3 if framing.cfa else 1))
+    except ValueError as err:
+        raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
     pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     sweep = len(g_values) > 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli import sai as sai_mod
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area, frame_grid
 from plenocli.io.preview import view_mosaic, write_png
@@ -36,7 +36,10 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
             except ValueError as err:
                 raise ConfigError(f"{grid}: {err}") from err
         else:
-            out = sai_mod.demultiplex(crop, n)
+            try:
+                out = sai_mod.demultiplex(crop, n)
+            except ValueError as err:
+                raise InputError(f"{input}: {err}") from err
         per_page.append(out)
     # view-major pages: the channels of one view are consecutive, named VIEW.CHANNEL
     stack = np.stack(per_page, axis=1).reshape(-1, *per_page[0].shape[1:])

@@ -1,0 +1,415 @@
+"""Bad inputs over every command: exit 1 (2 for usage), one line, no traceback, no file left,
+inputs unchanged.
+
+Each case runs a command in-process (click's CliRunner) on a folder of small inputs, good and
+bad, shared by the module; the output goes to a fresh folder that must stay empty. The inputs are
+hashed before and after every case.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+import yaml
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import tiffio
+from plenocli.io.raytrix import calib_from_grid, format_calib
+from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.synth.focused import write_raytrix_scene
+
+
+def _plain_tiff(path: Path, data: np.ndarray) -> None:
+    tifffile.imwrite(path, data, photometric="minisblack", metadata=None)
+
+
+def _plenocli_tiff(path: Path, data: np.ndarray, **meta) -> None:
+    data = np.asarray(data)
+    rows, cols = data.shape[-2:]
+    views = 1 if data.ndim == 2 else data.shape[0]
+    base = {"views": [f"v{k}" for k in range(views)], "cfa": None, "origin": [0, 0],
+            "active_area": [0, 0, rows, cols], "masked_areas": []}
+    description = json.dumps({tiffio.FORMAT_KEY: tiffio.FORMAT_VERSION, **base, **meta})
+    tifffile.imwrite(path, data, photometric="minisblack", metadata=None, description=description)
+
+
+def _huge_header_tiff(path: Path) -> None:
+    """A tiny TIFF whose header claims 200000 x 200000 uint16 pixels in one strip."""
+    entries = [(256, 4, 1, 200000), (257, 4, 1, 200000), (258, 3, 1, 16), (259, 3, 1, 1),
+               (262, 3, 1, 1), (273, 4, 1, 8 + 2 + 12 * 9 + 4), (277, 3, 1, 1),
+               (278, 4, 1, 200000), (279, 4, 1, 200000 * 200000 * 2 % 2 ** 32)]
+    ifd = struct.pack("<H", len(entries))
+    for tag, kind, count, value in entries:
+        ifd += struct.pack("<HHI", tag, kind, count)
+        ifd += struct.pack("<HH", value, 0) if kind == 3 else struct.pack("<I", value)
+    body = b"II*\x00" + struct.pack("<I", 8) + ifd + struct.pack("<I", 0)
+    path.write_bytes(body + bytes(831 - len(body)))
+
+
+def _png_chunk(kind: bytes, body: bytes) -> bytes:
+    return (struct.pack(">I", len(body)) + kind + body
+            + struct.pack(">I", zlib.crc32(kind + body)))
+
+
+def _write_grid_yaml(path: Path, base: dict, **changes) -> None:
+    doc = {"lens_grid": {**base, **changes}}
+    path.write_text(yaml.safe_dump(doc))
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("inputs")
+    runner = CliRunner()
+    # a dual-pixel raw, decoded and bias-corrected
+    raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
+    write_dualpixel_raw(d / "dp.dng", raw, truth)
+    for args in (["decode", d / "dp.dng", "-o", d / "frames.tif"],
+                 ["bias", d / "frames.tif", "-o", d / "biased.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    white = truth["params"]["white_level"]
+    write_dualpixel_raw(d / "clipped.dng", np.full_like(raw, white), truth)
+    # a focused (Raytrix-like) capture and its grid
+    write_raytrix_scene(d / "rt", seed=5, rows=120, cols=160)
+    grid = yaml.safe_load((d / "rt" / "grid.yaml").read_text())["lens_grid"]
+    base = {k: grid[k] for k in ("lattice", "pitch_px", "angle_rad", "offset_xy",
+                                 "image_shape", "sensor_origin")}
+    nan = float("nan")
+    for name, change in {
+        "angle_nan": {"angle_rad": nan}, "offset_nan": {"offset_xy": [nan, 3.0]},
+        "pitch_nan": {"pitch_px": nan}, "pitch_inf": {"pitch_px": float("inf")},
+        "pitch_tiny": {"pitch_px": 1e-6}, "rotation_inf": {"angle_rad": float("inf")},
+        "shape_negative": {"image_shape": [-120, 160]},
+        "lenses_nan": {"lenses": {"rows": [[0, 0, nan, 1.0], [0, 1, 3.0, 4.0]]}},
+        "far_away": {"offset_xy": [1e9, 1e9]},
+    }.items():
+        _write_grid_yaml(d / f"grid_{name}.yaml", base, **change)
+    _write_grid_yaml(d / "grid_noshape.yaml", {k: base[k] for k in base
+                                               if k not in ("image_shape", "sensor_origin")})
+    from plenocli.model.lensgrid import LensGrid
+
+    calib = calib_from_grid(LensGrid.from_dict(base))
+    (d / "rt" / "calib.xml").write_text(format_calib(calib))
+    for name, change in {"basis_zero": {"lens_base_x": [0.0, 0.0]},
+                         "basis_parallel": {"lens_base_y": calib["lens_base_x"]},
+                         "diameter_inf": {"diameter": float("inf")},
+                         "offset_nan": {"offset": [nan, 0.0]}}.items():
+        (d / f"calib_{name}.xml").write_text(format_calib({**calib, **change}))
+    # images for sai, flat and decode
+    rng = np.random.default_rng(0)
+    _plenocli_tiff(d / "f512.tif", rng.random((512, 512), np.float32))
+    _plenocli_tiff(d / "f511x509.tif", rng.random((509, 511), np.float32))
+    _plenocli_tiff(d / "f3.tif", rng.random((3, 3), np.float32))
+    _plenocli_tiff(d / "nan.tif", np.full((32, 32), np.nan, np.float32))
+    _plain_tiff(d / "complex.tif", (rng.random((16, 16)) + 1j).astype(np.complex64))
+    _plain_tiff(d / "bool.tif", rng.random((16, 16)) > 0.5)
+    _plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
+    _plain_tiff(d / "nan_plain.tif", np.full((16, 16), np.nan, np.float32))
+    good = (d / "biased.tif").read_bytes()
+    (d / "truncated.tif").write_bytes(good[: len(good) * 2 // 3])
+    _huge_header_tiff(d / "huge.tif")
+    meta = tiffio.read_meta(d / "frames.tif")
+    frames, _ = tiffio.read_image(d / "frames.tif")
+    for name, change in {"active_beyond": {"active_area": [0, 0, 480, 640]},
+                         "active_empty": {"active_area": [8, 16, 8, 16]},
+                         "left_only": {"masked_areas": meta["masked_areas"][:1]}}.items():
+        bad = dict(meta, **change)
+        tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **bad}))
+    (d / "not_yaml.yaml").write_text("lens_grid: [unclosed\n")
+    for name, change in {"meta_black": {"black_level": "abc"},
+                         "meta_black_short": {"black_level": [[0] * 4]},
+                         "meta_white": {"white_level": [None, None]},
+                         "meta_cfa": {"cfa": "XYZW"}, "meta_cfa_int": {"cfa": 5},
+                         "meta_masked": {"masked_areas": "x"},
+                         "meta_provenance": {"provenance": "x"}}.items():
+        tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
+    for name, text in {
+        "grid_int": "lens_grid: 5\n",
+        "grid_pitch_text": "lens_grid: {pitch_px: abc, angle_rad: 0, offset_xy: [0, 0]}\n",
+        "grid_offset_short": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0]}\n",
+        "grid_lattice": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                        "lattice: tri}\n",
+        "grid_origin_nan": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                           "sensor_origin: [.nan, 0]}\n",
+        "grid_origin_negative": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                                "sensor_origin: [-5, 0]}\n",
+        "grid_lens_row_short": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                               "lenses: {rows: [[0, 0, 1]]}}\n",
+        "grid_shape_3d": "lens_grid: {pitch_px: 20, angle_rad: 0, offset_xy: [0, 0], "
+                         "image_shape: [3, 4, 5]}\n",
+        "grid_square_tiny": "lens_grid: {pitch_px: 1, angle_rad: 0, offset_xy: [0, 0], "
+                            "lattice: square}\n",
+    }.items():
+        (d / f"{name}.yaml").write_text(text)
+    import cv2
+
+    sensor = (rng.random((64, 64)) * 60000).astype(np.uint16)
+    for suffix in (".png", ".bmp"):
+        ok, encoded = cv2.imencode(suffix, sensor if suffix == ".png" else sensor >> 8)
+        assert ok
+        (d / f"trunc{suffix}").write_bytes(encoded.tobytes()[: encoded.size // 2])
+    tifffile.imwrite(d / "zlib.tif", sensor, compression="zlib")
+    packed = (d / "zlib.tif").read_bytes()
+    (d / "zlib_trunc.tif").write_bytes(packed[: len(packed) // 2])
+    _plain_tiff(d / "inf.tif", np.full((16, 16), np.inf, np.float32))
+    (d / "huge.png").write_bytes(
+        b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", struct.pack(">IIBBBBB", 200000, 200000,
+                                                                16, 0, 0, 0, 0))
+        + _png_chunk(b"IDAT", zlib.compress(bytes(100))) + _png_chunk(b"IEND", b""))
+    _plain_tiff(d / "volume.tif", rng.random((2, 3, 16, 16)).astype(np.float32))
+    (d / "garbage.tif").write_bytes(b"II*\x00" + rng.integers(0, 255, 500, np.uint8).tobytes())
+    (d / "empty.tif").write_bytes(b"")
+    return d
+
+
+def _hash_folder(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def run_bad(inputs: Path, out: Path, args: list[str]):
+    out.mkdir(exist_ok=True)
+    before = _hash_folder(inputs)
+    argv = [a.format(i=inputs, o=out) for a in args]
+    result = CliRunner().invoke(cli, argv)
+    assert _hash_folder(inputs) == before, "an input changed"
+    left = [p.name for p in out.rglob("*")]
+    assert not left, f"files left behind: {left}"
+    return result
+
+
+def assert_one_line(result, code: int, words: tuple[str, ...]) -> None:
+    output = result.stderr if code == 1 else result.output
+    assert "Traceback" not in result.output + result.stderr
+    assert result.exit_code == code, result.output + result.stderr
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    if code == 1:
+        assert len(lines) == 1, lines
+        assert "internal error" not in lines[0], lines[0]
+    assert lines[-1].startswith("Error:"), lines
+    for word in words:
+        assert word in output, (word, output)
+
+
+# (id, argv with {i} = inputs folder and {o} = output folder, exit code, words in the message);
+# a value the option's own type refuses is a usage error (exit 2), like any bad flag
+CASES = [
+    # refocus: g, s and grids
+    ("refocus-g0", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "0",
+                    "-o", "{o}/r.tif"], 2, ("positive",)),
+    ("refocus-g-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g=-1",
+                       "-o", "{o}/r.tif"], 2, ("positive",)),
+    ("refocus-g-list-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                            "--g", "2,-3", "-o", "{o}/r.tif"], 2, ("positive",)),
+    ("refocus-g-sweep-huge", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                              "--g", "0:1e9:1", "-o", "{o}/r.tif"], 2, ("at most 1000",)),
+    ("refocus-g-sweep-1001", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                              "--g", "1:1001:1", "-o", "{o}/r.tif"], 2, ("at most 1000",)),
+    ("refocus-g-list-1001", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                             "--g", ",".join(["4"] * 1001), "-o", "{o}/r.tif"], 2, ("1000",)),
+    ("refocus-g-nan-range", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                             "--g", "nan:5:1", "-o", "{o}/r.tif"], 2, ("--g",)),
+    ("refocus-g-inf", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g",
+                       "inf", "-o", "{o}/r.tif"], 2, ("g",)),
+    ("refocus-s1000", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
+                       "1000", "-o", "{o}/r.tif"], 1, ("s = 1000",)),
+    ("refocus-s-nan", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
+                       "nan", "-o", "{o}/r.tif"], 2, ("'--s'",)),
+    *[(f"refocus-grid-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
+                                f"{{i}}/grid_{name}.yaml", "-o", "{o}/r.tif"], 1, words)
+      for name, words in [("angle_nan", ("angle_rad",)), ("offset_nan", ("offset_xy",)),
+                          ("pitch_nan", ("pitch_px",)), ("pitch_inf", ("pitch_px",)),
+                          ("pitch_tiny", ("pitch_px",)), ("rotation_inf", ("angle_rad",)),
+                          ("shape_negative", ("image_shape",)), ("lenses_nan", ("centres",)),
+                          ("far_away", ("offset_xy",))]],
+    *[(f"refocus-xml-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
+                               f"{{i}}/calib_{name}.xml", "-o", "{o}/r.tif"], 1, words)
+      for name, words in [("basis_zero", ("lens_base",)), ("basis_parallel", ("parallel",)),
+                          ("diameter_inf", ("diameter",)), ("offset_nan", ("offset",))]],
+    ("refocus-grid-not-yaml", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/not_yaml.yaml",
+                               "-o", "{o}/r.tif"], 1, ("YAML",)),
+    ("refocus-grid-misses-frame", ["refocus", "{i}/nan.tif", "--grid", "{i}/rt/grid.yaml",
+                                   "-o", "{o}/r.tif"], 1, ()),
+    ("refocus-all-nan", ["refocus", "{i}/nan.tif", "--grid", "{i}/grid_noshape.yaml",
+                         "-o", "{o}/r.tif"], 1, ("no valid pixel",)),
+    # sai: whole micro-images, enough of them
+    ("sai-n7-512", ["sai", "{i}/f512.tif", "-n", "7", "-o", "{o}/v.tif"], 1,
+     ("not a whole number", "511 x 511")),
+    ("sai-n2-511x509", ["sai", "{i}/f511x509.tif", "-n", "2", "-o", "{o}/v.tif"], 1,
+     ("not a whole number",)),
+    ("sai-n2-3x3", ["sai", "{i}/f3.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("at least",)),
+    ("sai-n-huge", ["sai", "{i}/f512.tif", "-n", "1000000", "-o", "{o}/v.tif"], 1,
+     ("at least",)),
+    ("sai-n0", ["sai", "{i}/f512.tif", "-n", "0", "-o", "{o}/v.tif"], 2, ()),
+    ("sai-all-nan", ["sai", "{i}/nan.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("no valid",)),
+    # bias: guard, smooth, over-scan
+    ("bias-guard-huge", ["bias", "{i}/frames.tif", "--guard", "99999", "-o", "{o}/b.tif"], 1,
+     ("guard",)),
+    ("bias-smooth-huge", ["bias", "{i}/frames.tif", "--smooth", "100000", "-o", "{o}/b.tif"],
+     1, ("smooth",)),
+    ("bias-overscan-top-missing", ["bias", "{i}/left_only.tif", "--overscan", "top", "-o",
+                                   "{o}/b.tif"], 1, ("over-scan",)),
+    ("bias-active-beyond", ["bias", "{i}/active_beyond.tif", "-o", "{o}/b.tif"], 1,
+     ("active_area",)),
+    ("bias-active-empty", ["bias", "{i}/active_empty.tif", "-o", "{o}/b.tif"], 1,
+     ("active_area",)),
+    ("bias-all-clipped", ["bias", "{o}/../clipped_frames.tif", "-o", "{o}/b.tif"], 1,
+     ("no valid pixel",)),
+    ("bias-crop-huge", ["bias", "{i}/frames.tif", "--crop", "99999x99999", "-o", "{o}/b.tif"],
+     1, ("crop",)),
+    ("bias-guard-negative", ["bias", "{i}/frames.tif", "--guard=-5", "-o", "{o}/b.tif"], 2, ()),
+    # decode: levels and sample types
+    ("decode-black-nan", ["decode", "{i}/f512.tif", "--black", "nan", "-o", "{o}/d.tif"], 2,
+     ("black",)),
+    ("decode-black-inf", ["decode", "{i}/f512.tif", "--black", "inf", "-o", "{o}/d.tif"], 2,
+     ("black",)),
+    ("decode-white-neg", ["decode", "{i}/dp.dng", "--white=-5", "-o", "{o}/d.tif"], 2,
+     ("white",)),
+    ("decode-white-nan", ["decode", "{i}/dp.dng", "--white", "nan", "-o", "{o}/d.tif"], 2,
+     ("white",)),
+    ("decode-black-above-white", ["decode", "{i}/dp.dng", "--black", "900", "--white", "800",
+                                  "-o", "{o}/d.tif"], 1, ("white level",)),
+    ("decode-black-negative", ["decode", "{i}/dp.dng", "--black=-3", "-o", "{o}/d.tif"], 2,
+     ("black",)),
+    *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, ("real",))
+      for kind in ("complex", "bool", "int8")],
+    ("decode-all-nan", ["decode", "{i}/nan_plain.tif", "-o", "{o}/d.tif"], 1, ("no valid",)),
+    ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
+     ("truncated",)),
+    ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
+    ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1, ()),
+    *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
+      for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
+                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
+                          ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
+                          ("huge.png", ("more than",))]],
+    ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
+     1, ("distinct",)),
+    ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
+     1, ("3 frame names",)),
+    ("decode-calib-without-raytrix", ["decode", "{i}/dp.dng", "--calib", "{i}/rt/calib.xml",
+                                      "-o", "{o}/d.tif"], 1, ("--calib",)),
+    ("decode-raytrix-bad-calib", ["decode", "{i}/f512.tif", "--camera", "raytrix", "--calib",
+                                  "{i}/calib_basis_zero.xml", "-o", "{o}/d.tif"], 1,
+     ("lens_base",)),
+    ("decode-cfa-bad", ["decode", "{i}/f512.tif", "--cfa", "RRGB", "-o", "{o}/d.tif"], 2,
+     ("'--cfa'",)),
+    # flat
+    ("flat-median-huge", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
+                          "100001", "-o", "{o}/f.tif"], 1, ("median",)),
+    ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
+                          "4", "-o", "{o}/f.tif"], 1, ("median",)),
+    ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif"], 1,
+     ("no valid pixel",)),
+    ("flat-truncated-white", ["flat", "{i}/biased.tif", "--white", "{i}/truncated.tif", "-o",
+                              "{o}/f.tif"], 1, ("truncated",)),
+    ("flat-percentile-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif",
+                             "--reference", "percentile", "--percentile", "nan", "-o",
+                             "{o}/f.tif"], 2, ("percentile",)),
+    ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
+                        "-o", "{o}/f.tif"], 2, ("floor",)),
+    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "-o",
+                            "{o}/f.tif"], 1, ("not a gain",)),
+    ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
+                               "{o}/f.tif"], 1, ("white image",)),
+    # refocus and sai: other options
+    *[(f"refocus-{opt}-{value}", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                                  f"--{opt}", value, "-o", "{o}/r.tif"], 2, (f"'--{opt}'",))
+      for opt, value in [("radius", "nan"), ("radius", "-1"), ("min-weight", "nan"),
+                         ("mask-width", "inf"), ("mask-width", "-1")]],
+    ("sai-grid-hex", ["sai", "{i}/rt/frames.tif", "-n", "2", "--grid", "{i}/rt/grid.yaml", "-o",
+                      "{o}/v.tif"], 1, ("square",)),
+    ("sai-cfa-layout", ["sai", "{i}/f512.tif", "--cfa-layout", "diagonal", "-o", "{o}/v.tif"],
+     2, ("cfa-layout",)),
+    # metadata a stage reads, edited or damaged
+    *[(f"bias-{name}", ["bias", f"{{i}}/{name}.tif", "-o", "{o}/b.tif"], 1, (word,))
+      for name, word in [("meta_black", "black_level"), ("meta_black_short", "black_level"),
+                         ("meta_white", "white_level"), ("meta_cfa", "cfa"),
+                         ("meta_cfa_int", "cfa"), ("meta_masked", "masked area"),
+                         ("meta_provenance", "provenance")]],
+    ("sai-meta-cfa", ["sai", "{i}/meta_cfa.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("cfa",)),
+    *[(f"refocus-{name}", ["refocus", "{i}/rt/frames.tif", "--grid", f"{{i}}/{name}.yaml",
+                           "-o", "{o}/r.tif"], 1, (word,))
+      for name, word in [("grid_int", "lens grid"), ("grid_pitch_text", "abc"),
+                         ("grid_offset_short", "offset_xy"), ("grid_lattice", "lattice"),
+                         ("grid_origin_nan", "sensor_origin"),
+                         ("grid_origin_negative", "sensor_origin"),
+                         ("grid_lens_row_short", "lens grid"),
+                         ("grid_shape_3d", "image_shape")]],
+    ("sai-grid-pitch-below-n", ["sai", "{i}/rt/frames.tif", "--grid", "{i}/grid_square_tiny.yaml",
+                                "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
+    ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
+    # batch
+    ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
+     2, ()),
+    ("batch-timeout-nan", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout",
+                           "nan"], 2, ()),
+    ("batch-inputs-none", ["batch", "{i}/none.yaml", "--inputs", "{i}/nothing/*.dng"], 1,
+     ("matches no file",)),
+    # info
+    ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
+    ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),
+    ("info-huge-png", ["info", "{i}/huge.png"], 1, ("more than",)),
+    ("info-bad-xml", ["info", "{i}/calib_basis_zero.xml"], 1, ("lens_base",)),
+    ("info-bad-yaml", ["info", "{i}/not_yaml.yaml"], 1, ("YAML",)),
+    ("info-truncated", ["info", "{i}/truncated.tif"], 1, ("truncated",)),
+    ("info-huge-header", ["info", "{i}/huge.tif"], 1, ("200000",)),
+    ("info-empty", ["info", "{i}/empty.tif"], 1, ()),
+    # every reader: a damaged TIFF is one line
+    ("sai-truncated", ["sai", "{i}/truncated.tif", "-o", "{o}/v.tif"], 1, ("truncated",)),
+    ("refocus-huge", ["refocus", "{i}/huge.tif", "--grid", "{i}/rt/grid.yaml", "-o",
+                      "{o}/r.tif"], 1, ("200000",)),
+    ("bias-complex", ["bias", "{i}/complex.tif", "-o", "{o}/b.tif"], 1, ("real",)),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_and_leaves_nothing(case, inputs, tmp_path):
+    name, args, code, words = case
+    if "clipped_frames" in " ".join(args):
+        result = CliRunner().invoke(cli, ["decode", str(inputs / "clipped.dng"), "-o",
+                                          str(tmp_path / "clipped_frames.tif")])
+        assert result.exit_code == 0, result.output
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, code, words)
+
+
+def test_truncated_tiff_gives_no_stray_tifffile_line(inputs, tmp_path, capfd):
+    result = run_bad(inputs, tmp_path / "out", ["info", "{i}/truncated.tif"])
+    captured = capfd.readouterr()
+    assert "tifffile" not in captured.err + captured.out + result.stderr
+    assert_one_line(result, 1, ("truncated",))
+
+
+# ------------------- the parameter path and the stage edge (more in tests/cli/test_edge.py)
+
+@pytest.mark.parametrize("step,words", [
+    ({"stage": "bias", "smooth": -3}, ("smooth",)),
+    ({"stage": "bias", "guard": -5}, ("guard",)),
+    ({"stage": "bias", "smooth": 1.5}, ("smooth",)),
+    ({"stage": "bias", "smooth": "abc"}, ("smooth",)),
+])
+def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"bias": {
+        **step, "input": str(inputs / "frames.tif"), "output": "{out}/b.tif"}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("option", ["--preview"])
+def test_outputs_that_collide_are_refused(option, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", ["decode", "{i}/dp.dng", "-o", "{o}/x.tif",
+                                                option, "{o}/x.tif"])
+    assert_one_line(result, 1, ("two outputs",))
