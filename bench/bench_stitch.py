@@ -81,12 +81,12 @@ def make_views(n_rows: int, n_cols: int, size: int, model: str, seed: int):
     return np.stack(views).astype(np.float32), relative
 
 
-def corner_error(truth: list[np.ndarray], report: dict, size: int) -> float:
+def corner_error(truth: list[np.ndarray], report, size: int) -> float:
     corners = np.float64([[0, 0], [size - 1, 0], [size - 1, size - 1], [0, size - 1]])
     corners = corners.reshape(-1, 1, 2)
     return max(float(np.abs(cv2.perspectiveTransform(corners, t)
                             - cv2.perspectiveTransform(corners, np.asarray(e))).max())
-               for t, e in zip(truth[1:], report["transform"]["view_to_reference"][1:],
+               for t, e in zip(truth[1:], report.transform["view_to_reference"][1:],
                                strict=True))
 
 
