@@ -10,8 +10,14 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.errors import InputError
-from plenocli.stitch import PrismRig, ViewOptics, common_to_view, view_to_common
-from plenocli.stitch import estimate_translation, stitch
+from plenocli.stitch import (
+    PrismRig,
+    ViewOptics,
+    common_to_view,
+    estimate_translation,
+    stitch,
+    view_to_common,
+)
 from plenocli.synth.prismcam import Camera, render_dualpixel, render_quadpixel
 
 

@@ -38,6 +38,26 @@ def pupil_centroid_mm(aperture_mm: float, part: tuple[int, int]) -> np.ndarray:
     return np.array([part[0] * c, part[1] * c], np.float64)
 
 
+def prism_deviation_deg(n: float, apex_deg: float) -> dict:
+    """Deviation of a thin prism of index ``n`` and apex angle ``apex_deg``.
+
+    Returns ``thin_deg`` ((n - 1) A, the paper's approximation), ``minimum_deg`` (exact minimum
+    deviation 2 asin(n sin(A/2)) - A) and ``normal_incidence_deg`` (exact, light entering the
+    first face at normal incidence: asin(n sin A) - A).
+    """
+    if n < 1:
+        raise ValueError(f"n {n} must be >= 1")
+    if not 0 <= apex_deg < 90:
+        raise ValueError(f"apex_deg {apex_deg} must be in [0, 90)")
+    a = math.radians(apex_deg)
+    out = {"thin_deg": (n - 1.0) * apex_deg}
+    s_min = n * math.sin(a / 2)
+    out["minimum_deg"] = math.degrees(2 * math.asin(s_min) - a) if s_min <= 1 else math.nan
+    s_norm = n * math.sin(a)
+    out["normal_incidence_deg"] = math.degrees(math.asin(s_norm) - a) if s_norm <= 1 else math.nan
+    return out
+
+
 def deviate(direction: np.ndarray, *, n: float, apex_deg: float, towards: tuple[int, int],
             reverse: bool = False) -> np.ndarray:
     """Directions (..., 3) of light (going +z) after a thin prism whose thin edge points

@@ -35,7 +35,7 @@ import tifffile
 
 from plenocli.io.atomic import atomic_path, write_text
 from plenocli.io.dng import write_dng
-from plenocli.optics.lens import refract
+from plenocli.optics import prism as optics_prism
 from plenocli.synth.chart import test_chart_u8
 
 FULL_SCALE_DN = 50000  # 16-bit value of a white chart seen through the whole pupil
@@ -55,7 +55,7 @@ class Camera:
     @property
     def image_distance_mm(self) -> float:
         """D from the thin-lens equation (sharp image of the chart)."""
-        return 1.0 / (1.0 / self.focal_mm - 1.0 / self.object_distance_mm)
+        return optics_prism.image_distance_mm(self.focal_mm, self.object_distance_mm)
 
     @property
     def half_field_deg(self) -> float:
@@ -70,45 +70,19 @@ def _check(pixels: int, rays: int, *, multiple: int = 2) -> None:
         raise ValueError(f"rays {rays} must be >= 1")
 
 
-def prism_deviate(direction: np.ndarray, *, n: float, apex_deg: float, sx: float, sy: float
-                  ) -> np.ndarray:
-    """Directions (..., 3) after a thin wedge prism of apex ``apex_deg`` per axis whose thin edge
-    points towards (sx, sy) (each -1, 0 or +1): light travelling +z is deviated about (n - 1) A
-    towards (sx, sy) in x and in y (a corner prism of a pyramid).
-
-    Both faces lean by half the apex angle (the symmetric, minimum-deviation mounting), which
-    keeps the off-axis rays of a 32 deg field clear of total internal reflection.
-    """
-    shape = direction.shape
-    d = direction.reshape(-1, 3)
-    t = math.tan(math.radians(apex_deg) / 2)
-    n1 = np.array([sx * t, sy * t, 1.0])
-    n2 = np.array([-sx * t, -sy * t, 1.0])
-    inside, ok1 = refract(d, np.tile(n1 / np.linalg.norm(n1), (len(d), 1)), 1.0, n)
-    out, ok2 = refract(inside, np.tile(n2 / np.linalg.norm(n2), (len(d), 1)), n, 1.0)
-    out[~(ok1 & ok2)] = np.nan  # total internal reflection: no light
-    return out.reshape(shape)
-
-
 def _chart_hits(cam: Camera, sensor_xy: np.ndarray, pupil_xy: np.ndarray,
                 prism: tuple[int, int] | None) -> np.ndarray:
     """Chart points (..., 2) mm seen from sensor points (..., 2) mm through pupil points."""
-    z = cam.object_distance_mm
-    q = -sensor_xy * (z / cam.image_distance_mm)
-    d = np.concatenate([q - pupil_xy, np.full(q.shape[:-1] + (1,), z)], axis=-1)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    if prism is not None:
-        d = prism_deviate(d, n=cam.prism_n, apex_deg=cam.prism_apex_deg, sx=prism[0],
-                          sy=prism[1])
-    return pupil_xy + d[..., :2] * (z / d[..., 2:3])
+    return optics_prism.scene_hits(sensor_xy, pupil_xy, image_distance_mm=cam.image_distance_mm,
+                                   object_distance_mm=cam.object_distance_mm,
+                                   prism=(cam.prism_n, cam.prism_apex_deg), towards=prism)
 
 
 def sensor_point_seeing(cam: Camera, chart_xy: np.ndarray, *, region: tuple[int, int],
                         prism: tuple[int, int] | None) -> np.ndarray:
     """The sensor point (2,) mm whose ray through the region's pupil centroid (and prism) meets
     the chart at ``chart_xy`` (2,) mm: Newton iteration on the exact ray geometry."""
-    c = 4 * cam.aperture_mm / 2 / (3 * math.pi)
-    pupil = np.array([[region[0] * c, region[1] * c]])
+    pupil = optics_prism.pupil_centroid_mm(cam.aperture_mm, region)[None]
     s = -np.asarray(chart_xy, dtype=np.float64) * cam.image_distance_mm / cam.object_distance_mm
     for _ in range(30):
         f0 = _chart_hits(cam, s[None], pupil, prism)[0] - chart_xy
@@ -129,8 +103,8 @@ def _pupil_samples(rng, shape, region: tuple[int, int], radius: float, rays: int
     sx, sy in {-1, 0, +1} (0: the whole extent on that axis); the part's centroid when rays = 1."""
     sx, sy = region
     if rays == 1:
-        c = 4 * radius / (3 * math.pi)
-        return np.broadcast_to(np.array([sx * c, sy * c]), (1, *shape, 2)).copy()
+        centroid = optics_prism.pupil_centroid_mm(2 * radius, region)
+        return np.broadcast_to(centroid, (1, *shape, 2)).copy()
     out = np.empty((rays, *shape, 2))
     for k in range(rays):
         r = radius * np.sqrt(rng.random(shape))
@@ -235,8 +209,7 @@ def view_footprint(cam: Camera, *, rows: int, cols: int, cell_mm: float,
     w, h = cols * cell_mm / 2, rows * cell_mm / 2
     pts = np.array([[-w, -h], [w, -h], [w, h], [-w, h],  # corners
                     [-w, 0.0], [w, 0.0], [0.0, -h], [0.0, h], [0.0, 0.0]])
-    c = 4 * cam.aperture_mm / 2 / (3 * math.pi)
-    pupil = np.tile([region[0] * c, region[1] * c], (len(pts), 1))
+    pupil = np.tile(optics_prism.pupil_centroid_mm(cam.aperture_mm, region), (len(pts), 1))
     hits = _chart_hits(cam, pts, pupil, prism)
     ang = np.degrees(np.arctan(hits / cam.object_distance_mm))
 
