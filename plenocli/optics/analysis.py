@@ -225,8 +225,8 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
     The image plane is the lens's configured one; ``focus`` tells how far it is from the
     paraxial focus for an object at infinity.
     """
-    if sensor_mm <= 0:
-        raise ValueError(f"sensor_mm {sensor_mm} must be > 0")
+    if not (math.isfinite(sensor_mm) and sensor_mm > 0):
+        raise ValueError(f"sensor_mm {sensor_mm} must be a finite number > 0")
     par = paraxial(lens, wavelength_um=wavelength_um)
     half = half_field_deg(lens, sensor_mm / 2, wavelength_um=wavelength_um)
     half_diag = half_field_deg(lens, sensor_mm / math.sqrt(2), wavelength_um=wavelength_um)

@@ -92,6 +92,8 @@ def undistort(image: np.ndarray, k1: float) -> np.ndarray:
     ``r`` is measured from the image centre in units of the half-diagonal, so ``k1 = 0.01`` moves
     the corners outward by 1 %. Resampled with Lanczos-4; NaN stays NaN (within the kernel).
     """
+    if not (np.isfinite(k1) and -1 < k1 <= 1):
+        raise ValueError(f"distortion k1 must be a finite number in (-1, 1], got {k1}")
     if k1 == 0:
         return image
     rows, cols = image.shape
