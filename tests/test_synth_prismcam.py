@@ -7,24 +7,17 @@ import pytest
 from scipy.optimize import least_squares
 
 from plenocli.io.raw import decode
-from plenocli.synth import prismcam
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.sai import demultiplex
+from plenocli.synth import KIND_NAMES, kinds, prismcam
 from plenocli.synth.prismcam import Camera, _chart_hits, render_quadpixel
 
 
-def demultiplex(frame, n=2):
-    """SAIs (n*n, rows/n, cols/n): plenocli.sai when available, Eq. 1 slicing otherwise."""
-    try:
-        from plenocli.sai import demultiplex as sai_demultiplex
-    except ImportError:
-        return np.stack([frame[i::n, j::n] for i in range(n) for j in range(n)])
-    return sai_demultiplex(frame, n)
-
-
 def quad_views(out_dir, **options):
-    truth = prismcam.write_quadpixel(out_dir, **options)
+    truth = simulate("quadpixel-pyramid", out_dir, **options)
     frames, meta = decode(out_dir / truth["files"]["capture"])
     assert meta["views"] == ["R", "G", "B"] and frames.dtype == np.uint16
-    views = np.stack([demultiplex(f) for f in frames], axis=-1)  # (4, rows, cols, 3)
+    views = np.stack([demultiplex(f, 2) for f in frames], axis=-1)  # (4, rows, cols, 3)
     return views, truth, json.loads((out_dir / "truth.json").read_text())
 
 
@@ -112,7 +105,7 @@ def test_more_rays_average_towards_the_single_ray_render():
 
 
 def test_dualpixel_prism_frames_like_a_dpraw(tmp_path):
-    truth = prismcam.write_dualpixel(tmp_path, pixels=192, seed=5, noise_dn=0.0)
+    truth = simulate("dualpixel-prism", tmp_path, pixels=192, seed=5, noise_dn=0.0)
     frames, meta = decode(tmp_path / "capture.dng")
     assert meta["views"] == ["S", "A"] and meta["cfa"] == "RGGB"
     assert meta["active_area"] == truth["active_area"]
@@ -137,8 +130,8 @@ def test_dualpixel_prism_frames_like_a_dpraw(tmp_path):
 
 
 def test_dualpixel_masked_half_gives_the_crosstalk(tmp_path):
-    truth = prismcam.write_dualpixel(tmp_path, pixels=96, scene="white", open_halves="A",
-                                     crosstalk=0.5, noise_dn=0.0)
+    truth = simulate("dualpixel-prism", tmp_path, pixels=96, scene="white", open_halves="A",
+                     crosstalk=0.5, noise_dn=0.0)
     frames, _ = decode(tmp_path / "capture.dng")
     top, left, bottom, right = truth["active_area"]
     s = frames[0, top:bottom, left:right].astype(float) - truth["black_level"]
@@ -147,7 +140,7 @@ def test_dualpixel_masked_half_gives_the_crosstalk(tmp_path):
 
 
 def test_raytrix_white_micro_images_centre_on_the_truth_lattice(tmp_path):
-    truth = prismcam.write_raytrix(tmp_path, pixels=202, scene="white", seed=7)
+    truth = simulate("raytrix-prism", tmp_path, pixels=202, scene="white", seed=7)
     frames, meta = decode(tmp_path / "capture.tif")
     img = frames[0].astype(float)
     lat = truth["lattice"]
@@ -197,7 +190,7 @@ def test_bad_options(bad, match):
 
 
 def test_kinds_are_registered():
-    kinds = prismcam.kinds()
+    assert tuple(sorted(kinds())) == KIND_NAMES  # the CLI's static list of names
     assert {"quadpixel-pyramid", "dualpixel-prism", "raytrix-prism", "quadpixel-white",
             "quadpixel-masked", "dualpixel-masked", "dualpixel-white",
-            "raytrix-white"} <= set(kinds)
+            "raytrix-white"} <= set(prismcam.kinds())

@@ -36,6 +36,7 @@ def _stages() -> dict[str, Stage]:
         optics,
         refocus,
         sai,
+        simulate,
         stitch,
     )
 
@@ -53,6 +54,7 @@ def _stages() -> dict[str, Stage]:
         Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
               outputs=("output", "transform_out", "report", "preview")),
         Stage("optics", optics.run, inputs=("input",), outputs=("json",)),
+        Stage("simulate", simulate.run, inputs=(), outputs=("output",)),
     ]
     return {s.name: s for s in table}
 

@@ -23,19 +23,14 @@ field angles in degrees, measured by tracing the view's corner rays).
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
-import tifffile
 
-from plenocli.io.atomic import atomic_path, write_text
-from plenocli.io.dng import write_dng
 from plenocli.optics import prism as optics_prism
+from plenocli.synth.capture import SimFile, Simulation
 from plenocli.synth.chart import test_chart_u8
 
 FULL_SCALE_DN = 50000  # 16-bit value of a white chart seen through the whole pupil
@@ -450,11 +445,7 @@ def render_raytrix(*, pixels: int = 404, rays: int = 1, seed: int = 0, prism: bo
 
 
 # ---------------------------------------------------------------------------------------------
-# Writers: files a user (and `plenocli simulate KIND -o DIR`) gets, plus truth.json.
-
-def _write_truth(out_dir: Path, truth: dict) -> None:
-    write_text(out_dir / "truth.json", json.dumps(truth, indent=1, allow_nan=True) + "\n")
-
+# Capture sets: what `plenocli simulate KIND -o DIR` writes, plus truth.json.
 
 def _to_u16(image: np.ndarray, scale: float, *, noise_dn: float, rng) -> np.ndarray:
     data = image * scale
@@ -463,12 +454,11 @@ def _to_u16(image: np.ndarray, scale: float, *, noise_dn: float, rng) -> np.ndar
     return np.clip(np.round(data), 0, 65535).astype(np.uint16)
 
 
-def write_quadpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 256,
-                    rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                    open_quarters: str | None = None, crosstalk: float = 0.0,
-                    noise_dn: float = 0.0, prism_apex_deg: float = 16.7) -> dict:
-    """Write ``capture.tif`` (16-bit RGB, pixels x pixels: decode gives frames R, G, B) and
-    ``truth.json`` into ``out_dir``.
+def simulate_quadpixel(*, seed: int = 0, pixels: int = 256, rays: int = 1,
+                       no_prisms: bool = False, scene: str = "chart",
+                       open_quarters: str | None = None, crosstalk: float = 0.0,
+                       noise_dn: float = 0.0, prism_apex_deg: float = 16.7) -> Simulation:
+    """``capture.tif`` (16-bit RGB, pixels x pixels: decode gives frames R, G, B) and its truth.
 
     ``open_quarters``: SAIs whose pupil quarter is open, e.g. "00" or "00,11" (None: all).
     """
@@ -482,22 +472,17 @@ def write_quadpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 
     sensor, truth = render_quadpixel(pixels=pixels, rays=rays, seed=seed, prisms=not no_prisms,
                                      scene=scene, open_quarters=quarters, crosstalk=crosstalk,
                                      camera=cam)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     data = _to_u16(sensor, FULL_SCALE_DN, noise_dn=noise_dn, rng=np.random.default_rng(seed + 1))
-    with atomic_path(out / "capture.tif") as tmp:
-        tifffile.imwrite(tmp, data, photometric="rgb")
     truth.update(files={"capture": "capture.tif"}, noise_dn=noise_dn)
-    _write_truth(out, truth)
-    return truth
+    return Simulation((SimFile("capture.tif", data, "tiff", {"photometric": "rgb"}),), truth)
 
 
-def write_dualpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 384,
-                    rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                    open_halves: str = "A,B", crosstalk: float = 0.0,
-                    noise_dn: float = 2.0, prism_apex_deg: float = 30.0) -> dict:
-    """Write ``capture.dng`` (two CFA frames "S" = A + B and "A", like a Canon DPRAW, RGGB,
-    black 512, white 16383, 16 optical-black columns on the left) and ``truth.json``.
+def simulate_dualpixel(*, seed: int = 0, pixels: int = 384, rays: int = 1,
+                       no_prisms: bool = False, scene: str = "chart", open_halves: str = "A,B",
+                       crosstalk: float = 0.0, noise_dn: float = 2.0,
+                       prism_apex_deg: float = 30.0) -> Simulation:
+    """``capture.dng`` (two CFA frames "S" = A + B and "A", like a Canon DPRAW, RGGB, black
+    512, white 16383, 16 optical-black columns on the left) and its truth.
 
     The default prism (n = 1.74, A = 30 deg) deviates the A view by ~78 % of the frame width,
     so that A and B are "almost juxtaposed with a tiny common portion" as in the paper's
@@ -519,33 +504,26 @@ def write_dualpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 
         frames[k, :, :margin] = black
     frames += rng.normal(0.0, noise_dn, frames.shape) if noise_dn > 0 else 0.0
     data = np.clip(np.round(frames), 0, white).astype(np.uint16)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_dng(out / "capture.dng", data, cfa="RGGB", black_levels=[black, black],
-              white_level=white, active_area=[0, margin, rows, cols + margin],
-              masked_areas=[[0, 0, rows, margin]], frame_names=["S", "A"])
+    active = [0, margin, rows, cols + margin]
+    dng = {"cfa": "RGGB", "black_levels": [black, black], "white_level": white,
+           "active_area": active, "masked_areas": [[0, 0, rows, margin]],
+           "frame_names": ["S", "A"]}
     truth.update(files={"capture": "capture.dng"}, black_level=black, white_level=white,
-                 scale_dn=scale, cfa="RGGB", active_area=[0, margin, rows, cols + margin],
-                 noise_dn=noise_dn)
-    _write_truth(out, truth)
-    return truth
+                 scale_dn=scale, cfa="RGGB", active_area=active, noise_dn=noise_dn)
+    return Simulation((SimFile("capture.dng", data, "dng", dng),), truth)
 
 
-def write_raytrix(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 404,
-                  rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                  pitch_px: float = 20.2, noise_dn: float = 0.0) -> dict:
-    """Write ``capture.tif`` (16-bit mono sensor image) and ``truth.json`` (with the lattice)."""
+def simulate_raytrix(*, seed: int = 0, pixels: int = 404, rays: int = 1, no_prisms: bool = False,
+                     scene: str = "chart", pitch_px: float = 20.2,
+                     noise_dn: float = 0.0) -> Simulation:
+    """``capture.tif`` (16-bit mono sensor image) and its truth (with the lattice)."""
     image, truth = render_raytrix(pixels=pixels, rays=rays, seed=seed, prism=not no_prisms,
                                   scene=scene, pitch_px=pitch_px)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     data = _to_u16(image, FULL_SCALE_DN, noise_dn=noise_dn, rng=np.random.default_rng(seed + 1))
-    with atomic_path(out / "capture.tif") as tmp:
-        tifffile.imwrite(tmp, data, photometric="minisblack")
     truth.update(files={"capture": "capture.tif"}, noise_dn=noise_dn,
                  full_scale_dn=FULL_SCALE_DN)
-    _write_truth(out, truth)
-    return truth
+    return Simulation((SimFile("capture.tif", data, "tiff", {"photometric": "minisblack"}),),
+                      truth)
 
 
 def kinds() -> dict:
@@ -553,12 +531,12 @@ def kinds() -> dict:
     from functools import partial
 
     return {
-        "quadpixel-pyramid": write_quadpixel,
-        "quadpixel-white": partial(write_quadpixel, scene="white", no_prisms=True),
-        "quadpixel-masked": partial(write_quadpixel, scene="white", open_quarters="00"),
-        "dualpixel-prism": write_dualpixel,
-        "dualpixel-white": partial(write_dualpixel, scene="white", no_prisms=True),
-        "dualpixel-masked": partial(write_dualpixel, scene="white", open_halves="A"),
-        "raytrix-prism": write_raytrix,
-        "raytrix-white": partial(write_raytrix, scene="white", no_prisms=True),
+        "quadpixel-pyramid": simulate_quadpixel,
+        "quadpixel-white": partial(simulate_quadpixel, scene="white", no_prisms=True),
+        "quadpixel-masked": partial(simulate_quadpixel, scene="white", open_quarters="00"),
+        "dualpixel-prism": simulate_dualpixel,
+        "dualpixel-white": partial(simulate_dualpixel, scene="white", no_prisms=True),
+        "dualpixel-masked": partial(simulate_dualpixel, scene="white", open_halves="A"),
+        "raytrix-prism": simulate_raytrix,
+        "raytrix-white": partial(simulate_raytrix, scene="white", no_prisms=True),
     }

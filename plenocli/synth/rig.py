@@ -11,20 +11,12 @@ bottom; ``2x2`` = S00, S01, S10, S11 (top-left, top-right, bottom-left, bottom-r
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
-
 import cv2
 import numpy as np
 from scipy import ndimage
 
-from plenocli.io import tiffio
-from plenocli.io.atomic import write_text
-from plenocli.model.provenance import stage_record
-
-LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
-VIEW_NAMES = {"1x2": ["L", "R"], "2x1": ["T", "B"], "2x2": ["S00", "S01", "S10", "S11"]}
+from plenocli.stitch.views import LAYOUTS, VIEW_NAMES
+from plenocli.synth.capture import SimFile, Simulation
 
 
 def make_scene(shape: tuple[int, int], *, seed: int = 0, blur_px: float = 1.5) -> np.ndarray:
@@ -151,7 +143,7 @@ def make_rig(*, layout: str = "1x2", view_shape: tuple[int, int] = (240, 320),
     relative = [inv0 @ h for h in homs]
     truth = {
         "layout": layout, "model": model, "view_shape": [rows, cols], "overlap": overlap,
-        "view_names": VIEW_NAMES[layout],
+        "view_names": list(VIEW_NAMES[layout]),
         "homographies": [h.tolist() for h in homs],
         "relative": [(r / r[2, 2]).tolist() for r in relative],
         "shifts_px": [[r[1, 2], r[0, 2]] for r in relative],
@@ -216,46 +208,37 @@ def make_masked_white(*, view_shape: tuple[int, int] = (120, 160), n_views: int 
     return views.astype(np.float32), truth
 
 
-def _write_rig(out_dir: str | os.PathLike, layout: str, *, seed: int, view_shape, overlap: float,
-               model: str, noise: float, ghost_r: float, vignetting: float) -> dict:
-    out = Path(out_dir)
+def _simulate_rig(layout: str, *, seed: int, view_shape, overlap: float, model: str,
+                  noise: float, ghost_r: float, vignetting: float) -> Simulation:
     views, _, truth = make_rig(layout=layout, view_shape=tuple(view_shape), overlap=overlap,
                                model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting,
                                seed=seed)
-    params = dict(layout=layout, seed=seed, view_shape=list(view_shape), overlap=overlap,
-                  model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
-    record = stage_record("simulate", params, {})
     names = truth["view_names"]
-    tiffio.write_image(out / "views.tif", views,
-                       {"views": names, "cfa": None, "provenance": record, "history": []})
-    files = {"views": "views.tif"}
+    meta = {"views": names, "cfa": None}
+    files = [SimFile("views.tif", views, "image", {"meta": meta})]
     for k, name in enumerate(names):  # one masked white capture per view (cross-talk target)
         white, wtruth = make_masked_white(view_shape=tuple(view_shape), n_views=len(names),
                                           intended=k, r=0.05 + ghost_r, noise=noise,
                                           seed=seed + 1 + k)
-        tiffio.write_image(out / f"white_{name}.tif", white,
-                           {"views": names, "cfa": None, "provenance": record, "history": []})
-        files[f"white_{name}"] = f"white_{name}.tif"
+        files.append(SimFile(f"white_{name}.tif", white, "image", {"meta": meta}))
         truth.setdefault("crosstalk", {})[name] = wtruth["r"]
     public = {k: v for k, v in truth.items() if k != "scene"}
-    public.update(files=files, kind=f"{'quad' if layout == '2x2' else 'stereo'}-rig")
-    write_text(out / "truth.json", json.dumps(public, indent=2))
-    return public
+    public.update(files={f.name[:-4]: f.name for f in files},
+                  kind=f"{'quad' if layout == '2x2' else 'stereo'}-rig")
+    return Simulation(tuple(files), public)
 
 
-def write_stereo_rig(out_dir: str | os.PathLike, *, seed: int = 0,
-                     view_shape: tuple[int, int] = (400, 500), overlap: float = 0.2,
-                     model: str = "translation", noise: float = 0.002, ghost_r: float = 0.0,
-                     vignetting: float = 0.2) -> dict:
-    """Write a two-view rig (views.tif, white_L.tif, white_R.tif, truth.json) into ``out_dir``."""
-    return _write_rig(out_dir, "1x2", seed=seed, view_shape=view_shape, overlap=overlap,
-                      model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
+def simulate_stereo_rig(*, seed: int = 0, view_shape: tuple[int, int] = (400, 500),
+                        overlap: float = 0.2, model: str = "translation", noise: float = 0.002,
+                        ghost_r: float = 0.0, vignetting: float = 0.2) -> Simulation:
+    """A two-view rig: views.tif (L, R), white_L.tif, white_R.tif and the truth."""
+    return _simulate_rig("1x2", seed=seed, view_shape=view_shape, overlap=overlap, model=model,
+                         noise=noise, ghost_r=ghost_r, vignetting=vignetting)
 
 
-def write_quad_rig(out_dir: str | os.PathLike, *, seed: int = 0,
-                   view_shape: tuple[int, int] = (300, 400), overlap: float = 0.2,
-                   model: str = "translation", noise: float = 0.002, ghost_r: float = 0.0,
-                   vignetting: float = 0.2) -> dict:
-    """Write a 2 x 2 rig (views S00, S01, S10, S11 + one masked white per view + truth.json)."""
-    return _write_rig(out_dir, "2x2", seed=seed, view_shape=view_shape, overlap=overlap,
-                      model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
+def simulate_quad_rig(*, seed: int = 0, view_shape: tuple[int, int] = (300, 400),
+                      overlap: float = 0.2, model: str = "translation", noise: float = 0.002,
+                      ghost_r: float = 0.0, vignetting: float = 0.2) -> Simulation:
+    """A 2 x 2 rig: views S00, S01, S10, S11 + one masked white per view, and the truth."""
+    return _simulate_rig("2x2", seed=seed, view_shape=view_shape, overlap=overlap, model=model,
+                         noise=noise, ghost_r=ghost_r, vignetting=vignetting)

@@ -9,11 +9,12 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
-from plenocli.synth.rig import make_masked_white, make_rig, write_quad_rig, write_stereo_rig
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.synth.rig import make_masked_white, make_rig
 
 
 def test_stitch_stereo_rig(tmp_path):
-    truth = write_stereo_rig(tmp_path / "rig", view_shape=(200, 260), seed=1)
+    truth = simulate("stereo-rig", tmp_path / "rig", view_shape=(200, 260), seed=1)
     out = tmp_path / "pano.tif"
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "-o", str(out),
                                    "--report", str(tmp_path / "r.json"), "--transform-out",
@@ -34,7 +35,7 @@ def test_stitch_stereo_rig(tmp_path):
 
 
 def test_stitch_quad_rig_and_view_selection(tmp_path):
-    write_quad_rig(tmp_path / "rig", view_shape=(160, 200), seed=2)
+    simulate("quad-rig", tmp_path / "rig", view_shape=(160, 200), seed=2)
     out = tmp_path / "pano.tif"
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "-o", str(out),
                                    "--views", "S00,S01,S10,S11", "--layout", "2x2"])
