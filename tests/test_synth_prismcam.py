@@ -9,7 +9,7 @@ from scipy.optimize import least_squares
 from plenocli.io.raw import decode
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.sai import demultiplex
-from plenocli.synth import KIND_NAMES, kinds, prismcam
+from plenocli.synth import KIND_NAMES, kinds, prismsets
 from plenocli.synth.prismcam import Camera, _chart_hits, render_quadpixel
 
 
@@ -193,4 +193,4 @@ def test_kinds_are_registered():
     assert tuple(sorted(kinds())) == KIND_NAMES  # the CLI's static list of names
     assert {"quadpixel-pyramid", "dualpixel-prism", "raytrix-prism", "quadpixel-white",
             "quadpixel-masked", "dualpixel-masked", "dualpixel-white",
-            "raytrix-white"} <= set(prismcam.kinds())
+            "raytrix-white"} <= set(prismsets.kinds())

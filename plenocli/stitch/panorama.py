@@ -112,28 +112,14 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     if rig is not None:
         stack, origins, layout = _undistort_rig(stack, rig, layout)
     luma = luminance(stack)
-    closure, pair_info = None, None
-    if transform is not None:
-        transforms, layout, source = check_transform(transform, n_views, (rows, cols), model)
-    else:
-        source = "estimated"
-        search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
-                      min_correlation=min_correlation)
-        if layout == "auto":
-            layout = "2x2" if n_views == 4 else auto_layout(luma, search, overlap,
-                                                             overlap_tolerance)
-        expected = priors(layout, stack.shape[-2:], origins, overlap, overlap_tolerance,
-                          tolerance_px)
-        transforms, pair_info, closure = register(luma, layout, model, search, expected)
-    offset, pano_shape = compose.canvas(transforms, stack.shape[-2:])
-    warped, weights = compose.warp_views(stack, transforms, offset, pano_shape)
+    search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
+                  min_correlation=min_correlation, overlap=overlap,
+                  overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
+    transforms, layout, source, pair_info, closure = _transforms(
+        luma, transform, layout, model, origins, search, view_shape=(rows, cols))
     pairs = neighbour_pairs(layout)
-    gains = np.ones((n_views, n_chan))
-    if match_gain:
-        gains = compose.match_gains(warped, weights, pairs)
-        warped *= gains[:, :, None, None].astype(np.float32)
-    warped, weights, offset = compose.trim_to_coverage(warped, weights, offset)
-    panorama = compose.blend(warped, weights, blend)
+    panorama, warped, weights, offset, gains = _composite(stack, transforms, pairs,
+                                                          match_gain=match_gain, blend=blend)
     residuals = pair_residuals(warped, weights, pairs)
     if pair_info is None:  # a given transform: the pairs are only named
         pair_info = [{"views": [a, b], "direction": d} for a, b, d in pairs]
@@ -162,6 +148,39 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
         coverage_fraction=float((weights.sum(axis=0) > 0).mean()))
     return (panorama if colour else panorama[0]), report
+
+
+def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
+                origins: np.ndarray | None, search: dict, *, view_shape: tuple[int, int]):
+    """View -> view 0 transforms: registered (priors from the rig or the expected overlap),
+    or a saved transform checked against the input views' ``view_shape``. Returns them, the
+    layout, their source, the per-pair reports (None for a saved transform) and the closure."""
+    n_views, rows, cols = luma.shape  # with a rig: the common frame's canvases
+    if transform is not None:
+        transforms, layout, source = check_transform(transform, n_views, view_shape, model)
+        return transforms, layout, source, None, None
+    limits = {k: search[k] for k in ("max_overlap", "min_overlap_px", "min_correlation")}
+    overlap, overlap_tolerance = search["overlap"], search["overlap_tolerance"]
+    if layout == "auto":
+        layout = "2x2" if n_views == 4 else auto_layout(luma, limits, overlap, overlap_tolerance)
+    expected = priors(layout, (rows, cols), origins, overlap, overlap_tolerance,
+                      search["tolerance_px"])
+    transforms, pair_info, closure = register(luma, layout, model, limits, expected)
+    return transforms, layout, "estimated", pair_info, closure
+
+
+def _composite(stack: np.ndarray, transforms: list[np.ndarray], pairs: list, *,
+               match_gain: bool, blend: str):
+    """The blended panorama (C, rows', cols') and what it was made of: the warped views, their
+    weights, the view-0 -> panorama translation and the per-view, per-channel gains."""
+    offset, pano_shape = compose.canvas(transforms, stack.shape[-2:])
+    warped, weights = compose.warp_views(stack, transforms, offset, pano_shape)
+    gains = np.ones(stack.shape[:2])
+    if match_gain:
+        gains = compose.match_gains(warped, weights, pairs)
+        warped *= gains[:, :, None, None].astype(np.float32)
+    warped, weights, offset = compose.trim_to_coverage(warped, weights, offset)
+    return compose.blend(warped, weights, blend), warped, weights, offset, gains
 
 
 def _check_options(n_views: int, *, layout: str, model: str, blend: str,

@@ -18,13 +18,13 @@ KIND_NAMES = ("dualpixel", "dualpixel-masked", "dualpixel-prism", "dualpixel-whi
 
 def kinds() -> dict[str, Callable[..., object]]:
     """Simulation kinds by name: ``simulate(*, seed, ...) -> Simulation``."""
-    from plenocli.synth import dualpixel, focused, prismcam, rig, whiteimage
+    from plenocli.synth import dualpixel, focused, prismsets, rig, whiteimage
 
     return {
         "dualpixel": dualpixel.simulate_capture_set,
         "raytrix-scene": focused.simulate_raytrix_scene,
         "hexgrid-white": whiteimage.simulate_hexgrid_white,
-        **prismcam.kinds(),
+        **prismsets.kinds(),
         "stereo-rig": rig.simulate_stereo_rig,
         "quad-rig": rig.simulate_quad_rig,
     }
