@@ -48,9 +48,10 @@ def test_homography_corner_error_within_0p5_px(layout, seed, vignetting, noise):
                                overlap=0.3, perspective_px=4.0, vignetting=vignetting,
                                noise=noise, seed=seed)
     _, report = stitch(views, layout=layout, model="homography")
-    # noise-free views are related by an exact homography: the photometric fit recovers it
-    # to a few thousandths of a pixel; noise leaves about 0.1-0.3 px at the far corners
-    assert _corner_error(truth, report) < (0.02 if noise == 0 else 0.5)
+    # noise-free views of the analytic scene are related by an exact homography: the
+    # photometric fit (cubic B-spline resampling of view b) recovers it within 0.02 px at the
+    # far corners over seeds 1-6; noise and vignetting leave up to about 0.06 px
+    assert _corner_error(truth, report) < (0.03 if noise == 0 else 0.2)
     assert all(p["inliers"] >= 12 for p in report.pairs)
     assert all(p["refinement"] == "photometric" for p in report.pairs)
     if layout == "2x2":

@@ -60,18 +60,7 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     vignetting = 1.0 - 0.3 * (xn**2 + yn**2) / 2
     split = 0.5 - slope * xn + 0.02 * yn  # A is brighter on the left of the frame
 
-    if scene == "white":
-        radiance = np.ones((rows, cols))
-    elif scene == "chart":
-        texture = gaussian_filter(rng.standard_normal((rows, cols)), 3.0)
-        radiance = 0.9 + 0.35 * texture / texture.std()
-        radiance[rows // 4: rows // 2, cols // 5: cols // 3] *= 0.3  # a dark patch with edges
-        for _ in range(6):  # highlights that clip S (and sometimes A)
-            r0, c0 = rng.integers(4, rows - 8), rng.integers(4, cols - 8)
-            radiance[r0:r0 + 4, c0:c0 + 4] = 3.2
-        radiance = np.clip(radiance, 0.05, None)
-    else:
-        raise ValueError(f"scene must be 'chart' or 'white', got {scene!r}")
+    radiance = _radiance(rng, scene, rows, cols)
 
     s_mean = signal * radiance * vignetting * gain
     a_mean = split * s_mean
@@ -82,26 +71,9 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     else:
         a_sig, b_sig = np.round(a_mean), np.round(b_mean)
 
-    row_bias = np.empty((2, height, 2))
-    raw = np.empty((2, height, width), np.uint16)
-    clipped = []
-    for f, (sig, level) in enumerate(((a_sig + b_sig, black[0]), (a_sig, black[1]))):
-        phase = rng.uniform(0, 2 * np.pi)
-        wave = bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 400.0 + phase)
-        if noise == 0:  # integer bias: a noiseless capture is then exact in DN
-            wave = np.round(wave)
-        for p in range(2):
-            offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
-            row_bias[f, :, p] = level + wave + offs
-        bias_full = row_bias[f][:, np.arange(width) % 2]
-        frame = bias_full.copy()
-        frame[top:, left:] += sig
-        if noise > 0:
-            frame += rng.normal(0.0, noise, frame.shape)
-        frame = np.round(frame)
-        clipped.append(frame[top:, left:] >= white_level)
-        raw[f] = np.clip(frame, 0, white_level).astype(np.uint16)
-
+    raw, row_bias, clipped = _frames(rng, (a_sig + b_sig, a_sig), colour, black=black,
+                                     top=top, left=left, bias_amplitude=bias_amplitude,
+                                     white_level=white_level, noise=noise)
     clipped_s, clipped_a = clipped
     s_true = (a_sig + b_sig).astype(np.float32)
     a_true = a_sig.astype(np.float32)
@@ -121,6 +93,50 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
                    "signal": signal, "noise": noise},
     }
     return raw, truth
+
+
+def _radiance(rng: np.random.Generator, scene: str, rows: int, cols: int) -> np.ndarray:
+    """Scene radiance (rows, cols), 1 = the white target."""
+    if scene == "white":
+        return np.ones((rows, cols))
+    if scene != "chart":
+        raise ValueError(f"scene must be 'chart' or 'white', got {scene!r}")
+    texture = gaussian_filter(rng.standard_normal((rows, cols)), 3.0)
+    radiance = 0.9 + 0.35 * texture / texture.std()
+    radiance[rows // 4: rows // 2, cols // 5: cols // 3] *= 0.3  # a dark patch with edges
+    for _ in range(6):  # highlights that clip S (and sometimes A)
+        r0, c0 = rng.integers(4, rows - 8), rng.integers(4, cols - 8)
+        radiance[r0:r0 + 4, c0:c0 + 4] = 3.2
+    return np.clip(radiance, 0.05, None)
+
+
+def _frames(rng: np.random.Generator, signals: tuple[np.ndarray, np.ndarray],
+            colour: np.ndarray, *, black: tuple[int, int], top: int, left: int,
+            bias_amplitude: float, white_level: int, noise: float):
+    """The raw frames (2, top + rows, left + cols) uint16 of the signals S and A: a per-row,
+    per-colour bias over the whole raw (over-scan included), read noise, clipping. Also the
+    bias (2, height, column phase) and the clipped masks of the active area."""
+    rows, cols = signals[0].shape
+    height, width = top + rows, left + cols
+    row_bias = np.empty((2, height, 2))
+    raw = np.empty((2, height, width), np.uint16)
+    clipped = []
+    for f, (sig, level) in enumerate(zip(signals, black, strict=True)):
+        phase = rng.uniform(0, 2 * np.pi)
+        wave = bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 400.0 + phase)
+        if noise == 0:  # integer bias: a noiseless capture is then exact in DN
+            wave = np.round(wave)
+        for p in range(2):
+            offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
+            row_bias[f, :, p] = level + wave + offs
+        frame = row_bias[f][:, np.arange(width) % 2].copy()
+        frame[top:, left:] += sig
+        if noise > 0:
+            frame += rng.normal(0.0, noise, frame.shape)
+        frame = np.round(frame)
+        clipped.append(frame[top:, left:] >= white_level)
+        raw[f] = np.clip(frame, 0, white_level).astype(np.uint16)
+    return raw, row_bias, clipped
 
 
 def dng_options(truth: dict) -> dict:

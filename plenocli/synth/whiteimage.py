@@ -93,13 +93,8 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         for k, colour in enumerate(cfa.upper()):
             gains[k // 2, k % 2] = COLOUR_GAIN[colour]
         value *= np.tile(gains, (rows // 2 + 1, cols // 2 + 1))[:rows, :cols]
-    electrons = rng.poisson(value * full_well_e).astype(np.float64)
-    electrons += rng.normal(0.0, read_noise_e, size=electrons.shape)
-    dn = np.clip(np.rint(electrons * (4095 / (1.1 * full_well_e)) + 64), 0, 4095)
-    if dead_pixels:
-        pos = rng.integers(0, rows * cols, size=2 * dead_pixels)
-        dn.flat[pos[:dead_pixels]] = 0
-        dn.flat[pos[dead_pixels:]] = 4095
+    dn = _to_dn(rng, value, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                dead_pixels=dead_pixels)
     idx, _ = grid.lens_centres()
     true_centres = centre_of(idx[:, 0], idx[:, 1])
     truth = {
@@ -109,6 +104,20 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         "indices": idx.tolist(), "centres_xy": true_centres.tolist(), "seed": int(seed),
     }
     return dn.astype(np.uint16), truth
+
+
+def _to_dn(rng: np.random.Generator, value: np.ndarray, *, full_well_e: float,
+           read_noise_e: float, dead_pixels: int) -> np.ndarray:
+    """12-bit DN (black 64) of a relative exposure: photon and read noise, then as many dead
+    (0) as hot (4095) pixels."""
+    electrons = rng.poisson(value * full_well_e).astype(np.float64)
+    electrons += rng.normal(0.0, read_noise_e, size=electrons.shape)
+    dn = np.clip(np.rint(electrons * (4095 / (1.1 * full_well_e)) + 64), 0, 4095)
+    if dead_pixels:
+        pos = rng.integers(0, value.size, size=2 * dead_pixels)
+        dn.flat[pos[:dead_pixels]] = 0
+        dn.flat[pos[dead_pixels:]] = 4095
+    return dn
 
 
 def _hash_normal(key: np.ndarray, seed: int) -> np.ndarray:
