@@ -15,7 +15,7 @@ from plenocli.synth import KIND_NAMES
 @click.option("--rays", type=click.IntRange(min=1), default=None,
               help="Rays per pixel (optical kinds).")
 @click.option("--no-prisms", is_flag=True, default=None, help="Remove the prisms (optical kinds).")
-@click.option("--param", "extra", multiple=True, metavar="KEY=VALUE",
+@click.option("--param", multiple=True, metavar="KEY=VALUE",
               help="Another option of the kind (repeatable), e.g. --param noise=0.")
 @options.stage_command
 def simulate(**params):

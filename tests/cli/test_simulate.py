@@ -107,3 +107,36 @@ def test_help_does_not_import_the_simulator():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    from plenocli.pipeline.stages import simulate as stage
+
+    real = stage._write_file
+
+    def failing(path, item, record):
+        if item.name == "white.dng":  # the second file of the set
+            raise OSError("disk full")
+        real(path, item, record)
+
+    monkeypatch.setattr(stage, "_write_file", failing)
+    out = tmp_path / "set"
+    res = invoke("dualpixel", "-o", out, "--pixels", "32x48")
+    assert res.exit_code == 1 and "disk full" in res.output
+    assert not out.exists()
+    out.mkdir()
+    (out / "keep.txt").write_text("the user's")
+    assert invoke("dualpixel", "-o", out, "--pixels", "32x48").exit_code == 1
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]
+
+
+def test_a_pipeline_step_can_simulate(tmp_path):
+    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.runner import run_pipeline
+
+    config = tmp_path / "sim.yaml"
+    config.write_text("steps:\n  simulate:\n    kind: stereo-rig\n    output: rig\n"
+                      "    seed: 4\n    param: ['view_shape=[48, 64]']\n")
+    run_pipeline(load_config(config))
+    truth = json.loads((tmp_path / "rig" / "truth.json").read_text())
+    assert truth["seed"] == 4 and truth["view_shape"] == [48, 64]

@@ -24,11 +24,11 @@ TRUTH_FILE = "truth.json"
 
 def run(kind: str, output: str, *, seed: int = 0, pixels: str | int | None = None,
         rays: int | None = None, no_prisms: bool | None = None,
-        extra: tuple[str, ...] = ()) -> None:
+        param: tuple[str, ...] = ()) -> None:
     """Write the capture set of ``kind`` into the folder ``output``.
 
     ``pixels`` (one number or ROWSxCOLS), ``rays`` and ``no_prisms`` go to the kinds that take
-    them; ``extra`` holds more keyword options as ``KEY=VALUE`` strings (YAML values).
+    them; ``param`` holds more keyword options as ``KEY=VALUE`` strings (YAML values).
     """
     import yaml
 
@@ -38,7 +38,7 @@ def run(kind: str, output: str, *, seed: int = 0, pixels: str | int | None = Non
             kwargs[key] = value
     if isinstance(kwargs.get("pixels"), str) and kwargs["pixels"].isdigit():
         kwargs["pixels"] = int(kwargs["pixels"])  # one number, else ROWSxCOLS
-    for item in extra:
+    for item in param:
         key, sep, value = item.partition("=")
         if not sep:
             raise ConfigError(f"--param {item!r}: expected KEY=VALUE")
