@@ -1,6 +1,8 @@
 """Synthetic captures of the prism designs: decode them and check them against their truth."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -9,7 +11,7 @@ from scipy.optimize import least_squares
 from plenocli.io.raw import decode
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.sai import demultiplex
-from plenocli.synth import KIND_NAMES, kinds, prismsets
+from plenocli.synth import KIND_NAMES, kinds
 from plenocli.synth.prismcam import Camera, _chart_hits, render_quadpixel
 
 
@@ -189,8 +191,15 @@ def test_bad_options(bad, match):
         render_quadpixel(**{"pixels": 64, **bad})
 
 
-def test_kinds_are_registered():
-    assert tuple(sorted(kinds())) == KIND_NAMES  # the CLI's static list of names
+def test_kinds_are_registered_and_loaded_one_module_at_a_time():
     assert {"quadpixel-pyramid", "dualpixel-prism", "raytrix-prism", "quadpixel-white",
             "quadpixel-masked", "dualpixel-masked", "dualpixel-white",
-            "raytrix-white"} <= set(prismsets.kinds())
+            "raytrix-white"} <= set(KIND_NAMES)
+    assert kinds()["quadpixel-white"].keywords == {"scene": "white", "no_prisms": True}
+    code = ("import sys\nfrom plenocli.synth import generator\n"
+            "generator('quadpixel-pyramid')\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('plenocli.synth.', 'numba'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert eval(out) == ["plenocli.synth.capture", "plenocli.synth.chart",
+                         "plenocli.synth.prismcam", "plenocli.synth.prismsets"]

@@ -94,19 +94,3 @@ def simulate_raytrix(*, seed: int = 0, pixels: int = 404, rays: int = 1, no_pris
                  full_scale_dn=FULL_SCALE_DN)
     return Simulation((SimFile("capture.tif", data, "tiff", {"photometric": "minisblack"}),),
                       truth)
-
-
-def kinds() -> dict:
-    """The simulate kinds of this module (see docs/optics.md for their keyword options)."""
-    from functools import partial
-
-    return {
-        "quadpixel-pyramid": simulate_quadpixel,
-        "quadpixel-white": partial(simulate_quadpixel, scene="white", no_prisms=True),
-        "quadpixel-masked": partial(simulate_quadpixel, scene="white", open_quarters="00"),
-        "dualpixel-prism": simulate_dualpixel,
-        "dualpixel-white": partial(simulate_dualpixel, scene="white", no_prisms=True),
-        "dualpixel-masked": partial(simulate_dualpixel, scene="white", open_halves="A"),
-        "raytrix-prism": simulate_raytrix,
-        "raytrix-white": partial(simulate_raytrix, scene="white", no_prisms=True),
-    }

@@ -52,11 +52,11 @@ def simulate(kind: str, output: str | os.PathLike, **params) -> dict:
 
     Returns the truth as written to ``truth.json`` (with its ``provenance``).
     """
-    from plenocli.synth import KIND_NAMES, kinds
+    from plenocli.synth import KIND_NAMES, generator
 
     if kind not in KIND_NAMES:
         raise ConfigError(f"simulate: unknown kind {kind!r}; use one of {', '.join(KIND_NAMES)}")
-    generate = kinds()[kind]
+    generate = generator(kind)
     accepted = inspect.signature(generate).parameters
     for key in params:
         if key not in accepted:
