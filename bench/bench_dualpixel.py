@@ -23,7 +23,8 @@ from plenocli.bias import subtract_overscan
 from plenocli.dualpixel import split_views
 from plenocli.flatfield import apply_gain, white_gain
 from plenocli.io.raw import decode
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 
 def best_of(n, func):

@@ -24,7 +24,8 @@ sys.path.insert(0, str(ROOT))
 from plenocli.io.lensfile import read_lens  # noqa: E402
 from plenocli.optics.fasttrace import trace_fast  # noqa: E402
 from plenocli.optics.lens import Lens, Surface, trace  # noqa: E402
-from plenocli.synth.prismcam import render_quadpixel, write_quadpixel  # noqa: E402
+from plenocli.pipeline.stages.simulate import simulate  # noqa: E402
+from plenocli.synth.prismcam import render_quadpixel  # noqa: E402
 
 
 def peak_rss_mb() -> float:
@@ -68,7 +69,7 @@ def main() -> None:
     del sensor
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        write_quadpixel(tmp, pixels=args.pixels, seed=0)
+        simulate("quadpixel-pyramid", tmp, pixels=args.pixels, seed=0)
         t_write = time.perf_counter() - t0
     print(f"plenocli simulate quadpixel-pyramid --pixels {args.pixels} (render + 16-bit TIFF + "
           f"truth.json): {t_write:.2f} s")

@@ -42,5 +42,5 @@ _OS_HINTS = {
 def os_error_message(err: OSError) -> str:
     """One line for an operating-system error: the path and the cause, and what to do."""
     path = err.filename if err.filename is not None else ""
-    cause = _OS_HINTS.get(err.errno, err.strerror or type(err).__name__)
+    cause = _OS_HINTS.get(err.errno) or err.strerror or str(err) or type(err).__name__
     return f"{path}: {cause}" if path else cause

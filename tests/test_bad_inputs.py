@@ -23,8 +23,8 @@ from click.testing import CliRunner
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
 from plenocli.io.raytrix import calib_from_grid, format_calib
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
-from plenocli.synth.focused import write_raytrix_scene
+from plenocli.pipeline.stages.simulate import simulate, write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 
 def _plain_tiff(path: Path, data: np.ndarray) -> None:
@@ -78,7 +78,7 @@ def inputs(tmp_path_factory) -> Path:
     white = truth["params"]["white_level"]
     write_dualpixel_raw(d / "clipped.dng", np.full_like(raw, white), truth)
     # a focused (Raytrix-like) capture and its grid
-    write_raytrix_scene(d / "rt", seed=5, rows=120, cols=160)
+    simulate("raytrix-scene", d / "rt", seed=5, rows=120, cols=160)
     grid = yaml.safe_load((d / "rt" / "grid.yaml").read_text())["lens_grid"]
     base = {k: grid[k] for k in ("lattice", "pitch_px", "angle_rad", "offset_xy",
                                  "image_shape", "sensor_origin")}

@@ -19,7 +19,8 @@ from plenocli.cli.main import cli
 from plenocli.errors import ConfigError, InputError
 from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
 from plenocli.pipeline.config import load_config, read_template
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 ROOT = Path(__file__).resolve().parents[1]
 N_CAPTURES = 12

@@ -28,16 +28,10 @@ NUMBA_KERNELS = {
 # plenocli/calibration/), the simulator in plenocli/synth/ (one prism model in plenocli/optics/,
 # synth modules returning arrays). Remove each entry when its rebuild lands.
 TEMPORARY_FILES = {
-    "plenocli/stitch.py",
     "plenocli/hexgrid.py",
-    "plenocli/synth/prismcam.py",
 }
 TEMPORARY_FUNCTIONS = {
-    "plenocli/stitch.py:stitch",
-    "plenocli/stitch.py:estimate_translation",
-    "plenocli/stitch.py:estimate_homography",
     "plenocli/hexgrid.py:calibrate",
-    "plenocli/synth/dualpixel.py:dualpixel_capture",
     "plenocli/synth/whiteimage.py:white_image",
 }
 

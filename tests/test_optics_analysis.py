@@ -12,10 +12,10 @@ from plenocli.optics.analysis import (
     half_field_deg,
     lens_report,
     paraxial,
-    prism_deviation_deg,
     spot_rms_um,
 )
 from plenocli.optics.lens import Lens, Surface
+from plenocli.optics.prism import prism_deviation_deg
 from tests.conftest import ROOT
 
 TABLE2 = ROOT / "configs" / "lenses" / "paper_table2.yaml"

@@ -163,3 +163,31 @@ def test_compiled_tracer_matches_the_numpy_tracer():
         assert np.array_equal(alive, ref.alive)
         assert np.nanmax(np.abs(p - ref.position)) < 1e-12
         assert np.nanmax(np.abs(dd - ref.direction)) < 1e-12
+
+
+def test_serial_and_parallel_kernels_are_distinct_cached_functions():
+    """numba caches by Python function: one function compiled twice (serial and parallel)
+    would share one cache entry (numba issue 6845)."""
+    from plenocli.optics import fasttrace
+
+    serial, parallel = fasttrace._serial_kernel, fasttrace._parallel_kernel
+    assert serial.py_func is not parallel.py_func
+    assert serial.py_func.__qualname__ != parallel.py_func.__qualname__
+    assert not serial.targetoptions.get("parallel") and parallel.targetoptions["parallel"]
+    lens = table2()
+    pos, d = random_rays(np.random.default_rng(6), 2000)
+    one = fasttrace.trace_fast(lens, pos, d, parallel=False)
+    two = fasttrace.trace_fast(lens, pos, d, parallel=True)
+    for a, b in zip(one, two, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("surface, match", [
+    (dict(thickness_mm=-0.5), "thickness_mm -0.5"), (dict(thickness_mm=math.inf), "thickness"),
+    (dict(radius_mm=math.nan), "radius_mm is NaN"), (dict(conic=math.inf), "conic"),
+    (dict(glass=0.9), "refractive index"), (dict(diameter_mm=math.nan), "diameter_mm is NaN")])
+def test_impossible_surfaces_are_refused(surface, match):
+    with pytest.raises(ValueError, match=match):
+        Lens((Surface(**surface),))
+    with pytest.raises(ValueError, match="image_distance_mm"):
+        Lens((Surface(),), image_distance_mm=math.nan)

@@ -11,9 +11,9 @@ from plenocli.io.raw import decode
 from plenocli.io.tiffio import read_image, read_meta
 from plenocli.pipeline.config import load_config
 from plenocli.pipeline.runner import run_pipeline
+from plenocli.pipeline.stages.simulate import simulate
 from plenocli.sai import demultiplex
 from plenocli.stitch import stitch
-from plenocli.synth import kinds, prismcam
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -23,7 +23,7 @@ def _views(frames, n=2):
 
 
 def test_quadpixel_pyramid_stitches_to_twice_the_field(tmp_path):
-    truth = prismcam.write_quadpixel(tmp_path, pixels=256, seed=0)
+    truth = simulate("quadpixel-pyramid", tmp_path, pixels=256, seed=0)
     frames, meta = decode(tmp_path / truth["files"]["capture"])
     views = _views(frames.astype(np.float32))  # (3 colours, 4 views, rows, cols)
     green = views[1]
@@ -34,11 +34,11 @@ def test_quadpixel_pyramid_stitches_to_twice_the_field(tmp_path):
     assert panorama.shape[-2] > 1.7 * rows and panorama.shape[-1] > 1.7 * cols
     assert truth["stitched_field_deg"]["x"] == pytest.approx(2 * truth["main_lens_field_deg"],
                                                              rel=0.05)
-    assert isinstance(report, dict)
+    assert report.layout == "2x2"
 
 
 def test_dualpixel_prism_stitches_a_wider_image(tmp_path):
-    truth = prismcam.write_dualpixel(tmp_path, pixels=384, seed=2, noise_dn=0.0)
+    truth = simulate("dualpixel-prism", tmp_path, pixels=384, seed=2, noise_dn=0.0)
     frames, meta = decode(tmp_path / truth["files"]["capture"])
     top, left, bottom, right = meta["active_area"]
     black = truth["black_level"]
@@ -58,7 +58,7 @@ def test_raytrix_prism_pipeline_from_the_config(tmp_path):
     """simulate -> decode -> calibrate -> flat -> refocus (sweep, left, right) -> stitch, run by
     the shipped config with its inputs and outputs redirected into a temp folder."""
     for kind in ("raytrix-prism", "raytrix-white"):
-        kinds()[kind](tmp_path / kind, pixels=1200)
+        simulate(kind, tmp_path / kind, pixels=1200)
     out = tmp_path / "out"
     overrides = [f"decode.input={tmp_path / 'raytrix-prism' / 'capture.tif'}",
                  f"decode_white.input={tmp_path / 'raytrix-white' / 'capture.tif'}"]

@@ -7,7 +7,8 @@ import tifffile
 
 from plenocli.errors import InputError
 from plenocli.io import raw as rawio
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 
 @pytest.fixture

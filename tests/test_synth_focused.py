@@ -9,7 +9,9 @@ import pytest
 
 from plenocli.io import tiffio
 from plenocli.io.gridfile import read_grid
-from plenocli.synth.focused import raytrix_scene, texture_at, write_raytrix_scene
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.synth import kinds
+from plenocli.synth.focused import raytrix_scene, simulate_raytrix_scene, texture_at
 
 
 def test_scene_is_a_pure_function_of_the_seed():
@@ -44,7 +46,7 @@ def test_pixel_filter_is_the_box_average():
 
 @pytest.mark.parametrize("cfa", [None, "RGGB"])
 def test_write_raytrix_scene(tmp_path, cfa):
-    truth = write_raytrix_scene(tmp_path, seed=3, rows=96, cols=128, cfa=cfa)
+    truth = simulate("raytrix-scene", tmp_path, seed=3, rows=96, cols=128, cfa=cfa)
     frames, meta = tiffio.read_image(tmp_path / "frames.tif")
     assert frames.shape == (1, 96, 128) and meta["cfa"] == cfa
     grid = read_grid(tmp_path / "grid.yaml")
@@ -55,7 +57,4 @@ def test_write_raytrix_scene(tmp_path, cfa):
 
 
 def test_registered_as_a_simulation_kind():
-    pytest.importorskip("plenocli.synth.dualpixel", reason="kinds() also needs the lead's module")
-    from plenocli.synth import kinds
-
-    assert kinds()["raytrix-scene"] is write_raytrix_scene
+    assert kinds()["raytrix-scene"] is simulate_raytrix_scene

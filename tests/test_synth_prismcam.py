@@ -1,30 +1,25 @@
 """Synthetic captures of the prism designs: decode them and check them against their truth."""
 
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
 from plenocli.io.raw import decode
-from plenocli.synth import prismcam
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.sai import demultiplex
+from plenocli.synth import KIND_NAMES, kinds
 from plenocli.synth.prismcam import Camera, _chart_hits, render_quadpixel
 
 
-def demultiplex(frame, n=2):
-    """SAIs (n*n, rows/n, cols/n): plenocli.sai when available, Eq. 1 slicing otherwise."""
-    try:
-        from plenocli.sai import demultiplex as sai_demultiplex
-    except ImportError:
-        return np.stack([frame[i::n, j::n] for i in range(n) for j in range(n)])
-    return sai_demultiplex(frame, n)
-
-
 def quad_views(out_dir, **options):
-    truth = prismcam.write_quadpixel(out_dir, **options)
+    truth = simulate("quadpixel-pyramid", out_dir, **options)
     frames, meta = decode(out_dir / truth["files"]["capture"])
     assert meta["views"] == ["R", "G", "B"] and frames.dtype == np.uint16
-    views = np.stack([demultiplex(f) for f in frames], axis=-1)  # (4, rows, cols, 3)
+    views = np.stack([demultiplex(f, 2) for f in frames], axis=-1)  # (4, rows, cols, 3)
     return views, truth, json.loads((out_dir / "truth.json").read_text())
 
 
@@ -112,7 +107,7 @@ def test_more_rays_average_towards_the_single_ray_render():
 
 
 def test_dualpixel_prism_frames_like_a_dpraw(tmp_path):
-    truth = prismcam.write_dualpixel(tmp_path, pixels=192, seed=5, noise_dn=0.0)
+    truth = simulate("dualpixel-prism", tmp_path, pixels=192, seed=5, noise_dn=0.0)
     frames, meta = decode(tmp_path / "capture.dng")
     assert meta["views"] == ["S", "A"] and meta["cfa"] == "RGGB"
     assert meta["active_area"] == truth["active_area"]
@@ -137,8 +132,8 @@ def test_dualpixel_prism_frames_like_a_dpraw(tmp_path):
 
 
 def test_dualpixel_masked_half_gives_the_crosstalk(tmp_path):
-    truth = prismcam.write_dualpixel(tmp_path, pixels=96, scene="white", open_halves="A",
-                                     crosstalk=0.5, noise_dn=0.0)
+    truth = simulate("dualpixel-prism", tmp_path, pixels=96, scene="white", open_halves="A",
+                     crosstalk=0.5, noise_dn=0.0)
     frames, _ = decode(tmp_path / "capture.dng")
     top, left, bottom, right = truth["active_area"]
     s = frames[0, top:bottom, left:right].astype(float) - truth["black_level"]
@@ -147,7 +142,7 @@ def test_dualpixel_masked_half_gives_the_crosstalk(tmp_path):
 
 
 def test_raytrix_white_micro_images_centre_on_the_truth_lattice(tmp_path):
-    truth = prismcam.write_raytrix(tmp_path, pixels=202, scene="white", seed=7)
+    truth = simulate("raytrix-prism", tmp_path, pixels=202, scene="white", seed=7)
     frames, meta = decode(tmp_path / "capture.tif")
     img = frames[0].astype(float)
     lat = truth["lattice"]
@@ -196,8 +191,15 @@ def test_bad_options(bad, match):
         render_quadpixel(**{"pixels": 64, **bad})
 
 
-def test_kinds_are_registered():
-    kinds = prismcam.kinds()
+def test_kinds_are_registered_and_loaded_one_module_at_a_time():
     assert {"quadpixel-pyramid", "dualpixel-prism", "raytrix-prism", "quadpixel-white",
             "quadpixel-masked", "dualpixel-masked", "dualpixel-white",
-            "raytrix-white"} <= set(kinds)
+            "raytrix-white"} <= set(KIND_NAMES)
+    assert kinds()["quadpixel-white"].keywords == {"scene": "white", "no_prisms": True}
+    code = ("import sys\nfrom plenocli.synth import generator\n"
+            "generator('quadpixel-pyramid')\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('plenocli.synth.', 'numba'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert eval(out) == ["plenocli.synth.capture", "plenocli.synth.chart",
+                         "plenocli.synth.prismcam", "plenocli.synth.prismsets"]

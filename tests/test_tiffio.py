@@ -130,7 +130,8 @@ def test_metadata_geometry_must_fit_the_image(tmp_path, meta, words):
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory):
-    from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+    from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+    from plenocli.synth.dualpixel import dualpixel_capture
 
     folder = tmp_path_factory.mktemp("pristine")
     raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)

@@ -5,26 +5,28 @@ from plenocli.cli import options
 
 @click.command(short_help="Figures of a lens prescription (focal length, field, distortion).")
 @options.input_arg
-@click.option("--sensor-mm", type=options.FiniteFloat(min=0, min_open=True),
-              default=3.6, show_default=True,
+@click.option("--sensor-mm",
+              type=options.FiniteFloat(min=0, min_open=True), default=3.6, show_default=True,
               help="Side of the square sensor (mm), for the field of view.")
 @click.option("--json", type=click.Path(dir_okay=False), default=None,
               help="Also write the figures as JSON here.")
 @click.option("--crosstalk", is_flag=True,
               help="Also trace a quad-pixel micro-lens array behind the lens and report the "
                    "sub-aperture cross-talk ratio, without and with a cross mask at the stop.")
-@click.option("--mask-width", type=options.FiniteFloat(0, 1, max_open=True),
+@click.option("--mask-width",
+              type=options.FiniteFloat(min=0, max=1, max_open=True),
               default=1 / 15, show_default=True,
               help="Cross mask width as a fraction of the stop diameter.")
-@click.option("--pixel-um", type=options.FiniteFloat(min=0, min_open=True),
-              default=1.2, show_default=True,
+@click.option("--pixel-um",
+              type=options.FiniteFloat(min=0, min_open=True), default=1.2, show_default=True,
               help="Pixel size (um) for --crosstalk.")
-@click.option("--object-distance-mm", type=options.FiniteFloat(min=0, min_open=True),
-              default=2000.0, show_default=True,
+@click.option("--object-distance-mm",
+              type=options.FiniteFloat(min=0, min_open=True), default=2000.0, show_default=True,
               help="White board distance (mm) for --crosstalk.")
 @click.option("--prism-n", type=options.FiniteFloat(min=1), default=1.74, show_default=True,
               help="Prism index for the deviation figures.")
-@click.option("--prism-apex-deg", type=options.FiniteFloat(0, 90, max_open=True),
+@click.option("--prism-apex-deg",
+              type=options.FiniteFloat(min=0, max=90, max_open=True),
               default=16.7, show_default=True,
               help="Prism apex angle A (deg).")
 @options.stage_command

@@ -12,17 +12,21 @@ from plenocli.cli import options
               show_default=True, help="Arrangement, views row-major (2x2: S00,S01,S10,S11).")
 @click.option("--model", type=click.Choice(["translation", "homography"]),
               default="translation", show_default=True, help="Geometric model between views.")
-@click.option("--distortion", type=options.FiniteFloat(-1, 1), default=0.0, show_default=True,
+@click.option("--distortion",
+              type=options.FiniteFloat(min=-1, max=1, min_open=True), default=0.0,
+              show_default=True,
               help="Known radial distortion K1 removed first (r_d = r_u (1 + K1 r_u^2), r in "
                    "half-diagonals).")
 @click.option("--rig", type=click.Path(dir_okay=False), default=None,
               help="Prism rig YAML (focal_mm, sensor_mm, prism_n, prism_apex_deg, views): cancel "
                    "the prisms' distortion and search near the predicted overlap "
                    "(configs/rigs/).")
-@click.option("--overlap", type=options.FiniteFloat(0, 1, min_open=True, max_open=True),
-              default=None,
+@click.option("--overlap",
+              type=options.FiniteFloat(min=0, max=1, min_open=True, max_open=True), default=None,
               help="Expected overlap, fraction of the view (e.g. 0.2); restricts the search.")
-@click.option("--overlap-tolerance", type=options.FiniteFloat(0, 1), default=0.1, show_default=True,
+@click.option("--overlap-tolerance",
+              type=options.FiniteFloat(min=0, max=1, min_open=True, max_open=True),
+              default=0.1, show_default=True,
               help="Tolerance on --overlap (fraction of the view).")
 @click.option("--transform-in", type=click.Path(dir_okay=False), default=None,
               help="Reapply a transform saved with --transform-out instead of registering.")

@@ -15,11 +15,22 @@ import os
 import socket
 import tempfile
 from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from plenocli.errors import InputError
 
-_PENDING: contextvars.ContextVar[list[tuple[Path, Path]] | None] = contextvars.ContextVar(
+
+@dataclass
+class _Pending:
+    """What a stage has written so far: (temporary, destination) pairs, and the folders made
+    for them (removed again, when empty, if the stage fails)."""
+
+    files: list[tuple[Path, Path]] = field(default_factory=list)
+    folders: list[Path] = field(default_factory=list)
+
+
+_PENDING: contextvars.ContextVar[_Pending | None] = contextvars.ContextVar(
     "plenocli_pending_outputs", default=None)
 _HOST = socket.gethostname().replace(".", "_").replace("-", "_") or "host"
 
@@ -29,24 +40,28 @@ def outputs_together() -> Iterator[None]:
     """Hold back the renames of every atomic write in the block until the block succeeds.
 
     On any exception (or Ctrl-C) inside the block every temporary is removed and no destination
-    is touched.
+    is touched. Inside another such block it joins the outer one.
     """
-    pending: list[tuple[Path, Path]] = []
+    if _PENDING.get() is not None:
+        yield
+        return
+    pending = _Pending()
     token = _PENDING.set(pending)
     try:
         yield
     except BaseException:
-        _discard(pending)
+        _discard(pending.files)
+        _remove_empty(pending.folders)
         raise
     finally:
         _PENDING.reset(token)
     landed = 0
     try:
-        for tmp, dest in pending:
+        for tmp, dest in pending.files:
             os.replace(tmp, dest)
             landed += 1
     except BaseException:
-        _discard(pending[landed:])
+        _discard(pending.files[landed:])
         raise
 
 
@@ -67,9 +82,11 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     if dest.is_dir():
         raise InputError(f"output {dest} is a folder; give a file name")
     pending = _PENDING.get()
-    if pending is not None and any(_same_path(dest, d) for _, d in pending):
+    if pending is not None and any(_same_path(dest, d) for _, d in pending.files):
         raise InputError(f"{dest} is written twice by one command; give each output its own "
                          "path")
+    if pending is not None:
+        pending.folders.extend(_missing_folders(dest.parent))
     dest.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(dest)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.{_HOST}-{os.getpid()}.",
@@ -82,7 +99,7 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         if pending is None:
             os.replace(tmp, dest)
         else:
-            pending.append((tmp, dest))
+            pending.files.append((tmp, dest))
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -99,11 +116,17 @@ def write_text(path: str | os.PathLike, text: str, *, protect: tuple = ()) -> No
     write_bytes(path, text.encode("utf-8"), protect=protect)
 
 
-def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
+def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
+                  folders: Iterable[Path] = ()) -> None:
     """Before any work: every output distinct from the others and from the inputs, not a
     folder, with a name the file system takes, in a folder that exists or can be made and is
-    writable. Raises InputError naming the path and what to do."""
+    writable. ``folders`` are output folders a stage fills: not a file, and writable (or
+    makeable). Raises InputError naming the path and what to do."""
     outputs, inputs = [Path(p) for p in outputs], [Path(p) for p in inputs]
+    for folder in (Path(p) for p in folders):
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"output folder {folder} is a file; give a folder")
+        _check_folder(folder / "x")
     for k, out in enumerate(outputs):
         for other in outputs[:k]:
             if _same_path(out, other):
@@ -166,6 +189,21 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    """The folders ``mkdir(parents=True)`` would make for ``folder``, deepest first."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for folder in folders:  # deepest first
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def _discard(pending: list[tuple[Path, Path]]) -> None:

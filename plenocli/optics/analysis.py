@@ -14,6 +14,7 @@ import numpy as np
 
 from plenocli.optics.glass import D_LINE_UM
 from plenocli.optics.lens import Lens, trace
+from plenocli.optics.prism import prism_deviation_deg
 
 
 def _ynu(lens: Lens, y: float, u: float, *, first: int = 0, wavelength_um: float = D_LINE_UM
@@ -216,26 +217,6 @@ def spot_rms_um(lens: Lens, field_deg: float, *, rays_across: int = 32,
     return float(1e3 * np.sqrt(np.mean(np.sum((xy - xy.mean(axis=0)) ** 2, axis=1))))
 
 
-def prism_deviation_deg(n: float, apex_deg: float) -> dict:
-    """Deviation of a thin prism of index ``n`` and apex angle ``apex_deg``.
-
-    Returns ``thin_deg`` ((n - 1) A, the paper's approximation), ``minimum_deg`` (exact minimum
-    deviation 2 asin(n sin(A/2)) - A) and ``normal_incidence_deg`` (exact, light entering the
-    first face at normal incidence: asin(n sin A) - A).
-    """
-    if n < 1:
-        raise ValueError(f"n {n} must be >= 1")
-    if not 0 <= apex_deg < 90:
-        raise ValueError(f"apex_deg {apex_deg} must be in [0, 90)")
-    a = math.radians(apex_deg)
-    out = {"thin_deg": (n - 1.0) * apex_deg}
-    s_min = n * math.sin(a / 2)
-    out["minimum_deg"] = math.degrees(2 * math.asin(s_min) - a) if s_min <= 1 else math.nan
-    s_norm = n * math.sin(a)
-    out["normal_incidence_deg"] = math.degrees(math.asin(s_norm) - a) if s_norm <= 1 else math.nan
-    return out
-
-
 def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_LINE_UM,
                 spot_rays_across: int = 32, prism_n: float = 1.74,
                 prism_apex_deg: float = 16.7) -> dict:
@@ -244,8 +225,8 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
     The image plane is the lens's configured one; ``focus`` tells how far it is from the
     paraxial focus for an object at infinity.
     """
-    if sensor_mm <= 0:
-        raise ValueError(f"sensor_mm {sensor_mm} must be > 0")
+    if not (math.isfinite(sensor_mm) and sensor_mm > 0):
+        raise ValueError(f"sensor_mm {sensor_mm} must be a finite number > 0")
     par = paraxial(lens, wavelength_um=wavelength_um)
     half = half_field_deg(lens, sensor_mm / 2, wavelength_um=wavelength_um)
     half_diag = half_field_deg(lens, sensor_mm / math.sqrt(2), wavelength_um=wavelength_um)

@@ -132,6 +132,12 @@ def crosstalk_report(lens: Lens, *, cross_width_fraction: float = 1 / 15, quarte
     """Cross-talk ratio without and with a cross mask of width ``cross_width_fraction`` of the
     stop diameter. ``options`` go to :func:`sai_flux`. Also the fraction of flux the cross
     removes from the full pupil and the worst field point's ratio."""
+    if not (np.isfinite(cross_width_fraction) and 0 <= cross_width_fraction < 1):
+        raise ValueError(f"cross_width_fraction {cross_width_fraction} must be in [0, 1)")
+    for name in ("sensor_mm", "pixel_um", "object_distance_mm"):
+        value = options.get(name)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} {value} must be a finite number > 0")
     stop_d = lens.surfaces[lens.stop_index].diameter_mm
     intended = intended_sai(quarter)
     out = {"quarter": quarter, "intended_sai": list(intended)}

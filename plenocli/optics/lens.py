@@ -55,6 +55,21 @@ class Surface:
             return np.where(root >= 0, c * r2 / (1.0 + np.sqrt(np.maximum(root, 0.0))), np.nan)
 
 
+def _check_surface(k: int, s: Surface) -> None:
+    """Refuse values no ray can be traced through (NaN anywhere, a negative or infinite
+    thickness, an index below 1): the lens would give numbers, all wrong."""
+    if not (math.isfinite(s.thickness_mm) and s.thickness_mm >= 0):
+        raise ValueError(f"surface {k}: thickness_mm {s.thickness_mm} must be a finite number "
+                         ">= 0 (surfaces are listed in the order light meets them)")
+    for name in ("radius_mm", "diameter_mm", "conic"):
+        if math.isnan(getattr(s, name)):
+            raise ValueError(f"surface {k}: {name} is NaN; give a number")
+    if not math.isfinite(s.conic):
+        raise ValueError(f"surface {k}: conic {s.conic} must be finite")
+    if not isinstance(s.glass, str) and not (math.isfinite(s.glass) and s.glass >= 1):
+        raise ValueError(f"surface {k}: refractive index {s.glass} must be a finite number >= 1")
+
+
 @dataclass(frozen=True)
 class Lens:
     """A sequential lens: surfaces in the order light meets them, then the image plane.
@@ -72,6 +87,12 @@ class Lens:
     def __post_init__(self):
         if not self.surfaces:
             raise ValueError("a lens needs at least one surface")
+        for k, s in enumerate(self.surfaces):
+            _check_surface(k, s)
+        if self.image_distance_mm is not None and not (math.isfinite(self.image_distance_mm)
+                                                       and self.image_distance_mm >= 0):
+            raise ValueError(f"image_distance_mm {self.image_distance_mm} must be a finite "
+                             "number >= 0")
         z, positions = 0.0, []
         for s in self.surfaces:
             positions.append(z)

@@ -28,6 +28,7 @@ class Stage:
     name: str
     inputs: tuple[str, ...]
     outputs: tuple[str, ...]
+    folder_outputs: tuple[str, ...] = ()  # outputs that are folders the stage fills
 
     @property
     def run(self):
@@ -71,7 +72,9 @@ class Stage:
         every file the stage writes inside the block is renamed into place only when the whole
         stage succeeded (nothing is left behind otherwise).
         """
-        check_outputs(self.paths(params, self.outputs), self.paths(params, self.inputs))
+        files = tuple(name for name in self.outputs if name not in self.folder_outputs)
+        check_outputs(self.paths(params, files), self.paths(params, self.inputs),
+                      folders=self.paths(params, self.folder_outputs))
         token = RESOLVED.set(dict(params))
         try:
             with outputs_together():
@@ -93,6 +96,7 @@ _TABLE = (
     Stage("develop", inputs=("input", "wb_from", "recover_highlights"),
           outputs=("output", "linear", "preview")),
     Stage("optics", inputs=("input",), outputs=("json",)),
+    Stage("simulate", inputs=(), outputs=("output",), folder_outputs=("output",)),
 )
 
 

@@ -9,14 +9,10 @@ the corners; bright spots clip S. With ``noise=0`` everything is integer-valued 
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
-from plenocli.io.atomic import atomic_path, write_text
-from plenocli.io.dng import write_dng
+from plenocli.synth.capture import SimFile, Simulation
 
 COLOUR_GAIN = {"R": 0.55, "G": 1.0, "B": 0.7}  # white target seen through the CFA
 SPLIT_SLOPE = {"R": 0.16, "G": 0.12, "B": 0.09}  # A/S change from the left to the right edge
@@ -64,18 +60,7 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     vignetting = 1.0 - 0.3 * (xn**2 + yn**2) / 2
     split = 0.5 - slope * xn + 0.02 * yn  # A is brighter on the left of the frame
 
-    if scene == "white":
-        radiance = np.ones((rows, cols))
-    elif scene == "chart":
-        texture = gaussian_filter(rng.standard_normal((rows, cols)), 3.0)
-        radiance = 0.9 + 0.35 * texture / texture.std()
-        radiance[rows // 4: rows // 2, cols // 5: cols // 3] *= 0.3  # a dark patch with edges
-        for _ in range(6):  # highlights that clip S (and sometimes A)
-            r0, c0 = rng.integers(4, rows - 8), rng.integers(4, cols - 8)
-            radiance[r0:r0 + 4, c0:c0 + 4] = 3.2
-        radiance = np.clip(radiance, 0.05, None)
-    else:
-        raise ValueError(f"scene must be 'chart' or 'white', got {scene!r}")
+    radiance = _radiance(rng, scene, rows, cols)
 
     s_mean = signal * radiance * vignetting * gain
     a_mean = split * s_mean
@@ -86,26 +71,9 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     else:
         a_sig, b_sig = np.round(a_mean), np.round(b_mean)
 
-    row_bias = np.empty((2, height, 2))
-    raw = np.empty((2, height, width), np.uint16)
-    clipped = []
-    for f, (sig, level) in enumerate(((a_sig + b_sig, black[0]), (a_sig, black[1]))):
-        phase = rng.uniform(0, 2 * np.pi)
-        wave = bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 400.0 + phase)
-        if noise == 0:  # integer bias: a noiseless capture is then exact in DN
-            wave = np.round(wave)
-        for p in range(2):
-            offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
-            row_bias[f, :, p] = level + wave + offs
-        bias_full = row_bias[f][:, np.arange(width) % 2]
-        frame = bias_full.copy()
-        frame[top:, left:] += sig
-        if noise > 0:
-            frame += rng.normal(0.0, noise, frame.shape)
-        frame = np.round(frame)
-        clipped.append(frame[top:, left:] >= white_level)
-        raw[f] = np.clip(frame, 0, white_level).astype(np.uint16)
-
+    raw, row_bias, clipped = _frames(rng, (a_sig + b_sig, a_sig), colour, black=black,
+                                     top=top, left=left, bias_amplitude=bias_amplitude,
+                                     white_level=white_level, noise=noise)
     clipped_s, clipped_a = clipped
     s_true = (a_sig + b_sig).astype(np.float32)
     a_true = a_sig.astype(np.float32)
@@ -127,49 +95,96 @@ def dualpixel_capture(*, seed: int = 0, rows: int = 192, cols: int = 256, top: i
     return raw, truth
 
 
-def write_dualpixel_raw(path, raw: np.ndarray, truth: dict) -> None:
-    """Write a capture from :func:`dualpixel_capture` as a two-frame DNG (frames S, A)."""
+def _radiance(rng: np.random.Generator, scene: str, rows: int, cols: int) -> np.ndarray:
+    """Scene radiance (rows, cols), 1 = the white target."""
+    if scene == "white":
+        return np.ones((rows, cols))
+    if scene != "chart":
+        raise ValueError(f"scene must be 'chart' or 'white', got {scene!r}")
+    texture = gaussian_filter(rng.standard_normal((rows, cols)), 3.0)
+    radiance = 0.9 + 0.35 * texture / texture.std()
+    radiance[rows // 4: rows // 2, cols // 5: cols // 3] *= 0.3  # a dark patch with edges
+    for _ in range(6):  # highlights that clip S (and sometimes A)
+        r0, c0 = rng.integers(4, rows - 8), rng.integers(4, cols - 8)
+        radiance[r0:r0 + 4, c0:c0 + 4] = 3.2
+    return np.clip(radiance, 0.05, None)
+
+
+def _frames(rng: np.random.Generator, signals: tuple[np.ndarray, np.ndarray],
+            colour: np.ndarray, *, black: tuple[int, int], top: int, left: int,
+            bias_amplitude: float, white_level: int, noise: float):
+    """The raw frames (2, top + rows, left + cols) uint16 of the signals S and A: a per-row,
+    per-colour bias over the whole raw (over-scan included), read noise, clipping. Also the
+    bias (2, height, column phase) and the clipped masks of the active area."""
+    rows, cols = signals[0].shape
+    height, width = top + rows, left + cols
+    row_bias = np.empty((2, height, 2))
+    raw = np.empty((2, height, width), np.uint16)
+    clipped = []
+    for f, (sig, level) in enumerate(zip(signals, black, strict=True)):
+        phase = rng.uniform(0, 2 * np.pi)
+        wave = bias_amplitude * np.sin(2 * np.pi * np.arange(height) / 400.0 + phase)
+        if noise == 0:  # integer bias: a noiseless capture is then exact in DN
+            wave = np.round(wave)
+        for p in range(2):
+            offs = np.array([CFA_OFFSET[colour[r % 2, p]] for r in range(height)])
+            row_bias[f, :, p] = level + wave + offs
+        frame = row_bias[f][:, np.arange(width) % 2].copy()
+        frame[top:, left:] += sig
+        if noise > 0:
+            frame += rng.normal(0.0, noise, frame.shape)
+        frame = np.round(frame)
+        clipped.append(frame[top:, left:] >= white_level)
+        raw[f] = np.clip(frame, 0, white_level).astype(np.uint16)
+    return raw, row_bias, clipped
+
+
+def dng_options(truth: dict) -> dict:
+    """The :func:`plenocli.io.dng.write_dng` keywords of a capture from
+    :func:`dualpixel_capture`: a two-frame DNG (frames S, A) with its CFA, levels and margins."""
     geo = truth["geometry"]
-    write_dng(path, raw, cfa=geo["cfa"], black_levels=truth["params"]["black"],
-              white_level=truth["params"]["white_level"], active_area=geo["active_area"],
-              masked_areas=geo["masked_areas"], frame_names=["S", "A"],
-              model="plenocli synthetic Canon EOS 5D Mark IV (dual pixel)")
+    return {"cfa": geo["cfa"], "black_levels": truth["params"]["black"],
+            "white_level": truth["params"]["white_level"], "active_area": geo["active_area"],
+            "masked_areas": geo["masked_areas"], "frame_names": ["S", "A"],
+            "model": "plenocli synthetic Canon EOS 5D Mark IV (dual pixel)"}
 
 
-def write_capture_set(out_dir, *, seed: int = 0, pixels: str | int | None = None,
-                      noise: float = 2.0) -> dict:
-    """``plenocli simulate dualpixel``: capture.dng, white.dng and their truth in ``out_dir``.
+def _active_size(pixels: str | int | None) -> tuple[int, int]:
+    if not pixels:
+        return 192, 256
+    if isinstance(pixels, int) or str(pixels).isdigit():
+        return int(pixels), int(pixels)
+    try:
+        rows, cols = (int(v) for v in str(pixels).lower().split("x"))
+    except ValueError as err:
+        raise ValueError(f"pixels {pixels!r}: give ROWSxCOLS (e.g. 192x256) or one number") \
+            from err
+    return rows, cols
+
+
+def simulate_capture_set(*, seed: int = 0, pixels: str | int | None = None,
+                         noise: float = 2.0) -> Simulation:
+    """``plenocli simulate dualpixel``: capture.dng, white.dng and their truth.
 
     ``pixels`` is the active size as ``ROWSxCOLS`` (default 192x256); full size is 4480x6720
     with Canon's margins (top 42, left 136 would break nothing: margins here are kept even).
     Truth: ``truth.json`` (parameters, geometry) and ``truth.npz`` (per-row bias, A, B, S, split,
     vignetting and clipping masks of each capture, prefixed ``capture_`` / ``white_``).
     """
-    if not pixels:
-        rows, cols = 192, 256
-    elif isinstance(pixels, int) or str(pixels).isdigit():
-        rows = cols = int(pixels)
-    else:
-        rows, cols = (int(v) for v in str(pixels).lower().split("x"))
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    full = rows >= 2000
-    margins = {"top": 42, "left": 136} if full else {"top": 16, "left": 64}
-    arrays, summary = {}, {}
+    rows, cols = _active_size(pixels)
+    margins = {"top": 42, "left": 136} if rows >= 2000 else {"top": 16, "left": 64}
+    arrays, summary, files = {}, {}, []
     for name, scene, s in (("capture", "chart", seed), ("white", "white", seed + 1)):
         raw, truth = dualpixel_capture(seed=s, rows=rows, cols=cols, scene=scene, noise=noise,
                                        **margins)
-        write_dualpixel_raw(out / f"{name}.dng", raw, truth)
+        files.append(SimFile(f"{name}.dng", raw, "dng", dng_options(truth)))
         for key in ("A", "B", "S", "row_bias", "split", "vignetting", "clipped_S", "clipped_A"):
             arrays[f"{name}_{key}"] = truth[key]
         summary[name] = {"file": f"{name}.dng", "geometry": truth["geometry"],
                          "params": truth["params"],
                          "clipped_S_pixels": int(truth["clipped_S"].sum())}
-    with atomic_path(out / "truth.npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    files.append(SimFile("truth.npz", arrays, "npz"))
     doc = {"kind": "dualpixel", "frames": ["S", "A"], "captures": summary,
            "arrays": "truth.npz (A, B, S in DN above black of the active area; row_bias "
                      "(frame, row, column phase) in DN over the full raw height)"}
-    write_text(out / "truth.json", json.dumps(doc, indent=2))
-    return doc
+    return Simulation(tuple(files), doc)

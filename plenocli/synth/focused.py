@@ -23,17 +23,10 @@ x offset from the micro-image centre of the pixels in the view: a known disparit
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
-
 import numpy as np
 
-from plenocli.io import tiffio
-from plenocli.io.atomic import write_text
-from plenocli.io.gridfile import write_grid
 from plenocli.model.lensgrid import LensGrid
-from plenocli.model.provenance import stage_record
+from plenocli.synth.capture import SimFile, Simulation
 
 CHANNELS = "RGB"
 
@@ -128,30 +121,24 @@ def raytrix_scene(*, seed: int = 0, rows: int = 480, cols: int = 640, pitch_px: 
     return sensor.astype(np.float32), grid, truth if cfa else truth[0], info
 
 
-def write_raytrix_scene(out_dir: str | os.PathLike, *, seed: int = 0, rows: int = 480,
-                        cols: int = 640, pitch_px: float = 20.2, s: float = 0.2,
-                        g_true: float = 4.0, cfa: str | None = None) -> dict:
-    """Write a synthetic Raytrix-style capture into ``out_dir``.
+def simulate_raytrix_scene(*, seed: int = 0, rows: int = 480, cols: int = 640,
+                           pitch_px: float = 20.2, s: float = 0.2, g_true: float = 4.0,
+                           cfa: str | None = None) -> Simulation:
+    """A synthetic Raytrix-style capture set.
 
     Files: ``frames.tif`` (the sensor image, plenocli TIFF, view "raw"), ``grid.yaml`` (the lens
-    grid), ``texture.tif`` (true refocused image at g_true, one page per channel) and
-    ``truth.json``. Returns the truth dict.
+    grid), ``texture.tif`` (true refocused image at g_true, one page per channel); the truth.
     """
-    out = Path(out_dir)
     sensor, grid, truth, info = raytrix_scene(seed=seed, rows=rows, cols=cols, pitch_px=pitch_px,
                                               s=s, g_true=g_true, cfa=cfa)
-    params = dict(seed=seed, rows=rows, cols=cols, pitch_px=pitch_px, s=s, g_true=g_true, cfa=cfa)
-    record = stage_record("simulate", {"kind": "raytrix-scene", **params}, {})
     meta = {"views": ["raw"], "cfa": cfa, "origin": [0, 0], "black_level": [[0.0] * 4],
             "white_level": [1.0], "active_area": [0, 0, rows, cols], "masked_areas": [],
             "camera": "synthetic"}
-    tiffio.write_image(out / "frames.tif", sensor, tiffio.derived_meta(meta, record))
-    write_grid(out / "grid.yaml", grid, record)
     names = list(CHANNELS) if cfa else ["T"]
-    tiffio.write_image(out / "texture.tif", truth,
-                       tiffio.derived_meta({"views": names, "cfa": None}, record))
+    files = (SimFile("frames.tif", sensor, "image", {"meta": meta}),
+             SimFile("grid.yaml", grid, "grid"),
+             SimFile("texture.tif", truth, "image", {"meta": {"views": names, "cfa": None}}))
     truth_doc = {"kind": "raytrix-scene", **info,
                  "files": {"frames": "frames.tif", "grid": "grid.yaml",
                            "texture": "texture.tif"}}
-    write_text(out / "truth.json", json.dumps(truth_doc, indent=1))
-    return truth_doc
+    return Simulation(files, truth_doc)

@@ -23,19 +23,13 @@ field angles in degrees, measured by tracing the view's corner rays).
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import cv2
 import numpy as np
-import tifffile
 
-from plenocli.io.atomic import atomic_path, write_text
-from plenocli.io.dng import write_dng
-from plenocli.optics.lens import refract
+from plenocli.optics import prism as optics_prism
 from plenocli.synth.chart import test_chart_u8
 
 FULL_SCALE_DN = 50000  # 16-bit value of a white chart seen through the whole pupil
@@ -55,7 +49,7 @@ class Camera:
     @property
     def image_distance_mm(self) -> float:
         """D from the thin-lens equation (sharp image of the chart)."""
-        return 1.0 / (1.0 / self.focal_mm - 1.0 / self.object_distance_mm)
+        return optics_prism.image_distance_mm(self.focal_mm, self.object_distance_mm)
 
     @property
     def half_field_deg(self) -> float:
@@ -70,45 +64,19 @@ def _check(pixels: int, rays: int, *, multiple: int = 2) -> None:
         raise ValueError(f"rays {rays} must be >= 1")
 
 
-def prism_deviate(direction: np.ndarray, *, n: float, apex_deg: float, sx: float, sy: float
-                  ) -> np.ndarray:
-    """Directions (..., 3) after a thin wedge prism of apex ``apex_deg`` per axis whose thin edge
-    points towards (sx, sy) (each -1, 0 or +1): light travelling +z is deviated about (n - 1) A
-    towards (sx, sy) in x and in y (a corner prism of a pyramid).
-
-    Both faces lean by half the apex angle (the symmetric, minimum-deviation mounting), which
-    keeps the off-axis rays of a 32 deg field clear of total internal reflection.
-    """
-    shape = direction.shape
-    d = direction.reshape(-1, 3)
-    t = math.tan(math.radians(apex_deg) / 2)
-    n1 = np.array([sx * t, sy * t, 1.0])
-    n2 = np.array([-sx * t, -sy * t, 1.0])
-    inside, ok1 = refract(d, np.tile(n1 / np.linalg.norm(n1), (len(d), 1)), 1.0, n)
-    out, ok2 = refract(inside, np.tile(n2 / np.linalg.norm(n2), (len(d), 1)), n, 1.0)
-    out[~(ok1 & ok2)] = np.nan  # total internal reflection: no light
-    return out.reshape(shape)
-
-
 def _chart_hits(cam: Camera, sensor_xy: np.ndarray, pupil_xy: np.ndarray,
                 prism: tuple[int, int] | None) -> np.ndarray:
     """Chart points (..., 2) mm seen from sensor points (..., 2) mm through pupil points."""
-    z = cam.object_distance_mm
-    q = -sensor_xy * (z / cam.image_distance_mm)
-    d = np.concatenate([q - pupil_xy, np.full(q.shape[:-1] + (1,), z)], axis=-1)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    if prism is not None:
-        d = prism_deviate(d, n=cam.prism_n, apex_deg=cam.prism_apex_deg, sx=prism[0],
-                          sy=prism[1])
-    return pupil_xy + d[..., :2] * (z / d[..., 2:3])
+    return optics_prism.scene_hits(sensor_xy, pupil_xy, image_distance_mm=cam.image_distance_mm,
+                                   object_distance_mm=cam.object_distance_mm,
+                                   prism=(cam.prism_n, cam.prism_apex_deg), towards=prism)
 
 
 def sensor_point_seeing(cam: Camera, chart_xy: np.ndarray, *, region: tuple[int, int],
                         prism: tuple[int, int] | None) -> np.ndarray:
     """The sensor point (2,) mm whose ray through the region's pupil centroid (and prism) meets
     the chart at ``chart_xy`` (2,) mm: Newton iteration on the exact ray geometry."""
-    c = 4 * cam.aperture_mm / 2 / (3 * math.pi)
-    pupil = np.array([[region[0] * c, region[1] * c]])
+    pupil = optics_prism.pupil_centroid_mm(cam.aperture_mm, region)[None]
     s = -np.asarray(chart_xy, dtype=np.float64) * cam.image_distance_mm / cam.object_distance_mm
     for _ in range(30):
         f0 = _chart_hits(cam, s[None], pupil, prism)[0] - chart_xy
@@ -129,8 +97,8 @@ def _pupil_samples(rng, shape, region: tuple[int, int], radius: float, rays: int
     sx, sy in {-1, 0, +1} (0: the whole extent on that axis); the part's centroid when rays = 1."""
     sx, sy = region
     if rays == 1:
-        c = 4 * radius / (3 * math.pi)
-        return np.broadcast_to(np.array([sx * c, sy * c]), (1, *shape, 2)).copy()
+        centroid = optics_prism.pupil_centroid_mm(2 * radius, region)
+        return np.broadcast_to(centroid, (1, *shape, 2)).copy()
     out = np.empty((rays, *shape, 2))
     for k in range(rays):
         r = radius * np.sqrt(rng.random(shape))
@@ -235,8 +203,7 @@ def view_footprint(cam: Camera, *, rows: int, cols: int, cell_mm: float,
     w, h = cols * cell_mm / 2, rows * cell_mm / 2
     pts = np.array([[-w, -h], [w, -h], [w, h], [-w, h],  # corners
                     [-w, 0.0], [w, 0.0], [0.0, -h], [0.0, h], [0.0, 0.0]])
-    c = 4 * cam.aperture_mm / 2 / (3 * math.pi)
-    pupil = np.tile([region[0] * c, region[1] * c], (len(pts), 1))
+    pupil = np.tile(optics_prism.pupil_centroid_mm(cam.aperture_mm, region), (len(pts), 1))
     hits = _chart_hits(cam, pts, pupil, prism)
     ang = np.degrees(np.arctan(hits / cam.object_distance_mm))
 
@@ -474,118 +441,3 @@ def render_raytrix(*, pixels: int = 404, rays: int = 1, seed: int = 0, prism: bo
                     "indices_ij": ij.tolist() if len(centres) <= 20000 else None},
     }
     return out, truth
-
-
-# ---------------------------------------------------------------------------------------------
-# Writers: files a user (and `plenocli simulate KIND -o DIR`) gets, plus truth.json.
-
-def _write_truth(out_dir: Path, truth: dict) -> None:
-    write_text(out_dir / "truth.json", json.dumps(truth, indent=1, allow_nan=True) + "\n")
-
-
-def _to_u16(image: np.ndarray, scale: float, *, noise_dn: float, rng) -> np.ndarray:
-    data = image * scale
-    if noise_dn > 0:
-        data = data + rng.normal(0.0, noise_dn, data.shape)
-    return np.clip(np.round(data), 0, 65535).astype(np.uint16)
-
-
-def write_quadpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 256,
-                    rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                    open_quarters: str | None = None, crosstalk: float = 0.0,
-                    noise_dn: float = 0.0, prism_apex_deg: float = 16.7) -> dict:
-    """Write ``capture.tif`` (16-bit RGB, pixels x pixels: decode gives frames R, G, B) and
-    ``truth.json`` into ``out_dir``.
-
-    ``open_quarters``: SAIs whose pupil quarter is open, e.g. "00" or "00,11" (None: all).
-    """
-    quarters = None
-    if open_quarters:
-        try:
-            quarters = tuple((int(q[0]), int(q[1])) for q in open_quarters.split(","))
-        except (ValueError, IndexError) as err:
-            raise ValueError(f"open_quarters {open_quarters!r}: give SAIs like 00,11") from err
-    cam = Camera(prism_apex_deg=prism_apex_deg)
-    sensor, truth = render_quadpixel(pixels=pixels, rays=rays, seed=seed, prisms=not no_prisms,
-                                     scene=scene, open_quarters=quarters, crosstalk=crosstalk,
-                                     camera=cam)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    data = _to_u16(sensor, FULL_SCALE_DN, noise_dn=noise_dn, rng=np.random.default_rng(seed + 1))
-    with atomic_path(out / "capture.tif") as tmp:
-        tifffile.imwrite(tmp, data, photometric="rgb")
-    truth.update(files={"capture": "capture.tif"}, noise_dn=noise_dn)
-    _write_truth(out, truth)
-    return truth
-
-
-def write_dualpixel(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 384,
-                    rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                    open_halves: str = "A,B", crosstalk: float = 0.0,
-                    noise_dn: float = 2.0, prism_apex_deg: float = 30.0) -> dict:
-    """Write ``capture.dng`` (two CFA frames "S" = A + B and "A", like a Canon DPRAW, RGGB,
-    black 512, white 16383, 16 optical-black columns on the left) and ``truth.json``.
-
-    The default prism (n = 1.74, A = 30 deg) deviates the A view by ~78 % of the frame width,
-    so that A and B are "almost juxtaposed with a tiny common portion" as in the paper's
-    prototypes (22 % overlap here, enough to register them); the stitched field is 64 deg.
-    """
-    halves = tuple(h.strip() for h in open_halves.split(","))
-    if set(halves) - {"A", "B"}:
-        raise ValueError(f"open_halves {open_halves!r}: use A, B or A,B")
-    a, b, truth = render_dualpixel(pixels=pixels, rays=rays, seed=seed, prism=not no_prisms,
-                                   scene=scene, open_halves=halves, crosstalk=crosstalk,
-                                   camera=Camera(prism_apex_deg=prism_apex_deg))
-    rng = np.random.default_rng(seed + 1)
-    black, white, margin = 512, 16383, 16
-    scale = 0.4 * (white - black)  # a white chart through one half: 40 % of the range
-    rows, cols = a.shape[:2]
-    frames = np.empty((2, rows, cols + margin), np.float64)
-    for k, view in enumerate((a + b, a)):
-        frames[k, :, margin:] = bayer_mosaic(view) * scale + black
-        frames[k, :, :margin] = black
-    frames += rng.normal(0.0, noise_dn, frames.shape) if noise_dn > 0 else 0.0
-    data = np.clip(np.round(frames), 0, white).astype(np.uint16)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_dng(out / "capture.dng", data, cfa="RGGB", black_levels=[black, black],
-              white_level=white, active_area=[0, margin, rows, cols + margin],
-              masked_areas=[[0, 0, rows, margin]], frame_names=["S", "A"])
-    truth.update(files={"capture": "capture.dng"}, black_level=black, white_level=white,
-                 scale_dn=scale, cfa="RGGB", active_area=[0, margin, rows, cols + margin],
-                 noise_dn=noise_dn)
-    _write_truth(out, truth)
-    return truth
-
-
-def write_raytrix(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 404,
-                  rays: int = 1, no_prisms: bool = False, scene: str = "chart",
-                  pitch_px: float = 20.2, noise_dn: float = 0.0) -> dict:
-    """Write ``capture.tif`` (16-bit mono sensor image) and ``truth.json`` (with the lattice)."""
-    image, truth = render_raytrix(pixels=pixels, rays=rays, seed=seed, prism=not no_prisms,
-                                  scene=scene, pitch_px=pitch_px)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    data = _to_u16(image, FULL_SCALE_DN, noise_dn=noise_dn, rng=np.random.default_rng(seed + 1))
-    with atomic_path(out / "capture.tif") as tmp:
-        tifffile.imwrite(tmp, data, photometric="minisblack")
-    truth.update(files={"capture": "capture.tif"}, noise_dn=noise_dn,
-                 full_scale_dn=FULL_SCALE_DN)
-    _write_truth(out, truth)
-    return truth
-
-
-def kinds() -> dict:
-    """The simulate kinds of this module (see docs/optics.md for their keyword options)."""
-    from functools import partial
-
-    return {
-        "quadpixel-pyramid": write_quadpixel,
-        "quadpixel-white": partial(write_quadpixel, scene="white", no_prisms=True),
-        "quadpixel-masked": partial(write_quadpixel, scene="white", open_quarters="00"),
-        "dualpixel-prism": write_dualpixel,
-        "dualpixel-white": partial(write_dualpixel, scene="white", no_prisms=True),
-        "dualpixel-masked": partial(write_dualpixel, scene="white", open_halves="A"),
-        "raytrix-prism": write_raytrix,
-        "raytrix-white": partial(write_raytrix, scene="white", no_prisms=True),
-    }

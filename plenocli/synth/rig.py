@@ -11,49 +11,68 @@ bottom; ``2x2`` = S00, S01, S10, S11 (top-left, top-right, bottom-left, bottom-r
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
+import math
+from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
-from scipy import ndimage
 
-from plenocli.io import tiffio
-from plenocli.io.atomic import write_text
-from plenocli.model.provenance import stage_record
-
-LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
-VIEW_NAMES = {"1x2": ["L", "R"], "2x1": ["T", "B"], "2x2": ["S00", "S01", "S10", "S11"]}
+from plenocli.stitch.views import LAYOUTS, VIEW_NAMES
+from plenocli.synth.capture import SimFile, Simulation
 
 
-def make_scene(shape: tuple[int, int], *, seed: int = 0, blur_px: float = 1.5) -> np.ndarray:
-    """A band-limited textured scene in [0.1, 1]: multi-scale noise plus smooth discs.
+@dataclass(frozen=True)
+class CosineScene:
+    """An analytic, band-limited scene: ``0.55 + 0.15 * sum_k a_k cos(2 pi f_k . (x, y) + phi_k)
+    / std``, clipped to [0.1, 1], defined at any real (x, y) (px, column first).
 
-    Parameters
-    ----------
-    shape : (rows, cols) of the scene in pixels.
-    seed : seed of ``np.random.default_rng``.
-    blur_px : Gaussian sigma (px) applied last, so that sub-pixel resampling is accurate.
-
-    Returns
-    -------
-    (rows, cols) float64 scene radiance.
+    Views are rendered by evaluating it at their warped pixel coordinates, so the ground truth
+    owes nothing to a resampler (in particular not to the cubic splines the photometric
+    refinement of :mod:`plenocli.stitch` uses).
     """
+
+    frequencies: np.ndarray  # (K, 2) cycles/px, (fx, fy)
+    phases: np.ndarray  # (K,) rad
+    amplitudes: np.ndarray  # (K,)
+
+    def __call__(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Scene values at (x, y) (any equal shapes), float64."""
+        xf = np.ascontiguousarray(x, np.float64).ravel()
+        yf = np.ascontiguousarray(y, np.float64).ravel()
+        w = 2 * np.pi * self.frequencies
+        out = np.empty(xf.size)
+        _sum_of_cosines(xf, yf, np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(w[:, 1]),
+                        self.phases, self.amplitudes, out)
+        std = np.sqrt(0.5 * np.sum(self.amplitudes**2))
+        return np.clip(0.55 + 0.15 * out / std, 0.1, 1.0).reshape(np.shape(x))
+
+
+@numba.njit(cache=True)
+def _sum_of_cosines(x, y, wx, wy, phase, amplitude, out):
+    """out[i] = sum_k amplitude[k] cos(wx[k] x[i] + wy[k] y[i] + phase[k]) (numba: numpy's
+    (points, components) temporaries were twice as slow)."""
+    for i in range(x.size):
+        acc = 0.0
+        for k in range(wx.size):
+            acc += amplitude[k] * math.cos(wx[k] * x[i] + wy[k] * y[i] + phase[k])
+        out[i] = acc
+
+
+def random_scene(*, seed: int = 0, components: int = 64, min_period_px: float = 3.0,
+                 max_period_px: float = 60.0) -> CosineScene:
+    """A seeded :class:`CosineScene`: ``components`` cosines in random directions with periods
+    log-uniform in [``min_period_px``, ``max_period_px``] (below the Nyquist limit of 2 px) and
+    amplitudes growing as sqrt(period), a texture with structure at every scale and no period
+    (so a registration has one true match)."""
+    if not 2 < min_period_px < max_period_px:
+        raise ValueError(f"periods must satisfy 2 < min_period_px < max_period_px, got "
+                         f"{min_period_px}, {max_period_px}")
     rng = np.random.default_rng(seed)
-    rows, cols = shape
-    scene = np.zeros(shape)
-    for sigma, amp in ((1.0, 0.25), (4.0, 0.5), (16.0, 1.0)):
-        layer = ndimage.gaussian_filter(rng.standard_normal(shape), sigma)
-        scene += amp * layer / layer.std()
-    yy, xx = np.mgrid[0:rows, 0:cols]
-    for _ in range(max(4, rows * cols // 20000)):
-        cy, cx = rng.uniform(0, rows), rng.uniform(0, cols)
-        rad = rng.uniform(5, 30)
-        scene += rng.uniform(-1.5, 1.5) * ((yy - cy) ** 2 + (xx - cx) ** 2 < rad**2)
-    scene = ndimage.gaussian_filter(scene, blur_px)
-    lo, hi = scene.min(), scene.max()
-    return 0.1 + 0.9 * (scene - lo) / (hi - lo)
+    period = np.exp(rng.uniform(np.log(min_period_px), np.log(max_period_px), components))
+    angle = rng.uniform(0, np.pi, components)
+    freq = np.stack([np.cos(angle), np.sin(angle)], axis=1) / period[:, None]
+    return CosineScene(freq, rng.uniform(0, 2 * np.pi, components), np.sqrt(period))
 
 
 def _view_homographies(layout: str, view_shape: tuple[int, int], overlap: float,
@@ -106,8 +125,8 @@ def make_rig(*, layout: str = "1x2", view_shape: tuple[int, int] = (240, 320),
     clean : (V, rows, cols) float32 views with gain 1, no vignetting, noise or ghost.
     truth : dict with ``homographies`` (view -> scene), ``relative`` (view k -> view 0 pixel
         coordinates), ``shifts_px`` ([dy, dx] of view k in view 0 coordinates, translation model),
-        ``scene`` (the full scene array, not JSON) and ``scene_origin`` (scene pixel of view 0's
-        (0, 0)), gains, vignetting, noise, ghost_r.
+        ``scene`` (the analytic :class:`CosineScene`, not JSON) and ``scene_origin`` (scene pixel of
+        view 0's (0, 0)), gains, vignetting, noise, ghost_r.
     """
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {sorted(LAYOUTS)}, got {layout!r}")
@@ -123,19 +142,13 @@ def make_rig(*, layout: str = "1x2", view_shape: tuple[int, int] = (240, 320),
     origin = np.eye(3)
     origin[:2, 2] = margin
     homs = [origin @ h for h in homs]
-    n_rows, n_cols = LAYOUTS[layout]
-    scene_shape = (int(rows * (1 + (n_rows - 1) * (1 - overlap))) + 2 * margin,
-                   int(cols * (1 + (n_cols - 1) * (1 - overlap))) + 2 * margin)
-    scene = make_scene(scene_shape, seed=seed)
-    coeffs = ndimage.spline_filter(scene, order=3)
+    scene = random_scene(seed=seed)
     yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
     pts = np.stack([xx.ravel(), yy.ravel(), np.ones(xx.size)])
     clean = np.empty((n_views, rows, cols), np.float32)
     for k, h in enumerate(homs):
         q = h @ pts
-        sx, sy = q[0] / q[2], q[1] / q[2]
-        clean[k] = ndimage.map_coordinates(coeffs, [sy, sx], order=3, prefilter=False,
-                                           mode="nearest").reshape(rows, cols)
+        clean[k] = scene(q[0] / q[2], q[1] / q[2]).reshape(rows, cols)
     gains = tuple(gains) if gains is not None else (1.0, 0.85, 1.1, 0.95)[:n_views]
     if len(gains) != n_views:
         raise ValueError(f"gains must have {n_views} values for layout {layout}, got {len(gains)}")
@@ -151,7 +164,7 @@ def make_rig(*, layout: str = "1x2", view_shape: tuple[int, int] = (240, 320),
     relative = [inv0 @ h for h in homs]
     truth = {
         "layout": layout, "model": model, "view_shape": [rows, cols], "overlap": overlap,
-        "view_names": VIEW_NAMES[layout],
+        "view_names": list(VIEW_NAMES[layout]),
         "homographies": [h.tolist() for h in homs],
         "relative": [(r / r[2, 2]).tolist() for r in relative],
         "shifts_px": [[r[1, 2], r[0, 2]] for r in relative],
@@ -216,46 +229,37 @@ def make_masked_white(*, view_shape: tuple[int, int] = (120, 160), n_views: int 
     return views.astype(np.float32), truth
 
 
-def _write_rig(out_dir: str | os.PathLike, layout: str, *, seed: int, view_shape, overlap: float,
-               model: str, noise: float, ghost_r: float, vignetting: float) -> dict:
-    out = Path(out_dir)
+def _simulate_rig(layout: str, *, seed: int, view_shape, overlap: float, model: str,
+                  noise: float, ghost_r: float, vignetting: float) -> Simulation:
     views, _, truth = make_rig(layout=layout, view_shape=tuple(view_shape), overlap=overlap,
                                model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting,
                                seed=seed)
-    params = dict(layout=layout, seed=seed, view_shape=list(view_shape), overlap=overlap,
-                  model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
-    record = stage_record("simulate", params, {})
     names = truth["view_names"]
-    tiffio.write_image(out / "views.tif", views,
-                       {"views": names, "cfa": None, "provenance": record, "history": []})
-    files = {"views": "views.tif"}
+    meta = {"views": names, "cfa": None}
+    files = [SimFile("views.tif", views, "image", {"meta": meta})]
     for k, name in enumerate(names):  # one masked white capture per view (cross-talk target)
         white, wtruth = make_masked_white(view_shape=tuple(view_shape), n_views=len(names),
                                           intended=k, r=0.05 + ghost_r, noise=noise,
                                           seed=seed + 1 + k)
-        tiffio.write_image(out / f"white_{name}.tif", white,
-                           {"views": names, "cfa": None, "provenance": record, "history": []})
-        files[f"white_{name}"] = f"white_{name}.tif"
+        files.append(SimFile(f"white_{name}.tif", white, "image", {"meta": meta}))
         truth.setdefault("crosstalk", {})[name] = wtruth["r"]
     public = {k: v for k, v in truth.items() if k != "scene"}
-    public.update(files=files, kind=f"{'quad' if layout == '2x2' else 'stereo'}-rig")
-    write_text(out / "truth.json", json.dumps(public, indent=2))
-    return public
+    public.update(files={f.name[:-4]: f.name for f in files},
+                  kind=f"{'quad' if layout == '2x2' else 'stereo'}-rig")
+    return Simulation(tuple(files), public)
 
 
-def write_stereo_rig(out_dir: str | os.PathLike, *, seed: int = 0,
-                     view_shape: tuple[int, int] = (400, 500), overlap: float = 0.2,
-                     model: str = "translation", noise: float = 0.002, ghost_r: float = 0.0,
-                     vignetting: float = 0.2) -> dict:
-    """Write a two-view rig (views.tif, white_L.tif, white_R.tif, truth.json) into ``out_dir``."""
-    return _write_rig(out_dir, "1x2", seed=seed, view_shape=view_shape, overlap=overlap,
-                      model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
+def simulate_stereo_rig(*, seed: int = 0, view_shape: tuple[int, int] = (400, 500),
+                        overlap: float = 0.2, model: str = "translation", noise: float = 0.002,
+                        ghost_r: float = 0.0, vignetting: float = 0.2) -> Simulation:
+    """A two-view rig: views.tif (L, R), white_L.tif, white_R.tif and the truth."""
+    return _simulate_rig("1x2", seed=seed, view_shape=view_shape, overlap=overlap, model=model,
+                         noise=noise, ghost_r=ghost_r, vignetting=vignetting)
 
 
-def write_quad_rig(out_dir: str | os.PathLike, *, seed: int = 0,
-                   view_shape: tuple[int, int] = (300, 400), overlap: float = 0.2,
-                   model: str = "translation", noise: float = 0.002, ghost_r: float = 0.0,
-                   vignetting: float = 0.2) -> dict:
-    """Write a 2 x 2 rig (views S00, S01, S10, S11 + one masked white per view + truth.json)."""
-    return _write_rig(out_dir, "2x2", seed=seed, view_shape=view_shape, overlap=overlap,
-                      model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting)
+def simulate_quad_rig(*, seed: int = 0, view_shape: tuple[int, int] = (300, 400),
+                      overlap: float = 0.2, model: str = "translation", noise: float = 0.002,
+                      ghost_r: float = 0.0, vignetting: float = 0.2) -> Simulation:
+    """A 2 x 2 rig: views S00, S01, S10, S11 + one masked white per view, and the truth."""
+    return _simulate_rig("2x2", seed=seed, view_shape=view_shape, overlap=overlap, model=model,
+                         noise=noise, ghost_r=ghost_r, vignetting=vignetting)

@@ -15,14 +15,10 @@ centres (x = col, y = row).
 
 from __future__ import annotations
 
-import json
-import os
-from pathlib import Path
-
 import numpy as np
 
-from plenocli.io.atomic import write_text
 from plenocli.model.lensgrid import LensGrid
+from plenocli.synth.capture import SimFile, Simulation
 
 COLOUR_GAIN = {"R": 0.55, "G": 1.0, "B": 0.75}
 
@@ -97,13 +93,8 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         for k, colour in enumerate(cfa.upper()):
             gains[k // 2, k % 2] = COLOUR_GAIN[colour]
         value *= np.tile(gains, (rows // 2 + 1, cols // 2 + 1))[:rows, :cols]
-    electrons = rng.poisson(value * full_well_e).astype(np.float64)
-    electrons += rng.normal(0.0, read_noise_e, size=electrons.shape)
-    dn = np.clip(np.rint(electrons * (4095 / (1.1 * full_well_e)) + 64), 0, 4095)
-    if dead_pixels:
-        pos = rng.integers(0, rows * cols, size=2 * dead_pixels)
-        dn.flat[pos[:dead_pixels]] = 0
-        dn.flat[pos[dead_pixels:]] = 4095
+    dn = _to_dn(rng, value, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                dead_pixels=dead_pixels)
     idx, _ = grid.lens_centres()
     true_centres = centre_of(idx[:, 0], idx[:, 1])
     truth = {
@@ -113,6 +104,20 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         "indices": idx.tolist(), "centres_xy": true_centres.tolist(), "seed": int(seed),
     }
     return dn.astype(np.uint16), truth
+
+
+def _to_dn(rng: np.random.Generator, value: np.ndarray, *, full_well_e: float,
+           read_noise_e: float, dead_pixels: int) -> np.ndarray:
+    """12-bit DN (black 64) of a relative exposure: photon and read noise, then as many dead
+    (0) as hot (4095) pixels."""
+    electrons = rng.poisson(value * full_well_e).astype(np.float64)
+    electrons += rng.normal(0.0, read_noise_e, size=electrons.shape)
+    dn = np.clip(np.rint(electrons * (4095 / (1.1 * full_well_e)) + 64), 0, 4095)
+    if dead_pixels:
+        pos = rng.integers(0, value.size, size=2 * dead_pixels)
+        dn.flat[pos[:dead_pixels]] = 0
+        dn.flat[pos[dead_pixels:]] = 4095
+    return dn
 
 
 def _hash_normal(key: np.ndarray, seed: int) -> np.ndarray:
@@ -131,28 +136,19 @@ def _hash_normal(key: np.ndarray, seed: int) -> np.ndarray:
     return np.stack([r * np.cos(2 * np.pi * u2), r * np.sin(2 * np.pi * u2)], axis=-1)
 
 
-def write_hexgrid_white(out_dir: str | os.PathLike, *, seed: int = 0, size: int = 1024,
-                        pitch_px: float = 20.2, angle_deg: float = 7.0, jitter_px: float = 0.05,
-                        cfa: str | None = "RGGB", lattice: str = "hex") -> dict:
-    """Write ``white.tif`` (a Bayer or mono white image, uint16), ``truth.json`` (lattice and
-    every true centre) and ``grid_true.xml`` (the true lattice as RayCalibData) into
-    ``out_dir``. The offset is drawn from ``seed``. Returns the truth dict."""
-    import tifffile
-
-    from plenocli.io import raytrix
-    from plenocli.io.atomic import atomic_path
-
+def simulate_hexgrid_white(*, seed: int = 0, size: int = 1024, pitch_px: float = 20.2,
+                           angle_deg: float = 7.0, jitter_px: float = 0.05,
+                           cfa: str | None = "RGGB", lattice: str = "hex") -> Simulation:
+    """``white.tif`` (a Bayer or mono white image, uint16), the truth (lattice and every true
+    centre) and, for a hex lattice, ``grid_true.xml`` (the true lattice as RayCalibData). The
+    offset is drawn from ``seed``."""
     rng = np.random.default_rng(seed)
     offset = (size / 2 + rng.uniform(0, pitch_px), size / 2 + rng.uniform(0, pitch_px))
     image, truth = white_image((size, size), pitch_px=pitch_px, angle_rad=np.radians(angle_deg),
                                offset_xy=offset, lattice=lattice, jitter_px=jitter_px, cfa=cfa,
                                seed=seed)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out / "white.tif") as tmp:
-        tifffile.imwrite(tmp, image, photometric="minisblack")
-    write_text(out / "truth.json", json.dumps(truth))
-    grid = LensGrid(pitch_px, np.radians(angle_deg), offset, lattice, image_shape=(size, size))
+    files = [SimFile("white.tif", image, "tiff", {"photometric": "minisblack"})]
     if lattice == "hex":
-        raytrix.write_calib(out / "grid_true.xml", raytrix.calib_from_grid(grid))
-    return truth
+        grid = LensGrid(pitch_px, np.radians(angle_deg), offset, lattice, image_shape=(size, size))
+        files.append(SimFile("grid_true.xml", grid, "raytrix-xml"))
+    return Simulation(tuple(files), truth)

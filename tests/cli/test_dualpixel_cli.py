@@ -12,7 +12,8 @@ from click.testing import CliRunner
 from plenocli.cli.main import cli
 from plenocli.io.tiffio import read_image
 from plenocli.model.provenance import sha256_file
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 ROOT = Path(__file__).resolve().parents[2]
 FIX = ROOT / "fixtures" / "dualpixel"

@@ -9,7 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
-from plenocli.synth.dualpixel import dualpixel_capture, write_dualpixel_raw
+from plenocli.pipeline.stages.simulate import write_dualpixel_raw
+from plenocli.synth.dualpixel import dualpixel_capture
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
 

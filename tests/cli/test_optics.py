@@ -2,6 +2,7 @@
 
 import json
 
+import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
@@ -38,3 +39,41 @@ def test_missing_file_and_usage_error(tmp_path):
     assert res.exit_code == 1 and "no such lens file" in res.output
     res = CliRunner().invoke(cli, ["optics", TABLE2, "--sensor-mm", "wide"])
     assert res.exit_code == 2
+
+
+def test_crosstalk_figures_in_the_text_and_the_json(tmp_path):
+    out = tmp_path / "ct.json"
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--mask-width", "0.1",
+                                   "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "cross-talk (quarter ++ open" in res.output
+    ct = json.loads(out.read_text())["crosstalk"]
+    assert 0.02 < ct["no_mask"]["ratio"] < 0.2  # pupil aberration leaks light off-axis
+    assert ct["cross_mask"]["ratio"] < ct["no_mask"]["ratio"]
+    assert ct["cross_mask"]["cross_width_mm"] == pytest.approx(0.1 * 3.09, rel=1e-3)
+    assert ct["microlens_pitch_um"] == pytest.approx(2.3981, abs=0.003)  # Table 1's phi
+    assert f"r = {100 * ct['no_mask']['ratio']:.1f} %" in res.output
+
+
+@pytest.mark.parametrize("option, value", [("--sensor-mm", "nan"), ("--sensor-mm", "-1"),
+                                           ("--pixel-um", "inf"), ("--mask-width", "1"),
+                                           ("--prism-apex-deg", "nan")])
+def test_non_finite_or_out_of_range_options_are_usage_errors(option, value):
+    res = CliRunner().invoke(cli, ["optics", TABLE2, option, value])
+    assert res.exit_code == 2 and option in res.output
+
+
+@pytest.mark.parametrize("row, words", [("{radius: 3.0, glass: N-BK7, thickness: -1}",
+                                         "thickness_mm -1"),
+                                        ("{radius: .nan, glass: N-BK7, thickness: 1}",
+                                         "radius_mm is NaN"),
+                                        ("{radius: 3.0, glass: N-BK7, thickness: .nan}",
+                                         "thickness_mm nan")])
+def test_impossible_prescriptions_are_one_line(tmp_path, row, words):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(f"surfaces:\n  - {row}\n  - {{radius: -3.0, thickness: 5}}\n")
+    out = tmp_path / "out.json"
+    res = CliRunner().invoke(cli, ["optics", str(bad), "--json", str(out)])
+    assert res.exit_code == 1, res.output
+    assert words in res.output and len(res.output.strip().splitlines()) == 1
+    assert not out.exists()

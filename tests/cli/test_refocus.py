@@ -11,14 +11,14 @@ from plenocli.io import tiffio
 from plenocli.io.gridfile import read_grid, write_grid
 from plenocli.model.lensgrid import LensGrid
 from plenocli.pipeline.registry import get_stages
+from plenocli.pipeline.stages.simulate import simulate
 from plenocli.sai import view_names
-from plenocli.synth.focused import write_raytrix_scene
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     out = tmp_path_factory.mktemp("scene")
-    truth = write_raytrix_scene(out, seed=21, rows=240, cols=320)
+    truth = simulate("raytrix-scene", out, seed=21, rows=240, cols=320)
     return out, truth
 
 
@@ -57,7 +57,7 @@ def test_focal_sweep_finds_the_true_g(scene, tmp_path, caplog):
 
 
 def test_bayer_frames_give_rgb_pages(tmp_path):
-    write_raytrix_scene(tmp_path, seed=22, rows=160, cols=200, cfa="RGGB")
+    simulate("raytrix-scene", tmp_path, seed=22, rows=160, cols=200, cfa="RGGB")
     out = tmp_path / "rgb.tif"
     result = invoke("refocus", tmp_path / "frames.tif", "--grid", tmp_path / "grid.yaml",
                     "--view", "right", "-o", out, "--preview", tmp_path / "rgb.png")

@@ -9,11 +9,12 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
-from plenocli.synth.rig import make_masked_white, make_rig, write_quad_rig, write_stereo_rig
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.synth.rig import make_masked_white, make_rig
 
 
 def test_stitch_stereo_rig(tmp_path):
-    truth = write_stereo_rig(tmp_path / "rig", view_shape=(200, 260), seed=1)
+    truth = simulate("stereo-rig", tmp_path / "rig", view_shape=(200, 260), seed=1)
     out = tmp_path / "pano.tif"
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "-o", str(out),
                                    "--report", str(tmp_path / "r.json"), "--transform-out",
@@ -34,7 +35,7 @@ def test_stitch_stereo_rig(tmp_path):
 
 
 def test_stitch_quad_rig_and_view_selection(tmp_path):
-    write_quad_rig(tmp_path / "rig", view_shape=(160, 200), seed=2)
+    simulate("quad-rig", tmp_path / "rig", view_shape=(160, 200), seed=2)
     out = tmp_path / "pano.tif"
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "-o", str(out),
                                    "--views", "S00,S01,S10,S11", "--layout", "2x2"])
@@ -118,3 +119,43 @@ def test_crosstalk_views_leave_out_the_sum_view(tmp_path):
     assert json.loads(out.read_text())["r"] > 1  # S counted: the ratio is meaningless
     res = CliRunner().invoke(cli, ["crosstalk", str(p), "--views", "A,Q", "-o", str(out)])
     assert res.exit_code == 1 and "not in the input" in res.output
+
+
+def _distorted_views(truth: dict, k1: float) -> np.ndarray:
+    """The rig's views seen through a radial distortion r_d = r_u (1 + k1 r_u^2) (r in
+    half-diagonals from the view centre), rendered from the analytic scene."""
+    rows, cols = truth["view_shape"]
+    cy, cx = (rows - 1) / 2, (cols - 1) / 2
+    norm2 = cy**2 + cx**2
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
+    r_d2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / norm2
+    scale = np.ones_like(r_d2)
+    for _ in range(30):  # p_u = p_d * scale with scale = 1 / (1 + k1 r_u^2)
+        scale = 1 / (1 + k1 * r_d2 * scale**2)
+    ux, uy = cx + (xx - cx) * scale, cy + (yy - cy) * scale
+    views = []
+    for h, gain in zip(truth["homographies"], truth["gains"], strict=True):
+        q = np.asarray(h) @ np.stack([ux.ravel(), uy.ravel(), np.ones(ux.size)])
+        views.append(gain * truth["scene"](q[0] / q[2], q[1] / q[2]).reshape(rows, cols))
+    return np.stack(views).astype(np.float32)
+
+
+def test_stitch_removes_a_known_distortion(tmp_path):
+    _, _, truth = make_rig(layout="1x2", view_shape=(240, 320), overlap=0.3, seed=5)
+    k1 = 0.04
+    path = tmp_path / "views.tif"
+    tiffio.write_image(path, _distorted_views(truth, k1), {"views": ["L", "R"], "cfa": None})
+    errors = {}
+    for distortion in (0.0, k1):
+        report = tmp_path / f"r{distortion}.json"
+        res = CliRunner().invoke(cli, ["stitch", str(path), "--distortion", str(distortion),
+                                       "-o", str(tmp_path / "pano.tif"), "--report", str(report)])
+        assert res.exit_code == 0, res.output
+        rep = json.loads(report.read_text())
+        assert rep["distortion_k1"] == rep["transform"]["distortion_k1"] == distortion
+        errors[distortion] = np.abs(np.array(rep["shifts_px"][1])
+                                    - truth["shifts_px"][1]).max()
+    assert errors[k1] < 0.02 and errors[0.0] > 1.0  # 4 px at this k1 when left in
+    res = CliRunner().invoke(cli, ["stitch", str(path), "--distortion", "nan",
+                                   "-o", str(tmp_path / "bad.tif")])
+    assert res.exit_code == 2 and "--distortion" in res.output

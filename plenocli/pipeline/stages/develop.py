@@ -4,9 +4,6 @@ profile, the camera's EXIF and provenance; optionally the scene-referred linear 
 
 from __future__ import annotations
 
-from contextlib import ExitStack
-from pathlib import Path
-
 import cv2
 import numpy as np
 
@@ -17,7 +14,7 @@ from plenocli.colour.demosaic import METHODS
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import photo as export
 from plenocli.io import tiffio
-from plenocli.io.atomic import atomic_path
+from plenocli.io.atomic import outputs_together, write_bytes
 from plenocli.model import colour as colour_matrix
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
@@ -218,15 +215,11 @@ def _preview_bytes(encoded: np.ndarray, space: str, description: dict) -> bytes:
 
 def _write_together(output, body, linear, scene, meta, record, preview, preview_body,
                     protect) -> None:
-    """All outputs land together or none: each is written to a temporary file first."""
-    targets = [p for p in (output, linear, preview) if p]
-    if len({str(Path(p).resolve()) for p in targets}) != len(targets):
-        raise ConfigError("-o, --linear and --preview must be different files")
-    with ExitStack() as stack:
-        tmp = stack.enter_context(atomic_path(output, protect=protect))
-        tmp.write_bytes(body)
+    """All outputs land together or none (the stage edge also checks they are distinct)."""
+    with outputs_together():
+        write_bytes(output, body, protect=protect)
         if preview:
-            stack.enter_context(atomic_path(preview, protect=protect)).write_bytes(preview_body)
+            write_bytes(preview, preview_body, protect=protect)
         if linear:
             linear_meta = tiffio.derived_meta(
                 meta, record, views=["R", "G", "B", "rebuilt"][:scene.shape[-1]], cfa=None,

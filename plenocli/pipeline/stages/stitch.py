@@ -9,6 +9,7 @@ single-page Bayer view is stitched as half-size RGB.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -21,8 +22,8 @@ from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
 from plenocli.model.cfa import half_size_rgb, shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
-from plenocli.prismrig import PrismRig
 from plenocli.progress import log, shown
+from plenocli.stitch import PrismRig
 
 CHANNELS = ("R", "G", "B")
 
@@ -99,7 +100,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
             raise InputError(f"{path}: not a JSON stitch transform ({err}); save one with "
                              "--transform-out") from err
     prism_rig = load_rig(rig) if rig else None
-    panorama, rep = stitch_lib.stitch(stack, layout=layout, model=model,
+    panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
                                       distortion_k1=distortion, transform=transform, blend=blend,
                                       rig=prism_rig, overlap=overlap,
                                       overlap_tolerance=overlap_tolerance)
@@ -108,7 +109,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                   overlap_tolerance=overlap_tolerance)
     record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                              "rig": rig})
-    rep.update(input_views=names, bayer_half_size=cfa)
+    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_half_size": cfa}
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
     page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1

@@ -10,8 +10,14 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.errors import InputError
-from plenocli.prismrig import PrismRig, ViewOptics, common_to_view, view_to_common
-from plenocli.stitch import estimate_translation, stitch
+from plenocli.stitch import (
+    PrismRig,
+    ViewOptics,
+    common_to_view,
+    estimate_translation,
+    stitch,
+    view_to_common,
+)
 from plenocli.synth.prismcam import Camera, render_dualpixel, render_quadpixel
 
 
@@ -77,16 +83,16 @@ def test_model_maps_view_centres_where_the_simulator_traced_them():
 
 
 def check_rig_panorama(pano, rep, expected_field_deg, *, corr=0.95, residual=0.25):
-    axis = np.array(rep["axis_px"])
+    axis = np.array(rep.axis_px)
     found, area = red_disc(pano, axis)
     assert area > 8
     assert np.linalg.norm(found - axis) < 1.0  # the axis marker lands where the truth says
-    for p in rep["pairs"]:  # exact rig model: the registration only confirms the prediction
+    for p in rep.pairs:  # exact rig model: the registration only confirms the prediction
         assert np.allclose(p["shift_px"], p["expected_shift_px"], atol=0.1)
         assert p["correlation"] > corr  # no ghosting over the overlap
-    assert rep["residual_px"] is not None and rep["residual_px"] < residual
+    assert rep.residual_px is not None and rep.residual_px < residual
     for axis_name, deg in expected_field_deg.items():
-        assert rep["field_deg"][axis_name] == pytest.approx(deg, abs=1.5)
+        assert rep.field_deg[axis_name] == pytest.approx(deg, abs=1.5)
 
 
 def test_quadpixel_pyramid_stitches_to_twice_the_field():
@@ -108,8 +114,8 @@ def test_dualpixel_prism_stitches_where_translation_alone_failed(pixels):
 def test_transform_with_rig_is_reapplied():
     views, _, rig = dual(384)
     pano, rep = stitch(views, layout="1x2", rig=rig)
-    again, rep2 = stitch(views * 0.5, transform=rep["transform"])
-    assert rep2["transform_source"] == "given" and rep2["rig"] == rig.to_dict()
+    again, rep2 = stitch(views * 0.5, transform=rep.transform)
+    assert rep2.transform_source == "given" and rep2.rig == rig.to_dict()
     assert np.allclose(np.nan_to_num(again), np.nan_to_num(pano) * 0.5, atol=1e-5)
 
 
@@ -172,6 +178,6 @@ def test_quadpixel_pyramid_full_demo_size(model):
     if model == "translation":
         check_rig_panorama(pano, rep, {"x": truth["stitched_field_deg"]["x"]})
     else:  # a homography near the identity: the marker still lands on the axis
-        found, _ = red_disc(pano, rep["axis_px"])
-        assert np.linalg.norm(found - rep["axis_px"]) < 1.0
-        assert rep["residual_px"] is not None and rep["residual_px"] < 0.25
+        found, _ = red_disc(pano, rep.axis_px)
+        assert np.linalg.norm(found - rep.axis_px) < 1.0
+        assert rep.residual_px is not None and rep.residual_px < 0.25

@@ -1,4 +1,4 @@
-"""The constant geometric distortion of views seen through prisms at the main lens's stop.
+"""Undistortion of views seen through prisms at the main lens's stop (a prism rig).
 
 A prism rig (paper sections 3, 5.2, 6) puts a thin prism over part of the pupil of a thin main
 lens of focal ``F``; each view (sub-aperture image) sees the scene through its own pupil part and
@@ -17,12 +17,11 @@ common pixel = (sensor-plane position of the undeviated image) / pixel_mm + (col
 rows / 2 - 0.5), so for a view without prism (and an object at infinity) the map is the identity
 and the optical axis sits at common pixel ((cols - 1) / 2, (rows - 1) / 2).
 
-Ray model (exact for thin lens + thin prism at the stop; :mod:`plenocli.synth.prismcam` renders
-with it): the view pixel at sensor point s sends its ray through the pupil part's centroid p
-towards the conjugate point q = -s z / D (D = 1 / (1/F - 1/z)); the prism (two plane faces, each
-leaning by A / 2 towards the prism's thin edge, vector Snell's law) deviates it; it meets the
-scene plane z at C. The common coordinate is -C D / z. The inverse traces the ray back through the
-prism (exact, no iteration).
+Ray model: :mod:`plenocli.optics.prism` (exact for a thin lens and thin prisms at the stop), the
+one the simulator :mod:`plenocli.synth.prismcam` renders with. The view pixel at sensor point s
+sends its ray through the pupil part's centroid p towards the conjugate point q = -s z / D; the
+prism deviates it; it meets the scene plane z at C. The common coordinate is -C D / z. The
+inverse traces the ray back through the prism (exact, no iteration).
 """
 
 from __future__ import annotations
@@ -32,9 +31,9 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
-from plenocli.optics.lens import refract
+from plenocli.optics import prism as optics_prism
+from plenocli.stitch.views import fill_nan
 
 
 @dataclass(frozen=True)
@@ -87,9 +86,7 @@ class PrismRig:
     @property
     def image_distance_mm(self) -> float:
         """D: the sensor's distance behind the thin lens (focused on the object plane)."""
-        if math.isinf(self.object_distance_mm):
-            return self.focal_mm
-        return 1.0 / (1.0 / self.focal_mm - 1.0 / self.object_distance_mm)
+        return optics_prism.image_distance_mm(self.focal_mm, self.object_distance_mm)
 
     def with_apex(self, apex_deg: float) -> PrismRig:
         """The same rig with another prism apex angle (for fitting it to data)."""
@@ -129,42 +126,6 @@ class PrismRig:
             raise ValueError(f"the rig has a malformed entry ({err})") from err
 
 
-def _deviate(d: np.ndarray, *, n: float, apex_deg: float, towards: tuple[int, int],
-             reverse: bool) -> np.ndarray:
-    """Directions (N, 3) through the prism (light going +z); ``reverse`` traces back from the
-    exit direction to the entrance direction. NaN where totally internally reflected."""
-    t = math.tan(math.radians(apex_deg) / 2)
-    n1 = np.array([towards[0] * t, towards[1] * t, 1.0])
-    n2 = np.array([-towards[0] * t, -towards[1] * t, 1.0])
-    n1, n2 = n1 / np.linalg.norm(n1), n2 / np.linalg.norm(n2)
-    if reverse:  # light running backwards: enter by the exit face, leave by the entrance face
-        inside, ok1 = refract(-d, np.broadcast_to(n2, d.shape), 1.0, n)
-        out, ok2 = refract(inside, np.broadcast_to(n1, d.shape), n, 1.0)
-        out = -out
-    else:
-        inside, ok1 = refract(d, np.broadcast_to(n1, d.shape), 1.0, n)
-        out, ok2 = refract(inside, np.broadcast_to(n2, d.shape), n, 1.0)
-    out[~(ok1 & ok2)] = np.nan
-    return out
-
-
-def fill_nan(image: np.ndarray) -> np.ndarray:
-    """NaN replaced by the nearest finite value (so the resampling kernel does not spread NaN)."""
-    bad = ~np.isfinite(image)
-    if not bad.any():
-        return image
-    if bad.all():
-        return np.zeros_like(image)
-    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    return image[tuple(idx)]
-
-
-def _pupil_centroid(rig: PrismRig, view: ViewOptics) -> np.ndarray:
-    """Centroid (2,) mm of the view's pupil part (half or quarter disk)."""
-    c = 4 * (rig.aperture_mm / 2) / (3 * math.pi)
-    return np.array([view.pupil[0] * c, view.pupil[1] * c], np.float64)
-
-
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
     if not 0 <= view < len(rig.views):
         raise ValueError(f"view {view} is not in the rig ({len(rig.views)} views)")
@@ -186,7 +147,7 @@ def common_to_view(rig: PrismRig, view: int, cx: np.ndarray, cy: np.ndarray,
 
 def _through_prism(rig: PrismRig, view: int, x, y, shape: tuple[int, int], *,
                    reverse: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Trace pixels (x, y) out through the lens to the chart (or infinity), deviate the ray by
+    """Trace pixels (x, y) out through the lens to the scene (or infinity), deviate the ray by
     the view's prism (forwards, or backwards when ``reverse``) and trace it back to a pixel.
     The same geometry both ways, so the inverse is exact and needs no iteration."""
     v = _check_view(rig, view)
@@ -195,19 +156,11 @@ def _through_prism(rig: PrismRig, view: int, x, y, shape: tuple[int, int], *,
     s = np.stack([((np.asarray(x, np.float64) + 0.5) - cols / 2) * pix,
                   ((np.asarray(y, np.float64) + 0.5) - rows / 2) * pix], axis=-1).reshape(-1, 2)
     z, dist = rig.object_distance_mm, rig.image_distance_mm
-    p = _pupil_centroid(rig, v)
-    if math.isinf(z):
-        d = np.concatenate([-s, np.full((len(s), 1), dist)], axis=1)
-    else:
-        d = np.concatenate([-s * (z / dist) - p, np.full((len(s), 1), z)], axis=1)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    if v.prism is not None and rig.prism_apex_deg > 0:
-        d = _deviate(d, n=rig.prism_n, apex_deg=rig.prism_apex_deg, towards=v.prism,
-                     reverse=reverse)
-    if math.isinf(z):
-        u = -dist * d[:, :2] / d[:, 2:3]
-    else:
-        u = -(p + d[:, :2] * (z / d[:, 2:3])) * (dist / z)
+    hits = optics_prism.scene_hits(
+        s, optics_prism.pupil_centroid_mm(rig.aperture_mm, v.pupil), image_distance_mm=dist,
+        object_distance_mm=z, prism=(rig.prism_n, rig.prism_apex_deg), towards=v.prism,
+        reverse=reverse)
+    u = -dist * hits if math.isinf(z) else -hits * (dist / z)  # the undeviated image point
     out_x = u[:, 0] / pix + cols / 2 - 0.5
     out_y = u[:, 1] / pix + rows / 2 - 0.5
     return out_x.reshape(np.shape(x)), out_y.reshape(np.shape(x))
@@ -270,3 +223,31 @@ def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.nd
             warped = cv2.remap(img, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
             out[k, c] = np.where(cover, warped, np.nan)
     return out, origin_xy[:, ::-1].copy()
+
+
+def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
+                       offset: np.ndarray, covered: np.ndarray):
+    """Panorama pixel [row, col] of the main lens's optical axis, and the panorama's angular
+    field {"x", "y"} (deg): the covered span along the row (column) through each view's centre,
+    the widest of them (the prisms bend the views' outer edges, so the span depends on the line).
+    ``covered`` (rows', cols') marks the panorama pixels with data; ``offset`` maps view-0
+    pixels to panorama pixels."""
+    rows, cols = view_shape
+    shift = -origins[0] + [offset[1, 2], offset[0, 2]]  # common -> panorama (view 0 reference)
+    axis = np.array([(rows - 1) / 2, (cols - 1) / 2]) + shift
+    pix = rig.sensor_mm / cols
+    dist = rig.image_distance_mm
+    field_deg: dict = {"x": None, "y": None}
+    for k in range(len(rig.views)):
+        cx, cy = view_to_common(rig, k, np.array([(cols - 1) / 2]), np.array([(rows - 1) / 2]),
+                                view_shape)
+        centre = np.array([cy[0], cx[0]]) + shift
+        for name, line, c in (("x", covered[int(round(centre[0])), :], axis[1]),
+                              ("y", covered[:, int(round(centre[1]))], axis[0])):
+            idx = np.nonzero(line)[0]
+            if idx.size == 0:
+                continue
+            lo, hi = idx.min() - 0.5 - c, idx.max() + 0.5 - c  # pixel edges
+            span = float(np.degrees(np.arctan(hi * pix / dist) - np.arctan(lo * pix / dist)))
+            field_deg[name] = span if field_deg[name] is None else max(field_deg[name], span)
+    return axis.tolist(), field_deg

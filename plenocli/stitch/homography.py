@@ -1,0 +1,121 @@
+"""A homography between two neighbouring views: SIFT features, ratio test, matches restricted to
+the expected direction (and prior), RANSAC, least squares, then the photometric refinement of
+:mod:`plenocli.stitch.photometric`."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from plenocli.errors import InputError
+from plenocli.stitch.photometric import refine_homography
+from plenocli.stitch.quality import aligned_correlation
+from plenocli.stitch.views import fill_nan, highpass
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    img = fill_nan(image)
+    lo, hi = np.percentile(img, [0.5, 99.5])
+    return np.clip(255 * (img - lo) / max(hi - lo, 1e-12), 0, 255).astype(np.uint8)
+
+
+def _data_mask(view: np.ndarray) -> np.ndarray | None:
+    """Where features may lie: not on the edges of no-data regions (None: everywhere)."""
+    valid = np.isfinite(view)
+    return None if valid.all() else ndimage.binary_erosion(valid, iterations=4).astype(np.uint8)
+
+
+def _feature_matches(a: np.ndarray, b: np.ndarray, *, direction: str, min_inliers: int,
+                     prior: tuple[float, float] | None, tolerance_px: float | None):
+    """Matched SIFT points (pa, pb), (N, 2) float32 (x, y), that pass the ratio test and lie
+    in the expected direction (and within ``tolerance_px`` of the prior shift)."""
+    sift = cv2.SIFT_create(nfeatures=8000, contrastThreshold=0.01)
+    ka, da = sift.detectAndCompute(_to_uint8(a), _data_mask(a))
+    kb, db = sift.detectAndCompute(_to_uint8(b), _data_mask(b))
+    if da is None or db is None or len(ka) < min_inliers or len(kb) < min_inliers:
+        raise InputError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
+                         "views have no texture; try --model translation")
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(db, da, k=2)
+    good = [m for m, *rest in knn if rest and m.distance < 0.75 * rest[0].distance]
+    pb = np.float32([kb[m.queryIdx].pt for m in good]).reshape(-1, 2)
+    pa = np.float32([ka[m.trainIdx].pt for m in good]).reshape(-1, 2)
+    axis = 0 if direction == "h" else 1
+    ahead = pa[:, axis] - pb[:, axis] > 0  # b lies after a: its points sit later in a
+    if prior is not None:
+        tol = tolerance_px if tolerance_px is not None else max(8.0, 0.05 * max(a.shape))
+        shift = pa - pb
+        ahead &= (np.abs(shift[:, 0] - prior[1]) <= tol) & (np.abs(shift[:, 1] - prior[0]) <= tol)
+    pa, pb = pa[ahead], pb[ahead]
+    if len(pa) < min_inliers:
+        raise InputError(f"only {len(pa)} feature matches in the expected overlap direction; the "
+                         "views may not overlap or have no texture")
+    return pa, pb
+
+
+def _ransac(pa: np.ndarray, pb: np.ndarray, *, ransac_px: float, min_inliers: int):
+    """RANSAC homography b -> a, then least squares (Levenberg-Marquardt) on its inliers: a
+    better start than the minimal-sample model RANSAC returns. Returns it and the inliers."""
+    h, inl = cv2.findHomography(pb, pa, cv2.RANSAC, ransac_px, maxIters=5000, confidence=0.999)
+    if h is None or inl is None or int(inl.sum()) < min_inliers:
+        n_in = 0 if inl is None else int(inl.sum())
+        raise InputError(f"only {n_in} RANSAC inliers (need {min_inliers}); the views may not "
+                         "overlap or have no texture")
+    inl = inl.ravel().astype(bool)
+    h_ls, _ = cv2.findHomography(pb[inl], pa[inl], 0)
+    h = h_ls if h_ls is not None else h
+    return h / h[2, 2], inl
+
+
+def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
+                        min_inliers: int = 12, ransac_px: float = 2.0,
+                        min_correlation: float = 0.4,
+                        prior: tuple[float, float] | None = None,
+                        tolerance_px: float | None = None,
+                        max_overlap: float = 0.7) -> tuple[np.ndarray, dict]:
+    """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + photometric
+    refinement. With ``prior`` = expected shift (dy, dx), only matches displaced by it within
+    ``tolerance_px`` (default 5 % of the view, >= 8 px) are kept: a periodic scene's false
+    matches, a period away, are left out. A fit that lays view b over more than ``max_overlap``
+    of view a (or not after it at all) is refused: on a periodic scene that is a false match.
+
+    Returns
+    -------
+    h_ab : (3, 3) float64 with ``h_ab[2, 2] == 1``.
+    info : dict with ``matches``, ``inliers``, ``reprojection_rms_px`` (RANSAC inliers under the
+        final homography), ``correlation``, ``refinement``.
+    """
+    if direction not in ("h", "v"):
+        raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
+    pa, pb = _feature_matches(a, b, direction=direction, min_inliers=min_inliers, prior=prior,
+                              tolerance_px=tolerance_px)
+    h, inl = _ransac(pa, pb, ransac_px=ransac_px, min_inliers=min_inliers)
+    ha, hb = highpass(a), highpass(b)
+    before = aligned_correlation(ha, hb, h, a, b)
+    refined, method, photometric = h, "ransac", {}
+    try:
+        candidate, photometric = refine_homography(a, b, h)
+        after = aligned_correlation(ha, hb, candidate, a, b)
+        if np.isfinite(after) and after >= before - 0.01:
+            refined, method = candidate, "photometric"
+    except ValueError:
+        pass
+    proj = cv2.perspectiveTransform(pb[inl].reshape(-1, 1, 2).astype(np.float64), refined)
+    rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - pa[inl]) ** 2, axis=1))))
+    correlation = aligned_correlation(ha, hb, refined, a, b)
+    if not np.isfinite(correlation) or correlation < min_correlation:
+        raise InputError(f"no reliable overlap found between the views (normalised correlation "
+                         f"{correlation:.2f} < {min_correlation} after the homography fit)")
+    axis = 0 if direction == "h" else 1
+    size = a.shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
+    centre = np.array([[[(b.shape[1] - 1) / 2, (b.shape[0] - 1) / 2]]])
+    step = float(cv2.perspectiveTransform(centre, refined)[0, 0, axis] - centre[0, 0, axis])
+    overlap = 1.0 - step / size
+    if not 0 < overlap <= max_overlap:
+        raise InputError(f"the homography lays one view {100 * overlap:.0f} % over the other "
+                         f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "
+                         "periodic scene gives; use --overlap or --rig")
+    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
+            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
+            **photometric}
+    return refined, info

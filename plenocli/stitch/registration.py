@@ -1,0 +1,151 @@
+"""Registration of a layout: the expected position of each neighbour pair (a rig's prediction or
+an expected overlap), pairwise estimates, and their global solve into one transform per view."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from plenocli.errors import InputError
+from plenocli.stitch.homography import estimate_homography
+from plenocli.stitch.translation import estimate_translation
+from plenocli.stitch.views import corners_xy, neighbour_pairs, translation_matrix
+
+
+def difference_row(a: int, b: int, n_views: int) -> np.ndarray:
+    """Design-matrix row of a pair measurement x_b - x_a, with view 0 fixed (x_0 = 0)."""
+    row = np.zeros(n_views - 1)
+    if b:
+        row[b - 1] += 1
+    if a:
+        row[a - 1] -= 1
+    return row
+
+
+def _solve_translations(measured: list[tuple[int, int, np.ndarray]], n_views: int):
+    """Least-squares positions p_k (p_0 = 0) from pair measurements p_b - p_a = d_ab."""
+    m = np.array([difference_row(a, b, n_views) for a, b, _ in measured])
+    r = np.array([d for _, _, d in measured])
+    pos, *_ = np.linalg.lstsq(m, r, rcond=None)
+    closure = float(np.sqrt(np.mean(np.sum((m @ pos - r) ** 2, axis=1))))
+    return np.vstack([np.zeros(2), pos]), closure
+
+
+
+
+def priors(layout: str, shape: tuple[int, int], origins: np.ndarray | None,
+            overlap: float | None, overlap_tolerance: float, tolerance_px: float | None
+            ) -> dict:
+    """Expected shift (dy, dx) and search tolerance (px) per neighbour pair, or None."""
+    rows, cols = shape
+    out = {}
+    for a, b, direction in neighbour_pairs(layout):
+        if origins is not None:
+            d = origins[b] - origins[a]
+            out[(a, b)] = ((float(d[0]), float(d[1])), tolerance_px)
+        elif overlap is not None:
+            size = cols if direction == "h" else rows
+            shift = (0.0, size * (1 - overlap)) if direction == "h" else (size * (1 - overlap),
+                                                                           0.0)
+            tol = tolerance_px if tolerance_px is not None else overlap_tolerance * size
+            out[(a, b)] = (shift, tol)
+        else:
+            out[(a, b)] = (None, None)
+    return out
+
+
+def auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
+                overlap_tolerance: float = 0.1) -> str:
+    """The layout of two views: side by side or one above the other, whichever overlap
+    correlates best."""
+    best, best_corr, errors = None, -np.inf, []
+    for layout, direction in (("1x2", "h"), ("2x1", "v")):
+        (prior, tol), = priors(layout, luma.shape[1:], None, overlap, overlap_tolerance,
+                                None).values()
+        try:
+            _, _, info = estimate_translation(luma[0], luma[1], direction=direction, prior=prior,
+                                              tolerance_px=tol, **search)
+        except InputError as err:
+            errors.append(str(err))
+            continue
+        if info["correlation"] > best_corr:
+            best, best_corr = layout, info["correlation"]
+    if best is None:
+        raise InputError(f"no overlap found side by side nor one above the other ({errors[0]})")
+    return best
+
+
+
+
+def _measure_pair(luma: np.ndarray, a: int, b: int, direction: str, model: str, search: dict,
+                  prior, tol) -> tuple[np.ndarray, dict]:
+    """One neighbour pair: the shift [dy, dx] or the homography b -> a, and its report."""
+    try:
+        if model == "translation":
+            dy, dx, info = estimate_translation(luma[a], luma[b], direction=direction,
+                                                prior=prior, tolerance_px=tol, **search)
+            info["shift_px"] = [dy, dx]
+            return np.array([dy, dx]), info
+        h, info = estimate_homography(luma[a], luma[b], direction=direction,
+                                      min_correlation=search["min_correlation"], prior=prior,
+                                      tolerance_px=tol, max_overlap=search["max_overlap"])
+        info["homography"] = h.tolist()
+        return h, info
+    except InputError as err:
+        raise InputError(f"views {a} and {b}: {err}") from err
+
+
+def _chain_homographies(measured: dict, n_views: int, shape: tuple[int, int]):
+    """View -> view 0 homographies from the pairs, and for 2 x 2 the closure (px): the largest
+    corner disagreement of view 3 reached through view 1 and through view 2."""
+    transforms = [np.eye(3)] * n_views
+    transforms[1] = measured[(0, 1)]
+    if n_views != 4:
+        return transforms, None
+    transforms[2] = measured[(0, 2)]
+    via_1 = measured[(0, 1)] @ measured[(1, 3)]
+    via_2 = measured[(0, 2)] @ measured[(2, 3)]
+    transforms[3] = via_1 / via_1[2, 2]
+    corners = corners_xy(shape)
+    p1 = cv2.perspectiveTransform(corners, via_1)
+    p2 = cv2.perspectiveTransform(corners, via_2 / via_2[2, 2])
+    return transforms, float(np.max(np.linalg.norm((p1 - p2).reshape(-1, 2), axis=1)))
+
+
+def register(luma: np.ndarray, layout: str, model: str, search: dict, expected: dict):
+    """Transforms (view -> view 0), the per-pair reports and the closure (px, or None)."""
+    n_views = luma.shape[0]
+    pair_info, measured = [], {}
+    for a, b, direction in neighbour_pairs(layout):
+        prior, tol = expected[(a, b)]
+        measured[(a, b)], info = _measure_pair(luma, a, b, direction, model, search, prior, tol)
+        if prior is not None:
+            info["expected_shift_px"] = list(prior)
+        pair_info.append({"views": [a, b], "direction": direction, **info})
+    if model == "homography":
+        transforms, closure = _chain_homographies(measured, n_views, luma.shape[1:])
+        return transforms, pair_info, closure
+    pos, closure = _solve_translations([(a, b, d) for (a, b), d in measured.items()], n_views)
+    return [translation_matrix(*p) for p in pos], pair_info, (closure if n_views > 2 else None)
+
+
+def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str):
+    """The view transforms and layout of a saved transform, refused unless it fits the views."""
+    try:
+        mats = [np.asarray(t, dtype=np.float64) for t in transform["view_to_reference"]]
+        layout = transform["layout"]
+        view_shape = tuple(transform["view_shape"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise InputError(f"the transform is not a plenocli stitch transform (missing or bad "
+                         f"{err}); save one with --transform-out") from err
+    if len(mats) != n_views or any(m.shape != (3, 3) for m in mats):
+        raise InputError(f"the transform holds {len(mats)} view transforms for {n_views} views")
+    if view_shape != shape:
+        raise InputError(f"the transform was made for views of {view_shape[1]} x {view_shape[0]} "
+                         f"px, these are {shape[1]} x {shape[0]}; register them again")
+    if transform.get("model", model) != model:
+        raise InputError(f"the transform is a {transform.get('model')} model but --model is "
+                         f"{model}; pass --model {transform.get('model')}")
+    return mats, layout, "given"
+
+

@@ -1,0 +1,152 @@
+"""The view stack: validation, a known radial distortion removed, and the high-passed texture the
+registration works on.
+
+Geometry convention of the whole package: a transform is a 3 x 3 matrix mapping a view's pixel
+``(x, y, 1)`` (column, row) to the pixel coordinates of view 0 (the reference). Views are ordered
+row-major over the layout: ``1x2`` = left, right; ``2x1`` = top, bottom; ``2x2`` = S00, S01, S10,
+S11 (top-left, top-right, bottom-left, bottom-right).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from plenocli.errors import InputError
+
+LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
+VIEW_NAMES = {"1x2": ("L", "R"), "2x1": ("T", "B"), "2x2": ("S00", "S01", "S10", "S11")}
+MODELS = ("translation", "homography")
+BLENDS = ("feather", "multiband")
+HIGHPASS_SIGMA_PX = 8.0
+
+
+def neighbour_pairs(layout: str) -> list[tuple[int, int, str]]:
+    """Neighbour pairs (a, b, direction): 'h' = b right of a, 'v' = b below a."""
+    return {"1x2": [(0, 1, "h")], "2x1": [(0, 1, "v")],
+            "2x2": [(0, 1, "h"), (0, 2, "v"), (1, 3, "v"), (2, 3, "h")]}[layout]
+
+
+def translation_matrix(dy: float, dx: float) -> np.ndarray:
+    """The 3 x 3 matrix of the shift (dy, dx) px."""
+    m = np.eye(3)
+    m[0, 2], m[1, 2] = dx, dy
+    return m
+
+
+def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray, bool]:
+    """Validate views and return them as (V, C, rows, cols) float32 plus ``colour`` (C given).
+
+    ``views`` is (V, rows, cols), (V, C, rows, cols) or a sequence of equally shaped arrays.
+    Views of different sizes or channel counts are rejected (crop or resample them first).
+    """
+    if isinstance(views, np.ndarray):
+        arrays = list(views)
+    else:
+        arrays = [np.asarray(v) for v in views]
+    if len(arrays) not in (2, 4):
+        raise InputError(f"stitch needs 2 or 4 views, got {len(arrays)}; select views with "
+                         "--views (e.g. --views A,B)")
+    first = arrays[0].shape
+    for k, a in enumerate(arrays):
+        if a.ndim not in (2, 3):
+            raise InputError(f"view {k} has shape {a.shape}; a view is (rows, cols) or "
+                             "(channels, rows, cols)")
+        if a.shape != first:
+            what = "channel count" if a.ndim != len(first) or a.shape[-2:] == first[-2:] else "size"
+            raise InputError(f"view {k} has shape {a.shape} but view 0 has {first} (different "
+                             f"{what}); stitch needs views of one size and one channel count")
+    colour = len(first) == 3
+    stack = np.stack([a if colour else a[np.newaxis] for a in arrays]).astype(np.float32)
+    if min(stack.shape[-2:]) < 32:
+        raise InputError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
+                         "register; need at least 32 x 32")
+    return stack, colour
+
+
+def luminance(stack: np.ndarray) -> np.ndarray:
+    """(V, rows, cols): the channel mean of a (V, C, rows, cols) stack (NaN where no channel has
+    data). Refuses a view without data or without texture."""
+    if stack.shape[1] > 1:
+        with warnings.catch_warnings():  # no-data pixels (all NaN) stay NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            luma = np.nanmean(stack, axis=1)
+    else:
+        luma = stack[:, 0]
+    for k in range(len(luma)):
+        if not np.isfinite(luma[k]).any():
+            raise InputError(f"view {k} holds no data (all NaN)")
+        if float(np.nanstd(luma[k])) == 0.0:
+            raise InputError(f"view {k} has no texture (constant image); stitching needs "
+                             "structure in the overlap")
+    return luma
+
+
+def undistort(image: np.ndarray, k1: float) -> np.ndarray:
+    """Remove a constant radial distortion ``r_d = r_u (1 + k1 r_u^2)`` from a (rows, cols) image.
+
+    ``r`` is measured from the image centre in units of the half-diagonal, so ``k1 = 0.01`` moves
+    the corners outward by 1 %. Resampled with Lanczos-4; NaN stays NaN (within the kernel).
+    """
+    if not (np.isfinite(k1) and -1 < k1 <= 1):
+        raise ValueError(f"distortion k1 must be a finite number in (-1, 1], got {k1}")
+    if k1 == 0:
+        return image
+    rows, cols = image.shape
+    cy, cx = (rows - 1) / 2, (cols - 1) / 2
+    norm = np.hypot(cy, cx)
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float32)
+    ru2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / norm**2
+    scale = 1.0 + k1 * ru2
+    map_x = (cx + (xx - cx) * scale).astype(np.float32)
+    map_y = (cy + (yy - cy) * scale).astype(np.float32)
+    return cv2.remap(image.astype(np.float32), map_x, map_y, cv2.INTER_LANCZOS4,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+
+
+def fill_nan(image: np.ndarray) -> np.ndarray:
+    """NaN replaced by the nearest finite value (so the resampling kernel does not spread NaN)."""
+    bad = ~np.isfinite(image)
+    if not bad.any():
+        return image
+    if bad.all():
+        return np.zeros_like(image)
+    idx = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
+    return image[tuple(idx)]
+
+
+def highpass(image: np.ndarray) -> np.ndarray:
+    """Texture only: image minus a wide Gaussian blur, float32 (removes vignetting and offsets).
+
+    With NaN (no data) the blur is a normalised convolution over the valid pixels and the
+    result is 0 where there is no data, so the edges of a view's data add no false texture.
+    """
+    valid = np.isfinite(image)
+    if valid.all():
+        img = image.astype(np.float32)
+        return img - cv2.GaussianBlur(img, (0, 0), HIGHPASS_SIGMA_PX)
+    m = valid.astype(np.float32)
+    img = np.where(valid, image, 0).astype(np.float32)
+    blur = cv2.GaussianBlur(img, (0, 0), HIGHPASS_SIGMA_PX) / np.maximum(
+        cv2.GaussianBlur(m, (0, 0), HIGHPASS_SIGMA_PX), 1e-6)
+    return np.where(valid, img - blur, 0).astype(np.float32)
+
+
+def valid_eroded(view: np.ndarray) -> np.ndarray:
+    """Pixels with data, eroded by 2 px (the view's border counts as no data)."""
+    finite = np.isfinite(view)
+    if not finite.all():
+        return ndimage.binary_erosion(finite, iterations=2)
+    finite[:2], finite[-2:], finite[:, :2], finite[:, -2:] = False, False, False, False
+    return finite
+
+
+def corners_xy(shape: tuple[int, int]) -> np.ndarray:
+    """(4, 1, 2) float64 corners (x, y) of a (rows, cols) view, for cv2.perspectiveTransform."""
+    rows, cols = shape
+    return np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]]).reshape(
+        -1, 1, 2)

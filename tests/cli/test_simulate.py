@@ -1,0 +1,142 @@
+"""`plenocli simulate` end to end: every kind at a small size, options, errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.synth import KIND_NAMES, kinds
+
+# the smallest options each kind accepts, and the files it must write besides truth.json
+SMALL = {
+    "dualpixel": (["--pixels", "32x48"], {"capture.dng", "white.dng", "truth.npz"}),
+    "dualpixel-masked": (["--pixels", "48"], {"capture.dng"}),
+    "dualpixel-prism": (["--pixels", "48"], {"capture.dng"}),
+    "dualpixel-white": (["--pixels", "48"], {"capture.dng"}),
+    "hexgrid-white": (["--param", "size=96"], {"white.tif", "grid_true.xml"}),
+    "quad-rig": (["--param", "view_shape=[48, 64]"],
+                 {"views.tif", "white_S00.tif", "white_S01.tif", "white_S10.tif",
+                  "white_S11.tif"}),
+    "quadpixel-masked": (["--pixels", "32"], {"capture.tif"}),
+    "quadpixel-pyramid": (["--pixels", "32", "--rays", "2"], {"capture.tif"}),
+    "quadpixel-white": (["--pixels", "32"], {"capture.tif"}),
+    "raytrix-prism": (["--pixels", "60"], {"capture.tif"}),
+    "raytrix-scene": (["--param", "rows=48", "--param", "cols=64"],
+                      {"frames.tif", "grid.yaml", "texture.tif"}),
+    "raytrix-white": (["--pixels", "60"], {"capture.tif"}),
+    "stereo-rig": (["--param", "view_shape=[48, 64]"], {"views.tif", "white_L.tif",
+                                                         "white_R.tif"}),
+}
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, ["simulate", *map(str, args)])
+
+
+def test_every_kind_is_listed_and_tested():
+    assert tuple(sorted(kinds())) == KIND_NAMES == tuple(sorted(SMALL))
+
+
+@pytest.mark.parametrize("kind", KIND_NAMES)
+def test_every_kind_writes_its_files_and_truth(tmp_path, kind):
+    options, files = SMALL[kind]
+    out = tmp_path / kind
+    res = invoke(kind, "-o", out, "--seed", 3, *options)
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} == files | {"truth.json"}
+    truth = json.loads((out / "truth.json").read_text())  # strict JSON (no NaN)
+    record = truth["provenance"]
+    assert record["stage"] == "simulate" and record["parameters"]["kind"] == kind
+    assert record["parameters"]["seed"] == 3
+    assert not list(out.glob("*.tmp*"))
+
+
+def test_same_seed_same_capture(tmp_path):
+    for name in ("a", "b"):
+        assert invoke("quadpixel-pyramid", "-o", tmp_path / name, "--pixels", 32).exit_code == 0
+    a, b = ((tmp_path / n / "capture.tif").read_bytes() for n in ("a", "b"))
+    assert a == b
+
+
+def test_options_reach_the_generator(tmp_path):
+    from plenocli.io.raw import decode
+
+    res = invoke("dualpixel-masked", "-o", tmp_path, "--pixels", 48, "--param", "crosstalk=0.25",
+                 "--param", "noise_dn=0")
+    assert res.exit_code == 0, res.output
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    assert truth["crosstalk"] == 0.25
+    frames, _ = decode(tmp_path / "capture.dng")
+    top, left, bottom, right = truth["active_area"]
+    s = frames[0, top:bottom, left:right].astype(float) - truth["black_level"]
+    a = frames[1, top:bottom, left:right].astype(float) - truth["black_level"]
+    assert (s - a).sum() / a.sum() == pytest.approx(0.25, rel=0.01)
+    assert np.all(frames[:, :, :left] == truth["black_level"])
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["quadpixel-pyramid", "--param", "colour=1"], 1, "does not take 'colour'"),
+    (["quadpixel-pyramid", "--param", "crosstalk"], 1, "expected KEY=VALUE"),
+    (["quadpixel-pyramid", "--pixels", "15"], 1, "pixels 15"),
+    (["dualpixel", "--pixels", "wide"], 1, "ROWSxCOLS"),
+    (["moon-rig"], 2, "moon-rig"),
+    (["quadpixel-pyramid", "--rays", "0"], 2, "rays"),
+])
+def test_bad_options_are_one_line_and_leave_nothing(tmp_path, args, code, words):
+    out = tmp_path / "out"
+    res = invoke(args[0], "-o", out, *args[1:])
+    assert res.exit_code == code, res.output
+    assert words in res.output
+    if code == 1:
+        assert len(res.output.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_help_does_not_import_the_simulator():
+    code = ("import sys\nfrom click.testing import CliRunner\nfrom plenocli.cli.main import cli\n"
+            "res = CliRunner().invoke(cli, ['simulate', '--help'])\n"
+            "assert res.exit_code == 0 and 'quadpixel-pyramid' in res.output\n"
+            "print(sorted(m for m in sys.modules if m.startswith(('plenocli.synth.', 'cv2', "
+            "'tifffile', 'scipy.ndimage'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
+    from plenocli.pipeline.stages import simulate as stage
+
+    real = stage._write_file
+
+    def failing(path, item, record):
+        if item.name == "white.dng":  # the second file of the set
+            raise OSError("disk full")
+        real(path, item, record)
+
+    monkeypatch.setattr(stage, "_write_file", failing)
+    out = tmp_path / "set"
+    res = invoke("dualpixel", "-o", out, "--pixels", "32x48")
+    assert res.exit_code == 1 and "disk full" in res.output
+    assert not out.exists()
+    out.mkdir()
+    (out / "keep.txt").write_text("the user's")
+    assert invoke("dualpixel", "-o", out, "--pixels", "32x48").exit_code == 1
+    assert [p.name for p in out.iterdir()] == ["keep.txt"]
+
+
+def test_a_pipeline_step_can_simulate(tmp_path):
+    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.runner import run_pipeline
+
+    config = tmp_path / "sim.yaml"
+    config.write_text("steps:\n  simulate:\n    kind: stereo-rig\n    output: rig\n"
+                      "    seed: 4\n    param: ['view_shape=[48, 64]']\n")
+    run_pipeline(load_config(config))
+    truth = json.loads((tmp_path / "rig" / "truth.json").read_text())
+    assert truth["seed"] == 4 and truth["view_shape"] == [48, 64]
