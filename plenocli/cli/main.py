@@ -16,6 +16,7 @@ from plenocli.cli.run import run
 from plenocli.cli.sai import sai
 from plenocli.cli.simulate import simulate
 from plenocli.cli.stitch import stitch
+from plenocli.cli.unmix import unmix
 
 
 class PipelineOrder(click.Group):
@@ -44,6 +45,7 @@ for command in (
     refocus,
     sai,
     crosstalk,
+    unmix,
     stitch,
     run,
     batch,

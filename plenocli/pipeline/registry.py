@@ -37,6 +37,7 @@ def _stages() -> dict[str, Stage]:
         refocus,
         sai,
         stitch,
+        unmix,
     )
 
     table = [
@@ -49,7 +50,9 @@ def _stages() -> dict[str, Stage]:
         Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("crosstalk", crosstalk.run, inputs=("inputs", "grid"),
-              outputs=("output", "preview")),
+              outputs=("output", "preview", "mixing_out")),
+        Stage("unmix", unmix.run, inputs=("inputs", "mixing"),
+              outputs=("output", "noise_map", "preview")),
         Stage("stitch", stitch.run, inputs=("inputs", "transform_in", "rig"),
               outputs=("output", "transform_out", "report", "preview")),
         Stage("optics", optics.run, inputs=("input",), outputs=("json",)),

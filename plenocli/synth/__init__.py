@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 def kinds() -> dict[str, Callable[..., dict]]:
     """Simulation kinds by name: ``write(out_dir, *, seed, size, ...) -> truth``."""
-    from plenocli.synth import dualpixel, focused, prismcam, rig, whiteimage
+    from plenocli.synth import dualpixel, focused, mixing, prismcam, rig, whiteimage
 
     return {
         "dualpixel": dualpixel.write_capture_set,
@@ -21,4 +21,5 @@ def kinds() -> dict[str, Callable[..., dict]]:
         **prismcam.kinds(),
         "stereo-rig": rig.write_stereo_rig,
         "quad-rig": rig.write_quad_rig,
+        **mixing.kinds(),
     }

@@ -1,0 +1,288 @@
+"""Ghosts of a prism rig: a known, smooth mixing of the views, and its masked-pupil whites.
+
+Every pixel of view k records ``sum_j M_kj(x, y) T_j(x, y)`` (``plenocli.unmix``). Here M is
+known: ``M_jj = 1`` and, off the diagonal,
+
+    M_kj(u, v) = r_kj * s_c * (1 + a_kj u + b_kj v + q (u^2 + v^2 - 1/6))
+
+with u, v in [-1/2, 1/2] across the frame, ``a_kj, b_kj`` seeded in [-slope, slope], a small
+curvature q and a colour scale ``s_c`` (cross-talk depends on wavelength). For four views
+(quad-pixel), quarters that share an edge leak ``r``, the diagonal ones ``DIAGONAL * r``.
+
+The clean per-view images come from ``plenocli.synth.prismcam`` (rendered without cross-talk);
+this module mixes them, makes the whites with one pupil part open, and writes capture sets.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import tifffile
+
+from plenocli.io.atomic import atomic_path, write_text
+from plenocli.io.dng import write_dng
+from plenocli.synth import prismcam
+
+DIAGONAL = 0.4  # diagonal quarters of a quad-pixel leak less than edge neighbours
+CURVATURE = 0.05
+COLOUR_SCALE = {"R": 1.1, "G": 1.0, "B": 0.85, "L": 1.0}
+CROSS_MASK_LIGHT = 0.84  # the paper's cross mask keeps 84 % of the light
+
+
+def mixing_field(shape: tuple[int, int], *, n_views: int, r: float, slope: float = 0.2,
+                 colours: tuple[str, ...] = ("L",), seed: int = 0) -> np.ndarray:
+    """The known mixing, per pixel: (colours, V, V, rows, cols) float64 with M_jj = 1.
+
+    Parameters
+    ----------
+    shape : (rows, cols) of a view.
+    n_views : 2 (dual-pixel, Raytrix) or 4 (quad-pixel).
+    r : cross-talk of the (edge-)neighbour views at the frame centre, green (e.g. 0.5, 0.13).
+    slope : relative change of each M_kj across the frame (u or v from -1/2 to 1/2).
+    colours : names of the colour planes (R, G, B or L).
+    seed : seed of ``np.random.default_rng`` for the per-entry slopes.
+    """
+    if n_views not in (2, 4):
+        raise ValueError(f"n_views must be 2 or 4, got {n_views}")
+    if not 0 <= r < 1 or not 0 <= slope < 1:
+        raise ValueError(f"r ({r}) and slope ({slope}) must be in [0, 1)")
+    rng = np.random.default_rng(seed)
+    rows, cols = shape
+    v = (np.arange(rows) + 0.5)[:, None] / rows - 0.5
+    u = (np.arange(cols) + 0.5)[None, :] / cols - 0.5
+    field = np.zeros((len(colours), n_views, n_views, rows, cols))
+    for k in range(n_views):
+        field[:, k, k] = 1.0
+        for j in range(n_views):
+            if j == k:
+                continue
+            a, b = rng.uniform(-slope, slope, 2)
+            diagonal = n_views == 4 and (k ^ j) == 3  # S00-S11, S01-S10
+            shape_uv = 1 + a * u + b * v + CURVATURE * (u ** 2 + v ** 2 - 1 / 6)
+            for c, colour in enumerate(colours):
+                field[c, k, j] = r * (DIAGONAL if diagonal else 1.0) * COLOUR_SCALE[colour] \
+                    * shape_uv
+    return field
+
+
+def colour_index(shape: tuple[int, int], cfa: str | None) -> np.ndarray:
+    """(rows, cols) index into ("R", "G", "B") of each pixel of a ``cfa`` mosaic (0s if None)."""
+    out = np.zeros(shape, np.int64)
+    if cfa:
+        for k, letter in enumerate(cfa.upper()):
+            out[k // 2::2, k % 2::2] = "RGB".index(letter)
+    return out
+
+
+def apply_mixing(clean: np.ndarray, field: np.ndarray, colours: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """Observed views (V, rows, cols): ``O_k = sum_j M_kj T_j`` per pixel.
+
+    ``clean`` (V, rows, cols); ``field`` (C, V, V, rows, cols); ``colours`` (rows, cols) colour
+    index of each pixel (None: colour 0).
+    """
+    per_pixel = _pick_colour(field, colours)
+    return np.einsum("kjyx,jyx->kyx", per_pixel, clean)
+
+
+def masked_white(whites: np.ndarray, field: np.ndarray, part: int,
+                 colours: np.ndarray | None = None) -> np.ndarray:
+    """Views (V, rows, cols) of a white target with only pupil part ``part`` open:
+    ``O_k = M_k,part W_part`` (``whites`` (V, rows, cols): each view's own white)."""
+    per_pixel = _pick_colour(field, colours)
+    return per_pixel[:, part] * whites[part]
+
+
+def _pick_colour(field: np.ndarray, colours: np.ndarray | None) -> np.ndarray:
+    if colours is None:
+        return field[0]
+    return np.take_along_axis(field, colours[None, None, None], axis=0)[0]
+
+
+def tile_truth(field: np.ndarray, whites: np.ndarray, tile_px: int,
+               colours: np.ndarray | None = None) -> np.ndarray:
+    """The flux-weighted mean of the true M_kj over each tile (what a masked white measures),
+    (C, V, V, n_tile_rows, n_tile_cols): for comparison with ``measure_mixing``."""
+    n_c, n_v, _, rows, cols = field.shape
+    n_r, n_k = -(-rows // tile_px), -(-cols // tile_px)
+    out = np.empty((n_c, n_v, n_v, n_r, n_k))
+    cidx = np.zeros((rows, cols), np.int64) if colours is None else colours
+    for c in range(n_c):
+        sel = cidx == c
+        for j in range(n_v):
+            weight = np.where(sel, whites[j], 0.0)
+            denom = _tile_sum(weight, tile_px)
+            for k in range(n_v):
+                out[c, k, j] = _tile_sum(weight * field[c, k, j], tile_px) / denom
+    return out
+
+
+def _tile_sum(values: np.ndarray, tile_px: int) -> np.ndarray:
+    rows, cols = values.shape
+    n_r, n_k = -(-rows // tile_px), -(-cols // tile_px)
+    padded = np.zeros((n_r * tile_px, n_k * tile_px))
+    padded[:rows, :cols] = values
+    return padded.reshape(n_r, tile_px, n_k, tile_px).sum(axis=(1, 3))
+
+
+# ---------------------------------------------------------------------------------------------
+# Capture sets: the ghosted capture, the same capture without ghosts (the truth), one masked
+# white per pupil part and an all-open white (for the flat), as the real cameras write them.
+
+def render_dualpixel_ghost(*, pixels: int = 384, rays: int = 1, seed: int = 0, r: float = 0.5,
+                           slope: float = 0.2, prism_apex_deg: float = 30.0) -> dict:
+    """Clean and ghosted A, B mosaics (RGGB) of a dual-pixel + prism capture, plus whites.
+
+    Returns a dict of (rows, cols) float64 arrays in [0, ~1.5]: ``clean`` and ``ghosted``
+    (2, rows, cols) views A, B; ``masked`` {"A": (2, rows, cols), "B": ...}; ``white``
+    (2, rows, cols) all-open white with its ghosts; ``field`` (3, 2, 2, rows, cols) the true M.
+    """
+    cam = prismcam.Camera(prism_apex_deg=prism_apex_deg)
+    a, b, truth = prismcam.render_dualpixel(pixels=pixels, rays=rays, seed=seed, prism=True,
+                                            camera=cam)
+    wa, wb, _ = prismcam.render_dualpixel(pixels=pixels, rays=rays, seed=seed, prism=False,
+                                          scene="white", camera=cam)
+    mosaic = [prismcam.bayer_mosaic(v).astype(np.float64) for v in (a, b, wa, wb)]
+    clean, whites = np.stack(mosaic[:2]), np.stack(mosaic[2:])
+    colours = colour_index(clean.shape[1:], "RGGB")
+    field = mixing_field(clean.shape[1:], n_views=2, r=r, slope=slope, colours=("R", "G", "B"),
+                         seed=seed + 7)
+    return {"clean": clean, "ghosted": apply_mixing(clean, field, colours),
+            "masked": {name: masked_white(whites, field, j, colours)
+                       for j, name in enumerate("AB")},
+            "white": apply_mixing(whites, field, colours), "field": field, "render": truth}
+
+
+def render_quadpixel_ghost(*, pixels: int = 256, rays: int = 1, seed: int = 0, r: float = 0.13,
+                           slope: float = 0.2, cross_mask: bool = False) -> dict:
+    """Clean and ghosted SAIs of a quad-pixel + pyramid capture (RGB), plus masked whites.
+
+    With ``cross_mask`` the paper's cross-shaped mask is in the stop: r = 3 % and 84 % of the
+    light. Returns ``clean``/``ghosted`` (4, half, half, 3) SAIs S00, S01, S10, S11; ``masked``
+    {name: (4, half, half, 3)}; ``field`` (3, 4, 4, half, half).
+    """
+    light = CROSS_MASK_LIGHT if cross_mask else 1.0
+    r_used = 0.03 if cross_mask else r
+    sensor, truth = prismcam.render_quadpixel(pixels=pixels, rays=rays, seed=seed)
+    white, _ = prismcam.render_quadpixel(pixels=pixels, rays=rays, seed=seed, prisms=False,
+                                         scene="white")
+    clean = light * _sais(sensor)
+    whites = light * _sais(white)
+    half = clean.shape[1]
+    field = mixing_field((half, half), n_views=4, r=r_used, slope=slope,
+                         colours=("R", "G", "B"), seed=seed + 7)
+    ghosted = np.stack([apply_mixing(clean[..., c], field[c:c + 1]) for c in range(3)], -1)
+    masked = {name: np.stack([masked_white(whites[..., c], field[c:c + 1], j)
+                              for c in range(3)], -1)
+              for j, name in enumerate(SAI_NAMES)}
+    return {"clean": clean, "ghosted": ghosted, "masked": masked, "field": field,
+            "r": r_used, "light": light, "render": truth}
+
+
+SAI_NAMES = ("S00", "S01", "S10", "S11")
+
+
+def _sais(sensor: np.ndarray) -> np.ndarray:
+    """The four SAIs (4, half, half, 3) of a quad-pixel sensor image: S_ij = L[i::2, j::2]."""
+    return np.stack([sensor[i::2, j::2] for i in range(2) for j in range(2)]).astype(np.float64)
+
+
+def _multiplex(sais: np.ndarray) -> np.ndarray:
+    rows, cols = sais.shape[1:3]
+    sensor = np.empty((2 * rows, 2 * cols, 3), np.float64)
+    for k in range(4):
+        sensor[k // 2::2, k % 2::2] = sais[k]
+    return sensor
+
+
+def _write_canon_dng(path: Path, views: np.ndarray, *, scale: float, rng, noise_dn: float
+                     ) -> None:
+    """Two CFA frames S = A + B and A like ``prismcam.write_dualpixel`` (black 512, white
+    16383, 16 optical-black columns)."""
+    black, white, margin = 512, 16383, 16
+    rows, cols = views.shape[1:]
+    frames = np.full((2, rows, cols + margin), float(black))
+    frames[0, :, margin:] += (views[0] + views[1]) * scale
+    frames[1, :, margin:] += views[0] * scale
+    if noise_dn > 0:
+        frames += rng.normal(0.0, noise_dn, frames.shape)
+    data = np.clip(np.round(frames), 0, white).astype(np.uint16)
+    write_dng(path, data, cfa="RGGB", black_levels=[black, black], white_level=white,
+              active_area=[0, margin, rows, cols + margin], masked_areas=[[0, 0, rows, margin]],
+              frame_names=["S", "A"])
+
+
+def write_dualpixel_ghost(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 384,
+                          rays: int = 1, r: float = 0.5, slope: float = 0.2,
+                          noise_dn: float = 0.0, prism_apex_deg: float = 30.0) -> dict:
+    """Write a Canon-like dual-pixel + prism set with ghosts (r about 50 %) into ``out_dir``:
+    ``capture.dng`` (ghosted), ``clean.dng`` (the same capture without ghosts: the truth),
+    ``white.dng`` (all-open white, for flat), ``masked_A.dng`` / ``masked_B.dng`` (only pupil
+    half A / B open) and ``truth.json``."""
+    sim = render_dualpixel_ghost(pixels=pixels, rays=rays, seed=seed, r=r, slope=slope,
+                                 prism_apex_deg=prism_apex_deg)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    scale = 0.25 * (16383 - 512)  # S of a ghosted white stays below clipping up to r ~ 0.9
+    rng = np.random.default_rng(seed + 1)
+    files = {"capture": sim["ghosted"], "clean": sim["clean"], "white": sim["white"],
+             "masked_A": sim["masked"]["A"], "masked_B": sim["masked"]["B"]}
+    for name, views in files.items():
+        _write_canon_dng(out / f"{name}.dng", views, scale=scale, rng=rng, noise_dn=noise_dn)
+    truth = _truth(sim["field"], ("A", "B"), kind="dualpixel-ghost", seed=seed, r=r,
+                   slope=slope, noise_dn=noise_dn, scale_dn=scale,
+                   files={k: f"{k}.dng" for k in files}, render=sim["render"])
+    write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
+    return truth
+
+
+def write_quadpixel_ghost(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 256,
+                          rays: int = 1, r: float = 0.13, slope: float = 0.2,
+                          cross_mask: bool = False, noise_dn: float = 0.0) -> dict:
+    """Write a quad-pixel + pyramid set with ghosts (r = 13 %, or 3 % with ``cross_mask``):
+    ``capture.tif`` (16-bit RGB, ghosted), ``clean.tif`` (the truth), ``masked_S00.tif`` ..
+    ``masked_S11.tif`` (one pupil quarter open) and ``truth.json``."""
+    sim = render_quadpixel_ghost(pixels=pixels, rays=rays, seed=seed, r=r, slope=slope,
+                                 cross_mask=cross_mask)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    scale = 0.6 * prismcam.FULL_SCALE_DN  # a ghosted white (1 + 3 r) stays below 65535
+    rng = np.random.default_rng(seed + 1)
+    files = {"capture": sim["ghosted"], "clean": sim["clean"],
+             **{f"masked_{n}": sim["masked"][n] for n in SAI_NAMES}}
+    for name, sais in files.items():
+        data = _multiplex(sais) * scale
+        if noise_dn > 0:
+            data = data + rng.normal(0.0, noise_dn, data.shape)
+        with atomic_path(out / f"{name}.tif") as tmp:
+            tifffile.imwrite(tmp, np.clip(np.round(data), 0, 65535).astype(np.uint16),
+                             photometric="rgb")
+    truth = _truth(sim["field"], SAI_NAMES, kind="quadpixel-ghost", seed=seed, r=sim["r"],
+                   slope=slope, noise_dn=noise_dn, scale_dn=scale, cross_mask=cross_mask,
+                   light=sim["light"], files={k: f"{k}.tif" for k in files},
+                   render=sim["render"])
+    write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
+    return truth
+
+
+def _truth(field: np.ndarray, views: tuple[str, ...], **extra) -> dict:
+    """truth.json: the parameters, and r = max over k != j of M_kj / M_jj per colour."""
+    off = ~np.eye(field.shape[1], dtype=bool)  # M_jj = 1: the ratios are the entries
+    r_max = {c: float(field[k][off].max()) for k, c in enumerate("RGB"[:field.shape[0]])}
+    return {**extra, "views": list(views), "colours": ["R", "G", "B"],
+            "mixing_r_max_per_colour": r_max,
+            "model": "O_k = sum_j M_kj T_j per pixel, M_jj = 1 (plenocli.synth.mixing)"}
+
+
+def kinds() -> dict:
+    """The simulate kinds of this module."""
+    from functools import partial
+
+    return {
+        "dualpixel-ghost": write_dualpixel_ghost,
+        "quadpixel-ghost": write_quadpixel_ghost,
+        "quadpixel-ghost-mask": partial(write_quadpixel_ghost, cross_mask=True),
+    }
