@@ -228,8 +228,27 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
                                             - 1)) / 2.0
     centre_c = (np.arange(n_c) * tile_px + (np.minimum((np.arange(n_c) + 1) * tile_px, cols)
                                             - 1)) / 2.0
+    for c in range(len(colours)):
+        # A colour's pixels sit off the tile centre (red of RGGB by half a pixel up and left):
+        # move its values to the centre along the field's gradient.
+        cells = np.argwhere(pattern == c)
+        if len(cells) and colour_pattern is not None:
+            off_r, off_c = cells.mean(axis=0) - 0.5
+            nodes[c] = _shift_nodes(nodes[c], centre_r, centre_c, off_r, off_c)
     return MixingField(nodes.astype(np.float32), centre_r, centre_c, (rows, cols), tuple(views),
                        tuple(colours))
+
+
+def _shift_nodes(values: np.ndarray, node_rows: np.ndarray, node_cols: np.ndarray,
+                 off_r: float, off_c: float) -> np.ndarray:
+    """Values (..., n_r, n_c) measured at node + (off_r, off_c), moved to the nodes (first
+    order)."""
+    out = values.copy()
+    if len(node_rows) > 1:
+        out -= off_r * np.gradient(values, node_rows, axis=-2)
+    if len(node_cols) > 1:
+        out -= off_c * np.gradient(values, node_cols, axis=-1)
+    return out
 
 
 def _fill_from_nearest(nodes: np.ndarray) -> np.ndarray:
