@@ -88,23 +88,52 @@ def _axis_weights(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np
 
 
 @numba.njit(cache=True, inline="always")
-def _solve_matrix(m, lam2, a, work):
-    """A = M^-1 (lam2 = 0) or (M^T M + lam2 I)^-1 M^T into ``a``; False if singular.
+def _solve_matrix(m, lam2, a, work, normal, normal_inv):
+    """A = M^-1 (lam2 = 0) or (M^T M + lam2 I)^-1 M^T into ``a``; False if singular."""
+    v = m.shape[0]
+    if lam2 == 0.0:
+        return _invert(m, a, work)
+    for i in range(v):
+        for j in range(v):
+            s = 0.0
+            for k in range(v):
+                s += m[k, i] * m[k, j]
+            normal[i, j] = s + (lam2 if i == j else 0.0)
+    if not _invert(normal, normal_inv, work):
+        return False
+    for i in range(v):
+        for j in range(v):
+            s = 0.0
+            for k in range(v):
+                s += normal_inv[i, k] * m[j, k]
+            a[i, j] = s
+    return True
 
-    Gauss-Jordan with partial pivoting on [N | B], N = M or M^T M + lam2 I, B = I or M^T.
-    """
+
+@numba.njit(cache=True, inline="always")
+def _invert(m, a, work):
+    """A = M^-1: closed forms for 2 x 2 and 4 x 4, Gauss-Jordan otherwise; False if singular."""
+    v = m.shape[0]
+    if v == 2:
+        det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+        if abs(det) < SINGULAR_PIVOT:
+            return False
+        a[0, 0], a[0, 1] = m[1, 1] / det, -m[0, 1] / det
+        a[1, 0], a[1, 1] = -m[1, 0] / det, m[0, 0] / det
+        return True
+    if v == 4:
+        return _inverse4(m, a)
+    return _gauss_jordan(m, a, work)
+
+
+@numba.njit(cache=True, inline="always")
+def _gauss_jordan(m, a, work):
+    """A = M^-1 by Gauss-Jordan with partial pivoting on [M | I]; False if singular."""
     v = m.shape[0]
     for i in range(v):
         for j in range(v):
-            if lam2 > 0.0:
-                s = 0.0
-                for k in range(v):
-                    s += m[k, i] * m[k, j]
-                work[i, j] = s + (lam2 if i == j else 0.0)
-                a[i, j] = m[j, i]
-            else:
-                work[i, j] = m[i, j]
-                a[i, j] = 1.0 if i == j else 0.0
+            work[i, j] = m[i, j]
+            a[i, j] = 1.0 if i == j else 0.0
     for col in range(v):
         piv = col
         for r in range(col + 1, v):
@@ -192,6 +221,8 @@ def _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, 
         m = np.empty((v, v))
         a = np.empty((v, v))
         work = np.empty((v, v))
+        normal = np.empty((v, v))
+        normal_inv = np.empty((v, v))
         bad = 0
         for x in range(cols):
             c = pattern[y & 1, x & 1]
@@ -200,7 +231,7 @@ def _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, 
             for k in range(v):
                 for j in range(v):
                     m[k, j] = (1.0 - wx) * row_m[c, k, j, lo] + wx * row_m[c, k, j, hi]
-            ok = _inverse4(m, a) if v == 4 and lam2 == 0.0 else _solve_matrix(m, lam2, a, work)
+            ok = _solve_matrix(m, lam2, a, work, normal, normal_inv)
             if not ok:
                 bad += 1
             for k in range(v):
