@@ -285,4 +285,93 @@ def kinds() -> dict:
         "dualpixel-ghost": write_dualpixel_ghost,
         "quadpixel-ghost": write_quadpixel_ghost,
         "quadpixel-ghost-mask": partial(write_quadpixel_ghost, cross_mask=True),
+        "raytrix-ghost": write_raytrix_ghost,
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# Raytrix + prism. prismcam.render_raytrix gives each pixel only the field of its own pupil
+# half; cross-talk needs both fields at every pixel, so this renderer (the same optics) computes
+# both. It belongs in prismcam (render_raytrix with a pupil-edge blur) once that module settles.
+
+def render_raytrix_ghost(*, pixels: int = 404, seed: int = 0, pitch_px: float = 20.2,
+                         g: float = 4.0, edge_blur_px: float = 1.5, lens_border_px: float = 1.0,
+                         scene: str = "chart", camera: prismcam.Camera | None = None) -> dict:
+    """A focused (type-2) capture with a prism over the +x pupil half, with and without
+    cross-talk, and its whites: dict of (rows, pixels) float64 images in [0, 1].
+
+    Pixel x under the micro-lens of centre c sees image point c + g (x - c) (the lattice is
+    ``prismcam.render_raytrix``'s for the same seed). Without cross-talk, pixels left of c see
+    the +x (prism) pupil half only. With it, the pupil edge is blurred over ``edge_blur_px``
+    (micro-lens aberrations, pixel size): a pixel at dx = x - c collects the fraction
+    ``w(dx) = erfc(dx / (sqrt 2 blur)) / 2`` of its light through the prism half.
+
+    Returns ``ghosted``, ``clean``, ``white`` (all-open white), ``masked_left`` (only the
+    prism half open), ``masked_right`` (only the other half open).
+    """
+    from scipy.spatial import cKDTree
+    from scipy.special import erfc
+
+    camera = camera or prismcam.Camera()
+    rng = np.random.default_rng(seed)
+    rows = pixels * 2 // 3
+    cell = camera.sensor_mm / pixels
+    rotation = float(rng.uniform(-0.01, 0.01))
+    offset = (float(rng.uniform(-0.5, 0.5) * pitch_px), float(rng.uniform(-0.5, 0.5) * pitch_px))
+    centres, _ = prismcam.hex_centres(rows, pixels, pitch_px=pitch_px, rotation_rad=rotation,
+                                      offset_px=offset)
+    chart = prismcam.make_chart(camera, pixels, seed=seed, scene=scene)
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    radius, half_pitch = camera.aperture_mm / 2, pitch_px / 2
+    yy, xx = np.mgrid[0:rows, 0:pixels].astype(np.float64) + 0.5
+    dist, nearest = cKDTree(centres).query(np.stack([xx.ravel(), yy.ravel()], axis=1))
+    c = centres[nearest].reshape(rows, pixels, 2)
+    dx, dy = xx - c[..., 0], yy - c[..., 1]
+    s = np.stack([(c[..., 0] + g * dx - pixels / 2) * cell,
+                  (c[..., 1] + g * dy - rows / 2) * cell], axis=-1)
+    px = np.abs(dx) / half_pitch * radius
+    py = -dy / half_pitch * radius
+    fields = []
+    for side, prism in ((1, (1, 0)), (-1, None)):  # +x half behind the prism, -x half bare
+        pupil = np.stack([side * px, py], axis=-1)
+        hits = prismcam._chart_hits(camera, s, pupil, prism)
+        fields.append(prismcam._sample_chart(chart, hits).astype(np.float64) @ luminance)
+    prism_field, bare_field = fields
+    vignette = np.clip((half_pitch - lens_border_px - dist.reshape(rows, pixels)) / 1.5 + 0.5,
+                       0.0, 1.0)
+    w = 0.5 * erfc(dx / (np.sqrt(2) * edge_blur_px)) if edge_blur_px > 0 else \
+        (dx < 0).astype(np.float64)
+    hard = (dx < 0).astype(np.float64)
+    return {"ghosted": vignette * (w * prism_field + (1 - w) * bare_field),
+            "clean": vignette * (hard * prism_field + (1 - hard) * bare_field),
+            "white": vignette, "masked_left": vignette * w, "masked_right": vignette * (1 - w),
+            "lattice": {"rotation": rotation, "offset_px": list(offset), "pitch_px": pitch_px}}
+
+
+def write_raytrix_ghost(out_dir: str | os.PathLike, *, seed: int = 0, pixels: int = 404,
+                        pitch_px: float = 20.2, edge_blur_px: float = 1.5,
+                        noise_dn: float = 0.0) -> dict:
+    """Write a Raytrix + prism set with cross-talk: ``capture.tif`` (16-bit mono), ``clean.tif``
+    (the truth), ``white.tif``, ``masked_left.tif`` (prism half open), ``masked_right.tif``
+    and ``truth.json``."""
+    sim = render_raytrix_ghost(pixels=pixels, seed=seed, pitch_px=pitch_px,
+                               edge_blur_px=edge_blur_px)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed + 1)
+    names = ("capture", "clean", "white", "masked_left", "masked_right")
+    for name, key in zip(names, ("ghosted", "clean", "white", "masked_left", "masked_right"),
+                         strict=True):
+        data = sim[key] * prismcam.FULL_SCALE_DN
+        if noise_dn > 0:
+            data = data + rng.normal(0.0, noise_dn, data.shape)
+        with atomic_path(out / f"{name}.tif") as tmp:
+            tifffile.imwrite(tmp, np.clip(np.round(data), 0, 65535).astype(np.uint16),
+                             photometric="minisblack")
+    truth = {"kind": "raytrix-ghost", "seed": seed, "pixels": [pixels * 2 // 3, pixels],
+             "edge_blur_px": edge_blur_px, "noise_dn": noise_dn, "lattice": sim["lattice"],
+             "files": {n: f"{n}.tif" for n in names},
+             "model": "pixel = w(dx) prism field + (1 - w(dx)) bare field, w = erfc(dx / "
+                      "(sqrt 2 blur)) / 2 (plenocli.synth.mixing)"}
+    write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
+    return truth

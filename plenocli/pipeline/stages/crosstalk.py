@@ -247,24 +247,24 @@ def load_mixing_views(path: str, views: str | None) -> dict:
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
-    loaded = [load_mixing_views(p, views) for p in inputs]
+    loaded, labels = _load_masked_whites(inputs, views)
     first = loaded[0]
-    for path, cap in zip(inputs[1:], loaded[1:], strict=False):
+    for path, cap in zip(labels[1:], loaded[1:], strict=False):
         if (cap["names"], cap["colours"], cap["layout"], cap["cfa"], cap["data"].shape) != (
                 first["names"], first["colours"], first["layout"], first["cfa"],
                 first["data"].shape):
             raise InputError(f"{path} does not match {inputs[0]} (views, colours, CFA or size); "
                              "give masked whites of one rig, processed the same way")
     names = first["names"]
-    if len(inputs) != len(names):
+    if len(loaded) != len(names):
         raise InputError(f"--mixing-out needs one masked white per pupil part: {len(names)} "
-                         f"views ({','.join(names)}) but {len(inputs)} inputs")
+                         f"views ({','.join(names)}) but {len(loaded)} inputs")
     specs = (intended or "auto").split(",")
-    if len(specs) not in (1, len(inputs)):
-        raise ConfigError(f"--intended has {len(specs)} names for {len(inputs)} inputs; give one "
-                          "name per input")
+    if len(specs) not in (1, len(loaded)):
+        raise ConfigError(f"--intended has {len(specs)} names for {len(loaded)} masked whites; "
+                          "give one name per masked white")
     captures, opened = [], []
-    for k, (path, cap) in enumerate(zip(inputs, loaded, strict=True)):
+    for k, (path, cap) in enumerate(zip(labels, loaded, strict=True)):
         luminance = cap["data"].sum(axis=1)  # flux over every colour, as r has always been
         idx = _intended_index(specs[k if len(specs) > 1 else 0], names, path)
         pattern = _cfa_pattern(cap)
@@ -318,6 +318,31 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
              "%.2f %% (mean), %.2f %% (max over tiles)", len(names), len(field.colours),
              field.nodes.shape[3], field.nodes.shape[4], shown(mixing_out),
              100 * from_m["r_mean"], 100 * from_m["r_max"])
+
+
+def _load_masked_whites(inputs: list[str], views: str | None) -> tuple[list[dict], list[str]]:
+    """The masked whites and a label for each. Files of one view each (refocused left/right
+    images) come V to a masked white, in the order --views names them."""
+    single = all(len(tiffio.read_meta(p).get("views") or [None]) == 1 for p in inputs)
+    if not single:
+        return [load_mixing_views(p, views) for p in inputs], inputs
+    names = [v.strip() for v in (views or "").split(",") if v.strip()]
+    if len(names) < 2 or len(inputs) != len(names) ** 2:
+        raise InputError(f"each input holds one view: name the views with --views (e.g. "
+                         f"left,right) and give that many files per masked white, in that order "
+                         f"({len(inputs)} files given)")
+    loaded, labels = [], []
+    for k in range(0, len(inputs), len(names)):
+        group = inputs[k:k + len(names)]
+        parts = [load_mixing_views(p, None) for p in group]
+        cap = dict(parts[0])
+        if len({p["data"].shape for p in parts}) != 1:
+            raise InputError(f"{', '.join(group)}: the views of one masked white differ in size")
+        cap["data"] = np.concatenate([p["data"] for p in parts])
+        cap["names"] = names
+        loaded.append(cap)
+        labels.append("+".join(group))
+    return loaded, labels
 
 
 def _cfa_pattern(cap: dict) -> np.ndarray | None:
