@@ -248,9 +248,10 @@ def _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, 
 
 
 @numba.njit(cache=True, parallel=True)
-def _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, out, gain, want_gain,
+def _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, want_gain,
                    singular):
-    """Two views, no regularisation: the closed-form inverse (numba kernel, one row per task)."""
+    """Two views: the closed-form solve matrix, M^-1 or (M^T M + lam2 I)^-1 M^T (numba kernel,
+    one image row per parallel task)."""
     n_col = nodes.shape[0]
     rows, cols = obs.shape[1], obs.shape[2]
     n_nc = nodes.shape[4]
@@ -272,7 +273,16 @@ def _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, out, gain, want_
             m01 = (1.0 - wx) * row_m[c, 0, 1, lo] + wx * row_m[c, 0, 1, hi]
             m10 = (1.0 - wx) * row_m[c, 1, 0, lo] + wx * row_m[c, 1, 0, hi]
             m11 = (1.0 - wx) * row_m[c, 1, 1, lo] + wx * row_m[c, 1, 1, hi]
-            det = m00 * m11 - m01 * m10
+            if lam2 > 0.0:  # N = M^T M + lam2 I; A = N^-1 M^T
+                n00 = m00 * m00 + m10 * m10 + lam2
+                n01 = m00 * m01 + m10 * m11
+                n11 = m01 * m01 + m11 * m11 + lam2
+                det = n00 * n11 - n01 * n01
+                a00, a01 = n11 * m00 - n01 * m01, n11 * m10 - n01 * m11
+                a10, a11 = n00 * m01 - n01 * m00, n00 * m11 - n01 * m10
+            else:
+                det = m00 * m11 - m01 * m10
+                a00, a01, a10, a11 = m11, -m01, -m10, m00
             if abs(det) < SINGULAR_PIVOT:
                 bad += 1
                 out[0, y, x] = np.nan
@@ -283,11 +293,11 @@ def _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, out, gain, want_
                 continue
             inv = 1.0 / det
             o0, o1 = obs[0, y, x], obs[1, y, x]
-            out[0, y, x] = (m11 * o0 - m01 * o1) * inv
-            out[1, y, x] = (m00 * o1 - m10 * o0) * inv
+            out[0, y, x] = (a00 * o0 + a01 * o1) * inv
+            out[1, y, x] = (a10 * o0 + a11 * o1) * inv
             if want_gain:
-                gain[0, y, x] = np.sqrt(m11 * m11 + m01 * m01) * abs(inv)
-                gain[1, y, x] = np.sqrt(m10 * m10 + m00 * m00) * abs(inv)
+                gain[0, y, x] = np.sqrt(a00 * a00 + a01 * a01) * abs(inv)
+                gain[1, y, x] = np.sqrt(a10 * a10 + a11 * a11) * abs(inv)
         singular[y] = bad
 
 
@@ -330,9 +340,9 @@ def unmix(views: np.ndarray, mixing: MixingField, *, colour_pattern=None,
     out = np.empty(obs.shape, np.float32)
     gain = np.empty(obs.shape if noise_gain else (1, 1, 1), np.float32)
     singular = np.zeros(obs.shape[1], np.int64)
-    if mixing.n_views == 2 and regularise == 0:
-        _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, out, gain, noise_gain,
-                       singular)
+    if mixing.n_views == 2:
+        _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, float(regularise) ** 2,
+                       out, gain, noise_gain, singular)
     else:
         _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, float(regularise) ** 2,
                       out, gain, noise_gain, singular)
