@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import unmix as unmix_lib
-from plenocli.errors import CalibrationError, InputError
+from plenocli.errors import CalibrationError, ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
@@ -96,7 +96,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     if not inputs:
         raise InputError("no input given; pass the views TIFF (or one TIFF per view)")
     if not (np.isfinite(regularise) and regularise >= 0):
-        raise InputError(f"--regularise must be a finite number >= 0, got {regularise}")
+        raise ConfigError(f"--regularise must be a finite number >= 0, got {regularise}")
     field, mix_meta = read_mixing(mixing)
     info = mix_meta["mixing"]
     pages, names, meta = _load(inputs)
