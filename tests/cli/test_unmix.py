@@ -151,3 +151,44 @@ def test_crosstalk_mixing_needs_one_white_per_part(rig):
                   "-o", tmp / "c.json", "--mixing-out", tmp / "m.tif")
     assert res.exit_code == 1 and "open each pupil part once" in res.output
     assert not (tmp / "m.tif").exists() and not (tmp / "c.json").exists()
+
+
+def test_one_file_per_view_like_raytrix_left_right(tmp_path):
+    """Refocused left/right images are one file each: crosstalk takes two per masked white (in
+    the order of --views), unmix takes both and names the views after the files."""
+    field = sim_mixing.mixing_field(SHAPE, n_views=2, r=0.1, seed=4)
+    whites = np.ones((2, *SHAPE))
+    clean = np.random.default_rng(3).uniform(0.2, 1.0, (2, *SHAPE))
+    ghosted = sim_mixing.apply_mixing(clean, field)
+    files = []
+    for j, half in enumerate(("left", "right")):
+        masked = sim_mixing.masked_white(whites, field, j)
+        for k, view in enumerate(("left", "right")):
+            path = tmp_path / f"masked_{half}_{view}.tif"
+            tiffio.write_image(path, masked[k:k + 1].astype(np.float32), {"views": ["L"]})
+            files.append(path)
+    for k, view in enumerate(("left", "right")):
+        tiffio.write_image(tmp_path / f"{view}.tif", ghosted[k:k + 1].astype(np.float32),
+                           {"views": ["L"]})
+    res = _invoke("crosstalk", *files, "--views", "left,right", "--intended", "left,right",
+                  "--tile", 8, "-o", tmp_path / "ct.json", "--mixing-out", tmp_path / "m.tif")
+    assert res.exit_code == 0, res.output
+    res = _invoke("unmix", tmp_path / "left.tif", tmp_path / "right.tif", "--mixing",
+                  tmp_path / "m.tif", "-o", tmp_path / "clean.tif")
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(tmp_path / "clean.tif")
+    assert meta["views"] == ["left", "right"]
+    np.testing.assert_allclose(data, clean, rtol=1e-3)
+    res = _invoke("crosstalk", *files[:3], "--views", "left,right", "-o", tmp_path / "c2.json",
+                  "--mixing-out", tmp_path / "m2.tif")
+    assert res.exit_code == 1 and "give that many files per masked white" in res.output
+
+
+def test_non_finite_mixing_is_refused(rig):
+    paths, _, _, tmp = rig
+    nodes = np.tile(np.eye(2)[None, :, :, None, None], (1, 1, 1, 2, 2))
+    nodes[0, 0, 1, 1, 1] = np.nan
+    mixing = _mixing_file(tmp, nodes)
+    res = _invoke("unmix", _bad_views(tmp, cfa=None), "--mixing", mixing, "-o", tmp / "o.tif",
+                  "--regularise", 0.1)
+    assert res.exit_code == 1 and "non-finite" in res.output and not (tmp / "o.tif").exists()

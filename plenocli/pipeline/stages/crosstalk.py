@@ -323,7 +323,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
 def _load_masked_whites(inputs: list[str], views: str | None) -> tuple[list[dict], list[str]]:
     """The masked whites and a label for each. Files of one view each (refocused left/right
     images) come V to a masked white, in the order --views names them."""
-    single = all(len(tiffio.read_meta(p).get("views") or [None]) == 1 for p in inputs)
+    single = all(len(tiffio.read_meta(p).get("views") or [None, None]) == 1 for p in inputs)
     if not single:
         return [load_mixing_views(p, views) for p in inputs], inputs
     names = [v.strip() for v in (views or "").split(",") if v.strip()]

@@ -77,6 +77,9 @@ def _check_geometry(field, info: dict, meta: dict, area: tuple[int, int, int, in
 
 
 def _check_condition(field, mixing: str, regularise: float) -> np.ndarray:
+    if not np.isfinite(field.nodes).all():
+        raise CalibrationError(f"{mixing}: the mixing field has non-finite values; measure it "
+                               "again with plenocli crosstalk --mixing-out")
     cond = unmix_lib.node_condition(field)
     if regularise == 0 and not np.all(cond <= MAX_CONDITION):
         c, a, b = np.unravel_index(int(np.argmax(np.where(np.isfinite(cond), cond, np.inf))),
