@@ -308,11 +308,12 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False), protect=protect)
     if preview:
         maps, titles = [], []
+        shown_colour = field.colours.index("G") if "G" in field.colours else 0
         for k in range(len(names)):
             for j in range(len(names)):
                 if k != j:
-                    maps.append(np.asarray(field.nodes[0, k, j], np.float64))
-                    titles.append(f"M {names[k]}<-{names[j]} ({field.colours[0]})")
+                    maps.append(np.asarray(field.nodes[shown_colour, k, j], np.float64))
+                    titles.append(f"M {names[k]}<-{names[j]} ({field.colours[shown_colour]})")
         _write_png(preview, _heat_map(maps, titles), protect)
     log.info("crosstalk: mixing of %d views x %d colours on %d x %d tiles -> %s; r from M "
              "%.2f %% (mean), %.2f %% (max over tiles)", len(names), len(field.colours),
