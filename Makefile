@@ -20,13 +20,16 @@ $(STAMP): pyproject.toml
 # Simulated captures with ground truth for the demos (seeded: the same files every time).
 SIM       := out/fixtures
 SIM_KINDS := dualpixel-prism dualpixel-white dualpixel-masked quadpixel-pyramid \
-             raytrix-prism raytrix-white
+             raytrix-prism raytrix-white dualpixel-ghost quadpixel-ghost raytrix-ghost
 SIM_ARGS_dualpixel-prism   := --pixels 768
 SIM_ARGS_dualpixel-white   := --pixels 768
 SIM_ARGS_dualpixel-masked  := --pixels 768 --param crosstalk=0.2
 SIM_ARGS_quadpixel-pyramid := --pixels 1024
 SIM_ARGS_raytrix-prism     := --pixels 1200
 SIM_ARGS_raytrix-white     := --pixels 1200
+SIM_ARGS_dualpixel-ghost   := --pixels 768
+SIM_ARGS_quadpixel-ghost   := --pixels 1024
+SIM_ARGS_raytrix-ghost     := --pixels 1200
 
 $(SIM)/%/truth.json: $(STAMP)
 	$(BIN)/plenocli simulate $* -o $(SIM)/$* $(SIM_ARGS_$*) -q

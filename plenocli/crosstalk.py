@@ -10,6 +10,10 @@ width m). Ideally only the intended view then receives light. The cross-talk rat
 about 50 %). Flux is summed over pixels where every view is finite (NaN = masked value, e.g. B
 where S clipped). r is reported globally, as a map over tiles of the frame, and per colour when
 the views are Bayer mosaics.
+
+With one masked white per pupil part, ``measure_mixing`` gives the whole mixing matrix M per
+tile and colour (view k records sum_j M_kj T_j; M_jj = 1), which ``plenocli.unmix`` inverts.
+r is then max over k != j of M_kj / M_jj.
 """
 
 from __future__ import annotations
@@ -17,9 +21,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from scipy import ndimage
 
 from plenocli.errors import InputError
 from plenocli.model.cfa import check_pattern
+from plenocli.model.mixing import MixingField
 
 
 def _colour_masks(shape: tuple[int, int], cfa: str | None) -> dict[str, np.ndarray]:
@@ -169,3 +175,116 @@ def refocus_mask_sweep(frame: np.ndarray, grid, mask_widths: Sequence[float], *,
         return left, right
 
     return mask_width_sweep(make_views, mask_widths, intended=intended, tile_px=tile_px)
+
+
+def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
+                   views: Sequence[str], tile_px: int = 64, colour_pattern=None,
+                   colours: Sequence[str] = ("L",), min_valid_fraction: float = 0.25
+                   ) -> MixingField:
+    """The mixing-matrix field M from one masked-pupil white per pupil part.
+
+    In capture j only pupil part ``intended[j]`` is open, so view k records
+    ``M_k,intended W`` with W that part's white: per tile and colour, M_k,intended is the flux of
+    view k over the flux of the intended view (the paper's ratio, tile by tile), and
+    ``M_jj = 1``. Node positions are the tile centres; ``plenocli.unmix`` interpolates between
+    them.
+
+    Parameters
+    ----------
+    captures : V arrays (V, rows, cols), one per pupil part, linear above black; NaN = masked.
+    intended : the open part (view index) of each capture: a permutation of 0..V-1.
+    views : the V view names.
+    tile_px : tile side (px; even, so a tile holds whole CFA cells).
+    colour_pattern : 2 x 2 indices into ``colours`` of a Bayer mosaic; None = one colour.
+    colours : names of the colour planes.
+    min_valid_fraction : tiles with fewer valid pixels are filled from the nearest good tile.
+
+    Returns
+    -------
+    MixingField with nodes (colours, V, V, n_tile_rows, n_tile_cols).
+    """
+    n_views = len(views)
+    if len(captures) != n_views or sorted(int(k) for k in intended) != list(range(n_views)):
+        raise InputError(f"the mixing needs one masked white per pupil part: {n_views} captures "
+                         f"with intended views {list(range(n_views))} in any order, got "
+                         f"{len(captures)} with {list(intended)}")
+    if tile_px < 2 or tile_px % 2:
+        raise ValueError(f"tile_px must be an even number >= 2, got {tile_px}")
+    shapes = {np.shape(c) for c in captures}
+    if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[0] != n_views:
+        raise InputError(f"the masked whites must all be ({n_views}, rows, cols) views of one "
+                         f"size, got shapes {sorted(shapes)}")
+    rows, cols = next(iter(shapes))[1:]
+    pattern = np.zeros((2, 2), np.int64) if colour_pattern is None else \
+        np.asarray(colour_pattern, np.int64).reshape(2, 2)
+    colour_of = np.tile(pattern, (-(-rows // 2), -(-cols // 2)))[:rows, :cols]
+    n_r, n_c = -(-rows // tile_px), -(-cols // tile_px)
+    nodes = np.full((len(colours), n_views, n_views, n_r, n_c), np.nan)
+    for capture, j in zip(captures, intended, strict=True):
+        data = np.asarray(capture, np.float64)
+        valid = np.isfinite(data).all(axis=0)
+        for c in range(len(colours)):
+            plane = colour_of == c
+            sel = plane & valid
+            enough = _tile_sums(sel.astype(np.float64), tile_px) >= \
+                min_valid_fraction * _tile_sums(plane.astype(np.float64), tile_px)
+            flux = np.stack([_tile_sums(np.where(sel, data[k], 0.0), tile_px)
+                             for k in range(n_views)])
+            main = flux[j]
+            good = enough & (main > 0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                nodes[c, :, j] = np.where(good, flux / main, np.nan)
+            if not good.any():
+                raise InputError(f"masked white of view {views[j]}: no tile of colour "
+                                 f"{colours[c]} has light in view {views[j]}; is it the capture "
+                                 "with that pupil part open?")
+    nodes = _fill_from_nearest(nodes)
+    centre_r = (np.arange(n_r) * tile_px + (np.minimum((np.arange(n_r) + 1) * tile_px, rows)
+                                            - 1)) / 2.0
+    centre_c = (np.arange(n_c) * tile_px + (np.minimum((np.arange(n_c) + 1) * tile_px, cols)
+                                            - 1)) / 2.0
+    for c in range(len(colours)):
+        # A colour's pixels sit off the tile centre (red of RGGB by half a pixel up and left):
+        # move its values to the centre along the field's gradient.
+        cells = np.argwhere(pattern == c)
+        if len(cells) and colour_pattern is not None:
+            off_r, off_c = cells.mean(axis=0) - 0.5
+            nodes[c] = _shift_nodes(nodes[c], centre_r, centre_c, off_r, off_c)
+    return MixingField(nodes.astype(np.float32), centre_r, centre_c, (rows, cols), tuple(views),
+                       tuple(colours))
+
+
+def _shift_nodes(values: np.ndarray, node_rows: np.ndarray, node_cols: np.ndarray,
+                 off_r: float, off_c: float) -> np.ndarray:
+    """Values (..., n_r, n_c) measured at node + (off_r, off_c), moved to the nodes (first
+    order)."""
+    out = values.copy()
+    if len(node_rows) > 1:
+        out -= off_r * np.gradient(values, node_rows, axis=-2)
+    if len(node_cols) > 1:
+        out -= off_c * np.gradient(values, node_cols, axis=-1)
+    return out
+
+
+def _fill_from_nearest(nodes: np.ndarray) -> np.ndarray:
+    """NaN nodes (tiles without enough light) take the value of the nearest measured tile."""
+    bad = ~np.isfinite(nodes).all(axis=(0, 1, 2))
+    if not bad.any():
+        return nodes
+    _, (ir, ic) = ndimage.distance_transform_edt(bad, return_indices=True)
+    filled = nodes[..., ir, ic]
+    return np.where(np.isfinite(nodes), nodes, filled)
+
+
+def mixing_ratio(mixing: MixingField) -> dict:
+    """The paper's r from M: max over k != j of M_kj / M_jj, over the field's nodes (``r_max``)
+    and of the node mean (``r_mean``), per colour and per (k, j) pair."""
+    nodes = np.asarray(mixing.nodes, np.float64)
+    diag = np.stack([nodes[:, j, j] for j in range(mixing.n_views)], axis=1)[:, None]
+    ratio = nodes / diag
+    off = ~np.eye(mixing.n_views, dtype=bool)
+    per_colour = {c: float(ratio[i][off].max()) for i, c in enumerate(mixing.colours)}
+    pairs = {f"{mixing.views[k]}<-{mixing.views[j]}": float(ratio[:, k, j].mean())
+             for k in range(mixing.n_views) for j in range(mixing.n_views) if k != j}
+    return {"r_max": max(per_colour.values()), "r_mean": max(pairs.values()),
+            "r_max_per_colour": per_colour, "mean_per_pair": pairs}

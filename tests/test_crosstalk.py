@@ -81,3 +81,63 @@ def test_pixel4_white_sheet_map_is_sane(realdata):
     assert finite.size == res["map"].size
     assert 0.0 <= finite.min() and finite.max() <= 1.0
     assert 0.0 <= res["r"] <= 1.0
+
+
+# --- the whole mixing matrix M (measure_mixing) ---------------------------------------------
+
+RGGB = np.array([[0, 1], [1, 2]])
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.003])
+def test_measured_mixing_matches_the_simulator_per_tile(noise):
+    from plenocli.crosstalk import measure_mixing
+    from plenocli.synth import mixing as sim_mixing
+
+    sim = sim_mixing.render_dualpixel_ghost(pixels=384, r=0.5, seed=3)
+    rng = np.random.default_rng(5)
+    masked = [sim["masked"][n] + rng.normal(0.0, noise, sim["masked"][n].shape) for n in "AB"]
+    field = measure_mixing(masked, intended=[0, 1], views=["A", "B"], tile_px=32,
+                           colour_pattern=RGGB, colours=("R", "G", "B"))
+    whites = np.stack([sim["masked"]["A"][0], sim["masked"]["B"][1]])
+    truth = sim_mixing.tile_truth(sim["field"], whites, 32,
+                                  sim_mixing.colour_index(whites.shape[1:], "RGGB"))
+    assert np.abs(field.nodes - truth).max() < 0.005
+    assert field.nodes.shape == (3, 2, 2, 8, 12)
+    np.testing.assert_array_equal(field.nodes[:, [0, 1], [0, 1]], 1.0)
+    np.testing.assert_allclose(field.node_rows[:2], [15.5, 47.5])
+
+
+def test_r_is_consistent_with_mixing():
+    from plenocli.crosstalk import measure_mixing, mixing_ratio
+    from plenocli.synth import mixing as sim_mixing
+
+    rows, cols = 64, 96
+    field = sim_mixing.mixing_field((rows, cols), n_views=4, r=0.13, seed=1)
+    whites = np.ones((4, rows, cols))
+    masked = [sim_mixing.masked_white(whites, field, j) for j in range(4)]
+    measured = measure_mixing(masked, intended=[0, 1, 2, 3], views=["a", "b", "c", "d"],
+                              tile_px=16)
+    ratios = mixing_ratio(measured)
+    # uniform white: the paper's r of capture j is the mean of M_kj over the frame
+    for j in range(4):
+        r = crosstalk_ratio(masked[j], intended=j)["r"]
+        mean_mkj = max(field[0, k, j].mean() for k in range(4) if k != j)
+        assert r == pytest.approx(mean_mkj, abs=1e-6)
+        assert r == pytest.approx(max(measured.nodes[0, k, j].mean() for k in range(4)
+                                      if k != j), abs=2e-3)
+    off = ~np.eye(4, dtype=bool)
+    assert ratios["r_max"] == pytest.approx(float(measured.nodes[0][off].max()))
+    assert 0.12 < ratios["r_mean"] < 0.14
+
+
+def test_measure_mixing_refuses_bad_sets():
+    from plenocli.crosstalk import measure_mixing
+
+    white = np.ones((2, 8, 8))
+    with pytest.raises(InputError, match="one masked white per pupil part"):
+        measure_mixing([white], intended=[0], views=["A", "B"])
+    with pytest.raises(InputError, match="one masked white per pupil part"):
+        measure_mixing([white, white], intended=[0, 0], views=["A", "B"])
+    with pytest.raises(InputError, match="no tile"):
+        dark = np.zeros((2, 8, 8))
+        measure_mixing([white, dark], intended=[0, 1], views=["A", "B"], tile_px=4)

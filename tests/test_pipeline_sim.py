@@ -57,11 +57,13 @@ def test_dualpixel_prism_stitches_a_wider_image(tmp_path):
 def test_raytrix_prism_pipeline_from_the_config(tmp_path):
     """simulate -> decode -> calibrate -> flat -> refocus (sweep, left, right) -> stitch, run by
     the shipped config with its inputs and outputs redirected into a temp folder."""
-    for kind in ("raytrix-prism", "raytrix-white"):
+    for kind in ("raytrix-prism", "raytrix-white", "raytrix-ghost"):
         simulate(kind, tmp_path / kind, pixels=1200)
     out = tmp_path / "out"
     overrides = [f"decode.input={tmp_path / 'raytrix-prism' / 'capture.tif'}",
-                 f"decode_white.input={tmp_path / 'raytrix-white' / 'capture.tif'}"]
+                 f"decode_white.input={tmp_path / 'raytrix-white' / 'capture.tif'}",
+                 *(f"decode_masked_{h}.input={tmp_path / 'raytrix-ghost' / f'masked_{h}.tif'}"
+                   for h in ("left", "right"))]
     steps = load_config(ROOT / "configs" / "raytrix_r5.yaml", overrides)
     for step in steps:  # every path under out/demo goes to the temp folder instead
         for key in (*step.stage.inputs, *step.stage.outputs):

@@ -26,18 +26,25 @@ from plenocli.cli import options
 @click.option("--g", "g", type=options.FiniteFloat(min=0, min_open=True),
               default=4.0, show_default=True,
               help="Refocus g (only with --mask-widths).")
+@click.option("--mixing-out", type=click.Path(dir_okay=False), default=None,
+              help="Also write the mixing-matrix field M (TIFF) for plenocli unmix; needs one "
+                   "masked white per pupil part (with --intended naming each one's open part).")
 @options.stage_command
 def crosstalk(**params):
     """Cross-talk ratio r = max flux on another view / flux on the intended view.
 
     Each INPUT is a views TIFF of a white target shot with all but one part of the pupil masked.
     r is reported globally, as a map over tiles and per colour (Bayer views), in a JSON report;
-    --preview draws the maps as a heat map. NaN pixels are ignored.
+    --preview draws the maps as a heat map. NaN pixels are ignored. With --mixing-out the
+    inputs are one masked white per pupil part, and the whole mixing matrix M (view k records
+    sum_j M_kj T_j) is measured per tile and colour and written for plenocli unmix.
 
     \b
     Example:
       plenocli crosstalk white_maskR.tif white_maskL.tif --views A,B --intended A,B \\
           -o crosstalk.json --preview crosstalk.png
+      plenocli crosstalk masked_A.tif masked_B.tif --views A,B --intended A,B \\
+          -o crosstalk.json --mixing-out mixing.tif
     """
     from plenocli.pipeline.stages.crosstalk import run
 

@@ -24,6 +24,7 @@ COMMANDS: dict[str, str] = {
     "refocus": "Refocus a focused-plenoptic capture (Lanczos splatting, Eq. 3).",
     "sai": "Sub-aperture images of an N x N plenoptic sensor (Eq. 1).",
     "crosstalk": "Measure sub-aperture cross-talk from masked white captures.",
+    "unmix": "Remove sub-aperture cross-talk (ghosts) with a measured mixing.",
     "stitch": "Stitch 2 or 4 views into an extended-FOV panorama.",
     "develop": "Develop a colour view into a photograph (TIFF, JPEG, PNG).",
     "run": "Run a pipeline config (make-style).",

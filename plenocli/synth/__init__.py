@@ -31,6 +31,10 @@ _SOURCES: dict[str, tuple[str, str, dict]] = {
     "raytrix-white": ("prismsets", "simulate_raytrix", {"scene": "white", "no_prisms": True}),
     "stereo-rig": ("rig", "simulate_stereo_rig", {}),
     "quad-rig": ("rig", "simulate_quad_rig", {}),
+    "dualpixel-ghost": ("mixing", "simulate_dualpixel_ghost", {}),
+    "quadpixel-ghost": ("mixing", "simulate_quadpixel_ghost", {}),
+    "quadpixel-ghost-mask": ("mixing", "simulate_quadpixel_ghost", {"cross_mask": True}),
+    "raytrix-ghost": ("mixing", "simulate_raytrix_ghost", {}),
 }
 KIND_NAMES = tuple(sorted(_SOURCES))
 

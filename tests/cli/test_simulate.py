@@ -14,8 +14,16 @@ from plenocli.cli.main import cli
 from plenocli.synth import KIND_NAMES, kinds
 
 # the smallest options each kind accepts, and the files it must write besides truth.json
+GHOST_QUAD = {"capture.tif", "clean.tif", "masked_S00.tif", "masked_S01.tif", "masked_S10.tif",
+              "masked_S11.tif"}
 SMALL = {
     "dualpixel": (["--pixels", "32x48"], {"capture.dng", "white.dng", "truth.npz"}),
+    "dualpixel-ghost": (["--pixels", "48"], {"capture.dng", "clean.dng", "white.dng",
+                                             "masked_A.dng", "masked_B.dng"}),
+    "quadpixel-ghost": (["--pixels", "32"], GHOST_QUAD),
+    "quadpixel-ghost-mask": (["--pixels", "32"], GHOST_QUAD),
+    "raytrix-ghost": (["--pixels", "60"], {"capture.tif", "clean.tif", "white.tif",
+                                           "masked_left.tif", "masked_right.tif"}),
     "dualpixel-masked": (["--pixels", "48"], {"capture.dng"}),
     "dualpixel-prism": (["--pixels", "48"], {"capture.dng"}),
     "dualpixel-white": (["--pixels", "48"], {"capture.dng"}),

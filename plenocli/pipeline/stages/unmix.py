@@ -1,0 +1,166 @@
+"""Stage ``unmix``: views TIFF(s) + mixing file -> views without sub-aperture cross-talk.
+
+The pages the mixing names are solved per pixel (``plenocli.unmix``); every other page (e.g.
+the sum view S of a dual-pixel file) is copied unchanged, so the output has the input's page
+names and metadata and ``stitch`` takes it as it is. A file that holds a single view (a left
+or right refocused image) names it after the file (``left.tif`` -> ``left``), as in stitch.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from plenocli import unmix as unmix_lib
+from plenocli.errors import CalibrationError, ConfigError, InputError
+from plenocli.io import tiffio
+from plenocli.io.mixingfile import read_mixing
+from plenocli.io.preview import write_png
+from plenocli.model.cfa import shift_pattern
+from plenocli.model.provenance import stage_record
+from plenocli.progress import log, shown
+
+MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
+
+
+def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
+    """All pages of ``inputs`` (P, rows, cols) float32, their names, the first file's meta."""
+    pages, names, first = [], [], None
+    for path in inputs:
+        data, meta = tiffio.read_image(path)
+        first = first if first is not None else meta
+        own = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+        if len(inputs) > 1 and data.shape[0] == 1:
+            own = [Path(path).stem]
+        if pages and data.shape[1:] != pages[0].shape[1:]:
+            raise InputError(f"{path} is {data.shape[2]} x {data.shape[1]} but {inputs[0]} is "
+                             f"{pages[0].shape[2]} x {pages[0].shape[1]}; unmix views of one "
+                             "capture")
+        pages.append(data.astype(np.float32, copy=False))
+        names += own
+    if len(set(names)) != len(names):
+        raise InputError(f"the inputs have repeated view names ({','.join(names)}); give each "
+                         "view once")
+    return np.concatenate(pages), names, first
+
+
+def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
+    """Page indices to solve together: one list (in the mixing's view order) per colour plane
+    (channels layout) or a single list (cfa / mono)."""
+    views = info["views"]
+    wanted = ([[f"{v}.{c}" for v in views] for c in info["colours"]]
+              if info["layout"] == "channels" else [views])
+    for group in wanted:
+        missing = [n for n in group if n not in names]
+        if missing:
+            raise InputError(f"{', '.join(inputs)} has no view {missing[0]!r} (views: "
+                             f"{','.join(names)}); the mixing expects {','.join(views)}"
+                             + (" per channel (VIEW.R, VIEW.G, VIEW.B)"
+                                if info["layout"] == "channels" else ""))
+    return [[names.index(n) for n in group] for group in wanted]
+
+
+def _check_geometry(field, info: dict, meta: dict, area: tuple[int, int, int, int],
+                    mixing: str, inputs: list[str]) -> None:
+    rows, cols = area[2] - area[0], area[3] - area[1]
+    if (rows, cols) != tuple(field.shape):
+        raise InputError(f"the views are {cols} x {rows} but {mixing} was measured on "
+                         f"{field.shape[1]} x {field.shape[0]}; measure the mixing on masked "
+                         "whites processed like these views")
+    cfa = shift_pattern(meta.get("cfa"), area[0], area[1])
+    expected = info.get("cfa") if info["layout"] == "cfa" else None
+    if (cfa or None) != (expected or None):
+        raise InputError(f"{', '.join(inputs)}: CFA {cfa or 'none'} but {mixing} was measured "
+                         f"on CFA {expected or 'none'}; measure the mixing on masked whites "
+                         "processed like these views")
+
+
+def _check_condition(field, mixing: str, regularise: float) -> np.ndarray:
+    if not np.isfinite(field.nodes).all():
+        raise CalibrationError(f"{mixing}: the mixing field has non-finite values; measure it "
+                               "again with plenocli crosstalk --mixing-out")
+    cond = unmix_lib.node_condition(field)
+    if regularise == 0 and not np.all(cond <= MAX_CONDITION):
+        c, a, b = np.unravel_index(int(np.argmax(np.where(np.isfinite(cond), cond, np.inf))),
+                                   cond.shape)
+        raise CalibrationError(f"{mixing}: the mixing matrix is singular or nearly so "
+                               f"(condition number {cond[c, a, b]:.3g} at node row {a}, col {b}, "
+                               f"colour {field.colours[c]}); re-measure it, or pass "
+                               "--regularise (e.g. 0.05) to damp those pixels")
+    return cond
+
+
+def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
+        regularise: float = 0.0, noise_map: str | None = None,
+        preview: str | None = None) -> None:
+    """Remove the cross-talk described by ``mixing`` from the views of ``inputs``."""
+    inputs = [inputs] if isinstance(inputs, str) else list(inputs)
+    if not inputs:
+        raise InputError("no input given; pass the views TIFF (or one TIFF per view)")
+    if not (np.isfinite(regularise) and regularise >= 0):
+        raise ConfigError(f"--regularise must be a finite number >= 0, got {regularise}")
+    field, mix_meta = read_mixing(mixing)
+    info = mix_meta["mixing"]
+    pages, names, meta = _load(inputs)
+    groups = _plan(names, info, inputs)
+    area = tuple(int(v) for v in (meta.get("active_area") or (0, 0, *pages.shape[1:])))
+    _check_geometry(field, info, meta, area, mixing, inputs)
+    cond = _check_condition(field, mixing, regularise)
+    top, left, bottom, right = area
+    cfa = shift_pattern(meta.get("cfa"), top, left)
+    out = pages.copy()
+    gains = np.empty((sum(len(g) for g in groups), bottom - top, right - left), np.float32)
+    singular = 0
+    for c, group in enumerate(groups):
+        if info["layout"] == "cfa":
+            pattern = np.array([field.colours.index(ch) for ch in cfa.upper()]).reshape(2, 2)
+        else:
+            pattern = np.full((2, 2), c)
+        res = unmix_lib.unmix(pages[group, top:bottom, left:right], field,
+                              colour_pattern=pattern, regularise=regularise, noise_gain=True)
+        out[group, top:bottom, left:right] = res.views
+        gains[c * len(group):(c + 1) * len(group)] = res.noise_gain
+        singular += res.singular_pixels
+    if singular:
+        raise CalibrationError(f"{mixing}: the mixing matrix cannot be inverted at {singular} "
+                               "pixels; re-measure it, or pass --regularise (e.g. 0.05)")
+    solved = [k for g in groups for k in g]
+    if not np.isfinite(out[solved]).any():
+        raise InputError(f"{', '.join(inputs)}: every unmixed pixel is NaN; check the views")
+    summary = _summary(gains, [names[k] for k in solved], cond, regularise)
+    params = dict(mixing=mixing, regularise=regularise)
+    record = stage_record("unmix", params, {"inputs": inputs, "mixing": mixing})
+    out_meta = tiffio.derived_meta(meta, record, views=names, unmix=summary)
+    protect = (*inputs, mixing)
+    tiffio.write_image(output, out, out_meta, protect=protect)
+    if noise_map:
+        gain_meta = tiffio.derived_meta(meta, record, views=[names[k] for k in solved],
+                                        active_area=[0, 0, *gains.shape[1:]], unmix=summary,
+                                        content="noise gain per view: output noise std for "
+                                                "unit independent noise in every input view")
+        tiffio.write_image(noise_map, gains, gain_meta, protect=protect)
+    if preview:
+        shown_pages = out[groups[0], top:bottom, left:right]
+        write_png(preview, shown_pages, cfa=cfa if info["layout"] == "cfa" else None,
+                  protect=protect)
+    log.info("unmix: %s -> %s (%s; noise gain median %.3g, max %.3g; condition number up to "
+             "%.3g%s)", ", ".join(shown(p) for p in inputs), shown(output),
+             ",".join(info["views"]), summary["noise_gain_median"], summary["noise_gain_max"],
+             summary["condition_max"], f", Tikhonov {regularise:g}" if regularise else "")
+
+
+def _summary(gains: np.ndarray, names: list[str], cond: np.ndarray, regularise: float) -> dict:
+    per_view = {}
+    for name, g in zip(names, gains, strict=True):
+        q = np.percentile(g, [50, 99])
+        per_view[name] = {"median": float(q[0]), "p99": float(q[1]), "max": float(g.max())}
+    finite = cond[np.isfinite(cond)]
+    return {"regularise": regularise, "noise_gain": per_view,
+            "noise_gain_median": float(np.median(gains)), "noise_gain_max": float(gains.max()),
+            "condition_min": float(finite.min()) if finite.size else float("inf"),
+            "condition_median": float(np.median(finite)) if finite.size else float("inf"),
+            "condition_max": float(cond.max()),
+            "definition": "noise gain of view k = ||row k of the solve matrix||_2: output noise "
+                          "std per unit independent input noise; condition = 2-norm condition "
+                          "number of M at the mixing nodes"}

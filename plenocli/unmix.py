@@ -1,0 +1,321 @@
+"""Cancel sub-aperture cross-talk: solve the per-pixel mixing of the views.
+
+Behind a prism rig every pixel of view k records ``O_k = sum_j M_kj T_j``, with ``T_j`` the image
+seen through pupil part j and ``M`` a small (V x V) matrix that varies slowly over the frame and
+per colour. ``M`` is measured from masked-pupil whites (``plenocli.crosstalk.measure_mixing``) on
+a grid of nodes (tile centres) and is bilinear between them (linear beyond the outer nodes).
+With ``M_jj = 1`` (the normalisation the measurement gives), ``T_j`` is what view j would record
+without cross-talk.
+
+Per pixel the solve matrix is ``A = M^-1``, or with Tikhonov regularisation ``lambda``
+``A = (M^T M + lambda^2 I)^-1 M^T``: each singular component of M is damped by
+``s^2 / (s^2 + lambda^2)``, so well-conditioned pixels (every ``s >> lambda``) barely change and
+ill-conditioned ones stop amplifying noise. The noise gain of view k, ``||row_k(A)||_2``, is the
+standard deviation of its output for unit, independent noise in every input view.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from plenocli.model.mixing import MixingField
+from plenocli.model.mixing import axis_weights as _axis_weights
+
+SINGULAR_PIVOT = 1e-9  # a pivot below this (M entries are ~1) means M is singular there
+
+
+@dataclass(frozen=True)
+class UnmixResult:
+    """``views`` (V, rows, cols) float32 clean views; ``noise_gain`` (V, rows, cols) float32 or
+    None; ``singular_pixels``: pixels where M could not be inverted (their output is NaN)."""
+
+    views: np.ndarray
+    noise_gain: np.ndarray | None
+    singular_pixels: int
+
+
+@numba.njit(cache=True, inline="always")
+def _solve_matrix(m, lam2, a, work, normal, normal_inv):
+    """A = M^-1 (lam2 = 0) or (M^T M + lam2 I)^-1 M^T into ``a``; False if singular."""
+    v = m.shape[0]
+    if lam2 == 0.0:
+        return _invert(m, a, work)
+    for i in range(v):
+        for j in range(v):
+            s = 0.0
+            for k in range(v):
+                s += m[k, i] * m[k, j]
+            normal[i, j] = s + (lam2 if i == j else 0.0)
+    if not _invert(normal, normal_inv, work):
+        return False
+    for i in range(v):
+        for j in range(v):
+            s = 0.0
+            for k in range(v):
+                s += normal_inv[i, k] * m[j, k]
+            a[i, j] = s
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _invert(m, a, work):
+    """A = M^-1: closed forms for 2 x 2 and 4 x 4, Gauss-Jordan otherwise; False if singular."""
+    v = m.shape[0]
+    if v == 2:
+        det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+        if abs(det) < SINGULAR_PIVOT:
+            return False
+        a[0, 0], a[0, 1] = m[1, 1] / det, -m[0, 1] / det
+        a[1, 0], a[1, 1] = -m[1, 0] / det, m[0, 0] / det
+        return True
+    if v == 4:
+        return _inverse4(m, a)
+    return _gauss_jordan(m, a, work)
+
+
+@numba.njit(cache=True, inline="always")
+def _gauss_jordan(m, a, work):
+    """A = M^-1 by Gauss-Jordan with partial pivoting on [M | I]; False if singular."""
+    v = m.shape[0]
+    for i in range(v):
+        for j in range(v):
+            work[i, j] = m[i, j]
+            a[i, j] = 1.0 if i == j else 0.0
+    for col in range(v):
+        piv = col
+        for r in range(col + 1, v):
+            if abs(work[r, col]) > abs(work[piv, col]):
+                piv = r
+        if abs(work[piv, col]) < SINGULAR_PIVOT:
+            return False
+        if piv != col:
+            for j in range(v):
+                work[col, j], work[piv, j] = work[piv, j], work[col, j]
+                a[col, j], a[piv, j] = a[piv, j], a[col, j]
+        inv = 1.0 / work[col, col]
+        for j in range(v):
+            work[col, j] *= inv
+            a[col, j] *= inv
+        for r in range(v):
+            if r != col:
+                f = work[r, col]
+                if f != 0.0:
+                    for j in range(v):
+                        work[r, j] -= f * work[col, j]
+                        a[r, j] -= f * a[col, j]
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _inverse4(m, a):
+    """A = M^-1 of a 4 x 4 M by cofactors (no pivoting branches); False if singular."""
+    m00, m01, m02, m03 = m[0, 0], m[0, 1], m[0, 2], m[0, 3]
+    m10, m11, m12, m13 = m[1, 0], m[1, 1], m[1, 2], m[1, 3]
+    m20, m21, m22, m23 = m[2, 0], m[2, 1], m[2, 2], m[2, 3]
+    m30, m31, m32, m33 = m[3, 0], m[3, 1], m[3, 2], m[3, 3]
+    s0 = m00 * m11 - m10 * m01
+    s1 = m00 * m12 - m10 * m02
+    s2 = m00 * m13 - m10 * m03
+    s3 = m01 * m12 - m11 * m02
+    s4 = m01 * m13 - m11 * m03
+    s5 = m02 * m13 - m12 * m03
+    c5 = m22 * m33 - m32 * m23
+    c4 = m21 * m33 - m31 * m23
+    c3 = m21 * m32 - m31 * m22
+    c2 = m20 * m33 - m30 * m23
+    c1 = m20 * m32 - m30 * m22
+    c0 = m20 * m31 - m30 * m21
+    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+    if abs(det) < SINGULAR_PIVOT:
+        return False
+    d = 1.0 / det
+    a[0, 0] = (m11 * c5 - m12 * c4 + m13 * c3) * d
+    a[0, 1] = (-m01 * c5 + m02 * c4 - m03 * c3) * d
+    a[0, 2] = (m31 * s5 - m32 * s4 + m33 * s3) * d
+    a[0, 3] = (-m21 * s5 + m22 * s4 - m23 * s3) * d
+    a[1, 0] = (-m10 * c5 + m12 * c2 - m13 * c1) * d
+    a[1, 1] = (m00 * c5 - m02 * c2 + m03 * c1) * d
+    a[1, 2] = (-m30 * s5 + m32 * s2 - m33 * s1) * d
+    a[1, 3] = (m20 * s5 - m22 * s2 + m23 * s1) * d
+    a[2, 0] = (m10 * c4 - m11 * c2 + m13 * c0) * d
+    a[2, 1] = (-m00 * c4 + m01 * c2 - m03 * c0) * d
+    a[2, 2] = (m30 * s4 - m31 * s2 + m33 * s0) * d
+    a[2, 3] = (-m20 * s4 + m21 * s2 - m23 * s0) * d
+    a[3, 0] = (-m10 * c3 + m11 * c1 - m12 * c0) * d
+    a[3, 1] = (m00 * c3 - m01 * c1 + m02 * c0) * d
+    a[3, 2] = (-m30 * s3 + m31 * s1 - m32 * s0) * d
+    a[3, 3] = (m20 * s3 - m21 * s1 + m22 * s0) * d
+    return True
+
+
+@numba.njit(cache=True, parallel=True)
+def _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, want_gain,
+                  singular):
+    """Per pixel: bilinear M of the pixel's colour, solve matrix A, T = A O (numba kernel: one
+    image row per parallel task; the nodes are first blended along the row's position)."""
+    n_col, v = nodes.shape[0], nodes.shape[1]
+    rows, cols = obs.shape[1], obs.shape[2]
+    n_nc = nodes.shape[4]
+    for y in numba.prange(rows):
+        row_m = np.empty((n_col, v, v, n_nc))
+        wy = wr[y]
+        for c in range(n_col):
+            for k in range(v):
+                for j in range(v):
+                    for b in range(n_nc):
+                        row_m[c, k, j, b] = ((1.0 - wy) * nodes[c, k, j, r0[y], b]
+                                             + wy * nodes[c, k, j, r1[y], b])
+        m = np.empty((v, v))
+        a = np.empty((v, v))
+        work = np.empty((v, v))
+        normal = np.empty((v, v))
+        normal_inv = np.empty((v, v))
+        bad = 0
+        for x in range(cols):
+            c = pattern[y & 1, x & 1]
+            wx = wc[x]
+            lo, hi = c0[x], c1[x]
+            for k in range(v):
+                for j in range(v):
+                    m[k, j] = (1.0 - wx) * row_m[c, k, j, lo] + wx * row_m[c, k, j, hi]
+            ok = _solve_matrix(m, lam2, a, work, normal, normal_inv)
+            if not ok:
+                bad += 1
+            for k in range(v):
+                s = 0.0
+                for j in range(v):
+                    s += a[k, j] * obs[j, y, x]
+                out[k, y, x] = s if ok else np.nan
+                if want_gain:
+                    g = 0.0
+                    for j in range(v):
+                        g += a[k, j] * a[k, j]
+                    gain[k, y, x] = np.sqrt(g) if ok else np.inf
+        singular[y] = bad
+
+
+@numba.njit(cache=True, parallel=True)
+def _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, lam2, out, gain, want_gain,
+                   singular):
+    """Two views: the closed-form solve matrix, M^-1 or (M^T M + lam2 I)^-1 M^T (numba kernel,
+    one image row per parallel task)."""
+    n_col = nodes.shape[0]
+    rows, cols = obs.shape[1], obs.shape[2]
+    n_nc = nodes.shape[4]
+    for y in numba.prange(rows):
+        row_m = np.empty((n_col, 2, 2, n_nc))
+        wy = wr[y]
+        for c in range(n_col):
+            for k in range(2):
+                for j in range(2):
+                    for b in range(n_nc):
+                        row_m[c, k, j, b] = ((1.0 - wy) * nodes[c, k, j, r0[y], b]
+                                             + wy * nodes[c, k, j, r1[y], b])
+        bad = 0
+        for x in range(cols):
+            c = pattern[y & 1, x & 1]
+            wx = wc[x]
+            lo, hi = c0[x], c1[x]
+            m00 = (1.0 - wx) * row_m[c, 0, 0, lo] + wx * row_m[c, 0, 0, hi]
+            m01 = (1.0 - wx) * row_m[c, 0, 1, lo] + wx * row_m[c, 0, 1, hi]
+            m10 = (1.0 - wx) * row_m[c, 1, 0, lo] + wx * row_m[c, 1, 0, hi]
+            m11 = (1.0 - wx) * row_m[c, 1, 1, lo] + wx * row_m[c, 1, 1, hi]
+            if lam2 > 0.0:  # N = M^T M + lam2 I; A = N^-1 M^T
+                n00 = m00 * m00 + m10 * m10 + lam2
+                n01 = m00 * m01 + m10 * m11
+                n11 = m01 * m01 + m11 * m11 + lam2
+                det = n00 * n11 - n01 * n01
+                a00, a01 = n11 * m00 - n01 * m01, n11 * m10 - n01 * m11
+                a10, a11 = n00 * m01 - n01 * m00, n00 * m11 - n01 * m10
+            else:
+                det = m00 * m11 - m01 * m10
+                a00, a01, a10, a11 = m11, -m01, -m10, m00
+            if abs(det) < SINGULAR_PIVOT:
+                bad += 1
+                out[0, y, x] = np.nan
+                out[1, y, x] = np.nan
+                if want_gain:
+                    gain[0, y, x] = np.inf
+                    gain[1, y, x] = np.inf
+                continue
+            inv = 1.0 / det
+            o0, o1 = obs[0, y, x], obs[1, y, x]
+            out[0, y, x] = (a00 * o0 + a01 * o1) * inv
+            out[1, y, x] = (a10 * o0 + a11 * o1) * inv
+            if want_gain:
+                gain[0, y, x] = np.sqrt(a00 * a00 + a01 * a01) * abs(inv)
+                gain[1, y, x] = np.sqrt(a10 * a10 + a11 * a11) * abs(inv)
+        singular[y] = bad
+
+
+def unmix(views: np.ndarray, mixing: MixingField, *, colour_pattern=None,
+          regularise: float = 0.0, noise_gain: bool = False) -> UnmixResult:
+    """Solve ``views = M T`` per pixel for the clean views T.
+
+    Parameters
+    ----------
+    views : (V, rows, cols) observed views (any linear unit), in ``mixing.views`` order;
+        NaN in any view makes every output at that pixel NaN.
+    mixing : the field M, of shape (rows, cols) and V views.
+    colour_pattern : 2 x 2 indices into ``mixing.colours`` of pixels (0, 0), (0, 1), (1, 0),
+        (1, 1) (a Bayer mosaic); None when the field has one colour.
+    regularise : Tikhonov lambda (>= 0, in units of M, whose diagonal is ~1); 0 = exact inverse.
+    noise_gain : also return the per-pixel noise gain of each output view.
+    """
+    obs = np.asarray(views)
+    if obs.ndim != 3 or obs.shape[0] != mixing.n_views:
+        raise ValueError(f"views must be ({mixing.n_views}, rows, cols) for this mixing, got "
+                         f"shape {obs.shape}")
+    if obs.shape[1:] != tuple(mixing.shape):
+        raise ValueError(f"views are {obs.shape[1]} x {obs.shape[2]} but the mixing field is "
+                         f"{mixing.shape[0]} x {mixing.shape[1]}")
+    if not (np.isfinite(regularise) and regularise >= 0):
+        raise ValueError(f"regularise must be a finite number >= 0, got {regularise}")
+    pattern = np.zeros((2, 2), np.int64)
+    if colour_pattern is not None:
+        pattern = np.asarray(colour_pattern, np.int64).reshape(2, 2)
+    if pattern.min() < 0 or pattern.max() >= len(mixing.colours):
+        raise ValueError(f"colour_pattern {pattern.tolist()} indexes colours outside "
+                         f"{mixing.colours}")
+    if colour_pattern is None and len(mixing.colours) != 1:
+        raise ValueError(f"the mixing has colours {mixing.colours}: pass colour_pattern")
+    if obs.dtype not in (np.float32, np.float64):
+        obs = obs.astype(np.float32)
+    nodes = np.ascontiguousarray(mixing.nodes, np.float64)
+    r0, r1, wr = _axis_weights(np.asarray(mixing.node_rows, np.float64), obs.shape[1])
+    c0, c1, wc = _axis_weights(np.asarray(mixing.node_cols, np.float64), obs.shape[2])
+    out = np.empty(obs.shape, np.float32)
+    gain = np.empty(obs.shape if noise_gain else (1, 1, 1), np.float32)
+    singular = np.zeros(obs.shape[1], np.int64)
+    if mixing.n_views == 2:
+        _unmix2_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, float(regularise) ** 2,
+                       out, gain, noise_gain, singular)
+    else:
+        _unmix_kernel(obs, nodes, pattern, r0, r1, wr, c0, c1, wc, float(regularise) ** 2,
+                      out, gain, noise_gain, singular)
+    return UnmixResult(out, gain if noise_gain else None, int(singular.sum()))
+
+
+def node_condition(mixing: MixingField) -> np.ndarray:
+    """2-norm condition number of M at every node, (colours, node_rows, node_cols); inf where
+    M is singular or not finite."""
+    m = np.moveaxis(np.asarray(mixing.nodes, np.float64), (1, 2), (-2, -1))
+    cond = np.full(m.shape[:-2], np.inf)
+    finite = np.isfinite(m).all(axis=(-2, -1))
+    if finite.any():
+        s = np.linalg.svd(m[finite], compute_uv=False)
+        with np.errstate(divide="ignore"):
+            cond[finite] = np.where(s[:, -1] > 0, s[:, 0] / s[:, -1], np.inf)
+    return cond
+
+
+def predicted_noise_gain(mixing: MixingField, *, regularise: float = 0.0) -> np.ndarray:
+    """Noise gain ||row_k(A)||_2 at every node, (colours, V, node_rows, node_cols)."""
+    m = np.moveaxis(np.asarray(mixing.nodes, np.float64), (1, 2), (-2, -1))
+    eye = np.eye(m.shape[-1])
+    mt = np.swapaxes(m, -1, -2)
+    a = np.linalg.solve(mt @ m + regularise ** 2 * eye, mt) if regularise else np.linalg.inv(m)
+    return np.moveaxis(np.sqrt((a ** 2).sum(axis=-1)), -1, 1)

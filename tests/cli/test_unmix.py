@@ -1,0 +1,194 @@
+"""End-to-end: plenocli crosstalk --mixing-out and plenocli unmix on synthetic views files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import tiffio
+from plenocli.io.mixingfile import read_mixing, write_mixing
+from plenocli.synth import mixing as sim_mixing
+from plenocli.unmix import MixingField
+
+SHAPE = (64, 96)
+
+
+def _invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture()
+def rig(tmp_path):
+    """Dual-pixel views (A, B, S; RGGB) with r = 50 % ghosts, their masked whites, the truth."""
+    rng = np.random.default_rng(0)
+    colours = sim_mixing.colour_index(SHAPE, "RGGB")
+    field = sim_mixing.mixing_field(SHAPE, n_views=2, r=0.5, colours=("R", "G", "B"), seed=1)
+    clean = rng.uniform(0.2, 1.0, (2, *SHAPE))
+    ghosted = sim_mixing.apply_mixing(clean, field, colours)
+    whites = np.ones((2, *SHAPE))
+    meta = {"views": ["A", "B", "S"], "cfa": "RGGB", "active_area": [0, 0, *SHAPE]}
+    paths = {}
+    for name, views in (("views", ghosted), *(
+            (f"masked_{n}", sim_mixing.masked_white(whites, field, j, colours))
+            for j, n in enumerate("AB"))):
+        paths[name] = tmp_path / f"{name}.tif"
+        stack = np.concatenate([views, views.sum(axis=0, keepdims=True)]).astype(np.float32)
+        tiffio.write_image(paths[name], stack, meta)
+    paths["mixing"] = tmp_path / "mixing.tif"
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_B"], "--views", "A,B",
+                  "--intended", "A,B", "--tile", 8, "-o", tmp_path / "ct.json",
+                  "--mixing-out", paths["mixing"], "--preview", tmp_path / "ct.png")
+    assert res.exit_code == 0, res.output
+    return paths, clean, ghosted, tmp_path
+
+
+def test_crosstalk_writes_mixing_and_r(rig):
+    paths, _, _, tmp = rig
+    field, meta = read_mixing(paths["mixing"])
+    assert field.views == ("A", "B") and field.colours == ("R", "G", "B")
+    assert meta["mixing"]["layout"] == "cfa" and meta["mixing"]["cfa"] == "RGGB"
+    assert meta["provenance"]["stage"] == "crosstalk"
+    report = json.loads((tmp / "ct.json").read_text())
+    assert [c["intended"] for c in report["captures"]] == ["A", "B"]
+    # r (the paper's number, flux over the frame) agrees with the mean of M's off-diagonal
+    assert report["r"] == pytest.approx(report["mixing"]["r_mean"], abs=0.01)
+    assert report["mixing"]["r_max"] >= report["r"]
+    assert (tmp / "ct.png").stat().st_size > 0
+
+
+def test_unmix_recovers_views_and_keeps_pages(rig):
+    paths, clean, ghosted, tmp = rig
+    out = tmp / "clean.tif"
+    res = _invoke("unmix", paths["views"], "--mixing", paths["mixing"], "-o", out,
+                  "--noise-map", tmp / "gain.tif", "--preview", tmp / "clean.png")
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(out)
+    assert meta["views"] == ["A", "B", "S"] and meta["cfa"] == "RGGB"
+    np.testing.assert_allclose(data[:2], clean, rtol=2e-3)
+    np.testing.assert_array_equal(data[2], ghosted.sum(axis=0).astype(np.float32))
+    assert meta["provenance"]["stage"] == "unmix" and meta["unmix"]["noise_gain_max"] > 1.3
+    gain, gain_meta = tiffio.read_image(tmp / "gain.tif")
+    assert gain_meta["views"] == ["A", "B"] and gain.shape == (2, *SHAPE)
+    assert (tmp / "clean.png").stat().st_size > 0
+
+
+def test_regularise_and_nan(rig):
+    paths, clean, ghosted, tmp = rig
+    views, meta = tiffio.read_image(paths["views"])
+    views[0, 10, 20] = np.nan
+    path = tmp / "nan.tif"
+    tiffio.write_image(path, views, meta)
+    res = _invoke("unmix", path, "--mixing", paths["mixing"], "-o", tmp / "o.tif",
+                  "--regularise", 0.05)
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(tmp / "o.tif")
+    assert np.isnan(data[:2, 10, 20]).all() and np.isfinite(data[:2, 11, 20]).all()
+    assert meta["unmix"]["regularise"] == 0.05
+    res = _invoke("unmix", path, "--mixing", paths["mixing"], "-o", tmp / "o2.tif",
+                  "--regularise", "nan")
+    assert res.exit_code == 2 and not (tmp / "o2.tif").exists()
+
+
+def _bad_views(tmp, shape=SHAPE, names=("A", "B", "S"), cfa="RGGB"):
+    path = tmp / "bad_views.tif"
+    tiffio.write_image(path, np.ones((len(names), *shape), np.float32),
+                       {"views": list(names), "cfa": cfa})
+    return path
+
+
+def _mixing_file(tmp, nodes, views=("A", "B")):
+    path = tmp / "bad_mixing.tif"
+    field = MixingField(nodes, np.array([10.0, 50.0]), np.array([10.0, 80.0]), SHAPE, views,
+                        ("L",))
+    write_mixing(path, field, layout="mono", cfa=None, meta={})
+    return path
+
+
+@pytest.mark.parametrize("case,message", [
+    ("size", "measured on 96 x 64"),
+    ("cfa", "CFA GRBG"),
+    ("names", "has no view 'A'"),
+    ("view_count", "has no view 'c'"),
+    ("singular", "singular"),
+    ("not_mixing", "not a mixing file"),
+])
+def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
+    paths, _, _, tmp = rig
+    views, mixing = paths["views"], paths["mixing"]
+    if case == "size":
+        views = _bad_views(tmp, shape=(64, 100))
+    elif case == "cfa":
+        views = _bad_views(tmp, cfa="GRBG")
+    elif case == "names":
+        views = _bad_views(tmp, names=("L", "R"))
+    elif case == "view_count":
+        nodes = np.tile(np.eye(4)[None, :, :, None, None], (1, 1, 1, 2, 2)) + 0.1
+        mixing = _mixing_file(tmp, nodes, views=("A", "B", "c", "d"))
+    elif case == "singular":
+        views = _bad_views(tmp, cfa=None)
+        mixing = _mixing_file(tmp, np.ones((1, 2, 2, 2, 2)))
+    elif case == "not_mixing":
+        mixing = paths["masked_A"]
+    out = tmp / "out.tif"
+    res = _invoke("unmix", views, "--mixing", mixing, "-o", out, "--noise-map",
+                  tmp / "gain.tif", "--preview", tmp / "p.png")
+    assert res.exit_code == 1, res.output
+    assert message in res.output and len(res.output.strip().splitlines()) == 1
+    assert "Traceback" not in res.output
+    assert not out.exists() and not (tmp / "gain.tif").exists() and not (tmp / "p.png").exists()
+
+
+def test_crosstalk_mixing_needs_one_white_per_part(rig):
+    paths, _, _, tmp = rig
+    res = _invoke("crosstalk", paths["masked_A"], "--views", "A,B", "-o", tmp / "c.json",
+                  "--mixing-out", tmp / "m.tif")
+    assert res.exit_code == 1 and "one masked white per pupil part" in res.output
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_A"], "--views", "A,B",
+                  "-o", tmp / "c.json", "--mixing-out", tmp / "m.tif")
+    assert res.exit_code == 1 and "open each pupil part once" in res.output
+    assert not (tmp / "m.tif").exists() and not (tmp / "c.json").exists()
+
+
+def test_one_file_per_view_like_raytrix_left_right(tmp_path):
+    """Refocused left/right images are one file each: crosstalk takes two per masked white (in
+    the order of --views), unmix takes both and names the views after the files."""
+    field = sim_mixing.mixing_field(SHAPE, n_views=2, r=0.1, seed=4)
+    whites = np.ones((2, *SHAPE))
+    clean = np.random.default_rng(3).uniform(0.2, 1.0, (2, *SHAPE))
+    ghosted = sim_mixing.apply_mixing(clean, field)
+    files = []
+    for j, half in enumerate(("left", "right")):
+        masked = sim_mixing.masked_white(whites, field, j)
+        for k, view in enumerate(("left", "right")):
+            path = tmp_path / f"masked_{half}_{view}.tif"
+            tiffio.write_image(path, masked[k:k + 1].astype(np.float32), {"views": ["L"]})
+            files.append(path)
+    for k, view in enumerate(("left", "right")):
+        tiffio.write_image(tmp_path / f"{view}.tif", ghosted[k:k + 1].astype(np.float32),
+                           {"views": ["L"]})
+    res = _invoke("crosstalk", *files, "--views", "left,right", "--intended", "left,right",
+                  "--tile", 8, "-o", tmp_path / "ct.json", "--mixing-out", tmp_path / "m.tif")
+    assert res.exit_code == 0, res.output
+    res = _invoke("unmix", tmp_path / "left.tif", tmp_path / "right.tif", "--mixing",
+                  tmp_path / "m.tif", "-o", tmp_path / "clean.tif")
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(tmp_path / "clean.tif")
+    assert meta["views"] == ["left", "right"]
+    np.testing.assert_allclose(data, clean, rtol=1e-3)
+    res = _invoke("crosstalk", *files[:3], "--views", "left,right", "-o", tmp_path / "c2.json",
+                  "--mixing-out", tmp_path / "m2.tif")
+    assert res.exit_code == 1 and "give that many files per masked white" in res.output
+
+
+def test_non_finite_mixing_is_refused(rig):
+    paths, _, _, tmp = rig
+    nodes = np.tile(np.eye(2)[None, :, :, None, None], (1, 1, 1, 2, 2))
+    nodes[0, 0, 1, 1, 1] = np.nan
+    mixing = _mixing_file(tmp, nodes)
+    res = _invoke("unmix", _bad_views(tmp, cfa=None), "--mixing", mixing, "-o", tmp / "o.tif",
+                  "--regularise", 0.1)
+    assert res.exit_code == 1 and "non-finite" in res.output and not (tmp / "o.tif").exists()
