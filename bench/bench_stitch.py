@@ -26,23 +26,14 @@ from __future__ import annotations
 
 import argparse
 import resource
-import time
 import tracemalloc
 
 import cv2
 import numpy as np
 
+from bench.timing import best_time
 from plenocli.stitch import stitch
 from plenocli.synth.rig import random_scene
-
-
-def best_time(func, repeat: int):
-    times, result = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = func()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def make_views(n_rows: int, n_cols: int, size: int, model: str, seed: int):

@@ -27,18 +27,11 @@ import time
 
 import numpy as np
 
+from bench.timing import best_time
 from plenocli.unmix import MixingField, unmix
 
 RGGB = np.array([[0, 1], [1, 2]])
 
-
-def best_time(func, repeat: int):
-    times, result = [], None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = func()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def make_case(n_views: int, rows: int, cols: int, colours: tuple[str, ...], seed: int):

@@ -145,7 +145,7 @@ def remove_stale_temporaries(dest: Path) -> None:
     with contextlib.suppress(OSError):
         for part in dest.parent.glob(f".{dest.name}.{_HOST}-*.part"):
             pid = part.name[len(f".{dest.name}.{_HOST}-"):].split(".", 1)[0]
-            if pid.isdigit() and not _alive(int(pid)):
+            if pid.isdigit() and not process_alive(int(pid)):
                 part.unlink(missing_ok=True)
 
 
@@ -181,7 +181,17 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs. A killed process stays a zombie until its parent reaps it
+    (and a zombie still answers kill(pid, 0)), so /proc's state is read where there is one."""
+    if os.path.exists("/proc/self/stat"):
+        try:
+            with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
+                return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+        except FileNotFoundError:
+            return False
+        except (OSError, IndexError):
+            pass
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

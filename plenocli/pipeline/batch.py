@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, PlenocliError
+from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
 from plenocli.progress import log, progress
@@ -245,29 +246,9 @@ def _watchdog(batch_pid: int, parent_pid: int) -> None:
         time.sleep(WATCH_SECONDS)
         if time.monotonic() > _hard_stop:
             os._exit(EXIT_OVERRAN)
-        if os.getppid() != parent_pid or not _alive(batch_pid):
+        if os.getppid() != parent_pid or not process_alive(batch_pid):
             _hard_stop = min(_hard_stop, time.monotonic() + GRACE_SECONDS)
             os.kill(os.getpid(), signal.SIGTERM)
-
-
-def _alive(pid: int) -> bool:
-    """Whether process ``pid`` runs. A killed batch stays a zombie until its caller reaps it
-    (and a zombie still answers kill(pid, 0)), so /proc's state is read where there is one."""
-    if os.path.exists("/proc/self/stat"):
-        try:
-            with open(f"/proc/{pid}/stat", encoding="ascii") as fh:
-                return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
-        except FileNotFoundError:
-            return False
-        except (OSError, IndexError):
-            pass
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def _on_sigterm(signum, frame) -> None:
