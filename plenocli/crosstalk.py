@@ -39,8 +39,18 @@ def _colour_masks(shape: tuple[int, int], cfa: str | None) -> dict[str, np.ndarr
     return masks
 
 
+def check_tile(tile_px: int, shape: tuple[int, ...]) -> None:
+    """ValueError unless ``tile_px`` is even, >= 2 and no longer than the image's longer side."""
+    if tile_px < 2 or tile_px % 2:
+        raise ValueError(f"tile_px must be an even number >= 2, got {tile_px}")
+    if tile_px > max(shape[-2:]):
+        raise ValueError(f"tile {tile_px} px is larger than the {shape[-1]} x {shape[-2]} "
+                         "image; choose a tile of a few dozen pixels (--tile 64)")
+
+
 def _tile_sums(values: np.ndarray, tile_px: int) -> np.ndarray:
     """Sum of (rows, cols) ``values`` over tile_px x tile_px tiles (edge tiles partial)."""
+    check_tile(tile_px, values.shape)
     rows, cols = values.shape
     n_r, n_c = -(-rows // tile_px), -(-cols // tile_px)
     padded = np.zeros((n_r * tile_px, n_c * tile_px), np.float64)

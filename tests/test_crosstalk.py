@@ -141,3 +141,9 @@ def test_measure_mixing_refuses_bad_sets():
     with pytest.raises(InputError, match="no tile"):
         dark = np.zeros((2, 8, 8))
         measure_mixing([white, dark], intended=[0, 1], views=["A", "B"], tile_px=4)
+
+
+def test_a_tile_larger_than_the_image_is_refused_before_allocating():
+    views = np.ones((2, 40, 60), np.float32)
+    with pytest.raises(ValueError, match="larger than the 60 x 40 image"):
+        crosstalk_ratio(views, tile_px=100_000)

@@ -98,7 +98,11 @@ def _measure(path: str, views: str | None, intended: str | None, tile: int) -> d
     framing = active_area(meta, data.shape[1:])
     cfa = framing.cfa
     idx = _intended_index(intended, names, path)
-    res = crosstalk_lib.crosstalk_ratio(framing.crop(data), intended=idx, tile_px=tile, cfa=cfa)
+    try:
+        res = crosstalk_lib.crosstalk_ratio(framing.crop(data), intended=idx, tile_px=tile,
+                                            cfa=cfa)
+    except ValueError as err:
+        raise InputError(f"{path}: {err}") from err
     return {
         "input": path, "views": names, "intended": names[res["intended"]],
         "r": res["r"], "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
@@ -215,8 +219,11 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
         luminance = cap["data"].sum(axis=1)  # flux over every colour, as r has always been
         idx = _intended_index(specs[k if len(specs) > 1 else 0], names, path)
         pattern = _cfa_pattern(cap)
-        res = crosstalk_lib.crosstalk_ratio(luminance, intended=idx, tile_px=tile,
-                                            cfa=cap["cfa"])
+        try:
+            res = crosstalk_lib.crosstalk_ratio(luminance, intended=idx, tile_px=tile,
+                                                cfa=cap["cfa"])
+        except ValueError as err:
+            raise InputError(f"{path}: {err}") from err
         opened.append(res["intended"])
         captures.append({
             "input": path, "views": names, "intended": names[res["intended"]], "r": res["r"],
