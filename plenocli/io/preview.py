@@ -51,3 +51,24 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
         if not ok:
             raise OSError(f"could not encode PNG for {path}")
         tmp.write_bytes(buf.tobytes())
+
+
+def write_grid_overlay(path: str | os.PathLike, flat: np.ndarray, centres: np.ndarray,
+                       pitch_px: float, *, protect: tuple = ()) -> None:
+    """A flattened image (display-stretched, at most 2048 px) with every lens centre (K, 2)
+    (x, y) px drawn as a red dot: a wrong grid shows at a glance."""
+    grey = to_display(flat, gamma=1.0)
+    scale = min(1.0, 2048 / max(grey.shape))
+    if scale < 1:
+        grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    bgr = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+    shift = 4  # sub-pixel drawing
+    radius = max(1, int(pitch_px * scale / 8)) << shift
+    for x, y in np.asarray(centres) * scale:
+        cv2.circle(bgr, (int(round(x * (1 << shift))), int(round(y * (1 << shift)))), radius,
+                   (0, 0, 255), -1, cv2.LINE_AA, shift)
+    ok, buf = cv2.imencode(".png", bgr)
+    if not ok:
+        raise OSError(f"could not encode PNG for {path}")
+    with atomic_path(path, protect=protect) as tmp:
+        tmp.write_bytes(buf.tobytes())

@@ -44,7 +44,7 @@ def _stages() -> dict[str, Stage]:
         Stage("bias", bias.run, inputs=("input",), outputs=("output", "preview")),
         Stage("flat", flat.run, inputs=("input", "white", "gain"),
               outputs=("output", "save_gain", "preview")),
-        Stage("calibrate", calibrate.run, inputs=("input", "compare"),
+        Stage("calibrate", calibrate.run, inputs=("input", "compare", "start"),
               outputs=("output", "xml", "preview")),
         Stage("refocus", refocus.run, inputs=("input", "grid"), outputs=("output", "preview")),
         Stage("sai", sai.run, inputs=("input", "grid"), outputs=("output", "preview")),

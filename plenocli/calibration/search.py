@@ -1,0 +1,97 @@
+"""The lattice search: views of the image at a few decimations (so every pitch from 6 to 100 px
+is seen with 10-20 px per lens), hypotheses from their spectra, each judged by the border
+autocorrelation of the view that suits its pitch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from plenocli.calibration.candidates import Lattice, lattices_of_peak, spectral_peaks
+from plenocli.calibration.flatten import border_signal, decimate, flatten
+from plenocli.calibration.verify import Autocorrelation, Verdict, control_contrast, judge, refine
+
+PITCH_RANGE_PX = (5.5, 110.0)   # searched; the documented range is 6-100 px
+VIEW_PX = 1024                  # side of the central crop each view looks at
+VIEW_FLAT_PX = 24.0             # flattening blur of a view (px of the view)
+REFINED = 6                     # hypotheses refined per search
+
+
+@dataclass(frozen=True)
+class View:
+    """The central crop of the image decimated by ``factor``: its flattened intensity and its
+    border signal, and the autocorrelation of the border signal."""
+
+    factor: int
+    flat: np.ndarray
+    border: np.ndarray
+    acf: Autocorrelation
+
+
+def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
+    """One view per decimation 1, 2, 4, 8 that still holds a useful crop."""
+    out = {}
+    for factor in (1, 2, 4, 8):
+        rows, cols = image.shape[0] // factor, image.shape[1] // factor
+        if factor > 1 and min(rows, cols) < 160:
+            break
+        # crop first (at full resolution), then decimate: an even factor averages the mosaic
+        side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
+        r0, c0 = (image.shape[0] - side_r) // 2, (image.shape[1] - side_c) // 2
+        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+        crop = decimate(image[r0:r0 + side_r, c0:c0 + side_c], factor)
+        flat = flatten(crop, cfa=cfa if factor == 1 else None, scale_px=VIEW_FLAT_PX)
+        if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
+            flat = cv2.blur(flat, (2, 2))
+        border = border_signal(flat)
+        out[factor] = View(factor, flat, border, Autocorrelation(border, factor))
+    return out
+
+
+def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:
+    """The most decimated view that still has 10 px per lens (the longest lags in pitches)."""
+    best = min(all_views)
+    for factor in sorted(all_views):
+        if lattice.pitch_px / factor >= 10.0:
+            best = factor
+    return all_views[best]
+
+
+def hypotheses(all_views: dict[int, View], *, cfa: bool, pitch_hint: float | None
+               ) -> list[Lattice]:
+    """Every lattice a spectral peak of a view suggests (both kinds, with relatives), inside
+    the pitch range (or within 15 % of the hint)."""
+    lo, hi = PITCH_RANGE_PX
+    if pitch_hint is not None:
+        lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
+    out: list[Lattice] = []
+    for view in all_views.values():
+        for signal in (view.flat, view.border):
+            for g in spectral_peaks(signal, cfa=cfa and view.factor == 1):
+                for lat in lattices_of_peak(g, view.factor):
+                    if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
+                        out.append(lat)
+    return out
+
+
+def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
+    """Score every hypothesis over near lags, refine the best few (per kind) and judge them."""
+    if not hyps:
+        return Verdict(Lattice("hex", 10.0, 0.0), -np.inf)
+    first = [(lat, view_for(lat, all_views).acf.contrast(lat, near=1.5, far=6.0))
+             for lat in hyps]
+    first.sort(key=lambda t: -t[1])
+    chosen: list[Lattice] = []
+    for kind in ("hex", "square"):
+        chosen += [lat for lat, _ in first if lat.kind == kind][:REFINED // 2]
+    chosen += [lat for lat, _ in first if lat not in chosen][:REFINED // 2]
+    scored = []
+    for lat in chosen:
+        acf = view_for(lat, all_views).acf
+        refined, c = refine(lat, acf)
+        scored.append((refined, c))
+    verdict = judge(scored, 0.0)
+    control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
+    return Verdict(verdict.lattice, verdict.contrast, verdict.rivals, control)
