@@ -22,18 +22,17 @@ Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenoc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.centres import mean_micro_image, refine_centres, symmetry_centre
-from plenocli.calibration.fit import (LatticeFit, compare_grids, fit_grid, fit_lattice,
-                                      phase_offset)
+from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice, phase_offset
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.lenstypes import classify
-from plenocli.calibration.search import find_lattice, hypotheses, view_for, views
-from plenocli.calibration.verify import Verdict, doubt
+from plenocli.calibration.search import border_lattice, find_lattice, hypotheses, view_for, views
+from plenocli.calibration.verify import Verdict, control_contrast, doubt, judge
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
@@ -41,6 +40,9 @@ __all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "fl
            "mean_micro_image", "refine_centres", "symmetry_centre"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
+# a lattice read from the border repetition is used when its pitch and angle errors move the
+# frame's corner lenses by at most this share of a pitch
+CORNER_TOLERANCE = 0.05
 WHAT_TO_DO = "pass --pitch PX (approximate), a white image, or --start GRID.yaml|calib.xml"
 
 
@@ -98,6 +100,10 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     if lattice != "auto" and found.kind != lattice:
         raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
                                f"{found.describe()} lattice; use --lattice {found.kind} or auto")
+    border = border_lattice(found, all_views)
+    sure = _corner_error(border, image.shape) <= CORNER_TOLERANCE * found.pitch_px
+    if sure:
+        found = border.lattice
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
     if start is None:
         guess = LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind,
@@ -106,7 +112,12 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
                          image_shape=image.shape)
     else:
         guess = start
-    grid, fit = fit_grid(flat, guess)
+    grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
+    if not fit.centres_refined and not sure:
+        raise CalibrationError(
+            f"{found.describe()} lattice found, but on this scene neither the micro-image "
+            f"centres nor the border repetition pin its pitch down (+-{border.pitch_err_px:.3f} "
+            f"px); {WHAT_TO_DO}")
     types = classify(flat, grid.indices, grid.centres_xy, grid.pitch_px) \
         if grid.lattice == "hex" else None
     type_info = None
@@ -119,6 +130,12 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
         type_info = {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
                      "p_value": types.p_value}
     return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info)
+
+
+def _corner_error(border, shape: tuple[int, int]) -> float:
+    """How far (px) the uncertainty of a border lattice moves the lenses at the frame corners."""
+    half_diagonal = float(np.hypot(*shape)) / 2
+    return half_diagonal * (border.pitch_err_px / border.lattice.pitch_px + border.angle_err_rad)
 
 
 def _checked(image: np.ndarray, lattice: str, black_level: float,
@@ -145,13 +162,12 @@ def _checked(image: np.ndarray, lattice: str, black_level: float,
 def _start_verdict(start: LensGrid, all_views) -> Verdict:
     """The confidence of a given lattice: its border contrast against its detuned copies and
     its relatives (a start file off by a harmonic is refused like a search would be)."""
-    from plenocli.calibration.verify import control_contrast, judge
-
     own = Lattice(start.lattice, start.pitch_px, start.angle_rad)
     scored = [(lat, view_for(lat, all_views).acf.contrast(lat))
               for lat in [own, *own.relatives()]]
-    verdict = judge(scored, control_contrast(own, view_for(own, all_views).acf))
-    if not verdict.lattice.same_as(own):
+    verdict = judge(scored, lambda lat: view_for(lat, all_views).acf)
+    verdict = replace(verdict, control=control_contrast(own, view_for(own, all_views).acf))
+    if not verdict.lattice.same_as(own):   # the start file is a relative of the lattice
         return Verdict(own, scored[0][1], ((verdict.lattice, verdict.contrast),),
-                       verdict.control)
+                       verdict.control, undecided=True)
     return verdict

@@ -127,6 +127,11 @@ def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarra
     return (logmag - median[ring]) / spread[ring]
 
 
-def _parabola(a: float, b: float, c: float) -> float:
+def _parabola(a, b, c):
+    """Vertex offset (-0.5 .. 0.5) of the parabola through three equally spaced samples
+    (scalars or arrays); 0 where they do not form a maximum."""
+    a, b, c = np.asarray(a, float), np.asarray(b, float), np.asarray(c, float)
     den = a - 2 * b + c
-    return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(den < 0, np.clip(0.5 * (a - c) / den, -0.5, 0.5), 0.0)
+    return off if off.ndim else float(off)

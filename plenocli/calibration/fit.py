@@ -14,7 +14,7 @@ MIN_LENSES = 12   # fewer whole micro-images: no lattice worth fitting
 
 
 def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex",
-                weights: np.ndarray | None = None) -> tuple[float, float, tuple[float, float]]:
+                weights: np.ndarray | None = None, return_se: bool = False) -> tuple:
     """Least-squares similarity lattice through lens centres.
 
     ``x_ij = o + i b1 + j R(step) b1`` is linear in (o, b1), so this is one linear solve.
@@ -27,7 +27,8 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
 
     Returns
     -------
-    pitch_px, angle_rad (unreduced), offset_xy (the centre of lens (0, 0))
+    pitch_px, angle_rad (unreduced), offset_xy (the centre of lens (0, 0)), and with
+    ``return_se`` the standard errors (pitch px, angle rad) from the residuals
     """
     if lattice not in LATTICES:
         raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {lattice!r}")
@@ -45,7 +46,27 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
         a, b = a * w[:, None], b * w
     sol, *_ = np.linalg.lstsq(a, b, rcond=None)
     ox, oy, u, v = sol
-    return float(np.hypot(u, v)), float(np.arctan2(v, u)), (float(ox), float(oy))
+    pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
+    if not return_se:
+        return pitch, angle, (float(ox), float(oy))
+    # standard errors from the normal equations: pitch along (u, v), angle across it
+    dof = max(len(b) - 4, 1)
+    cov = np.linalg.pinv(a.T @ a) * float(np.sum((a @ sol - b) ** 2)) / dof
+    radial = np.array([u, v]) / pitch
+    across = np.array([-v, u]) / pitch
+    se_pitch = float(np.sqrt(radial @ cov[2:, 2:] @ radial))
+    se_angle = float(np.sqrt(across @ cov[2:, 2:] @ across)) / pitch
+    return pitch, angle, (float(ox), float(oy)), (se_pitch, se_angle)
+
+
+def lattice_from_lags(lags: np.ndarray, indices: np.ndarray, weights: np.ndarray, *,
+                      lattice: str) -> tuple[float, float, tuple[float, float]]:
+    """Pitch (px), angle (rad) and their standard errors of the similarity lattice whose
+    vectors k b1 + m b2 best fit measured lags (K, 2) (the autocorrelation peaks)."""
+    pitch, angle, _, se = fit_lattice(np.vstack([indices, -indices]),
+                                      np.vstack([lags, -lags]), lattice=lattice,
+                                      weights=np.concatenate([weights, weights]), return_se=True)
+    return pitch, angle, se
 
 
 def reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: str,
@@ -139,23 +160,28 @@ class LatticeFit:
     residual_rms_px: float
     residual_max_px: float
     centres_refined: bool   # False: scene content moved the centres; they are the lattice's
+    pitch_se_px: float = 0.0
+    angle_se_rad: float = 0.0
 
 
 SCENE_RESIDUAL = 0.04   # residual RMS (pitches) above which per-lens centres follow the scene
 CORE_PITCHES = 12.0     # the first fit uses lenses within this many pitches of the middle
 
 
-def fit_grid(flat: np.ndarray, guess: LensGrid) -> tuple[LensGrid, LatticeFit]:
+def fit_grid(flat: np.ndarray, guess: LensGrid, *,
+             border: tuple[float, float] | None = None) -> tuple[LensGrid, LatticeFit]:
     """The lattice through the point-symmetry centres of the micro-images, from ``guess``.
 
     A first fit over the lenses near the middle corrects the pitch and rotation before the
     whole frame is refined (a 0.5 % pitch error is half a lens 100 lenses out). Lenses whose
     centre is far from the lattice (dead pixels, a bright scene edge) are dropped, robustly.
-    When the residuals are large the image is a scene whose content moves the centres; then
-    the centres are the fitted lattice's."""
+    When the residuals are large the image is a scene whose content moves the centres (they
+    are not point-symmetric): then pitch and angle are ``border`` (measured from the border
+    repetition, when given), only the offset comes from the centres, and the centres written
+    are the lattice's."""
     rows, cols = flat.shape
-    lattice = guess.lattice
-    grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, lattice, (rows, cols))
+    grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
+                     (rows, cols))
     for core in (CORE_PITCHES, None):
         idx, centres, refined = refine_centres(flat, grid)
         if core is not None:
@@ -165,34 +191,63 @@ def fit_grid(flat: np.ndarray, guess: LensGrid) -> tuple[LensGrid, LatticeFit]:
             raise CalibrationError(f"only {int(refined.sum())} whole micro-images fit in the "
                                    f"{cols} x {rows} px image (pitch {grid.pitch_px:.1f} px); "
                                    "use a larger image")
-        use = refined.copy()
-        for _ in range(4):
-            pitch, angle, offset = fit_lattice(idx[use], centres[use], lattice=lattice)
-            fitted = LensGrid(pitch, angle, offset, lattice)
-            resid = np.linalg.norm(centres - fitted.lattice_xy(idx[:, 0], idx[:, 1]), axis=1)
-            sigma = 1.4826 * np.median(resid[refined])
-            new_use = refined & (resid <= max(4.0 * sigma, 0.02))
-            if np.array_equal(new_use, use):
-                break
-            use = new_use
-        grid = reindexed(pitch, angle, offset, lattice, (rows, cols))
-    idx, ideal = grid.lens_centres()
-    # the same lenses, indexed on the final grid
-    i, j = grid.nearest_index(centres[:, 0], centres[:, 1])
-    order = {(a, b): k for k, (a, b) in enumerate(zip(i.tolist(), j.tolist(), strict=True))}
-    final = ideal.copy()
-    keep_use = np.zeros(len(idx), bool)
-    for k, (a, b) in enumerate(idx.tolist()):
-        src = order.get((a, b))
-        if src is not None and use[src]:
-            final[k] = centres[src]
-            keep_use[k] = True
-    resid = np.linalg.norm(final - ideal, axis=1)[keep_use]
-    rms = float(np.sqrt(np.mean(resid ** 2)))
+        grid, use, se = _robust_fit(idx, centres, refined, grid)
+    rms = _residual_rms(grid, idx, centres, use)
     scene = rms > SCENE_RESIDUAL * grid.pitch_px
-    report = LatticeFit(lenses_total=len(idx), lenses_refined=int(refined.sum()),
-                        outliers=int((refined & ~use).sum()), residual_rms_px=rms,
-                        residual_max_px=float(resid.max()), centres_refined=not scene)
-    centres_out = ideal if scene else final
-    return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, lattice,
-                    image_shape=(rows, cols), centres_xy=centres_out, indices=idx), report
+    if scene and border is not None:
+        basis = LensGrid(*border, (0.0, 0.0), grid.lattice).basis()
+        i, j = grid.nearest_index(centres[use, 0], centres[use, 1])
+        origin = np.median(centres[use] - i[:, None] * basis[0] - j[:, None] * basis[1], axis=0)
+        grid = reindexed(*border, (float(origin[0]), float(origin[1])), grid.lattice,
+                         (rows, cols))
+        se = (0.0, 0.0)
+    idx_out, ideal = grid.lens_centres()
+    final, measured = _on_grid(grid, idx_out, ideal, centres, use)
+    resid = np.linalg.norm(final - ideal, axis=1)[measured]
+    report = LatticeFit(lenses_total=len(idx_out), lenses_refined=int(refined.sum()),
+                        outliers=int((refined & ~use).sum()),
+                        residual_rms_px=float(np.sqrt(np.mean(resid ** 2))),
+                        residual_max_px=float(resid.max()), centres_refined=not scene,
+                        pitch_se_px=se[0], angle_se_rad=se[1])
+    return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
+                    image_shape=(rows, cols), centres_xy=ideal if scene else final,
+                    indices=idx_out), report
+
+
+def _robust_fit(idx, centres, refined, grid):
+    """Least-squares lattice through the refined centres, dropping those beyond 4 robust
+    sigma (at most four rounds); the grid re-indexed about the image centre, the lenses used
+    and the standard errors."""
+    use = refined.copy()
+    for _ in range(4):
+        pitch, angle, offset, se = fit_lattice(idx[use], centres[use], lattice=grid.lattice,
+                                               return_se=True)
+        fitted = LensGrid(pitch, angle, offset, grid.lattice)
+        resid = np.linalg.norm(centres - fitted.lattice_xy(idx[:, 0], idx[:, 1]), axis=1)
+        sigma = 1.4826 * np.median(resid[refined])
+        new_use = refined & (resid <= max(4.0 * sigma, 0.02))
+        if np.array_equal(new_use, use):
+            break
+        use = new_use
+    return reindexed(pitch, angle, offset, grid.lattice, grid.image_shape), use, se
+
+
+def _residual_rms(grid: LensGrid, idx, centres, use) -> float:
+    i, j = grid.nearest_index(centres[use, 0], centres[use, 1])
+    return float(np.sqrt(np.mean(np.sum((centres[use] - grid.lattice_xy(i, j)) ** 2, axis=1))))
+
+
+def _on_grid(grid: LensGrid, idx, ideal, centres, use):
+    """The measured centres placed on the lenses (idx) of ``grid`` (the ideal centre where a
+    lens has none), and which lenses have one."""
+    i, j = grid.nearest_index(centres[:, 0], centres[:, 1])
+    source = {(a, b): k for k, (a, b) in enumerate(zip(i.tolist(), j.tolist(), strict=True))
+              if use[k]}
+    final = ideal.copy()
+    measured = np.zeros(len(idx), bool)
+    for k, key in enumerate(map(tuple, idx.tolist())):
+        src = source.get(key)
+        if src is not None:
+            final[k] = centres[src]
+            measured[k] = True
+    return final, measured

@@ -1,7 +1,7 @@
 """Which hypothesis is the lens lattice, and how sure that is.
 
-The measure: the autocorrelation A(t) of the border signal (gradient magnitude of the flattened
-image) at long lags t. Two properties of every lenslet image make it decisive:
+The measure: the autocorrelation A(t) of the flattened image and of its border signal (gradient
+magnitude) at long lags t; a lattice must pass on both. Two properties of every lenslet image make it decisive:
 
 1. The micro-image borders (dark gaps, the vignetting edge of each micro-image) sit on the same
    lattice over the whole frame, so A has equal peaks at every lattice vector, as far as the
@@ -32,10 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
-from scipy import ndimage
 from scipy.optimize import minimize
 
-from plenocli.calibration.candidates import Lattice
+from plenocli.calibration.candidates import Lattice, _parabola
 
 WIN_RATIO = 2.0        # the winner's contrast over any unrelated hypothesis
 NULL_RATIO = 3.0       # the winner's contrast over its own detuned copies
@@ -43,19 +42,23 @@ MIN_CONTRAST = 0.15    # lattice points above holes by this share of the spread 
 
 
 class Autocorrelation:
-    """A(t) of a border signal (a crop at one decimation ``factor``), normalised by the overlap
-    of the shifted crop with itself (every lag is a mean, not a sum) and by A(0)."""
+    """A(t) of the signals of one view (a crop at one decimation ``factor``): the flattened
+    intensity (each micro-image bright inside, dark at its rim) and the border signal (its
+    edges), each normalised by the overlap of the shifted crop with itself (every lag is a
+    mean, not a sum) and by A(0). A lattice must show in both."""
 
-    def __init__(self, signal: np.ndarray, factor: int):
-        rows, cols = signal.shape
-        data = signal - np.float32(signal.mean())
+    def __init__(self, signals: tuple[np.ndarray, ...], factor: int):
+        rows, cols = signals[0].shape
         shape = (2 * rows, 2 * cols)   # zero padding: no wrap-around
-        power = np.abs(scipy.fft.rfft2(data, s=shape, workers=-1)) ** 2
-        acf = scipy.fft.irfft2(power, s=shape, workers=-1)
         ones = scipy.fft.rfft2(np.ones((rows, cols), np.float32), s=shape, workers=-1)
-        overlap = scipy.fft.irfft2(np.abs(ones) ** 2, s=shape, workers=-1)
-        acf = acf / np.maximum(overlap, 1.0)
-        self.acf = np.fft.fftshift(acf / max(acf[0, 0], 1e-30)).astype(np.float32)
+        overlap = np.maximum(scipy.fft.irfft2(np.abs(ones) ** 2, s=shape, workers=-1), 1.0)
+        self.acfs = []
+        for signal in signals:
+            data = signal - np.float32(signal.mean())
+            power = np.abs(scipy.fft.rfft2(data, s=shape, workers=-1)) ** 2
+            acf = scipy.fft.irfft2(power, s=shape, workers=-1) / overlap
+            self.acfs.append(np.fft.fftshift(acf / max(acf[0, 0], 1e-30)).astype(np.float32))
+        self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
         self.factor = factor
         self.reach = 0.45 * min(rows, cols)   # lags beyond this overlap too little of the crop
 
@@ -63,42 +66,114 @@ class Autocorrelation:
                  ) -> float:
         """Contrast of ``lattice`` over lags from ``near`` pitches (or 15 % of the crop) to
         ``far`` pitches (default: as far as the crop reaches). See the module docstring."""
+        lags = self._lags(lattice, near, far)
+        if lags is None:
+            return -np.inf
+        pts, k, m = lags
+        b1, b2 = lattice.basis() / self.factor
+        classes = [((k % 2 == a) & (m % 2 == b)) for a in (0, 1) for b in (0, 1)]
+        if lattice.kind == "hex":
+            classes += [((k - m) % 3 == a) for a in (0, 1, 2)]
+            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
+        else:
+            classes += [((k + m) % 2 == a) for a in (0, 1)]
+            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
+        offsets = np.array([[0.0, 0.0], *holes])
+        lags = pts[None, :, :] + offsets[:, None, :]
+        worst = np.inf
+        for acf in self.acfs:
+            values = self._sample(lags, acf)   # (1 + holes, K)
+            point_means = [values[0][c].mean() for c in classes if c.any()]
+            spread = float(values.std())
+            if not spread > 0:
+                return -np.inf
+            worst = min(worst, float(min(point_means) - values[1:].mean(axis=1).max()) / spread)
+        return worst
+
+    def between(self, coarse: Lattice, fine: Lattice) -> float:
+        """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
+        look like lattice points: about 1 when ``fine`` is the lens lattice (they are lenses),
+        about 0 or below when ``coarse`` is (they are its holes). (mean A there - mean A at the
+        holes of ``fine``) / (mean A at the shared points - the same), averaged over the
+        signals (the intensity sees a lens as bright and a hole as dark; the border signal
+        sees both as edges, but a lens of another type of a multi-focus array the same)."""
+        lags = self._lags(fine, 3.0, None)
+        if lags is None:
+            return float("nan")
+        pts = lags[0]
+        uv = pts @ np.linalg.inv(coarse.basis() / self.factor)
+        shared = np.all(np.abs(uv - np.rint(uv)) < 0.05, axis=1)
+        if shared.all() or not shared.any():
+            return float("nan")
+        b1, b2 = fine.basis() / self.factor
+        holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
+        shares = []
+        for acf in self.acfs:
+            base = float(np.mean([self._sample(pts + h, acf).mean() for h in holes]))
+            at = self._sample(pts, acf)
+            top = float(at[shared].mean()) - base
+            shares.append((float(at[~shared].mean()) - base) / top if top > 0 else np.nan)
+        return float(np.mean(shares))
+
+    def peak_lags(self, lattice: Lattice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sub-pixel positions (px of the full image) of the autocorrelation peaks at the far
+        lattice lags (the outer half of the reach), with their indices (k, m) and heights:
+        the borders repeat exactly there, the scene no longer does. Each peak is the centroid
+        of A - (its local floor) within a quarter pitch of the predicted lag."""
+        lags = self._lags(lattice, 0.0, None)
+        if lags is None:
+            return np.empty((0, 2)), np.empty((0, 2), np.int64), np.empty(0)
+        pts, k, m = lags
+        far = np.hypot(pts[:, 0], pts[:, 1]) >= 0.5 * self.reach
+        pts, k, m = pts[far], k[far], m[far]
+        radius = max(1.5, 0.25 * lattice.pitch_px / self.factor)
+        step = np.arange(-np.ceil(radius), np.ceil(radius) + 1)
+        dx, dy = np.meshgrid(step, step)
+        inside = np.hypot(dx, dy) <= radius
+        dx, dy = dx[inside], dy[inside]
+        cy, cx = self.acf.shape[0] // 2, self.acf.shape[1] // 2
+        acf = self.acf
+        rows = (cy + np.rint(pts[:, 1])[:, None] + dy[None, :]).astype(np.int64)
+        cols = (cx + np.rint(pts[:, 0])[:, None] + dx[None, :]).astype(np.int64)
+        window = acf[rows, cols]                                   # (K, window)
+        top = np.argmax(window, axis=1)
+        r = rows[np.arange(len(top)), top]
+        c = cols[np.arange(len(top)), top]
+        found = np.stack([c - cx + _parabola(acf[r, c - 1], acf[r, c], acf[r, c + 1]),
+                          r - cy + _parabola(acf[r - 1, c], acf[r, c], acf[r + 1, c])], axis=1)
+        height = np.maximum(window.max(axis=1) - np.median(window, axis=1), 0.0)
+        return found * self.factor, np.stack([k, m], axis=1), height
+
+    def _lags(self, lattice: Lattice, near: float, far: float | None):
+        """Lattice vectors (view px) of half the plane in the lag annulus, with indices."""
         basis = lattice.basis() / self.factor
         pitch = lattice.pitch_px / self.factor
         hi = self.reach if far is None else min(far * pitch, self.reach)
         lo = min(max(near * pitch, 0.15 * self.reach if far is None else 0.0), 0.8 * hi)
         if hi < 1.5 * pitch:
-            return -np.inf
+            return None
         n = int(hi / (pitch * np.sin(np.pi / 3))) + 2
         k, m = np.meshgrid(np.arange(-n, n + 1), np.arange(0, n + 1), indexing="ij")
         k, m = k.ravel(), m.ravel()
         pts = k[:, None] * basis[0] + m[:, None] * basis[1]
         dist = np.hypot(pts[:, 0], pts[:, 1])
         keep = (dist >= lo) & (dist <= hi)
-        pts, k, m = pts[keep], k[keep], m[keep]
-        if len(pts) < 12:
-            return -np.inf
-        b1, b2 = basis
-        if lattice.kind == "hex":
-            classes = [((k % 2 == a) & (m % 2 == b)) for a in (0, 1) for b in (0, 1)]
-            classes += [((k - m) % 3 == a) for a in (0, 1, 2)]
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
-        else:
-            classes = [((k % 2 == a) & (m % 2 == b)) for a in (0, 1) for b in (0, 1)]
-            classes += [((k + m) % 2 == a) for a in (0, 1)]
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
-        at_points = self._sample(pts)
-        at_holes = [self._sample(pts + h) for h in holes]
-        point_means = [at_points[c].mean() for c in classes if c.any()]
-        spread = float(np.std(np.concatenate([at_points, *at_holes])))
-        if spread <= 0:
-            return -np.inf
-        return float(min(point_means) - max(h.mean() for h in at_holes)) / spread
+        if keep.sum() < 12:
+            return None
+        return pts[keep], k[keep], m[keep]
 
-    def _sample(self, lags: np.ndarray) -> np.ndarray:
-        cy, cx = self.acf.shape[0] // 2, self.acf.shape[1] // 2
-        return ndimage.map_coordinates(self.acf, [cy + lags[:, 1], cx + lags[:, 0]], order=1,
-                                       mode="constant", cval=0.0)
+    @staticmethod
+    def _sample(lags: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``a`` (an autocorrelation) at lags (..., 2) (x, y) px of the view, bilinear."""
+        rows, cols = a.shape
+        x = lags[..., 0] + cols // 2
+        y = lags[..., 1] + rows // 2
+        x0 = np.clip(np.floor(x).astype(np.int64), 0, cols - 2)
+        y0 = np.clip(np.floor(y).astype(np.int64), 0, rows - 2)
+        fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
+        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+        return top * (1 - fy) + bottom * fy
 
 
 @dataclass(frozen=True)
@@ -109,6 +184,7 @@ class Verdict:
     contrast: float
     rivals: tuple[tuple[Lattice, float], ...] = field(default=())
     control: float = 0.0
+    undecided: bool = False    # a sub- or super-lattice could not be ruled out
 
     @property
     def margin(self) -> float:
@@ -118,6 +194,7 @@ class Verdict:
 
     def to_dict(self) -> dict:
         return {"contrast": round(self.contrast, 4), "control": round(self.control, 4),
+                "relative_undecided": self.undecided,
                 "margin": None if np.isinf(self.margin) else round(self.margin, 3),
                 "rivals": [{"lattice": lat.kind, "pitch_px": round(lat.pitch_px, 4),
                             "angle_deg": round(float(np.degrees(lat.angle_rad)), 4),
@@ -128,7 +205,8 @@ def refine(lattice: Lattice, acf: Autocorrelation) -> tuple[Lattice, float]:
     """Local maximum of the contrast around ``lattice``: Nelder-Mead in (log pitch, angle),
     first over near lags (a wide basin), then over all lags (a sharp one)."""
     current = lattice
-    for near, far, span in ((1.5, 6.0, 0.01), (3.0, 14.0, 0.003), (None, None, 0.001)):
+    for near, far, span, evaluations in ((1.5, 6.0, 0.01, 30), (3.0, 14.0, 0.003, 30),
+                                         (None, None, 0.001, 40)):
         def cost(p, base=current, near=near, far=far):
             cand = Lattice(base.kind, base.pitch_px * np.exp(p[0]), base.angle_rad + p[1])
             c = acf.contrast(cand) if near is None else acf.contrast(cand, near=near, far=far)
@@ -136,7 +214,7 @@ def refine(lattice: Lattice, acf: Autocorrelation) -> tuple[Lattice, float]:
 
         res = minimize(cost, np.zeros(2), method="Nelder-Mead",
                        options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
-                                "xatol": 1e-5, "fatol": 1e-4, "maxfev": 60})
+                                "xatol": 1e-5, "fatol": 1e-4, "maxfev": evaluations})
         current = Lattice(current.kind, current.pitch_px * np.exp(res.x[0]),
                           current.angle_rad + res.x[1])
     return current, acf.contrast(current)
@@ -152,17 +230,46 @@ def control_contrast(lattice: Lattice, acf: Autocorrelation) -> float:
     return max(0.0, *(acf.contrast(c) for c in copies))
 
 
-def judge(scored: list[tuple[Lattice, float]], control: float) -> Verdict:
-    """The winner of refined, scored hypotheses and its unrelated rivals (related = the same
-    lattice found twice)."""
-    ranked = sorted(scored, key=lambda t: -t[1])
+def sub_lattice_pair(best: Lattice, other: Lattice) -> tuple[Lattice, Lattice] | None:
+    """(coarse, fine) when ``other`` is near a sub- or super-lattice of ``best`` (x2, /2,
+    x sqrt(3) or sqrt(2) turned, and back), with that relative taken exactly from ``best``;
+    else None."""
+    for relative in best.relatives()[:4]:
+        if other.same_as(relative, rel=0.02, angle=0.02):
+            return (relative, best) if relative.pitch_px > best.pitch_px else (best, relative)
+    return None
+
+
+def judge(scored: list[tuple[Lattice, float]], acf_for) -> Verdict:
+    """The winner of refined, scored hypotheses and its unrelated rivals. A hypothesis that is a
+    sub- or super-lattice of the leader is settled by ``Autocorrelation.between`` (are the
+    points they do not share lenses or holes?), not by comparing contrasts; one that stays in
+    between is kept as a rival that cannot be ruled out."""
+    ranked = [t for t in sorted(scored, key=lambda t: -t[1]) if np.isfinite(t[1])]
+    if not ranked:
+        return Verdict(scored[0][0], -np.inf)
     best, contrast = ranked[0]
     rivals: list[tuple[Lattice, float]] = []
+    undecided: list[tuple[Lattice, float]] = []
     for lat, c in ranked[1:]:
-        if lat.same_as(best) or any(lat.same_as(r) for r, _ in rivals):
+        if lat.same_as(best) or any(lat.same_as(r) for r, _ in rivals + undecided):
             continue
-        rivals.append((lat, c))
-    return Verdict(best, contrast, tuple(rivals[:3]), control)
+        pair = sub_lattice_pair(best, lat)
+        if pair is None:
+            rivals.append((lat, c))
+            continue
+        coarse, fine = pair
+        share = acf_for(fine).between(coarse, fine)
+        if not np.isfinite(share):
+            continue
+        truth = fine if share > 2 / 3 else coarse if share < 1 / 3 else None
+        if truth is None:
+            undecided.append((lat, c))
+        elif truth is lat and c > 0:
+            best, contrast = lat, c   # the leader was a relative of the lens lattice
+    rivals = [(lat, c) for lat, c in rivals if not lat.same_as(best)]
+    return Verdict(best, contrast, tuple(undecided + rivals)[:3], 0.0,
+                   undecided=bool(undecided))
 
 
 def doubt(verdict: Verdict) -> str | None:
@@ -170,7 +277,7 @@ def doubt(verdict: Verdict) -> str | None:
     if verdict.contrast < MIN_CONTRAST or verdict.contrast < NULL_RATIO * verdict.control:
         return "no micro-lens lattice found (no hypothesis shows micro-image borders repeated " \
                "over the frame)"
-    if verdict.margin < WIN_RATIO:
+    if verdict.undecided or verdict.margin < WIN_RATIO:
         rival, c = verdict.rivals[0]
         return (f"unsure lattice: {verdict.lattice.describe()} (contrast "
                 f"{verdict.contrast:.2f}) or {rival.describe()} (contrast {c:.2f})")
