@@ -1,7 +1,8 @@
 """Which hypothesis is the lens lattice, and how sure that is.
 
 The measure: the autocorrelation A(t) of the flattened image and of its border signal (gradient
-magnitude) at long lags t; a lattice must pass on both. Two properties of every lenslet image make it decisive:
+magnitude) at long lags t; a lattice must pass on both. Two properties of every lenslet image
+make it decisive:
 
 1. The micro-image borders (dark gaps, the vignetting edge of each micro-image) sit on the same
    lattice over the whole frame, so A has equal peaks at every lattice vector, as far as the

@@ -13,8 +13,8 @@ with ``a = angle_rad`` measured from +x towards +y. ``centres_xy`` optionally ho
 centre of each lens (the real array is not a perfect lattice), with its ``indices`` (i, j).
 ``lens_type_of_coset`` (multi-focus arrays) gives the type of lens (i, j) as
 ``lens_type_of_coset[(i - j) % 3]``: the three lens types of a hex array each fill one coset of
-the index-3 sub-lattice. ``sensor_origin`` is the (row, col) of pixel (0, 0) in full-sensor coordinates, so a grid
-calibrated on one crop can be used on another.
+the index-3 sub-lattice. ``sensor_origin`` is the (row, col) of pixel (0, 0) in full-sensor
+coordinates, so a grid calibrated on one crop can be used on another.
 """
 
 from __future__ import annotations

@@ -54,7 +54,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     (RayCalibData) and ``preview`` (PNG with the centres drawn). ``start`` (YAML or XML) is a
     grid to refine instead of searching. Returns the report dict."""
     if xml and lattice == "square":
-        raise InputError("--xml writes a Raytrix (hexagonal) calibration; use --lattice hex or auto")
+        raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
+                         "use --lattice hex or auto")
     image, cfa, black, meta = load_image(input)
     other = gridfile.read_grid(compare, image_shape=image.shape) if compare else None
     first = gridfile.read_grid(start, image_shape=image.shape) if start else None
