@@ -92,6 +92,13 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
         acf = view_for(lat, all_views).acf
         refined, c = refine(lat, acf)
         scored.append((refined, c))
+    # the leader's relatives are tested at its exact multiples: measure it precisely first
+    scored.sort(key=lambda t: -t[1])
+    precise = border_lattice(scored[0][0], all_views)
+    if np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(scored[0][0], rel=0.02,
+                                                                     angle=0.02):
+        lat = precise.lattice
+        scored[0] = (lat, view_for(lat, all_views).acf.contrast(lat))
     verdict = judge(scored, lambda lat: view_for(lat, all_views).acf)
     control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
     return replace(verdict, control=control)

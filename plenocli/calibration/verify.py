@@ -91,21 +91,21 @@ class Autocorrelation:
             worst = min(worst, float(min(point_means) - values[1:].mean(axis=1).max()) / spread)
         return worst
 
-    def between(self, coarse: Lattice, fine: Lattice) -> float:
+    def between(self, coarse: Lattice, fine: Lattice) -> np.ndarray:
         """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
         look like lattice points: about 1 when ``fine`` is the lens lattice (they are lenses),
         about 0 or below when ``coarse`` is (they are its holes). (mean A there - mean A at the
-        holes of ``fine``) / (mean A at the shared points - the same), averaged over the
-        signals (the intensity sees a lens as bright and a hole as dark; the border signal
-        sees both as edges, but a lens of another type of a multi-focus array the same)."""
+        holes of ``fine``) / (mean A at the shared points - the same), one per signal (the
+        intensity sees a lens as bright and a hole as dark; the border signal sees both as
+        edges, but a lens of another type of a multi-focus array as a lens)."""
         lags = self._lags(fine, 3.0, None)
         if lags is None:
-            return float("nan")
+            return np.full(len(self.acfs), np.nan)
         pts = lags[0]
         uv = pts @ np.linalg.inv(coarse.basis() / self.factor)
         shared = np.all(np.abs(uv - np.rint(uv)) < 0.05, axis=1)
         if shared.all() or not shared.any():
-            return float("nan")
+            return np.full(len(self.acfs), np.nan)
         b1, b2 = fine.basis() / self.factor
         holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
         shares = []
@@ -114,7 +114,7 @@ class Autocorrelation:
             at = self._sample(pts, acf)
             top = float(at[shared].mean()) - base
             shares.append((float(at[~shared].mean()) - base) / top if top > 0 else np.nan)
-        return float(np.mean(shares))
+        return np.asarray(shares)
 
     def peak_lags(self, lattice: Lattice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Sub-pixel positions (px of the full image) of the autocorrelation peaks at the far
@@ -231,44 +231,50 @@ def control_contrast(lattice: Lattice, acf: Autocorrelation) -> float:
     return max(0.0, *(acf.contrast(c) for c in copies))
 
 
-def sub_lattice_pair(best: Lattice, other: Lattice) -> tuple[Lattice, Lattice] | None:
-    """(coarse, fine) when ``other`` is near a sub- or super-lattice of ``best`` (x2, /2,
-    x sqrt(3) or sqrt(2) turned, and back), with that relative taken exactly from ``best``;
-    else None."""
-    for relative in best.relatives()[:4]:
-        if other.same_as(relative, rel=0.02, angle=0.02):
-            return (relative, best) if relative.pitch_px > best.pitch_px else (best, relative)
+def settle(coarse: Lattice, fine: Lattice, acf: Autocorrelation) -> Lattice | None:
+    """Which of a lattice and its sub-lattice is the lens lattice, by ``between`` on each
+    signal: the fine one when their mean share is above 2/3 and none is below 1/3, the
+    coarse one when the mean is below 1/3 and none is above 2/3, else None (a scene periodic
+    on a relative of the lattice can make the signals disagree: then nobody can tell)."""
+    shares = acf.between(coarse, fine)
+    if not np.all(np.isfinite(shares)):
+        return None
+    mean = float(np.mean(shares))
+    if mean > 2 / 3 and min(shares) > 1 / 3:
+        return fine
+    if mean < 1 / 3 and max(shares) < 2 / 3:
+        return coarse
     return None
 
 
 def judge(scored: list[tuple[Lattice, float]], acf_for) -> Verdict:
-    """The winner of refined, scored hypotheses and its unrelated rivals. A hypothesis that is a
-    sub- or super-lattice of the leader is settled by ``Autocorrelation.between`` (are the
-    points they do not share lenses or holes?), not by comparing contrasts; one that stays in
-    between is kept as a rival that cannot be ruled out."""
+    """The winner of refined, scored hypotheses, checked against each of its sub- and
+    super-lattices with ``settle`` (not by comparing contrasts), and its unrelated rivals."""
     ranked = [t for t in sorted(scored, key=lambda t: -t[1]) if np.isfinite(t[1])]
     if not ranked:
         return Verdict(scored[0][0], -np.inf)
     best, contrast = ranked[0]
-    rivals: list[tuple[Lattice, float]] = []
     undecided: list[tuple[Lattice, float]] = []
+    for _ in range(3):
+        moved = False
+        undecided = []
+        for relative in best.relatives()[:4]:
+            coarse, fine = (relative, best) if relative.pitch_px > best.pitch_px \
+                else (best, relative)
+            acf = acf_for(fine)
+            truth = settle(coarse, fine, acf)
+            if truth is None:
+                undecided.append((relative, acf_for(relative).contrast(relative)))
+            elif truth is relative:
+                best, contrast, moved = relative, acf_for(relative).contrast(relative), True
+                break
+        if not moved:
+            break
+    rivals = []
     for lat, c in ranked[1:]:
-        if lat.same_as(best) or any(lat.same_as(r) for r, _ in rivals + undecided):
-            continue
-        pair = sub_lattice_pair(best, lat)
-        if pair is None:
+        known = [best, *best.relatives()[:4], *(r for r, _ in rivals)]
+        if not any(lat.same_as(k, rel=0.02, angle=0.02) for k in known):
             rivals.append((lat, c))
-            continue
-        coarse, fine = pair
-        share = acf_for(fine).between(coarse, fine)
-        if not np.isfinite(share):
-            continue
-        truth = fine if share > 2 / 3 else coarse if share < 1 / 3 else None
-        if truth is None:
-            undecided.append((lat, c))
-        elif truth is lat and c > 0:
-            best, contrast = lat, c   # the leader was a relative of the lens lattice
-    rivals = [(lat, c) for lat, c in rivals if not lat.same_as(best)]
     return Verdict(best, contrast, tuple(undecided + rivals)[:3], 0.0,
                    undecided=bool(undecided))
 
