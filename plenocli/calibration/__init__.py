@@ -28,7 +28,14 @@ import numpy as np
 
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.centres import mean_micro_image, refine_centres, symmetry_centre
-from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice, phase_offset
+from plenocli.calibration.fit import (
+    LatticeFit,
+    brightest_offset,
+    compare_grids,
+    fit_grid,
+    fit_lattice,
+    phase_offset,
+)
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.lenstypes import classify
 from plenocli.calibration.search import border_lattice, find_lattice, hypotheses, view_for, views
@@ -110,6 +117,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
                          image_shape=image.shape)
         guess = LensGrid(found.pitch_px, found.angle_rad, phase_offset(flat, guess), found.kind,
                          image_shape=image.shape)
+        guess = LensGrid(found.pitch_px, found.angle_rad, brightest_offset(flat, guess),
+                         found.kind, image_shape=image.shape)
     else:
         guess = start
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)

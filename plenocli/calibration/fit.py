@@ -214,6 +214,27 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
                     indices=idx_out), report
 
 
+def brightest_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
+    """The offset among the lattice's own and its holes' (the triangle centres of a hex
+    lattice, the cell centre of a square one) whose positions are brightest on average over
+    the frame: every micro-image is brightest at its centre (vignetting), Keplerian or
+    Galilean, while holes and gaps are point-symmetric too and would hold a symmetry fit."""
+    b1, b2 = grid.basis()
+    shifts = [np.zeros(2), (b1 + b2) / 3, 2 * (b1 + b2) / 3] if grid.lattice == "hex" \
+        else [np.zeros(2), (b1 + b2) / 2]
+    _, centres = grid.lens_centres()
+    rows, cols = flat.shape
+    best, where = -np.inf, np.asarray(grid.offset_xy)
+    for shift in shifts:
+        xy = np.rint(centres + shift).astype(np.int64)
+        inside = (xy[:, 0] >= 0) & (xy[:, 0] < cols) & (xy[:, 1] >= 0) & (xy[:, 1] < rows)
+        level = float(np.mean(flat[xy[inside, 1], xy[inside, 0]]))
+        if level > best:
+            best, where = level, np.asarray(grid.offset_xy) + shift
+    return float(where[0]), float(where[1])
+
+
+
 def _robust_fit(idx, centres, refined, grid):
     """Least-squares lattice through the refined centres, dropping those beyond 4 robust
     sigma (at most four rounds); the grid re-indexed about the image centre, the lenses used

@@ -16,7 +16,8 @@ SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in
 
 @dataclass(frozen=True)
 class LensTypes:
-    """Type (0 = sharpest in this frame) of every lens, and the mean sharpness per type."""
+    """Type (0 = sharpest in this frame) of every lens, the median sharpness of each type
+    relative to its neighbours, and the ANOVA p-value of the difference."""
 
     types: np.ndarray          # (K,) int8
     sharpness: tuple[float, float, float]
@@ -39,13 +40,32 @@ def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np
     return mean[r, c]
 
 
+def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """log sharpness of each lens minus the mean over its six neighbours (which are of the two
+    other types), for the lenses whose neighbours are all present: the scene's own detail
+    varies over the frame far more than between neighbours, and cancels. Returns (which lenses,
+    values)."""
+    log_s = np.log(np.maximum(sharpness, 1e-12))
+    lookup = {key: k for k, key in enumerate(map(tuple, indices.tolist()))}
+    steps = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1))
+    rows, values = [], []
+    for k, (i, j) in enumerate(indices.tolist()):
+        near = [lookup.get((i + di, j + dj)) for di, dj in steps]
+        if None in near:
+            continue
+        rows.append(k)
+        values.append(log_s[k] - float(np.mean(log_s[near])))
+    return np.asarray(rows, np.int64), np.asarray(values)
+
+
 def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
              pitch_px: float) -> LensTypes | None:
     """The lens types of a hex array, or None when the three cosets do not differ (a
     single-focus array, or a frame without detail)."""
     sharp = lens_sharpness(flat, centres, pitch_px)
+    rows, local = local_contrast(indices, sharp)
     coset = (indices[:, 0] - indices[:, 1]) % 3
-    groups = [sharp[coset == k] for k in range(3)]
+    groups = [local[coset[rows] == k] for k in range(3)]
     if min(len(g) for g in groups) < 10:
         return None
     p_value = float(stats.f_oneway(*groups).pvalue)
@@ -55,5 +75,5 @@ def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
     rank = np.argsort(-means)                 # coset of type 0, 1, 2
     type_of_coset = np.empty(3, np.int8)
     type_of_coset[rank] = np.arange(3)
-    return LensTypes(types=type_of_coset[coset], sharpness=tuple(float(v) for v in means[rank]),
-                     p_value=p_value)
+    return LensTypes(types=type_of_coset[coset],
+                     sharpness=tuple(float(np.exp(v)) for v in means[rank]), p_value=p_value)
