@@ -101,6 +101,9 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     else:
         verdict = _start_verdict(start, all_views)
     reason = doubt(verdict)
+    if reason and start is not None:
+        raise CalibrationError(f"the start grid ({verdict.lattice.describe()}) does not fit this "
+                               f"image: {reason}; check the --start file or calibrate without it")
     if reason:
         raise CalibrationError(f"{reason}; {WHAT_TO_DO}")
     found = verdict.lattice

@@ -108,6 +108,15 @@ def lattices_of_peak(g: np.ndarray, factor: float = 1.0) -> list[Lattice]:
     return [lat for f in first for lat in [f, *f.relatives()]]
 
 
+def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
+    """The hex and square lattices with the nearest-neighbour vector ``lag`` (px of an image
+    decimated by ``factor``), in pixels of the full image, with their relatives."""
+    pitch = factor * float(np.hypot(*lag))
+    angle = float(np.arctan2(lag[1], lag[0]))
+    first = [Lattice("hex", pitch, angle), Lattice("square", pitch, angle)]
+    return [lat for f in first for lat in [f, *f.relatives()]]
+
+
 def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarray:
     """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
     are a minority of each ring and do not inflate it."""

@@ -9,7 +9,12 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from plenocli.calibration.candidates import Lattice, lattices_of_peak, spectral_peaks
+from plenocli.calibration.candidates import (
+    Lattice,
+    lattices_of_lag,
+    lattices_of_peak,
+    spectral_peaks,
+)
 from plenocli.calibration.fit import lattice_from_lags
 from plenocli.calibration.flatten import border_signal, decimate, flatten
 from plenocli.calibration.verify import Autocorrelation, Verdict, control_contrast, judge, refine
@@ -69,12 +74,29 @@ def hypotheses(all_views: dict[int, View], *, cfa: bool, pitch_hint: float | Non
         lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
     out: list[Lattice] = []
     for view in all_views.values():
-        for signal in (view.flat, view.border):
-            for g in spectral_peaks(signal, cfa=cfa and view.factor == 1):
-                for lat in lattices_of_peak(g, view.factor):
-                    if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
-                        out.append(lat)
+        found = [lat for signal in (view.flat, view.border)
+                 for g in spectral_peaks(signal, cfa=cfa and view.factor == 1)
+                 for lat in lattices_of_peak(g, view.factor)]
+        found += [lat for v in acf_peaks(view.acf.acf) for lat in lattices_of_lag(v, view.factor)]
+        for lat in found:
+            if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
+                out.append(lat)
     return out
+
+
+def acf_peaks(acf: np.ndarray, *, count: int = 6) -> list[np.ndarray]:
+    """The strongest local maxima (x, y) of an autocorrelation at lags of 4-24 px (half
+    plane): nearest-neighbour vectors of the lattice when the spectrum is crowded by scene
+    peaks."""
+    cy, cx = acf.shape[0] // 2, acf.shape[1] // 2
+    win = acf[cy - 25:cy + 26, cx - 25:cx + 26]
+    local = cv2.dilate(win, np.ones((5, 5), np.uint8))
+    dy, dx = np.mgrid[-25:26, -25:26]
+    lag = np.hypot(dx, dy)
+    keep = (win >= local) & (lag >= 4) & (lag <= 24) & ((dy > 0) | ((dy == 0) & (dx > 0)))
+    order = np.argsort(-win[keep])[:count]
+    return [np.array([x, y], float) for x, y in zip(dx[keep][order], dy[keep][order],
+                                                    strict=True)]
 
 
 def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
@@ -92,14 +114,23 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
         acf = view_for(lat, all_views).acf
         refined, c = refine(lat, acf)
         scored.append((refined, c))
-    # the leader's relatives are tested at its exact multiples: measure it precisely first
-    scored.sort(key=lambda t: -t[1])
-    precise = border_lattice(scored[0][0], all_views)
-    if np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(scored[0][0], rel=0.02,
-                                                                     angle=0.02):
-        lat = precise.lattice
-        scored[0] = (lat, view_for(lat, all_views).acf.contrast(lat))
+    # relatives are tested at exact multiples: measure every hypothesis precisely first
+    for k, (lat, _) in enumerate(scored):
+        precise = border_lattice(lat, all_views)
+        if np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(lat, rel=0.02,
+                                                                         angle=0.02):
+            scored[k] = (precise.lattice,
+                         view_for(precise.lattice, all_views).acf.contrast(precise.lattice))
     verdict = judge(scored, lambda lat: view_for(lat, all_views).acf)
+    for _ in range(2):   # a winner reached through a relative is measured and judged again
+        precise = border_lattice(verdict.lattice, all_views)
+        if not (np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(
+                verdict.lattice, rel=0.02, angle=0.02)) or precise.lattice.same_as(
+                verdict.lattice, rel=1e-4, angle=1e-4):
+            break
+        lat = precise.lattice
+        leader = (lat, view_for(lat, all_views).acf.contrast(lat))
+        verdict = judge(scored, lambda lat: view_for(lat, all_views).acf, leader=leader)
     control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
     return replace(verdict, control=control)
 

@@ -247,33 +247,61 @@ def settle(coarse: Lattice, fine: Lattice, acf: Autocorrelation) -> Lattice | No
     return None
 
 
-def judge(scored: list[tuple[Lattice, float]], acf_for) -> Verdict:
-    """The winner of refined, scored hypotheses, checked against each of its sub- and
-    super-lattices with ``settle`` (not by comparing contrasts), and its unrelated rivals."""
+def nested(best: Lattice, other: Lattice) -> tuple[Lattice, Lattice] | None:
+    """(coarse, fine) when one lattice is (nearly) a sub-lattice of the other, of any index,
+    with ``other`` replaced by the exact lattice that ``best`` implies; else None."""
+    if other.kind != best.kind:
+        return None
+    for coarse_is_best in (False, True):
+        big, small = (best, other) if coarse_is_best else (other, best)
+        ratio = big.basis() @ np.linalg.inv(small.basis())
+        whole = np.rint(ratio)
+        if np.abs(ratio - whole).max() > 0.05 or abs(round(np.linalg.det(whole))) < 2:
+            continue
+        if coarse_is_best:     # other is finer: its basis from best's
+            vec = (np.linalg.inv(whole) @ best.basis())[0]
+            exact = Lattice(best.kind, float(np.hypot(*vec)), float(np.arctan2(vec[1], vec[0])))
+            return best, exact
+        vec = (whole @ best.basis())[0]
+        return Lattice(best.kind, float(np.hypot(*vec)), float(np.arctan2(vec[1], vec[0]))), best
+    return None
+
+
+def judge(scored: list[tuple[Lattice, float]], acf_for,
+          leader: tuple[Lattice, float] | None = None) -> Verdict:
+    """The winner of refined, scored hypotheses, checked against every hypothesis nested with
+    it (a sub- or super-lattice of any index, and always its x2, /2, x sqrt(3) (sqrt(2))
+    relatives) with ``settle`` rather than by contrast, and its unrelated rivals. ``leader``
+    starts the checks instead of the highest contrast (a winner measured again)."""
     ranked = [t for t in sorted(scored, key=lambda t: -t[1]) if np.isfinite(t[1])]
+    if leader is not None:
+        ranked = [leader, *(t for t in ranked if not t[0].same_as(leader[0]))]
     if not ranked:
         return Verdict(scored[0][0], -np.inf)
     best, contrast = ranked[0]
     undecided: list[tuple[Lattice, float]] = []
-    for _ in range(3):
-        moved = False
-        undecided = []
-        for relative in best.relatives()[:4]:
-            coarse, fine = (relative, best) if relative.pitch_px > best.pitch_px \
-                else (best, relative)
-            acf = acf_for(fine)
-            truth = settle(coarse, fine, acf)
+    for _ in range(4):
+        moved, undecided = False, []
+        others = [*best.relatives()[:4], *(lat for lat, _ in ranked[1:])]
+        for lat in others:
+            pair = None if lat.same_as(best) else nested(best, lat)
+            if pair is None:
+                continue
+            other = pair[0] if pair[1] is best else pair[1]
+            if any(other.same_as(u) for u, _ in undecided):
+                continue
+            truth = settle(*pair, acf_for(pair[1]))
             if truth is None:
-                undecided.append((relative, acf_for(relative).contrast(relative)))
-            elif truth is relative:
-                best, contrast, moved = relative, acf_for(relative).contrast(relative), True
+                undecided.append((other, acf_for(other).contrast(other)))
+            elif truth is other:
+                best, contrast, moved = other, acf_for(other).contrast(other), True
                 break
         if not moved:
             break
-    rivals = []
+    rivals: list[tuple[Lattice, float]] = []
     for lat, c in ranked[1:]:
-        known = [best, *best.relatives()[:4], *(r for r, _ in rivals)]
-        if not any(lat.same_as(k, rel=0.02, angle=0.02) for k in known):
+        if nested(best, lat) is None and not lat.same_as(best) and \
+                not any(lat.same_as(r) for r, _ in rivals):
             rivals.append((lat, c))
     return Verdict(best, contrast, tuple(undecided + rivals)[:3], 0.0,
                    undecided=bool(undecided))
