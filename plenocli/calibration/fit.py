@@ -49,6 +49,8 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
     pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
     if not return_se:
         return pitch, angle, (float(ox), float(oy))
+    if not pitch > 0:
+        return pitch, angle, (float(ox), float(oy)), (np.inf, np.inf)
     # standard errors from the normal equations: pitch along (u, v), angle across it
     dof = max(len(b) - 4, 1)
     cov = np.linalg.pinv(a.T @ a) * float(np.sum((a @ sol - b) ** 2)) / dof

@@ -106,33 +106,36 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
     first = [(lat, view_for(lat, all_views).acf.contrast(lat, near=1.5, far=6.0))
              for lat in hyps]
     first.sort(key=lambda t: -t[1])
-    chosen = [lat for lat, _ in first[:REFINED]]
+    chosen: list[Lattice] = []
+    for lat, _ in first:   # one per neighbourhood: a scene repetition comes in many variants
+        if len(chosen) < REFINED and not any(lat.same_as(c, rel=0.06, angle=0.06)
+                                             for c in chosen):
+            chosen.append(lat)
     for kind in ("hex", "square"):   # the best of each kind, to say which kind fits
         chosen += [lat for lat, _ in first if lat.kind == kind and lat not in chosen][:1]
-    scored = []
-    for lat in chosen:
-        acf = view_for(lat, all_views).acf
-        refined, c = refine(lat, acf)
-        scored.append((refined, c))
-    # relatives are tested at exact multiples: measure every hypothesis precisely first
-    for k, (lat, _) in enumerate(scored):
-        precise = border_lattice(lat, all_views)
-        if np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(lat, rel=0.02,
-                                                                         angle=0.02):
-            scored[k] = (precise.lattice,
-                         view_for(precise.lattice, all_views).acf.contrast(precise.lattice))
-    verdict = judge(scored, lambda lat: view_for(lat, all_views).acf)
-    for _ in range(2):   # a winner reached through a relative is measured and judged again
-        precise = border_lattice(verdict.lattice, all_views)
-        if not (np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(
-                verdict.lattice, rel=0.02, angle=0.02)) or precise.lattice.same_as(
-                verdict.lattice, rel=1e-4, angle=1e-4):
+    acf_for = lambda lat: view_for(lat, all_views).acf   # noqa: E731
+    scored = [_measured(*refine(lat, acf_for(lat)), all_views) for lat in chosen]
+    verdict = judge(scored, acf_for)
+    for _ in range(3):   # a winner reached through a relative is measured and judged again
+        lat, c = _measured(verdict.lattice, verdict.contrast, all_views)
+        if lat.same_as(verdict.lattice, rel=2e-4, angle=2e-4):
             break
-        lat = precise.lattice
-        leader = (lat, view_for(lat, all_views).acf.contrast(lat))
-        verdict = judge(scored, lambda lat: view_for(lat, all_views).acf, leader=leader)
+        verdict = judge(scored, acf_for, leader=(lat, c))
+    else:   # the far border peaks do not hold still on the winner: no stable lattice
+        verdict = replace(verdict, undecided=True)
     control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
     return replace(verdict, control=control)
+
+
+def _measured(lattice: Lattice, contrast: float, all_views) -> tuple[Lattice, float]:
+    """The hypothesis moved onto its far border-autocorrelation peaks (relatives are then
+    tested at exact multiples), with its contrast there; unchanged when the peaks do not
+    support it (no peaks, or more than 3 % away)."""
+    precise = border_lattice(lattice, all_views)
+    if not (np.isfinite(precise.pitch_err_px)
+            and precise.lattice.same_as(lattice, rel=0.03, angle=0.03)):
+        return lattice, contrast
+    return precise.lattice, view_for(precise.lattice, all_views).acf.contrast(precise.lattice)
 
 
 @dataclass(frozen=True)
@@ -157,7 +160,11 @@ def border_lattice(lattice: Lattice, all_views: dict[int, View]) -> BorderLattic
             lags, idx, height = acf.peak_lags(current)
             if len(lags) < 6:
                 return BorderLattice(lattice, np.inf, np.inf)
+            if not height.sum() > 0:
+                return BorderLattice(lattice, np.inf, np.inf)
             pitch, angle, se = lattice_from_lags(lags, idx, height, lattice=lattice.kind)
+            if not pitch > 0:
+                return BorderLattice(lattice, np.inf, np.inf)
             current = Lattice(lattice.kind, pitch, angle)
         ends.append((current, se))
     (a, se_a), (b, se_b) = ends
