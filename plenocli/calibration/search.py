@@ -107,12 +107,15 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
              for lat in hyps]
     first.sort(key=lambda t: -t[1])
     chosen: list[Lattice] = []
-    for lat, _ in first:   # one per neighbourhood: a scene repetition comes in many variants
-        if len(chosen) < REFINED and not any(lat.same_as(c, rel=0.06, angle=0.06)
+    for lat, c in first:   # one per neighbourhood: a scene repetition comes in many variants
+        if c > 0 and len(chosen) < REFINED and not any(lat.same_as(c, rel=0.06, angle=0.06)
                                              for c in chosen):
             chosen.append(lat)
     for kind in ("hex", "square"):   # the best of each kind, to say which kind fits
-        chosen += [lat for lat, _ in first if lat.kind == kind and lat not in chosen][:1]
+        chosen += [lat for lat, c in first
+                   if c > 0 and lat.kind == kind and lat not in chosen][:1]
+    if not chosen:   # no hypothesis has its points above its holes even over near lags
+        return Verdict(first[0][0], first[0][1])
     acf_for = lambda lat: view_for(lat, all_views).acf   # noqa: E731
     scored = [_measured(*refine(lat, acf_for(lat)), all_views) for lat in chosen]
     verdict = judge(scored, acf_for)

@@ -51,8 +51,11 @@ class Autocorrelation:
     def __init__(self, signals: tuple[np.ndarray, ...], factor: int):
         rows, cols = signals[0].shape
         shape = (2 * rows, 2 * cols)   # zero padding: no wrap-around
-        ones = scipy.fft.rfft2(np.ones((rows, cols), np.float32), s=shape, workers=-1)
-        overlap = np.maximum(scipy.fft.irfft2(np.abs(ones) ** 2, s=shape, workers=-1), 1.0)
+        # pixels a shift (dy, dx) keeps inside the crop, in the FFT's wrapped lag order
+        lag_r = np.minimum(np.arange(shape[0]), shape[0] - np.arange(shape[0]))
+        lag_c = np.minimum(np.arange(shape[1]), shape[1] - np.arange(shape[1]))
+        overlap = np.maximum(np.outer(np.maximum(rows - lag_r, 0), np.maximum(cols - lag_c, 0)),
+                             1.0).astype(np.float32)
         self.acfs = []
         for signal in signals:
             data = signal - np.float32(signal.mean())
