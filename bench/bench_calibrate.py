@@ -1,9 +1,14 @@
-"""Benchmark: calibration of 2048 x 2048 and 6720 x 4480 synthetic white images (in memory), and
-the whole `plenocli calibrate` command with file reading. Prints times and peak memory."""
+"""Benchmark `plenocli calibrate`: a 2048 x 2048 synthetic white image in memory, a real scene
+frame through the whole command (file reading, YAML writing), and a 31 Mpx frame (a real frame
+upsampled). The machine-speed baseline, measured in the same run, is one numpy rfft2 of the same
+image; times are printed in seconds and as ratios to it. Peak memory (tracemalloc, in memory)
+is printed as a multiple of the float32 image.
+
+    .venv/bin/python bench/bench_calibrate.py [REALDATA_DIR]
+"""
 
 from __future__ import annotations
 
-import resource
 import subprocess
 import sys
 import tempfile
@@ -11,53 +16,76 @@ import time
 import tracemalloc
 from pathlib import Path
 
+import cv2
 import numpy as np
-import tifffile
-import yaml
 
-from plenocli import hexgrid
-from plenocli.io import gridfile
+from plenocli import calibration
 from plenocli.synth.whiteimage import white_image
 
 
+def _best_of(fn, repeat: int = 3) -> float:
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def _baseline(image: np.ndarray) -> float:
+    data = image.astype(np.float32)
+    return _best_of(lambda: np.fft.rfft2(data))
+
+
+def _in_memory(name: str, image: np.ndarray, target_s: float, repeat: int = 3) -> None:
+    base = _baseline(image)
+    took = _best_of(lambda: calibration.calibrate(image), repeat)
+    tracemalloc.start()
+    calibration.calibrate(image)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    ratio_mem = peak / (image.size * 4)
+    print(f"{name}: {took:.2f} s (target {target_s} s), {took / base:.0f} x rfft2 "
+          f"({base * 1e3:.0f} ms); peak memory {ratio_mem:.1f} x the float32 image (target 5)")
+
+
+def _command(name: str, path: Path, target_s: float, shape: tuple[int, int]) -> None:
+    frame = cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float32)
+    base = _baseline(frame.sum(-1) if frame.ndim == 3 else frame)
+    plenocli = Path(sys.executable).with_name("plenocli")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "grid.yaml"
+        t = time.perf_counter()
+        res = subprocess.run([str(plenocli), "calibrate", str(path), "-o", str(out)],
+                             capture_output=True, text=True)
+        took = time.perf_counter() - t
+    status = "ok" if res.returncode == 0 else f"exit {res.returncode}: {res.stderr.strip()}"
+    print(f"{name} ({shape[1]} x {shape[0]}), whole command: {took:.2f} s (target {target_s} s), "
+          f"{took / base:.0f} x rfft2 ({base * 1e3:.0f} ms); {status}")
+
+
 def main() -> None:
-    hexgrid.calibrate(white_image((256, 256), pitch_px=12.0, angle_rad=0.1,
-                                  offset_xy=(128, 128))[0])  # compile numba
-    for rows, cols, target in ((2048, 2048, 0.5), (4480, 6720, 1.5)):
-        image, _ = white_image((rows, cols), pitch_px=20.2, angle_rad=0.05,
-                               offset_xy=(cols / 2 + 0.3, rows / 2 + 0.6), cfa="RGGB", seed=1)
-        times = []
-        for _ in range(3):
-            t = time.perf_counter()
-            grid, _ = hexgrid.calibrate(image, cfa="RGGB", black_level=64)
-            times.append(time.perf_counter() - t)
-        best = min(times)
-        tracemalloc.start()
-        hexgrid.calibrate(image, cfa="RGGB", black_level=64)
-        peak_mb = tracemalloc.get_traced_memory()[1] / 1e6
-        tracemalloc.stop()
-        print(f"calibrate {cols}x{rows}: {best:.3f} s (target {target} s, ratio "
-              f"{best / target:.2f}), pitch {grid.pitch_px:.5f}; peak traced memory "
-              f"{peak_mb:.0f} MB = {peak_mb / (image.size * 4 / 1e6):.1f} x the float32 image")
+    realdata = Path(sys.argv[1] if len(sys.argv) > 1 else "../shared/realdata") / "raytrix"
+    warm, _ = white_image((256, 256), pitch_px=12.0, angle_rad=0.1, offset_xy=(128, 128))
+    calibration.calibrate(warm)   # compile (or load) the numba kernels
+    white, _ = white_image((2048, 2048), pitch_px=20.2, angle_rad=0.05,
+                           offset_xy=(1024.3, 1024.6), seed=1)
+    _in_memory("white 2048 x 2048 in memory", white.astype(np.float32) - 64, 0.3)
+    frames = {"origami 4 Mpx": realdata / "origami" / "frame0.png",
+              "boys2 12 Mpx": realdata / "boys2_galilean" / "frame0.png"}
+    for name, path in frames.items():
+        if path.exists():
+            shape = cv2.imread(str(path)).shape[:2]
+            _command(name, path, 3.0, shape)
+    origami = realdata / "origami" / "frame0.png"
+    if origami.exists():   # 31 Mpx: the real frame upsampled 2.75 x (pitch 63.8 px)
+        frame = cv2.imread(str(origami)).astype(np.float32).sum(-1)
+        big = cv2.resize(frame, None, fx=2.75, fy=2.75, interpolation=cv2.INTER_CUBIC)
         with tempfile.TemporaryDirectory() as tmp:
-            src = Path(tmp) / "white.tif"
-            tifffile.imwrite(src, image)
-            t = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "plenocli", "calibrate", str(src), "-o",
-                            str(Path(tmp) / "g.yaml"), "-q"], check=True)
-            print(f"  whole command with file reading: {time.perf_counter() - t:.2f} s")
-            gpath = Path(tmp) / "g.yaml"
-            t = time.perf_counter()
-            read = gridfile.read_grid(gpath)
-            fast = time.perf_counter() - t
-            t = time.perf_counter()
-            yaml.load(gpath.read_text(), Loader=gridfile._LOADER)
-            plain = time.perf_counter() - t
-            print(f"  read_grid of {len(read.centres_xy)} lenses: {fast:.3f} s (target 0.3 s); "
-                  f"whole file through libyaml {plain:.2f} s ({plain / fast:.0f} x)")
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    print(f"peak RSS of this process {peak:.0f} MB (dominated by the synthetic image "
-          f"generator; calibrate's own peak is the traced figure above); numpy {np.__version__}")
+            path = Path(tmp) / "big.png"
+            cv2.imwrite(str(path), np.clip(big / 3, 0, 255).astype(np.uint8))
+            _command("origami x 2.75 (31 Mpx)", path, 8.0, big.shape)
+        _in_memory("origami x 2.75 (31 Mpx) in memory", big, 8.0, repeat=1)
 
 
 if __name__ == "__main__":

@@ -24,14 +24,9 @@ NUMBA_KERNELS = {
 }
 
 # TEMPORARY (issue 14): files being rebuilt by other engineers, who will bring them under the
-# limits: plenocli/stitch.py (-> plenocli/stitch/ package), plenocli/hexgrid.py (->
-# plenocli/calibration/), the simulator in plenocli/synth/ (one prism model in plenocli/optics/,
-# synth modules returning arrays). Remove each entry when its rebuild lands.
-TEMPORARY_FILES = {
-    "plenocli/hexgrid.py",
-}
+# limits. Remove each entry when its rebuild lands.
+TEMPORARY_FILES: set[str] = set()
 TEMPORARY_FUNCTIONS = {
-    "plenocli/hexgrid.py:calibrate",
     "plenocli/synth/whiteimage.py:white_image",
 }
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from plenocli import hexgrid
+from plenocli import calibration
 from plenocli.errors import InputError
 from plenocli.io import gridfile, raytrix
 from plenocli.model.lensgrid import LensGrid
@@ -39,7 +39,7 @@ def test_malformed_xml_is_an_input_error(text):
 def test_grid_calib_grid_round_trip(angle):
     grid = LensGrid(23.2, angle, (1001.3, 1040.8), image_shape=(2048, 2000))
     back = raytrix.grid_from_calib(raytrix.calib_from_grid(grid), (2048, 2000))
-    same = hexgrid.compare_grids(grid, back, (2048, 2000))
+    same = calibration.compare_grids(grid, back, (2048, 2000))
     assert same["max_px"] < 1e-6
     assert back.pitch_px == pytest.approx(23.2)
 

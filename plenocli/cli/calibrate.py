@@ -3,13 +3,20 @@ import click
 from plenocli.cli import options
 
 
-@click.command(short_help="Calibrate the micro-lens grid from a white image.")
+@click.command(short_help="Calibrate the micro-lens grid from a white or scene image.")
 @options.input_arg
 @options.output_opt
-@click.option("--lattice", type=click.Choice(["hex", "square"]), default="hex",
-              show_default=True, help="Micro-lens lattice.")
+@click.option("--lattice", type=click.Choice(["auto", "hex", "square"]), default="auto",
+              show_default=True, help="Micro-lens lattice; auto finds the kind (a kind that "
+              "does not fit the image is refused).")
+@click.option("--pitch", type=options.FiniteFloat(min=4.0, max=200.0), default=None,
+              help="Approximate lens pitch in px (e.g. from the datasheet): only lattices "
+              "within 15 % are considered.")
+@click.option("--start", type=click.Path(dir_okay=False), default=None,
+              help="Refine this grid (plenocli YAML or Raytrix XML) instead of searching; the "
+              "report says how far the result moved.")
 @click.option("--xml", type=click.Path(dir_okay=False), default=None,
-              help="Also write the grid as Raytrix RayCalibData XML.")
+              help="Also write the grid as Raytrix RayCalibData XML (with lens types).")
 @click.option("--compare", type=click.Path(dir_okay=False), default=None,
               help="Report the distance to another grid (YAML or RayCalibData XML).")
 @options.preview_opt
@@ -17,15 +24,17 @@ from plenocli.cli import options
 def calibrate(**params):
     """Estimate pitch, rotation, offset and every micro-image centre of INPUT.
 
-    INPUT is a white image (frames TIFF from decode, or a plain TIFF/PNG/BMP; views are summed,
-    a Bayer mosaic is handled from the metadata). No pitch or rotation hint is needed (pitch
-    6-60 px, any rotation). A scene image works too (lattice only). The YAML holds the lattice,
-    every lens (i, j, x, y) and the residual report.
+    INPUT is a white image or a scene through the lens array (frames TIFF from decode, or a
+    plain TIFF/PNG/BMP; views are summed, a Bayer mosaic is handled from the metadata). No hint
+    is needed (hex or square, pitch 6-100 px, any rotation). When the lattice is not certain
+    (a rival lattice fits almost as well) the command stops and names the rivals: pass --pitch,
+    a white image, or --start. The YAML holds the lattice, every lens (i, j, x, y), the lens
+    types of a multi-focus array, the residuals and the confidence.
 
     \b
     Example:
       plenocli calibrate white.tif -o grid.yaml --xml grid.xml --preview grid.png
-      plenocli calibrate frame0.png -o grid.yaml --compare calib.xml
+      plenocli calibrate frame0.png -o grid.yaml --start calib.xml
     """
     from plenocli.pipeline.stages.calibrate import run
 

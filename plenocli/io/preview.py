@@ -153,3 +153,20 @@ def display_colour(camera: np.ndarray, colour: dict | None = None, *,
     out = np.clip(out / max(reference, 1e-12), 0.0, 1.0)
     out = np.where(out <= 0.0031308, 12.92 * out, 1.055 * np.power(out, 1 / 2.4) - 0.055)
     return np.round(255 * out).astype(np.uint8)
+
+
+def write_grid_overlay(path: str | os.PathLike, flat: np.ndarray, centres: np.ndarray,
+                       pitch_px: float, *, protect: tuple = ()) -> None:
+    """A flattened image (display-stretched, at most 2048 px) with every lens centre (K, 2)
+    (x, y) px drawn as a red dot: a wrong grid shows at a glance."""
+    grey = to_display(flat, gamma=1.0)
+    scale = min(1.0, 2048 / max(grey.shape))
+    if scale < 1:
+        grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    bgr = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+    shift = 4  # sub-pixel drawing
+    radius = max(1, int(pitch_px * scale / 8)) << shift
+    for x, y in np.asarray(centres) * scale:
+        cv2.circle(bgr, (int(round(x * (1 << shift))), int(round(y * (1 << shift)))), radius,
+                   (0, 0, 255), -1, cv2.LINE_AA, shift)
+    write_picture(path, bgr, protect=protect)

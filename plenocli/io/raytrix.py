@@ -252,8 +252,13 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     base_y = [float(b[1, 0]), float(-b[1, 1])]
     tpl = template or {}
     lens_types = [dict(lt) for lt in tpl.get("lens_types", DEFAULT_LENS_TYPES)]
+    cosets = grid.lens_type_of_coset   # types measured from the image, when known
     for lt in lens_types:  # Raytrix: type 1 sits at +base_x, type 2 at -base_x
         sign = {0: 0.0, 1: 1.0, 2: -1.0}.get(int(lt["id"]), 0.0)
+        if cosets is not None and int(lt["id"]) in cosets:
+            # lens (1, 0) is one coset on from lens (0, 0), lens (-1, 0) two
+            step = (cosets.index(int(lt["id"])) - cosets.index(0)) % 3
+            sign = {0: 0.0, 1: 1.0, 2: -1.0}[step]
         lt["offset"] = [sign * base_x[0], sign * base_x[1]]
     return {
         "version": tpl.get("version", "1.0"),

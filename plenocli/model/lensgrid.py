@@ -11,8 +11,10 @@ Lens (i, j) of the lattice sits at::
 
 with ``a = angle_rad`` measured from +x towards +y. ``centres_xy`` optionally holds the refined
 centre of each lens (the real array is not a perfect lattice), with its ``indices`` (i, j).
-``sensor_origin`` is the (row, col) of pixel (0, 0) in full-sensor coordinates, so a grid
-calibrated on one crop can be used on another.
+``lens_type_of_coset`` (multi-focus arrays) gives the type of lens (i, j) as
+``lens_type_of_coset[(i - j) % 3]``: the three lens types of a hex array each fill one coset of
+the index-3 sub-lattice. ``sensor_origin`` is the (row, col) of pixel (0, 0) in full-sensor
+coordinates, so a grid calibrated on one crop can be used on another.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ class LensGrid:
     sensor_origin: tuple[int, int] = (0, 0)
     centres_xy: np.ndarray | None = field(default=None, compare=False, repr=False)
     indices: np.ndarray | None = field(default=None, compare=False, repr=False)
+    lens_type_of_coset: tuple[int, int, int] | None = None
 
     def __post_init__(self):
         if self.lattice not in LATTICES:
@@ -59,6 +62,17 @@ class LensGrid:
             raise ValueError("centres_xy and indices go together")
         if self.centres_xy is not None:
             _check_centres(self.centres_xy, self.indices)
+        if self.lens_type_of_coset is not None and (
+                self.lattice != "hex" or sorted(self.lens_type_of_coset) != [0, 1, 2]):
+            raise ValueError("lens_type_of_coset needs a hex lattice and holds types 0, 1, 2, "
+                             f"got {self.lens_type_of_coset!r}")
+
+    def lens_types(self, i, j) -> np.ndarray | None:
+        """Type (0, 1, 2) of lenses (i, j) of a multi-focus array, or None."""
+        if self.lens_type_of_coset is None:
+            return None
+        coset = (np.asarray(i, np.int64) - np.asarray(j, np.int64)) % 3
+        return np.asarray(self.lens_type_of_coset, np.int64)[coset]
 
     def basis(self) -> np.ndarray:
         """(2, 2) array whose rows are the lattice vectors b1, b2 in pixels (x, y)."""
@@ -141,6 +155,8 @@ class LensGrid:
             "image_shape": list(self.image_shape) if self.image_shape else None,
             "sensor_origin": [int(v) for v in self.sensor_origin],
         }
+        if self.lens_type_of_coset is not None:
+            out["lens_type_of_coset"] = [int(v) for v in self.lens_type_of_coset]
         if self.centres_xy is not None:
             out["lenses"] = {
                 "count": int(len(self.centres_xy)),
@@ -166,7 +182,9 @@ class LensGrid:
                    lattice=data.get("lattice", "hex"),
                    image_shape=_whole("image_shape", shape) if shape else None,
                    sensor_origin=_whole("sensor_origin", data.get("sensor_origin", (0, 0))),
-                   centres_xy=centres, indices=indices)
+                   centres_xy=centres, indices=indices,
+                   lens_type_of_coset=tuple(int(v) for v in data["lens_type_of_coset"])
+                   if data.get("lens_type_of_coset") is not None else None)
 
 
 def _check_point(name: str, xy) -> None:

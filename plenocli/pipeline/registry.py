@@ -87,7 +87,7 @@ _TABLE = (
     Stage("decode", inputs=("input", "calib"), outputs=("output", "preview")),
     Stage("bias", inputs=("input",), outputs=("output", "preview")),
     Stage("flat", inputs=("input", "white", "gain"), outputs=("output", "save_gain", "preview")),
-    Stage("calibrate", inputs=("input", "compare"), outputs=("output", "xml", "preview")),
+    Stage("calibrate", inputs=("input", "compare", "start"), outputs=("output", "xml", "preview")),
     Stage("refocus", inputs=("input", "grid"), outputs=("output", "preview")),
     Stage("sai", inputs=("input", "grid"), outputs=("output", "preview")),
     Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview", "mixing_out")),

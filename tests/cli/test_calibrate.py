@@ -55,3 +55,46 @@ def test_corrupt_xml(tmp_path):
     bad.write_text("<RayCalibData><offset><x>1")
     res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--compare", str(bad)])
     assert res.exit_code == 1 and "malformed XML" in res.output and not out.exists()
+
+
+def test_lattice_kind_that_does_not_fit_is_refused(tmp_path):
+    image, _ = white_image((512, 512), pitch_px=15.3, angle_rad=0.2, offset_xy=(250.3, 260.1),
+                           lattice="square", seed=2)
+    src, out = tmp_path / "white.tif", tmp_path / "g.yaml"
+    tifffile.imwrite(src, image)
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--lattice", "hex"])
+    assert res.exit_code == 1 and "square" in res.output and not out.exists()
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert yaml.safe_load(out.read_text())["lens_grid"]["lattice"] == "square"
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "2", "300"])
+def test_pitch_option_refuses_bad_values(tmp_path, value):
+    res = CliRunner().invoke(cli, ["calibrate", str(tmp_path / "x.tif"), "-o",
+                                   str(tmp_path / "g.yaml"), "--pitch", value])
+    assert res.exit_code == 2
+
+
+def test_start_and_lens_types_in_yaml_and_xml(tmp_path):
+    from plenocli.io import raytrix
+    from plenocli.model.lensgrid import LensGrid
+    from plenocli.synth.lenslet import lenslet_scene
+
+    image, truth = lenslet_scene((840, 840), pitch_px=35.0, angle_rad=0.3, multi_focus=True,
+                                 seed=3)
+    src = tmp_path / "scene.tif"
+    tifffile.imwrite(src, image)
+    off = np.asarray(truth["offset_xy"]) + (0.8, -0.6)
+    start = LensGrid(35.0, 0.3, tuple(off), image_shape=(840, 840))
+    xml_in, out, xml = tmp_path / "start.xml", tmp_path / "g.yaml", tmp_path / "g.xml"
+    raytrix.write_calib(xml_in, raytrix.calib_from_grid(start))
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--start",
+                                   str(xml_in), "--xml", str(xml)])
+    assert res.exit_code == 0, res.output
+    doc = yaml.safe_load(out.read_text())
+    assert doc["moved_from_start"]["rms_px"] > 0.5
+    assert sorted(doc["lens_grid"]["lens_type_of_coset"]) == [0, 1, 2]
+    assert doc["residuals"]["confidence"]["contrast"] > 0
+    types = {lt["id"]: lt["offset"] for lt in raytrix.read_calib(xml)["lens_types"]}
+    assert types[0] == [0.0, 0.0] and types[1] == [-v for v in types[2]]

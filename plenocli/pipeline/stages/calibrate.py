@@ -6,9 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocli import hexgrid
-from plenocli.errors import InputError
+from plenocli import calibration
+from plenocli.errors import CalibrationError, InputError
 from plenocli.io import gridfile, raytrix, tiffio
+from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
@@ -46,63 +47,54 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
     return image, cfa, black, meta
 
 
-def run(input: str, output: str, *, lattice: str = "hex", xml: str | None = None,
-        preview: str | None = None, compare: str | None = None) -> dict:
+def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None = None,
+        start: str | None = None, xml: str | None = None, compare: str | None = None,
+        preview: str | None = None) -> dict:
     """Calibrate the lens grid of ``input``; write ``output`` (YAML), optionally ``xml``
-    (RayCalibData) and ``preview`` (PNG with the centres drawn). Returns the report dict."""
+    (RayCalibData) and ``preview`` (PNG with the centres drawn). ``start`` (YAML or XML) is a
+    grid to refine instead of searching. Returns the report dict."""
+    if xml and lattice == "square":
+        raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
+                         "use --lattice hex or auto")
     image, cfa, black, meta = load_image(input)
     other = gridfile.read_grid(compare, image_shape=image.shape) if compare else None
-    grid, report = hexgrid.calibrate(image, lattice=lattice, cfa=cfa, black_level=black)
+    first = gridfile.read_grid(start, image_shape=image.shape) if start else None
+    try:
+        grid, report = calibration.calibrate(image, lattice=lattice, cfa=cfa, black_level=black,
+                                             pitch_hint=pitch, start=first)
+    except ValueError as err:
+        raise InputError(f"{input}: {err}") from err
+    if xml and grid.lattice != "hex":
+        raise CalibrationError(f"{input}: the array is square; --xml writes hexagonal Raytrix "
+                               "calibrations only, drop --xml")
     extra: dict = {"residuals": report.to_dict()}
+    if first is not None:
+        extra["moved_from_start"] = {"grid": str(start),
+                                     **calibration.compare_grids(grid, first, image.shape)}
     if other is not None:
         extra["compare"] = {"grid": str(compare),
-                            **hexgrid.compare_grids(grid, other, image.shape)}
-    params = dict(lattice=lattice, xml=xml, preview=preview, compare=compare)
-    record = stage_record("calibrate", params, {"input": input, "compare": compare})
-    protect = tuple(p for p in (input, compare) if p)
+                            **calibration.compare_grids(grid, other, image.shape)}
+    params = dict(lattice=lattice, pitch=pitch, start=start, xml=xml, preview=preview,
+                  compare=compare)
+    record = stage_record("calibrate", params, {"input": input, "compare": compare,
+                                                "start": start})
+    protect = tuple(p for p in (input, compare, start) if p)
     gridfile.write_grid(output, grid, record, extra=extra, protect=protect)
     if xml:
-        template = meta.get("raytrix_calib")
-        if lattice != "hex":
-            raise InputError("--xml writes a Raytrix (hexagonal) calibration; use --lattice hex")
-        raytrix.write_calib(xml, raytrix.calib_from_grid(grid, template=template),
+        raytrix.write_calib(xml, raytrix.calib_from_grid(grid, template=meta.get("raytrix_calib")),
                             protect=protect)
     if preview:
-        write_preview(preview, image, grid, cfa=cfa, protect=protect)
+        flat = calibration.flatten(image, cfa=cfa, scale_px=max(grid.pitch_px, 8.0))
+        write_grid_overlay(preview, flat, grid.lens_centres()[1], grid.pitch_px,
+                           protect=protect)
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
-             "%d lenses, residual RMS %.4f px, max %.4f px", shown(input), shown(output), lattice,
-             grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy, report.lenses_total,
-             report.residual_rms_px, report.residual_max_px)
-    if other is not None:
-        c = extra["compare"]
-        log.info("compare with %s: RMS %.4f px, max %.4f px over %d lenses, mean shift "
-                 "(%.3f, %.3f) px", compare, c["rms_px"], c["max_px"], c["lenses"],
-                 *c["mean_shift_xy"])
+             "%d lenses, residual RMS %.4f px, contrast %.3f", shown(input), shown(output),
+             grid.lattice, grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy,
+             report.fit.lenses_total, report.fit.residual_rms_px, report.verdict.contrast)
+    for key in ("moved_from_start", "compare"):
+        if key in extra:
+            c = extra[key]
+            log.info("%s %s: RMS %.4f px, max %.4f px over %d lenses, mean shift (%.3f, %.3f) px",
+                     key.replace("_", " "), c["grid"], c["rms_px"], c["max_px"], c["lenses"],
+                     *c["mean_shift_xy"])
     return extra
-
-
-def write_preview(path: str, image: np.ndarray, grid, *, cfa: str | None,
-                  protect: tuple = ()) -> None:
-    """The image (display-stretched) with every lens centre drawn as a red dot."""
-    import cv2
-
-    from plenocli.io.atomic import atomic_path
-    from plenocli.io.preview import to_display
-
-    flat = hexgrid.flatten(image, cfa=cfa, scale_px=max(grid.pitch_px, 8.0))
-    grey = to_display(flat, gamma=1.0)
-    scale = min(1.0, 2048 / max(grey.shape))
-    if scale < 1:
-        grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
-    bgr = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
-    _, centres = grid.lens_centres()
-    shift = 4  # sub-pixel drawing
-    for x, y in centres * scale:
-        cv2.circle(bgr, (int(round(x * (1 << shift))), int(round(y * (1 << shift)))),
-                   max(1, int(grid.pitch_px * scale / 8)) << shift, (0, 0, 255), -1,
-                   cv2.LINE_AA, shift)
-    ok, buf = cv2.imencode(".png", bgr)
-    if not ok:
-        raise OSError(f"could not encode PNG for {path}")
-    with atomic_path(path, protect=protect) as tmp:
-        tmp.write_bytes(buf.tobytes())

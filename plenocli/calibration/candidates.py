@@ -1,0 +1,146 @@
+"""Lattice hypotheses: the peaks of the power spectrum, each read as a hexagonal and as a square
+lattice, with every relative a peak could belong to (a harmonic or a sub-lattice).
+
+The spectrum only proposes; it never decides. A white image shows the lattice as its strongest
+peaks, but on a scene the parallax repeats content at a depth-dependent period close to the
+pitch, a multi-focus array adds the sqrt(3) lattice of its lens types, and a harmonic can be
+stronger than the fundamental. So every peak is taken as several hypotheses and
+``plenocli.calibration.verify`` judges them all with one measure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import scipy.fft
+
+from plenocli.model.lensgrid import LATTICES
+
+PEAK_Z = 4.0          # a spectral peak stands this many robust sigma above its ring
+PEAKS_PER_SPECTRUM = 8
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """A similarity lattice: kind ("hex" or "square"), nearest-neighbour distance (px) and the
+    angle of its first basis vector (rad, from +x towards +y, reduced to one lattice period)."""
+
+    kind: str
+    pitch_px: float
+    angle_rad: float
+
+    def __post_init__(self):
+        step = LATTICES[self.kind]
+        object.__setattr__(self, "angle_rad", float(self.angle_rad % step))
+
+    def basis(self) -> np.ndarray:
+        """(2, 2) rows b1, b2 (px)."""
+        a, step = self.angle_rad, LATTICES[self.kind]
+        return self.pitch_px * np.array([[np.cos(a), np.sin(a)],
+                                         [np.cos(a + step), np.sin(a + step)]])
+
+    def scaled(self, factor: float, turn: float = 0.0) -> Lattice:
+        return Lattice(self.kind, self.pitch_px * factor, self.angle_rad + turn)
+
+    def same_as(self, other: Lattice, *, rel: float = 0.01, angle: float = 0.01) -> bool:
+        if self.kind != other.kind or abs(self.pitch_px / other.pitch_px - 1) > rel:
+            return False
+        step = LATTICES[self.kind]
+        return abs((self.angle_rad - other.angle_rad + step / 2) % step - step / 2) <= angle
+
+    def relatives(self) -> list[Lattice]:
+        """The lattices a spectral peak of this one could really belong to: twice and half the
+        pitch, the index-3 (hex: sqrt(3), turned 30 deg) or index-2 (square: sqrt(2), turned
+        45 deg) super- and sub-lattices, and the other kind at the same pitch."""
+        turn, root = (np.pi / 6, np.sqrt(3)) if self.kind == "hex" else (np.pi / 4, np.sqrt(2))
+        other = "square" if self.kind == "hex" else "hex"
+        return [self.scaled(2), self.scaled(0.5), self.scaled(root, turn),
+                self.scaled(1 / root, turn), Lattice(other, self.pitch_px, self.angle_rad)]
+
+    def describe(self) -> str:
+        return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(self.angle_rad):.2f} deg"
+
+
+def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
+                   count: int = PEAKS_PER_SPECTRUM) -> list[np.ndarray]:
+    """The strongest isolated peaks (fx, fy) cycles/px of the Hann-windowed power spectrum of
+    ``signal`` (one of each +- pair), as z-scores against a robust background per ring of
+    radius (a scene's 1/f spectrum, noise), sub-bin by a parabola in log magnitude."""
+    rows, cols = signal.shape
+    win = (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
+    data = (signal - np.float32(signal.mean())) * win
+    size = max(rows, cols)
+    spec = scipy.fft.rfft2(data, s=(size, size), workers=-1)
+    logmag = np.log(np.abs(spec) + 1e-12)
+    fy = np.fft.fftfreq(size)[:, None]
+    fx = np.fft.rfftfreq(size)[None, :]
+    radius = np.hypot(fx, fy)
+    z = _ring_zscore(logmag, radius, size)
+    valid = radius > 3.0 / min(rows, cols)
+    if cfa:   # residual mosaic sits at the Nyquist corners
+        for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
+            valid &= np.hypot(fx - nx, fy - ny) > 0.03
+    z = np.where(valid, z, -np.inf).astype(np.float32)
+    local = cv2.dilate(z, np.ones((5, 5), np.uint8))
+    peaks = np.argwhere((z >= local) & (z > PEAK_Z))
+    order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:count]
+    out = []
+    for r, c in peaks[order]:
+        if not 0 < c < logmag.shape[1] - 1:
+            continue
+        ox = _parabola(logmag[r, c - 1], logmag[r, c], logmag[r, c + 1])
+        oy = _parabola(logmag[(r - 1) % size, c], logmag[r, c], logmag[(r + 1) % size, c])
+        row = r if r < size // 2 else r - size
+        out.append(np.array([(c + ox) / size, (row + oy) / size]))
+    return out
+
+
+def lattices_of_peak(g: np.ndarray, factor: float = 1.0) -> list[Lattice]:
+    """The hex and square lattices whose first reciprocal ring holds the peak ``g`` (cycles per
+    pixel of an image decimated by ``factor``), in pixels of the full image, with their
+    relatives."""
+    norm = float(np.hypot(*g))
+    angle = float(np.arctan2(g[1], g[0]))
+    first = [Lattice("hex", factor / (norm * np.sin(np.pi / 3)), angle + np.pi / 6),
+             Lattice("square", factor / norm, angle)]
+    return [lat for f in first for lat in [f, *f.relatives()]]
+
+
+def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
+    """The hex and square lattices with the nearest-neighbour vector ``lag`` (px of an image
+    decimated by ``factor``), in pixels of the full image, with their relatives."""
+    pitch = factor * float(np.hypot(*lag))
+    angle = float(np.arctan2(lag[1], lag[0]))
+    first = [Lattice("hex", pitch, angle), Lattice("square", pitch, angle)]
+    return [lat for f in first for lat in [f, *f.relatives()]]
+
+
+def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarray:
+    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
+    are a minority of each ring and do not inflate it."""
+    nring = size // 4 + 2
+    ring = np.minimum((radius * size / 4).astype(np.int64), nring - 1).ravel()
+    lo, span = float(logmag.min()), float(np.ptp(logmag)) + 1e-9
+    key = ring + (logmag.ravel() - lo) * (0.999 / span)   # one sort: by ring, then value
+    key.sort()
+    count = np.bincount(ring, minlength=nring)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    values = (key - np.repeat(np.arange(nring), count)) * (span / 0.999) + lo
+    safe = np.maximum(count, 1)
+    median = values[np.minimum(start + safe // 2, values.size - 1)]
+    low = values[np.minimum(start + (safe * 16) // 100, values.size - 1)]
+    spread = np.maximum(median - low, 0.05)   # a flat field has no spread: no peak passes
+    ring = ring.reshape(logmag.shape)
+    return (logmag - median[ring]) / spread[ring]
+
+
+def _parabola(a, b, c):
+    """Vertex offset (-0.5 .. 0.5) of the parabola through three equally spaced samples
+    (scalars or arrays); 0 where they do not form a maximum."""
+    a, b, c = np.asarray(a, float), np.asarray(b, float), np.asarray(c, float)
+    den = a - 2 * b + c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(den < 0, np.clip(0.5 * (a - c) / den, -0.5, 0.5), 0.0)
+    return off if off.ndim else float(off)

@@ -1,0 +1,79 @@
+"""Lens types of a multi-focus array: three micro-lens focal lengths interleaved on the hex
+lattice, each type on one coset of the index-3 sub-lattice ((i - j) mod 3). At a given depth
+the types image the scene with different sharpness, so the cosets differ in the high-frequency
+energy of their micro-images while lenses of one coset agree."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import stats
+
+SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in sharpness
+
+
+@dataclass(frozen=True)
+class LensTypes:
+    """Type (0 = sharpest in this frame) of every lens, the median sharpness of each type
+    relative to its neighbours, and the ANOVA p-value of the difference."""
+
+    types: np.ndarray          # (K,) int8
+    sharpness: tuple[float, float, float]
+    p_value: float
+
+
+def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np.ndarray:
+    """Mean |Laplacian| of the flattened image over a disc of 0.35 pitch around each centre
+    (K,): the micro-image's own detail, away from its border."""
+    lap = np.abs(cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3))
+    radius = 0.35 * pitch_px
+    # the disc mean is a box-free convolution with a normalised disc kernel, read at the centres
+    half = int(np.ceil(radius))
+    yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
+    kernel = (np.hypot(xx, yy) <= radius).astype(np.float32)
+    mean = cv2.filter2D(lap, cv2.CV_32F, kernel / kernel.sum(), borderType=cv2.BORDER_REFLECT)
+    rows, cols = mean.shape
+    c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, cols - 1)
+    r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, rows - 1)
+    return mean[r, c]
+
+
+def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """log sharpness of each lens minus the mean over its six neighbours (which are of the two
+    other types), for the lenses whose neighbours are all present: the scene's own detail
+    varies over the frame far more than between neighbours, and cancels. Returns (which lenses,
+    values)."""
+    log_s = np.log(np.maximum(sharpness, 1e-12))
+    lookup = {key: k for k, key in enumerate(map(tuple, indices.tolist()))}
+    steps = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1))
+    rows, values = [], []
+    for k, (i, j) in enumerate(indices.tolist()):
+        near = [lookup.get((i + di, j + dj)) for di, dj in steps]
+        if None in near:
+            continue
+        rows.append(k)
+        values.append(log_s[k] - float(np.mean(log_s[near])))
+    return np.asarray(rows, np.int64), np.asarray(values)
+
+
+def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
+             pitch_px: float) -> LensTypes | None:
+    """The lens types of a hex array, or None when the three cosets do not differ (a
+    single-focus array, or a frame without detail)."""
+    sharp = lens_sharpness(flat, centres, pitch_px)
+    rows, local = local_contrast(indices, sharp)
+    coset = (indices[:, 0] - indices[:, 1]) % 3
+    groups = [local[coset[rows] == k] for k in range(3)]
+    if min(len(g) for g in groups) < 10:
+        return None
+    p_value = float(stats.f_oneway(*groups).pvalue)
+    if not p_value < SIGNIFICANCE:
+        return None
+    means = np.array([float(np.median(g)) for g in groups])
+    rank = np.argsort(-means)                 # coset of type 0, 1, 2
+    type_of_coset = np.empty(3, np.int8)
+    type_of_coset[rank] = np.arange(3)
+    return LensTypes(types=type_of_coset[coset],
+                     sharpness=tuple(float(np.exp(v)) for v in means[rank]), p_value=p_value)

@@ -1,0 +1,178 @@
+"""The lattice search: views of the image at a few decimations (so every pitch from 6 to 100 px
+is seen with 10-20 px per lens), hypotheses from their spectra, each judged by the border
+autocorrelation of the view that suits its pitch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+from plenocli.calibration.candidates import (
+    Lattice,
+    lattices_of_lag,
+    lattices_of_peak,
+    spectral_peaks,
+)
+from plenocli.calibration.fit import lattice_from_lags
+from plenocli.calibration.flatten import border_signal, decimate, flatten
+from plenocli.calibration.verify import Autocorrelation, Verdict, control_contrast, judge, refine
+
+PITCH_RANGE_PX = (5.5, 110.0)   # searched; the documented range is 6-100 px
+VIEW_PX = 1024                  # side of the central crop each view looks at
+VIEW_FLAT_PX = 24.0             # flattening blur of a view (px of the view)
+REFINED = 4                     # hypotheses refined per search (and the best of each kind)
+
+
+@dataclass(frozen=True)
+class View:
+    """The central crop of the image decimated by ``factor``: its flattened intensity and its
+    border signal, and the autocorrelation of the border signal."""
+
+    factor: int
+    flat: np.ndarray
+    border: np.ndarray
+    acf: Autocorrelation
+
+
+def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
+    """One view per decimation 1, 2, 4, 8 that still holds a useful crop."""
+    out = {}
+    for factor in (1, 2, 4, 8):
+        rows, cols = image.shape[0] // factor, image.shape[1] // factor
+        if factor > 1 and min(rows, cols) < 160:
+            break
+        # crop first (at full resolution), then decimate: an even factor averages the mosaic
+        side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
+        r0, c0 = (image.shape[0] - side_r) // 2, (image.shape[1] - side_c) // 2
+        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+        crop = decimate(image[r0:r0 + side_r, c0:c0 + side_c], factor)
+        flat = flatten(crop, cfa=cfa if factor == 1 else None, scale_px=VIEW_FLAT_PX)
+        if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
+            flat = cv2.blur(flat, (2, 2))
+        border = border_signal(flat)
+        out[factor] = View(factor, flat, border, Autocorrelation((flat, border), factor))
+    return out
+
+
+def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:
+    """The most decimated view that still has 10 px per lens (the longest lags in pitches)."""
+    best = min(all_views)
+    for factor in sorted(all_views):
+        if lattice.pitch_px / factor >= 10.0:
+            best = factor
+    return all_views[best]
+
+
+def hypotheses(all_views: dict[int, View], *, cfa: bool, pitch_hint: float | None
+               ) -> list[Lattice]:
+    """Every lattice a spectral peak of a view suggests (both kinds, with relatives), inside
+    the pitch range (or within 15 % of the hint)."""
+    lo, hi = PITCH_RANGE_PX
+    if pitch_hint is not None:
+        lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
+    out: list[Lattice] = []
+    for view in all_views.values():
+        found = [lat for signal in (view.flat, view.border)
+                 for g in spectral_peaks(signal, cfa=cfa and view.factor == 1)
+                 for lat in lattices_of_peak(g, view.factor)]
+        found += [lat for v in acf_peaks(view.acf.acf) for lat in lattices_of_lag(v, view.factor)]
+        for lat in found:
+            if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
+                out.append(lat)
+    return out
+
+
+def acf_peaks(acf: np.ndarray, *, count: int = 6) -> list[np.ndarray]:
+    """The strongest local maxima (x, y) of an autocorrelation at lags of 4-24 px (half
+    plane): nearest-neighbour vectors of the lattice when the spectrum is crowded by scene
+    peaks."""
+    cy, cx = acf.shape[0] // 2, acf.shape[1] // 2
+    win = acf[cy - 25:cy + 26, cx - 25:cx + 26]
+    local = cv2.dilate(win, np.ones((5, 5), np.uint8))
+    dy, dx = np.mgrid[-25:26, -25:26]
+    lag = np.hypot(dx, dy)
+    keep = (win >= local) & (lag >= 4) & (lag <= 24) & ((dy > 0) | ((dy == 0) & (dx > 0)))
+    order = np.argsort(-win[keep])[:count]
+    return [np.array([x, y], float) for x, y in zip(dx[keep][order], dy[keep][order],
+                                                    strict=True)]
+
+
+def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
+    """Score every hypothesis over near lags, refine the best few (per kind) and judge them."""
+    if not hyps:
+        return Verdict(Lattice("hex", 10.0, 0.0), -np.inf)
+    first = [(lat, view_for(lat, all_views).acf.contrast(lat, near=1.5, far=6.0))
+             for lat in hyps]
+    first.sort(key=lambda t: -t[1])
+    chosen: list[Lattice] = []
+    for lat, c in first:   # one per neighbourhood: a scene repetition comes in many variants
+        if c > 0 and len(chosen) < REFINED and not any(lat.same_as(c, rel=0.06, angle=0.06)
+                                             for c in chosen):
+            chosen.append(lat)
+    for kind in ("hex", "square"):   # the best of each kind, to say which kind fits
+        chosen += [lat for lat, c in first
+                   if c > 0 and lat.kind == kind and lat not in chosen][:1]
+    if not chosen:   # no hypothesis has its points above its holes even over near lags
+        return Verdict(first[0][0], first[0][1])
+    acf_for = lambda lat: view_for(lat, all_views).acf   # noqa: E731
+    scored = [_measured(*refine(lat, acf_for(lat)), all_views) for lat in chosen]
+    verdict = judge(scored, acf_for)
+    for _ in range(3):   # a winner reached through a relative is measured and judged again
+        lat, c = _measured(verdict.lattice, verdict.contrast, all_views)
+        if lat.same_as(verdict.lattice, rel=2e-4, angle=2e-4):
+            break
+        verdict = judge(scored, acf_for, leader=(lat, c))
+    else:   # the far border peaks do not hold still on the winner: no stable lattice
+        verdict = replace(verdict, undecided=True)
+    control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
+    return replace(verdict, control=control)
+
+
+def _measured(lattice: Lattice, contrast: float, all_views) -> tuple[Lattice, float]:
+    """The hypothesis moved onto its far border-autocorrelation peaks (relatives are then
+    tested at exact multiples), with its contrast there; unchanged when the peaks do not
+    support it (no peaks, or more than 3 % away)."""
+    precise = border_lattice(lattice, all_views)
+    if not (np.isfinite(precise.pitch_err_px)
+            and precise.lattice.same_as(lattice, rel=0.03, angle=0.03)):
+        return lattice, contrast
+    return precise.lattice, view_for(precise.lattice, all_views).acf.contrast(precise.lattice)
+
+
+@dataclass(frozen=True)
+class BorderLattice:
+    """The lattice measured from the far autocorrelation peaks of the border signal, with its
+    uncertainty (the larger of the fit's standard error and the spread between two starts)."""
+
+    lattice: Lattice
+    pitch_err_px: float
+    angle_err_rad: float
+
+
+def border_lattice(lattice: Lattice, all_views: dict[int, View]) -> BorderLattice:
+    """Pitch and angle from the far border-autocorrelation peaks, iterated from two starts
+    0.3 % apart (the peak centroids lean towards the prediction; converged, they agree unless
+    the frame is too small for its scene to have stopped repeating)."""
+    acf = view_for(lattice, all_views).acf
+    ends = []
+    for start in (lattice.scaled(0.997), lattice.scaled(1.003)):
+        current, se = start, (np.inf, np.inf)
+        for _ in range(4):
+            lags, idx, height = acf.peak_lags(current)
+            if len(lags) < 6:
+                return BorderLattice(lattice, np.inf, np.inf)
+            if not height.sum() > 0:
+                return BorderLattice(lattice, np.inf, np.inf)
+            pitch, angle, se = lattice_from_lags(lags, idx, height, lattice=lattice.kind)
+            if not pitch > 0:
+                return BorderLattice(lattice, np.inf, np.inf)
+            current = Lattice(lattice.kind, pitch, angle)
+        ends.append((current, se))
+    (a, se_a), (b, se_b) = ends
+    step = np.pi / 3 if lattice.kind == "hex" else np.pi / 2
+    dangle = abs((a.angle_rad - b.angle_rad + step / 2) % step - step / 2)
+    mean = Lattice(lattice.kind, (a.pitch_px + b.pitch_px) / 2, a.angle_rad)
+    return BorderLattice(mean, max(abs(a.pitch_px - b.pitch_px), se_a[0], se_b[0]),
+                         max(dangle, se_a[1], se_b[1]))

@@ -1,0 +1,322 @@
+"""Which hypothesis is the lens lattice, and how sure that is.
+
+The measure: the autocorrelation A(t) of the flattened image and of its border signal (gradient
+magnitude) at long lags t; a lattice must pass on both. Two properties of every lenslet image
+make it decisive:
+
+1. The micro-image borders (dark gaps, the vignetting edge of each micro-image) sit on the same
+   lattice over the whole frame, so A has equal peaks at every lattice vector, as far as the
+   frame reaches. Scene content does not: a scene point is repeated by the parallax in a few
+   neighbouring micro-images only, at a depth-dependent period. Far lags keep the borders and
+   drop the scene.
+2. A lattice's relatives differ from it in a way A sees. Every point of the true lattice L is
+   a peak; every hole of L (edge midpoints, the centres of its triangles or squares) is a
+   trough. A coarser relative (x2, x sqrt(3)) has true lattice points among its holes; a finer
+   one (/2, /sqrt(3)) has true holes among its points. So the *contrast*
+
+       min over point classes of mean A  -  max over hole classes of mean A
+
+   (point classes: the cosets of the index-4 and index-3 (hex) / index-2 (square)
+   sub-lattices, so a finer relative cannot hide its false points in an average) is positive
+   only for the true lattice and about zero or negative for every relative, the other lattice
+   kind and a lattice detuned by a fraction of a pitch at the far lags.
+
+It is normalised by the spread of A over the sampled lags, so it does not depend on brightness,
+noise level or the image size. The winner must beat every unrelated hypothesis by a clear
+factor (else the command names both and stops), and beat copies of itself detuned in pitch and
+angle (else there is no lattice at all: a photo, noise, a flat field).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft
+from scipy.optimize import minimize
+
+from plenocli.calibration.candidates import Lattice, _parabola
+
+WIN_RATIO = 2.0        # the winner's contrast over any unrelated hypothesis
+NULL_RATIO = 3.0       # the winner's contrast over its own detuned copies
+MIN_CONTRAST = 0.15    # lattice points above holes by this share of the spread of A
+
+
+class Autocorrelation:
+    """A(t) of the signals of one view (a crop at one decimation ``factor``): the flattened
+    intensity (each micro-image bright inside, dark at its rim) and the border signal (its
+    edges), each normalised by the overlap of the shifted crop with itself (every lag is a
+    mean, not a sum) and by A(0). A lattice must show in both."""
+
+    def __init__(self, signals: tuple[np.ndarray, ...], factor: int):
+        rows, cols = signals[0].shape
+        shape = (2 * rows, 2 * cols)   # zero padding: no wrap-around
+        # pixels a shift (dy, dx) keeps inside the crop, in the FFT's wrapped lag order
+        lag_r = np.minimum(np.arange(shape[0]), shape[0] - np.arange(shape[0]))
+        lag_c = np.minimum(np.arange(shape[1]), shape[1] - np.arange(shape[1]))
+        overlap = np.maximum(np.outer(np.maximum(rows - lag_r, 0), np.maximum(cols - lag_c, 0)),
+                             1.0).astype(np.float32)
+        self.acfs = []
+        for signal in signals:
+            data = signal - np.float32(signal.mean())
+            power = np.abs(scipy.fft.rfft2(data, s=shape, workers=-1)) ** 2
+            acf = scipy.fft.irfft2(power, s=shape, workers=-1) / overlap
+            self.acfs.append(np.fft.fftshift(acf / max(acf[0, 0], 1e-30)).astype(np.float32))
+        self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
+        self.factor = factor
+        self.reach = 0.45 * min(rows, cols)   # lags beyond this overlap too little of the crop
+
+    def contrast(self, lattice: Lattice, *, near: float = 3.0, far: float | None = None
+                 ) -> float:
+        """Contrast of ``lattice`` over lags from ``near`` pitches (or 15 % of the crop) to
+        ``far`` pitches (default: as far as the crop reaches). See the module docstring."""
+        lags = self._lags(lattice, near, far)
+        if lags is None:
+            return -np.inf
+        pts, k, m = lags
+        b1, b2 = lattice.basis() / self.factor
+        classes = [((k % 2 == a) & (m % 2 == b)) for a in (0, 1) for b in (0, 1)]
+        if lattice.kind == "hex":
+            classes += [((k - m) % 3 == a) for a in (0, 1, 2)]
+            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
+        else:
+            classes += [((k + m) % 2 == a) for a in (0, 1)]
+            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
+        offsets = np.array([[0.0, 0.0], *holes])
+        lags = pts[None, :, :] + offsets[:, None, :]
+        worst = np.inf
+        for acf in self.acfs:
+            values = self._sample(lags, acf)   # (1 + holes, K)
+            point_means = [values[0][c].mean() for c in classes if c.any()]
+            spread = float(values.std())
+            if not spread > 0:
+                return -np.inf
+            worst = min(worst, float(min(point_means) - values[1:].mean(axis=1).max()) / spread)
+        return worst
+
+    def between(self, coarse: Lattice, fine: Lattice) -> np.ndarray:
+        """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
+        look like lattice points: about 1 when ``fine`` is the lens lattice (they are lenses),
+        about 0 or below when ``coarse`` is (they are its holes). (mean A there - mean A at the
+        holes of ``fine``) / (mean A at the shared points - the same), one per signal (the
+        intensity sees a lens as bright and a hole as dark; the border signal sees both as
+        edges, but a lens of another type of a multi-focus array as a lens)."""
+        lags = self._lags(fine, 3.0, None)
+        if lags is None:
+            return np.full(len(self.acfs), np.nan)
+        pts = lags[0]
+        uv = pts @ np.linalg.inv(coarse.basis() / self.factor)
+        shared = np.all(np.abs(uv - np.rint(uv)) < 0.05, axis=1)
+        if shared.all() or not shared.any():
+            return np.full(len(self.acfs), np.nan)
+        b1, b2 = fine.basis() / self.factor
+        holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
+        shares = []
+        for acf in self.acfs:
+            base = float(np.mean([self._sample(pts + h, acf).mean() for h in holes]))
+            at = self._sample(pts, acf)
+            top = float(at[shared].mean()) - base
+            shares.append((float(at[~shared].mean()) - base) / top if top > 0 else np.nan)
+        return np.asarray(shares)
+
+    def peak_lags(self, lattice: Lattice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sub-pixel positions (px of the full image) of the autocorrelation peaks at the far
+        lattice lags (the outer half of the reach), with their indices (k, m) and heights:
+        the borders repeat exactly there, the scene no longer does. Each peak is the centroid
+        of A - (its local floor) within a quarter pitch of the predicted lag."""
+        lags = self._lags(lattice, 0.0, None)
+        if lags is None:
+            return np.empty((0, 2)), np.empty((0, 2), np.int64), np.empty(0)
+        pts, k, m = lags
+        far = np.hypot(pts[:, 0], pts[:, 1]) >= 0.5 * self.reach
+        pts, k, m = pts[far], k[far], m[far]
+        radius = max(1.5, 0.25 * lattice.pitch_px / self.factor)
+        step = np.arange(-np.ceil(radius), np.ceil(radius) + 1)
+        dx, dy = np.meshgrid(step, step)
+        inside = np.hypot(dx, dy) <= radius
+        dx, dy = dx[inside], dy[inside]
+        cy, cx = self.acf.shape[0] // 2, self.acf.shape[1] // 2
+        acf = self.acf
+        rows = (cy + np.rint(pts[:, 1])[:, None] + dy[None, :]).astype(np.int64)
+        cols = (cx + np.rint(pts[:, 0])[:, None] + dx[None, :]).astype(np.int64)
+        window = acf[rows, cols]                                   # (K, window)
+        top = np.argmax(window, axis=1)
+        r = rows[np.arange(len(top)), top]
+        c = cols[np.arange(len(top)), top]
+        found = np.stack([c - cx + _parabola(acf[r, c - 1], acf[r, c], acf[r, c + 1]),
+                          r - cy + _parabola(acf[r - 1, c], acf[r, c], acf[r + 1, c])], axis=1)
+        height = np.maximum(window.max(axis=1) - np.median(window, axis=1), 0.0)
+        return found * self.factor, np.stack([k, m], axis=1), height
+
+    def _lags(self, lattice: Lattice, near: float, far: float | None):
+        """Lattice vectors (view px) of half the plane in the lag annulus, with indices."""
+        basis = lattice.basis() / self.factor
+        pitch = lattice.pitch_px / self.factor
+        hi = self.reach if far is None else min(far * pitch, self.reach)
+        lo = min(max(near * pitch, 0.15 * self.reach if far is None else 0.0), 0.8 * hi)
+        if hi < 1.5 * pitch:
+            return None
+        n = int(hi / (pitch * np.sin(np.pi / 3))) + 2
+        k, m = np.meshgrid(np.arange(-n, n + 1), np.arange(0, n + 1), indexing="ij")
+        k, m = k.ravel(), m.ravel()
+        pts = k[:, None] * basis[0] + m[:, None] * basis[1]
+        dist = np.hypot(pts[:, 0], pts[:, 1])
+        keep = (dist >= lo) & (dist <= hi)
+        if keep.sum() < 12:
+            return None
+        return pts[keep], k[keep], m[keep]
+
+    @staticmethod
+    def _sample(lags: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """``a`` (an autocorrelation) at lags (..., 2) (x, y) px of the view, bilinear."""
+        rows, cols = a.shape
+        x = lags[..., 0] + cols // 2
+        y = lags[..., 1] + rows // 2
+        x0 = np.clip(np.floor(x).astype(np.int64), 0, cols - 2)
+        y0 = np.clip(np.floor(y).astype(np.int64), 0, rows - 2)
+        fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
+        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+        return top * (1 - fy) + bottom * fy
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The lattice chosen, its contrast, the best unrelated rivals and the detuned control."""
+
+    lattice: Lattice
+    contrast: float
+    rivals: tuple[tuple[Lattice, float], ...] = field(default=())
+    control: float = 0.0
+    undecided: bool = False    # a sub- or super-lattice could not be ruled out
+
+    @property
+    def margin(self) -> float:
+        """Winner over the best rival (inf without one)."""
+        best = max((c for _, c in self.rivals), default=0.0)
+        return self.contrast / best if best > 0 else float("inf")
+
+    def to_dict(self) -> dict:
+        return {"contrast": round(self.contrast, 4), "control": round(self.control, 4),
+                "relative_undecided": self.undecided,
+                "margin": None if np.isinf(self.margin) else round(self.margin, 3),
+                "rivals": [{"lattice": lat.kind, "pitch_px": round(lat.pitch_px, 4),
+                            "angle_deg": round(float(np.degrees(lat.angle_rad)), 4),
+                            "contrast": round(c, 4)} for lat, c in self.rivals]}
+
+
+def refine(lattice: Lattice, acf: Autocorrelation) -> tuple[Lattice, float]:
+    """Local maximum of the contrast around ``lattice``: Nelder-Mead in (log pitch, angle),
+    first over near lags (a wide basin), then over all lags (a sharp one)."""
+    current = lattice
+    for near, far, span, evaluations in ((1.5, 6.0, 0.01, 30), (3.0, 14.0, 0.003, 30),
+                                         (None, None, 0.001, 40)):
+        def cost(p, base=current, near=near, far=far):
+            cand = Lattice(base.kind, base.pitch_px * np.exp(p[0]), base.angle_rad + p[1])
+            c = acf.contrast(cand) if near is None else acf.contrast(cand, near=near, far=far)
+            return -c if np.isfinite(c) else 10.0
+
+        res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                       options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
+                                "xatol": 1e-5, "fatol": 1e-4, "maxfev": evaluations})
+        current = Lattice(current.kind, current.pitch_px * np.exp(res.x[0]),
+                          current.angle_rad + res.x[1])
+    return current, acf.contrast(current)
+
+
+def control_contrast(lattice: Lattice, acf: Autocorrelation) -> float:
+    """The best contrast of ``lattice`` detuned in pitch or angle so that its farthest sampled
+    lag moves by half a pitch: a lattice that is not there, seen by the same measure."""
+    pitch = lattice.pitch_px / acf.factor
+    shift = 0.5 * pitch / max(acf.reach, 2 * pitch)
+    copies = [lattice.scaled(1 + s) for s in (-shift, shift)]
+    copies += [lattice.scaled(1.0, s) for s in (-shift, shift)]
+    return max(0.0, *(acf.contrast(c) for c in copies))
+
+
+def settle(coarse: Lattice, fine: Lattice, acf: Autocorrelation) -> Lattice | None:
+    """Which of a lattice and its sub-lattice is the lens lattice, by ``between`` on each
+    signal: the fine one when their mean share is above 2/3 and none is below 1/3, the
+    coarse one when the mean is below 1/3 and none is above 2/3, else None (a scene periodic
+    on a relative of the lattice can make the signals disagree: then nobody can tell)."""
+    shares = acf.between(coarse, fine)
+    if not np.all(np.isfinite(shares)):
+        return None
+    mean = float(np.mean(shares))
+    if mean > 2 / 3 and min(shares) > 1 / 3:
+        return fine
+    if mean < 1 / 3 and max(shares) < 2 / 3:
+        return coarse
+    return None
+
+
+def nested(best: Lattice, other: Lattice) -> tuple[Lattice, Lattice] | None:
+    """(coarse, fine) when one lattice is (nearly) a sub-lattice of the other, of any index,
+    with ``other`` replaced by the exact lattice that ``best`` implies; else None."""
+    if other.kind != best.kind:
+        return None
+    for coarse_is_best in (False, True):
+        big, small = (best, other) if coarse_is_best else (other, best)
+        ratio = big.basis() @ np.linalg.inv(small.basis())
+        whole = np.rint(ratio)
+        if np.abs(ratio - whole).max() > 0.05 or abs(round(np.linalg.det(whole))) < 2:
+            continue
+        if coarse_is_best:     # other is finer: its basis from best's
+            vec = (np.linalg.inv(whole) @ best.basis())[0]
+            exact = Lattice(best.kind, float(np.hypot(*vec)), float(np.arctan2(vec[1], vec[0])))
+            return best, exact
+        vec = (whole @ best.basis())[0]
+        return Lattice(best.kind, float(np.hypot(*vec)), float(np.arctan2(vec[1], vec[0]))), best
+    return None
+
+
+def judge(scored: list[tuple[Lattice, float]], acf_for,
+          leader: tuple[Lattice, float] | None = None) -> Verdict:
+    """The winner of refined, scored hypotheses, checked against every hypothesis nested with
+    it (a sub- or super-lattice of any index, and always its x2, /2, x sqrt(3) (sqrt(2))
+    relatives) with ``settle`` rather than by contrast, and its unrelated rivals. ``leader``
+    starts the checks instead of the highest contrast (a winner measured again)."""
+    ranked = [t for t in sorted(scored, key=lambda t: -t[1]) if np.isfinite(t[1])]
+    if leader is not None:
+        ranked = [leader, *(t for t in ranked if not t[0].same_as(leader[0]))]
+    if not ranked:
+        return Verdict(scored[0][0], -np.inf)
+    best, contrast = ranked[0]
+    undecided: list[tuple[Lattice, float]] = []
+    for _ in range(4):
+        moved, undecided = False, []
+        others = [*best.relatives()[:4], *(lat for lat, _ in ranked[1:])]
+        for lat in others:
+            pair = None if lat.same_as(best) else nested(best, lat)
+            if pair is None:
+                continue
+            other = pair[0] if pair[1] is best else pair[1]
+            if any(other.same_as(u) for u, _ in undecided):
+                continue
+            truth = settle(*pair, acf_for(pair[1]))
+            if truth is None:
+                undecided.append((other, acf_for(other).contrast(other)))
+            elif truth is other:
+                best, contrast, moved = other, acf_for(other).contrast(other), True
+                break
+        if not moved:
+            break
+    rivals: list[tuple[Lattice, float]] = []
+    for lat, c in ranked[1:]:
+        if nested(best, lat) is None and not lat.same_as(best) and \
+                not any(lat.same_as(r) for r, _ in rivals):
+            rivals.append((lat, c))
+    return Verdict(best, contrast, tuple(undecided + rivals)[:3], 0.0,
+                   undecided=bool(undecided))
+
+
+def doubt(verdict: Verdict) -> str | None:
+    """Why the verdict cannot be vouched for, or None."""
+    if verdict.contrast < MIN_CONTRAST or verdict.contrast < NULL_RATIO * verdict.control:
+        return "no micro-lens lattice found (no hypothesis shows micro-image borders repeated " \
+               "over the frame)"
+    if verdict.undecided or verdict.margin < WIN_RATIO:
+        rival, c = verdict.rivals[0]
+        return (f"unsure lattice: {verdict.lattice.describe()} (contrast "
+                f"{verdict.contrast:.2f}) or {rival.describe()} (contrast {c:.2f})")
+    return None

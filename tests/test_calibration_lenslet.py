@@ -1,0 +1,121 @@
+"""Lenslet scenes with borders (Keplerian, Galilean, multi-focus), relatives-of-the-truth traps,
+lattice kinds, hints, a start grid and lens types: every case right or refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from plenocli import calibration
+from plenocli.errors import CalibrationError
+from plenocli.io import raytrix
+from plenocli.model.lensgrid import LATTICES, LensGrid
+from plenocli.synth.lenslet import lenslet_scene
+from plenocli.synth.whiteimage import white_image
+
+
+def _scene(pitch, kind, seed, lattice="hex"):
+    size = int(min(2048, max(512, 24 * pitch)))
+    angle = float(np.random.default_rng(seed).uniform(0, np.pi))
+    image, truth = lenslet_scene((size, size), pitch_px=pitch, angle_rad=angle, lattice=lattice,
+                                 galilean=kind == "galilean", multi_focus=kind == "multi",
+                                 trap=kind if kind in ("double", "sqrt3") else None, seed=seed)
+    true = LensGrid(pitch, angle, tuple(truth["offset_xy"]), lattice, image_shape=(size, size))
+    return image, true
+
+
+def _is_right(grid: LensGrid, true: LensGrid) -> bool:
+    """Same kind, pitch within 0.1 %, angle within 0.02 deg, every true centre within a tenth
+    of a pitch of ours (computed from the truth, not from the code under test)."""
+    if grid.lattice != true.lattice:
+        return False
+    step = LATTICES[true.lattice]
+    dang = (grid.angle_rad - true.angle_rad + step / 2) % step - step / 2
+    _, centres = true.lens_centres()
+    i, j = grid.nearest_index(centres[:, 0], centres[:, 1])
+    err = np.linalg.norm(grid.lattice_xy(i, j) - centres, axis=1)
+    return (abs(grid.pitch_px / true.pitch_px - 1) <= 1e-3 and abs(np.degrees(dang)) <= 0.02
+            and err.max() <= 0.1 * true.pitch_px)
+
+
+@pytest.mark.parametrize("pitch", [8.0, 23.2, 45.5, 90.0])
+@pytest.mark.parametrize("kind", ["keplerian", "galilean"])
+def test_scenes_with_borders_are_right(pitch, kind):
+    image, true = _scene(pitch, kind, seed=int(pitch))
+    grid, report = calibration.calibrate(image)
+    assert _is_right(grid, true)
+    assert report.verdict.contrast > 0 and report.lens_types is None
+
+
+@pytest.mark.parametrize("pitch", [8.0, 18.0, 35.0, 70.0])
+@pytest.mark.parametrize("kind", ["multi", "double", "sqrt3"])
+def test_multi_focus_and_traps_are_right_or_refused(pitch, kind):
+    image, true = _scene(pitch, kind, seed=int(pitch) + 1)
+    try:
+        grid, _ = calibration.calibrate(image)
+    except CalibrationError as err:
+        assert "pass --pitch" in str(err)
+        return
+    assert _is_right(grid, true)
+
+
+def test_multi_focus_lens_types():
+    image, true = _scene(35.0, "multi", seed=3)
+    grid, report = calibration.calibrate(image)
+    assert _is_right(grid, true)
+    # the synthetic types: coset (i - j) mod 3 = 0 sharp, 1 and 2 blurred by 1 and 2.5 px, in
+    # the truth's indexing; ours may index from another lens: compare lens by lens
+    _, centres = true.lens_centres()
+    ti, tj = true.nearest_index(centres[:, 0], centres[:, 1])
+    i, j = grid.nearest_index(centres[:, 0], centres[:, 1])
+    assert np.array_equal(grid.lens_types(i, j), (ti - tj) % 3)
+    calib = raytrix.calib_from_grid(grid)
+    b1 = np.array(calib["lens_base_x"])
+    for lt in calib["lens_types"]:   # type t sits one or two cosets on from type 0
+        assert np.allclose(np.abs(lt["offset"]), 0 if lt["id"] == 0 else np.abs(b1))
+
+
+def test_square_array_auto_and_refused_as_hex():
+    image, _ = white_image((768, 768), pitch_px=17.3, angle_rad=0.4, offset_xy=(380.2, 390.7),
+                           lattice="square", seed=3)
+    grid, _ = calibration.calibrate(image, black_level=64)
+    assert grid.lattice == "square" and abs(grid.pitch_px - 17.3) < 0.01
+    with pytest.raises(CalibrationError, match="--lattice hex does not fit.*square"):
+        calibration.calibrate(image, lattice="hex", black_level=64)
+
+
+def test_pitch_hint_and_start_grid():
+    image, true = _scene(23.2, "keplerian", seed=9)
+    grid, _ = calibration.calibrate(image, pitch_hint=25.0)
+    assert _is_right(grid, true)
+    off = np.asarray(true.offset_xy) + (0.9, -0.7)   # a camera XML is often 0.5-1.5 px off
+    start = LensGrid(true.pitch_px * 1.0004, true.angle_rad + 2e-4, tuple(off),
+                     image_shape=true.image_shape)
+    grid, _ = calibration.calibrate(image, start=start)
+    assert _is_right(grid, true)
+    moved = calibration.compare_grids(grid, start, true.image_shape)
+    assert moved["rms_px"] > 0.5   # the report says how far it moved
+
+
+def test_start_that_is_a_relative_is_refused():
+    image, true = _scene(23.2, "keplerian", seed=9)
+    wrong = LensGrid(2 * true.pitch_px, true.angle_rad, true.offset_xy,
+                     image_shape=true.image_shape)
+    with pytest.raises(CalibrationError, match="start grid .* does not fit"):
+        calibration.calibrate(image, start=wrong)
+
+
+def test_bad_arguments():
+    image = np.zeros((64, 64))
+    with pytest.raises(ValueError, match="lattice"):
+        calibration.calibrate(image, lattice="triangle")
+    with pytest.raises(ValueError, match="pitch_hint"):
+        calibration.calibrate(image, pitch_hint=float("nan"))
+
+
+def test_photo_is_refused():
+    rng = np.random.default_rng(4)
+    yy, xx = np.mgrid[0:600, 0:800]
+    photo = 100 + 50 * np.sin(xx / 37.0) * np.cos(yy / 53.0) + rng.normal(0, 3, (600, 800))
+    with pytest.raises(CalibrationError, match="no micro-lens lattice"):
+        calibration.calibrate(photo)
