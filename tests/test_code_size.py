@@ -23,12 +23,6 @@ NUMBA_KERNELS = {
     "plenocli/refocus.py:_splat",
 }
 
-# TEMPORARY (issue 14): files being rebuilt by other engineers, who will bring them under the
-# limits. Remove each entry when its rebuild lands.
-TEMPORARY_FILES: set[str] = set()
-TEMPORARY_FUNCTIONS = {
-    "plenocli/synth/whiteimage.py:white_image",
-}
 
 
 def _sources() -> list[Path]:
@@ -58,28 +52,20 @@ def function_lengths() -> dict[str, int]:
 
 def test_no_file_over_the_limit():
     too_long = {name: n for name, n in file_lengths().items()
-                if n > MAX_FILE_LINES and name not in TEMPORARY_FILES}
+                if n > MAX_FILE_LINES}
     assert not too_long, (f"files over {MAX_FILE_LINES} lines (split them along their "
                           f"concerns): {too_long}")
 
 
 def test_no_function_over_the_limit():
-    allowed = NUMBA_KERNELS | TEMPORARY_FUNCTIONS
+    allowed = NUMBA_KERNELS
     too_long = {name: n for name, n in function_lengths().items()
                 if n > MAX_FUNCTION_LINES and name not in allowed}
     assert not too_long, (f"functions over {MAX_FUNCTION_LINES} lines (split them): "
                           f"{too_long}")
 
 
-@pytest.mark.parametrize("entry", sorted(TEMPORARY_FILES))
-def test_file_allowlist_entries_are_still_needed(entry):
-    lengths = file_lengths()
-    if entry not in lengths:
-        pytest.fail(f"{entry} is gone: remove it from TEMPORARY_FILES")
-    assert lengths[entry] > MAX_FILE_LINES, f"{entry} fits now: remove it from TEMPORARY_FILES"
-
-
-@pytest.mark.parametrize("entry", sorted(NUMBA_KERNELS | TEMPORARY_FUNCTIONS))
+@pytest.mark.parametrize("entry", sorted(NUMBA_KERNELS))
 def test_function_allowlist_entries_are_still_needed(entry):
     lengths = function_lengths()
     if entry not in lengths:

@@ -57,46 +57,13 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         raise ValueError(f"pitch_px must be between 2 and the image size, got {pitch_px}")
     rng = np.random.default_rng(seed)
     grid = LensGrid(pitch_px, angle_rad, tuple(offset_xy), lattice, image_shape=(rows, cols))
-    # the discs reaching a pixel belong to its nearest lattice point or a neighbour (jitter is
-    # small, discs are at most one pitch across)
-    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
-    i0, j0 = grid.nearest_index(xx, yy)
-
-    def centre_of(i, j):
-        base = grid.lattice_xy(i, j)
-        if jitter_px <= 0:
-            return base
-        # deterministic per-lens jitter from the index (hash into a counter-based stream)
-        key = (i.astype(np.int64) * 1_000_003 + j.astype(np.int64)) & 0x7FFFFFFF
-        u = _hash_normal(key, seed)
-        return base + jitter_px * u
-
-    radius = fill * pitch_px / 2
-    value = np.zeros((rows, cols))
-    neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)]
-    if lattice == "square":
-        neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1),
-                      (-1, 1)]
-    # light of neighbouring micro-images adds (their soft edges overlap): each micro-image keeps
-    # its whole point-symmetric profile, so its true centre is exactly its symmetry centre (a
-    # nearest-lens assignment would clip jittered micro-images unevenly)
-    for di, dj in neighbours:
-        c = centre_of(i0 + di, j0 + dj)
-        d = np.hypot(xx - c[..., 0], yy - c[..., 1])
-        shade = (1 - falloff * np.clip(d / radius, 0, 1) ** 2) ** 2
-        value += shade * 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
-    cx, cy = cols / 2 + 0.1 * cols, rows / 2 - 0.07 * rows
-    r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((rows / 2) ** 2 + (cols / 2) ** 2)
-    value *= 1 - vignetting * r2
-    if cfa:
-        gains = np.empty((2, 2))
-        for k, colour in enumerate(cfa.upper()):
-            gains[k // 2, k % 2] = COLOUR_GAIN[colour]
-        value *= np.tile(gains, (rows // 2 + 1, cols // 2 + 1))[:rows, :cols]
+    value = _micro_images(grid, (rows, cols), jitter_px=jitter_px, seed=seed,
+                          radius=fill * pitch_px / 2, edge_px=edge_px, falloff=falloff)
+    value *= _main_lens_shading((rows, cols), vignetting, cfa)
     dn = _to_dn(rng, value, full_well_e=full_well_e, read_noise_e=read_noise_e,
                 dead_pixels=dead_pixels)
     idx, _ = grid.lens_centres()
-    true_centres = centre_of(idx[:, 0], idx[:, 1])
+    true_centres = _lens_centre(grid, idx[:, 0], idx[:, 1], jitter_px, seed)
     truth = {
         "lattice": lattice, "pitch_px": float(pitch_px), "angle_rad": float(angle_rad),
         "offset_xy": [float(v) for v in offset_xy], "image_shape": [rows, cols],
@@ -104,6 +71,57 @@ def white_image(shape: tuple[int, int], *, pitch_px: float, angle_rad: float,
         "indices": idx.tolist(), "centres_xy": true_centres.tolist(), "seed": int(seed),
     }
     return dn.astype(np.uint16), truth
+
+
+def _lens_centre(grid: LensGrid, i: np.ndarray, j: np.ndarray, jitter_px: float,
+                 seed: int) -> np.ndarray:
+    """(..., 2) centre of lens (i, j): its lattice place plus a per-lens jitter drawn from the
+    index (a counter-based stream, so every pixel that asks for a lens gets the same centre)."""
+    base = grid.lattice_xy(i, j)
+    if jitter_px <= 0:
+        return base
+    key = (i.astype(np.int64) * 1_000_003 + j.astype(np.int64)) & 0x7FFFFFFF
+    return base + jitter_px * _hash_normal(key, seed)
+
+
+def _micro_images(grid: LensGrid, shape: tuple[int, int], *, jitter_px: float, seed: int,
+                  radius: float, edge_px: float, falloff: float) -> np.ndarray:
+    """Relative brightness of the micro-images: soft-edged discs darkening towards their rim."""
+    rows, cols = shape
+    # the discs reaching a pixel belong to its nearest lattice point or a neighbour (jitter is
+    # small, discs are at most one pitch across)
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
+    i0, j0 = grid.nearest_index(xx, yy)
+    value = np.zeros((rows, cols))
+    neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)]
+    if grid.lattice == "square":
+        neighbours = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, -1), (1, -1),
+                      (-1, 1)]
+    # light of neighbouring micro-images adds (their soft edges overlap): each micro-image keeps
+    # its whole point-symmetric profile, so its true centre is exactly its symmetry centre (a
+    # nearest-lens assignment would clip jittered micro-images unevenly)
+    for di, dj in neighbours:
+        c = _lens_centre(grid, i0 + di, j0 + dj, jitter_px, seed)
+        d = np.hypot(xx - c[..., 0], yy - c[..., 1])
+        shade = (1 - falloff * np.clip(d / radius, 0, 1) ** 2) ** 2
+        value += shade * 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
+    return value
+
+
+def _main_lens_shading(shape: tuple[int, int], vignetting: float, cfa: str | None) -> np.ndarray:
+    """The main lens's vignetting (centred off the frame centre) times the colour filters'
+    gains."""
+    rows, cols = shape
+    yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
+    cx, cy = cols / 2 + 0.1 * cols, rows / 2 - 0.07 * rows
+    r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((rows / 2) ** 2 + (cols / 2) ** 2)
+    shading = 1 - vignetting * r2
+    if cfa:
+        gains = np.empty((2, 2))
+        for k, colour in enumerate(cfa.upper()):
+            gains[k // 2, k % 2] = COLOUR_GAIN[colour]
+        shading *= np.tile(gains, (rows // 2 + 1, cols // 2 + 1))[:rows, :cols]
+    return shading
 
 
 def _to_dn(rng: np.random.Generator, value: np.ndarray, *, full_well_e: float,
