@@ -264,6 +264,24 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
                        tuple(colours))
 
 
+
+def measure_mixing_colours(captures: Sequence[np.ndarray], *, intended: Sequence[int],
+                           views: Sequence[str], colours: Sequence[str], tile_px: int = 64,
+                           colour_pattern=None) -> MixingField:
+    """``measure_mixing`` of masked whites held as (V, C, rows, cols): one mosaic per view
+    (C = 1, ``colour_pattern`` its Bayer cells) or C colour planes per view, measured alone."""
+    planes = np.shape(captures[0])[1]
+    if planes == 1:
+        return measure_mixing([np.asarray(c)[:, 0] for c in captures], intended=intended,
+                              views=views, tile_px=tile_px, colour_pattern=colour_pattern,
+                              colours=colours)
+    fields = [measure_mixing([np.asarray(c)[:, k] for c in captures], intended=intended,
+                             views=views, tile_px=tile_px, colours=[colours[k]])
+              for k in range(planes)]
+    first = fields[0]
+    return MixingField(np.concatenate([f.nodes for f in fields]), first.node_rows,
+                       first.node_cols, first.shape, tuple(views), tuple(colours))
+
 def _shift_nodes(values: np.ndarray, node_rows: np.ndarray, node_cols: np.ndarray,
                  off_r: float, off_c: float) -> np.ndarray:
     """Values (..., n_r, n_c) measured at node + (off_r, off_c), moved to the nodes (first

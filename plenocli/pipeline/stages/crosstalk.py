@@ -14,27 +14,9 @@ from plenocli.io.atomic import write_text
 from plenocli.io.framing import active_area, frame_grid, sensor_image
 from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
-from plenocli.model.mixing import MixingField
+from plenocli.io.views import read_masked_whites, select_views
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
-
-
-def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:
-    """Pages of ``data`` named in ``views`` ("A,B"; names from the metadata, or page numbers)."""
-    names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-    if not views:
-        return data, names
-    wanted = [v.strip() for v in views.split(",") if v.strip()]
-    idx = []
-    for name in wanted:
-        if name in names:
-            idx.append(names.index(name))
-        elif name.isdigit() and int(name) < data.shape[0]:
-            idx.append(int(name))
-        else:
-            raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
-                             "pass --views with names from that list")
-    return data[idx], [names[k] for k in idx]
 
 
 def _intended_index(spec: str | None, names: list[str], path: str) -> int | None:
@@ -103,6 +85,11 @@ def _measure(path: str, views: str | None, intended: str | None, tile: int) -> d
                                             cfa=cfa)
     except ValueError as err:
         raise InputError(f"{path}: {err}") from err
+    return _capture_entry(path, names, res, tile, cfa)
+
+
+def _capture_entry(path: str, names: list[str], res: dict, tile: int, cfa: str | None) -> dict:
+    """The report's entry for one masked capture (view indices turned into names)."""
     return {
         "input": path, "views": names, "intended": names[res["intended"]],
         "r": res["r"], "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
@@ -150,158 +137,66 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
 # ---------------------------------------------------------------------------------------------
 # The whole mixing matrix M from one masked white per pupil part (``--mixing-out``).
 
-CHANNELS = ("R", "G", "B")
-
-
-def _channel_views(names: list[str]) -> tuple[list[str], list[str]] | None:
-    """(views, channels) when the pages are VIEW.R, VIEW.G, VIEW.B for every view, else None."""
-    groups: dict[str, list[str]] = {}
-    for name in names:
-        view, dot, channel = name.rpartition(".")
-        if not dot or channel not in CHANNELS:
-            return None
-        groups.setdefault(view, []).append(channel)
-    channels = next(iter(groups.values()))
-    if len(groups) < 2 or any(c != channels for c in groups.values()):
-        return None
-    return list(groups), channels
-
-
-def load_mixing_views(path: str, views: str | None) -> dict:
-    """One views TIFF as ``data`` (V, C, rows, cols) float64 (active area only), ``names``,
-    ``colours``, ``layout`` (cfa, channels or mono) and the 2 x 2 ``cfa`` of the area."""
-    data, meta = tiffio.read_image(path)
-    framing = active_area(meta, data.shape[1:])
-    data, cfa = framing.crop(data), framing.cfa
-    page_names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-    grouped = _channel_views(page_names)
-    if grouped:
-        names, channels = grouped
-        if views:
-            wanted = [v.strip() for v in views.split(",") if v.strip()]
-            missing = [v for v in wanted if v not in names]
-            if missing:
-                raise InputError(f"{path}: view {missing[0]!r} is not in the input (views: "
-                                 f"{','.join(names)}); pass --views with names from that list")
-            names = wanted
-        index = {n: k for k, n in enumerate(page_names)}
-        stack = np.stack([[data[index[f"{v}.{c}"]] for c in channels] for v in names])
-        return {"data": stack.astype(np.float64), "names": names, "colours": channels,
-                "layout": "channels", "cfa": None}
-    chosen, names = select_views(data, meta, views)
-    layout = "cfa" if cfa else "mono"
-    colours = sorted(set(cfa.upper()), key="RGB".index) if cfa else ["L"]
-    return {"data": chosen[:, None].astype(np.float64), "names": names, "colours": colours,
-            "layout": layout, "cfa": cfa}
-
 
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
-    loaded, labels = _load_masked_whites(inputs, views)
-    first = loaded[0]
-    for path, cap in zip(labels[1:], loaded[1:], strict=False):
-        if (cap["names"], cap["colours"], cap["layout"], cap["cfa"], cap["data"].shape) != (
-                first["names"], first["colours"], first["layout"], first["cfa"],
-                first["data"].shape):
-            raise InputError(f"{path} does not match {inputs[0]} (views, colours, CFA or size); "
+    whites, labels = read_masked_whites(inputs, views)
+    first = whites[0]
+    for label, white in zip(labels[1:], whites[1:], strict=True):
+        if not white.same_kind(first):
+            raise InputError(f"{label} does not match {inputs[0]} (views, colours, CFA or size); "
                              "give masked whites of one rig, processed the same way")
-    names = first["names"]
-    if len(loaded) != len(names):
+    names = first.names
+    if len(whites) != len(names):
         raise InputError(f"--mixing-out needs one masked white per pupil part: {len(names)} "
-                         f"views ({','.join(names)}) but {len(loaded)} inputs")
+                         f"views ({','.join(names)}) but {len(whites)} inputs")
     specs = (intended or "auto").split(",")
-    if len(specs) not in (1, len(loaded)):
-        raise ConfigError(f"--intended has {len(specs)} names for {len(loaded)} masked whites; "
+    if len(specs) not in (1, len(whites)):
+        raise ConfigError(f"--intended has {len(specs)} names for {len(whites)} masked whites; "
                           "give one name per masked white")
     captures, opened = [], []
-    for k, (path, cap) in enumerate(zip(labels, loaded, strict=True)):
-        luminance = cap["data"].sum(axis=1)  # flux over every colour, as r has always been
-        idx = _intended_index(specs[k if len(specs) > 1 else 0], names, path)
-        pattern = _cfa_pattern(cap)
-        try:
-            res = crosstalk_lib.crosstalk_ratio(luminance, intended=idx, tile_px=tile,
-                                                cfa=cap["cfa"])
+    for k, (label, white) in enumerate(zip(labels, whites, strict=True)):
+        idx = _intended_index(specs[k if len(specs) > 1 else 0], names, label)
+        try:  # flux over every colour, as r has always been
+            res = crosstalk_lib.crosstalk_ratio(white.data.sum(axis=1), intended=idx,
+                                                tile_px=tile, cfa=white.cfa)
         except ValueError as err:
-            raise InputError(f"{path}: {err}") from err
+            raise InputError(f"{label}: {err}") from err
         opened.append(res["intended"])
-        captures.append({
-            "input": path, "views": names, "intended": names[res["intended"]], "r": res["r"],
-            "r_per_view": {names[j]: v for j, v in res["r_per_view"].items()},
-            "map_min": res["map_min"], "map_max": res["map_max"], "tile_px": tile,
-            "valid_fraction": res["valid_fraction"], "cfa": cap["cfa"],
-            "per_colour": {c: {"r": d["r"], "map": d["map"]} for c, d in
-                           res["per_colour"].items()}, "map": res["map"]})
+        captures.append(_capture_entry(label, names, res, tile, white.cfa))
     if sorted(opened) != list(range(len(names))):
         raise InputError("the masked whites must open each pupil part once; intended views were "
                          f"{','.join(names[j] for j in opened)}; pass --intended with one view "
                          "name per input")
-    per_colour = []
-    for c in range(len(first["colours"]) if first["layout"] == "channels" else 1):
-        plane = [cap["data"][:, c] for cap in loaded]
-        per_colour.append(crosstalk_lib.measure_mixing(
-            plane, intended=opened, views=names, tile_px=tile, colour_pattern=pattern,
-            colours=first["colours"] if first["layout"] != "channels" else
-            [first["colours"][c]]))
-    field = per_colour[0] if len(per_colour) == 1 else MixingField(
-        np.concatenate([f.nodes for f in per_colour]), per_colour[0].node_rows,
-        per_colour[0].node_cols, per_colour[0].shape, tuple(names), tuple(first["colours"]))
+    field = crosstalk_lib.measure_mixing_colours(
+        [w.data for w in whites], intended=opened, views=names, colours=first.colours,
+        tile_px=tile, colour_pattern=first.colour_pattern())
     from_m = crosstalk_lib.mixing_ratio(field)
-    params = dict(views=views, intended=intended, tile=tile)
-    record = stage_record("crosstalk", params, {"inputs": inputs})
+    record = stage_record("crosstalk", dict(views=views, intended=intended, tile=tile),
+                          {"inputs": inputs})
     history = [m for m in (tiffio.read_meta(p).get("provenance") for p in inputs) if m]
     doc = {"r": max(c["r"] for c in captures), "definition": "max flux on another view / flux "
            "on the intended view, over pixels finite in every view", "captures": captures,
-           "mixing": {"file": mixing_out, "layout": first["layout"], "tile_px": tile,
+           "mixing": {"file": mixing_out, "layout": first.layout, "tile_px": tile,
                       "definition": "view k records sum_j M_kj T_j; M_jj = 1; r = max over "
                       "k != j of M_kj / M_jj", **from_m}, "provenance": record}
     protect = tuple(inputs)
-    write_mixing(mixing_out, field, layout=first["layout"], cfa=first["cfa"],
+    write_mixing(mixing_out, field, layout=first.layout, cfa=first.cfa,
                  meta={"provenance": record, "history": history, "r_from_mixing": from_m},
                  protect=protect)
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False), protect=protect)
     if preview:
-        maps, titles = [], []
-        shown_colour = field.colours.index("G") if "G" in field.colours else 0
-        for k in range(len(names)):
-            for j in range(len(names)):
-                if k != j:
-                    maps.append(np.asarray(field.nodes[shown_colour, k, j], np.float64))
-                    titles.append(f"M {names[k]}<-{names[j]} ({field.colours[shown_colour]})")
-        write_heat_map(preview, maps, titles, protect=protect)
+        write_heat_map(preview, *_mixing_maps(field), protect=protect)
     log.info("crosstalk: mixing of %d views x %d colours on %d x %d tiles -> %s; r from M "
              "%.2f %% (mean), %.2f %% (max over tiles)", len(names), len(field.colours),
              field.nodes.shape[3], field.nodes.shape[4], shown(mixing_out),
              100 * from_m["r_mean"], 100 * from_m["r_max"])
 
 
-def _load_masked_whites(inputs: list[str], views: str | None) -> tuple[list[dict], list[str]]:
-    """The masked whites and a label for each. Files of one view each (refocused left/right
-    images) come V to a masked white, in the order --views names them."""
-    single = all(len(tiffio.read_meta(p).get("views") or [None, None]) == 1 for p in inputs)
-    if not single:
-        return [load_mixing_views(p, views) for p in inputs], inputs
-    names = [v.strip() for v in (views or "").split(",") if v.strip()]
-    if len(names) < 2 or len(inputs) != len(names) ** 2:
-        raise InputError(f"each input holds one view: name the views with --views (e.g. "
-                         f"left,right) and give that many files per masked white, in that order "
-                         f"({len(inputs)} files given)")
-    loaded, labels = [], []
-    for k in range(0, len(inputs), len(names)):
-        group = inputs[k:k + len(names)]
-        parts = [load_mixing_views(p, None) for p in group]
-        cap = dict(parts[0])
-        if len({p["data"].shape for p in parts}) != 1:
-            raise InputError(f"{', '.join(group)}: the views of one masked white differ in size")
-        cap["data"] = np.concatenate([p["data"] for p in parts])
-        cap["names"] = names
-        loaded.append(cap)
-        labels.append("+".join(group))
-    return loaded, labels
-
-
-def _cfa_pattern(cap: dict) -> np.ndarray | None:
-    """2 x 2 indices into the capture's colours of its Bayer pattern (None: not a mosaic)."""
-    if cap["layout"] != "cfa":
-        return None
-    return np.array([cap["colours"].index(ch) for ch in cap["cfa"].upper()]).reshape(2, 2)
+def _mixing_maps(field) -> tuple[list[np.ndarray], list[str]]:
+    """The off-diagonal M_kj of green (or the first colour) as maps with their titles."""
+    c = field.colours.index("G") if "G" in field.colours else 0
+    pairs = [(k, j) for k in range(field.n_views) for j in range(field.n_views) if k != j]
+    return ([np.asarray(field.nodes[c, k, j], np.float64) for k, j in pairs],
+            [f"M {field.views[k]}<-{field.views[j]} ({field.colours[c]})" for k, j in pairs])

@@ -1,0 +1,125 @@
+"""Named views of a views TIFF: pick them by name, group colour pages, read masked whites.
+
+A views TIFF names its pages in the metadata (``views``): one page per view (``A``, ``B``,
+``S00``), possibly one mosaic each, or one page per view and colour (``left.R``, ``left.G``...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocli.errors import InputError
+from plenocli.io import tiffio
+from plenocli.io.framing import active_area
+
+CHANNELS = ("R", "G", "B")
+
+
+@dataclass(frozen=True)
+class ColourViews:
+    """Views of one capture as (V, C, rows, cols) float64 over the active area.
+
+    ``layout`` is "channels" (C colour pages per view), "cfa" (one Bayer mosaic per view,
+    C = 1, ``cfa`` its 2 x 2 pattern) or "mono"; ``colours`` names the colour planes."""
+
+    data: np.ndarray
+    names: list[str]
+    colours: list[str]
+    layout: str
+    cfa: str | None
+
+    def colour_pattern(self) -> np.ndarray | None:
+        """2 x 2 indices into ``colours`` of the Bayer pattern (None: not a mosaic)."""
+        if self.layout != "cfa":
+            return None
+        return np.array([self.colours.index(ch) for ch in self.cfa.upper()]).reshape(2, 2)
+
+    def same_kind(self, other: ColourViews) -> bool:
+        return (self.names, self.colours, self.layout, self.cfa, self.data.shape) == (
+            other.names, other.colours, other.layout, other.cfa, other.data.shape)
+
+
+def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:
+    """Pages of ``data`` named in ``views`` ("A,B"; names from the metadata, or page numbers)."""
+    names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+    if not views:
+        return data, names
+    idx = []
+    for name in _wanted(views):
+        if name in names:
+            idx.append(names.index(name))
+        elif name.isdigit() and int(name) < data.shape[0]:
+            idx.append(int(name))
+        else:
+            raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
+                             "pass --views with names from that list")
+    return data[idx], [names[k] for k in idx]
+
+
+def read_colour_views(path: str, views: str | None) -> ColourViews:
+    """The views of one file named in ``views`` (all when None), grouped by colour."""
+    data, meta = tiffio.read_image(path)
+    framing = active_area(meta, data.shape[1:])
+    data, cfa = framing.crop(data), framing.cfa
+    page_names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+    grouped = _channel_views(page_names)
+    if grouped:
+        names, channels = grouped
+        if views:
+            missing = [v for v in _wanted(views) if v not in names]
+            if missing:
+                raise InputError(f"{path}: view {missing[0]!r} is not in the input (views: "
+                                 f"{','.join(names)}); pass --views with names from that list")
+            names = _wanted(views)
+        index = {n: k for k, n in enumerate(page_names)}
+        stack = np.stack([[data[index[f"{v}.{c}"]] for c in channels] for v in names])
+        return ColourViews(stack.astype(np.float64), names, channels, "channels", None)
+    chosen, names = select_views(data, meta, views)
+    colours = sorted(set(cfa.upper()), key="RGB".index) if cfa else ["L"]
+    return ColourViews(chosen[:, None].astype(np.float64), names, colours,
+                       "cfa" if cfa else "mono", cfa)
+
+
+def read_masked_whites(inputs: list[str], views: str | None
+                       ) -> tuple[list[ColourViews], list[str]]:
+    """The masked whites and a label for each. Files of one view each (refocused left/right
+    images) come V to a masked white, in the order ``views`` names them."""
+    single = all(len(tiffio.read_meta(p).get("views") or [None, None]) == 1 for p in inputs)
+    if not single:
+        return [read_colour_views(p, views) for p in inputs], list(inputs)
+    names = _wanted(views or "")
+    if len(names) < 2 or len(inputs) != len(names) ** 2:
+        raise InputError(f"each input holds one view: name the views with --views (e.g. "
+                         f"left,right) and give that many files per masked white, in that order "
+                         f"({len(inputs)} files given)")
+    loaded, labels = [], []
+    for k in range(0, len(inputs), len(names)):
+        group = inputs[k:k + len(names)]
+        parts = [read_colour_views(p, None) for p in group]
+        if len({p.data.shape for p in parts}) != 1:
+            raise InputError(f"{', '.join(group)}: the views of one masked white differ in size")
+        first = parts[0]
+        loaded.append(ColourViews(np.concatenate([p.data for p in parts]), names, first.colours,
+                                  first.layout, first.cfa))
+        labels.append("+".join(group))
+    return loaded, labels
+
+
+def _wanted(views: str) -> list[str]:
+    return [v.strip() for v in views.split(",") if v.strip()]
+
+
+def _channel_views(names: list[str]) -> tuple[list[str], list[str]] | None:
+    """(views, channels) when the pages are VIEW.R, VIEW.G, VIEW.B for every view, else None."""
+    groups: dict[str, list[str]] = {}
+    for name in names:
+        view, dot, channel = name.rpartition(".")
+        if not dot or channel not in CHANNELS:
+            return None
+        groups.setdefault(view, []).append(channel)
+    channels = next(iter(groups.values()))
+    if len(groups) < 2 or any(c != channels for c in groups.values()):
+        return None
+    return list(groups), channels
