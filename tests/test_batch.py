@@ -400,6 +400,20 @@ def test_crash_and_time_limit_fail_their_capture_only(forked_pool):
         assert "ran past --timeout 0.5 s" in results[name].detail
 
 
+def test_interrupt_between_results_stops_the_workers(forked_pool, monkeypatch):
+    import multiprocessing
+
+    def interrupted_after_first(items, label, total=None):
+        yield next(iter(items))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(forked_pool, "progress", interrupted_after_first)
+    results = forked_pool._pool_results(2, "cfg", ["/x/fine.dng", "/x/slow.dng"], {}, None)
+    with pytest.raises(KeyboardInterrupt):
+        forked_pool._collect(results, 2)
+    assert not multiprocessing.active_children()  # "slow" would sleep on for a minute
+
+
 def test_timeout_must_be_positive(shoot):
     _, config, captures = shoot
     with pytest.raises(ConfigError, match="--timeout"):

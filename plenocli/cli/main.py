@@ -20,7 +20,7 @@ COMMANDS: dict[str, str] = {
     "decode": "Decode a raw capture into a frames TIFF.",
     "bias": "Subtract the bias measured in the over-scan areas.",
     "flat": "Correct vignetting with a gain from a white image.",
-    "calibrate": "Calibrate the micro-lens grid from a white image.",
+    "calibrate": "Calibrate the micro-lens grid from a white or scene image.",
     "refocus": "Refocus a focused-plenoptic capture (Lanczos splatting, Eq. 3).",
     "sai": "Sub-aperture images of an N x N plenoptic sensor (Eq. 1).",
     "crosstalk": "Measure sub-aperture cross-talk from masked white captures.",

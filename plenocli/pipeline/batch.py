@@ -195,8 +195,16 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     else:
         results = _pool_results(min(jobs, len(captures)), str(config), captures, kwargs,
                                 timeout)
-    by_capture = {r.capture: r for r in progress(results, "captures", total=len(captures))}
+    by_capture = _collect(results, len(captures))
     return BatchReport(shared, [by_capture[c] for c in captures])
+
+
+def _collect(results: Iterator[CaptureResult], total: int) -> dict[str, CaptureResult]:
+    """Every result by capture. An interruption while a result is being handled closes the
+    results here, so a pool stops its workers now: left to the interpreter's exit, the pool
+    would wait for them to finish."""
+    with contextlib.closing(results):
+        return {r.capture: r for r in progress(results, "captures", total=total)}
 
 
 def _run_shared(template: Template, *, out, force: bool, dry_run: bool) -> list[Decision]:
