@@ -3,8 +3,10 @@
 Views are found by page name: a page ``VIEW.CHANNEL`` (``S00.R``, ``S00.G``, ...) is one channel
 of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is a view of its
 own. A file that holds a single view (e.g. a left or right refocused image) names it after the
-file (``left.tif`` -> ``left``). A
-single-page Bayer view is stitched as half-size RGB.
+file (``left.tif`` -> ``left``). A single-page Bayer view is demosaiced
+(``plenocli.colour.demosaic``, the default method) and stitched as full-resolution camera RGB;
+clipped (NaN) pixels stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
+gives it the camera's white balance and colour matrix.
 """
 
 from __future__ import annotations
@@ -16,11 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import stitch as stitch_lib
+from plenocli.colour.demosaic import demosaic
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
-from plenocli.model.cfa import half_size_rgb, shift_pattern
+from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
 from plenocli.stitch import PrismRig
@@ -43,7 +46,7 @@ def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
 
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols), their names, whether any
-    was a Bayer mosaic (stitched half-size), and the first file's metadata."""
+    was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata."""
     found: list[tuple[str, np.ndarray]] = []
     bayer, first_meta = False, None
     for path in inputs:
@@ -57,8 +60,8 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
             cfa = shift_pattern(cfa, top, left)
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
-            if len(pages) == 1 and cfa:  # registration needs whole CFA cells
-                found.append((name, np.moveaxis(half_size_rgb(data[pages[0]], cfa), -1, 0)))
+            if len(pages) == 1 and cfa:
+                found.append((name, np.moveaxis(demosaic(data[pages[0]], cfa), -1, 0)))
                 bayer = True
             else:
                 found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
@@ -109,7 +112,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                   overlap_tolerance=overlap_tolerance)
     record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                              "rig": rig})
-    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_half_size": cfa}
+    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": cfa}
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
     page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
