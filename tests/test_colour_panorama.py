@@ -16,6 +16,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -102,7 +103,7 @@ def chain(tmp_path_factory):
     _cast_and_clip(tmp / "views.tif", tmp / "views_cast.tif", clip=False)
     stitch.run([str(tmp / "views_cast.tif")], str(tmp / "panorama.tif"), views="A,B",
                layout="1x2", rig=str(RIG), report=str(tmp / "stitch.json"),
-               transform_out=str(tmp / "transform.json"))
+               transform_out=str(tmp / "transform.json"), preview=str(tmp / "panorama.png"))
     develop.run(str(tmp / "panorama.tif"), str(tmp / "panorama.jpg"),
                 linear=str(tmp / "panorama_linear.tif"))  # as-shot WB and matrix
     return tmp, truth
@@ -188,6 +189,20 @@ def test_seam_patches_keep_their_colour(developed):
     de, _ = _delta_e(linear, boxes, scale)
     print(f"colour panorama on the seam: dE2000 mean {de.mean():.2f}, max {de.max():.2f}")
     assert de.mean() < 1.0
+
+
+def test_stitch_preview_is_in_the_cameras_colour(chain, developed):
+    """The preview applies the camera's as-shot white balance and matrix: the chart's grey
+    patches show grey, not the camera's green cast."""
+    tmp, _ = chain
+    _, report, truth = developed
+    png = cv2.imread(str(tmp / "panorama.png"))[..., ::-1].astype(float)
+    neutral = [(r, c) for rgb, r, c in _patch_boxes(report, truth, on_seam=False)
+               if np.ptp(rgb) < 0.01]
+    assert len(neutral) == 4  # neutral 8 ... black 2 but the one on the seam (white is yellowish)
+    for r, c in neutral:
+        mean = png[r, c].reshape(-1, 3).mean(axis=0)
+        assert np.abs(mean - mean[1]).max() <= 3, mean
 
 
 def test_clipped_pixels_stay_nan_in_the_panorama(chain, developed):

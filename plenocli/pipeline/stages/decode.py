@@ -24,5 +24,6 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
              ",".join(meta["views"]), data.shape[2], data.shape[1], meta.get("cfa") or "none")
     if preview:
         area = active_area(meta, data.shape[1:])
-        write_png(preview, area.crop(data[0]).astype("float32"), cfa=area.cfa, protect=(input,))
+        write_png(preview, area.crop(data[0]).astype("float32"), cfa=area.cfa, protect=(input,),
+                  colour=meta.get("colour"))
 

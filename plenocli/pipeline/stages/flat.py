@@ -48,7 +48,8 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         gain_meta = tiffio.derived_meta(ref_meta, gain_record)
         tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source))
     if preview:
-        write_png(preview, corrected[:2], cfa=meta.get("cfa"), protect=(input, source))
+        write_png(preview, corrected[:2], cfa=meta.get("cfa"), protect=(input, source),
+                  colour=meta.get("colour"))
 
 
 def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:

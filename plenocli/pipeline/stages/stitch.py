@@ -131,7 +131,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                    protect=protect)
     if preview:
         image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
-        write_png(preview, image, protect=protect)
+        write_png(preview, image, protect=protect, colour=meta.get("colour"))
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %s px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1],
