@@ -225,3 +225,8 @@ def test_clipped_pixels_stay_nan_in_the_panorama(chain, developed):
     side = 6 + 2 * 7  # the block and the demosaicing's reach (menon2007: 7 px)
     assert side**2 <= len(found) <= (side + 4) ** 2  # + the resampling kernel, no smear
     assert np.isfinite(clipped[:, ~hole]).sum() == np.isfinite(clean[:, ~hole]).sum()
+    # the photograph shows the clipped highlight white and what no view covers black
+    develop.run(str(tmp / "panorama_clipped.tif"), str(tmp / "clipped.png"))
+    png = cv2.imread(str(tmp / "clipped.png"))
+    assert (png[hole] == 255).all()
+    assert (png[np.isnan(clean).any(axis=0)] == 0).all()
