@@ -69,7 +69,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         source = args.views if args.views.is_file() else simulated_views(Path(tmp))
         views, cfa = mosaics(source)
-    what = source.relative_to(ROOT) if source == args.views else "simulated dualpixel-prism"
+    what = source if source == args.views else "a simulated dualpixel-prism capture"
     print(f"views A, B of {what}: {views.shape[2]} x {views.shape[1]} {cfa}")
     results = {}
     for name, rgb_of in (("half-size RGB (before)", half_size_rgb),

@@ -221,6 +221,7 @@ def test_clipped_pixels_stay_nan_in_the_panorama(chain, developed):
     expected = np.array(report["axis_px"]) + [centre[0] - (rows - 1) / 2,
                                               centre[1] - (cols - 1) / 2]
     found = np.argwhere(hole)
+    print(f"clipped block: {len(found)} NaN panorama pixels")
     np.testing.assert_allclose(found.mean(axis=0), expected, atol=1.5)
     side = 6 + 2 * 7  # the block and the demosaicing's reach (menon2007: 7 px)
     assert side**2 <= len(found) <= (side + 4) ** 2  # + the resampling kernel, no smear
