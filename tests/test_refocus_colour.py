@@ -38,7 +38,7 @@ def test_bayer_refocus_is_rgb_at_full_resolution(refocused):
     assert covered.mean() > 0.6
     for ch in range(3):
         err = image[ch][covered] - texture[ch][covered]
-        assert 10 * np.log10(1 / np.mean(err**2)) >= 30.0  # PSNR, peak 1
+        assert 10 * np.log10(1 / np.mean(err**2)) >= 50.0  # PSNR, peak 1 (measured 60-64 dB)
 
 
 def test_develop_takes_the_refocused_rgb(refocused):
@@ -53,7 +53,7 @@ def test_develop_takes_the_refocused_rgb(refocused):
     keep = np.isfinite(measured).all(axis=1)
     assert keep.mean() > 0.6
     de = delta_e_2000(measured[keep], expected[keep])
-    assert de.mean() < 1.0 and np.percentile(de, 95) < 2.5
+    assert de.mean() < 0.3 and np.percentile(de, 95) < 0.5  # measured 0.08, 0.18
     assert cv2.imread(str(tmp / "rgb.jpg")).shape[:2] == linear.shape[1:]
 
 
