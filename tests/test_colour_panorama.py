@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 import pytest
 
+from plenocli.colour.demosaic import mosaic
 from plenocli.colour.metrics import delta_e_2000
 from plenocli.io import tiffio
 from plenocli.model import colour as colour_model
@@ -231,3 +232,18 @@ def test_clipped_pixels_stay_nan_in_the_panorama(chain, developed):
     png = cv2.imread(str(tmp / "clipped.png"))
     assert (png[hole] == 255).all()
     assert (png[np.isnan(clean).any(axis=0)] == 0).all()
+
+
+def test_views_with_their_own_bayer_patterns_are_each_demosaiced(tmp_path):
+    """SAIs whose mosaics start on different filters (``view_colours``) are demosaiced each with
+    its own pattern: a uniform colour comes out as that colour in every view."""
+    colour = np.array([0.2, 0.5, 0.8], np.float32)
+    patterns = ["RGGB", "GRBG", "BGGR", "GBRG"]
+    scene = np.broadcast_to(colour, (32, 48, 3))
+    pages = np.stack([mosaic(scene, p) for p in patterns])
+    meta = {"views": ["S00", "S01", "S10", "S11"], "cfa": None, "view_colours": patterns,
+            "active_area": [0, 0, 32, 48]}
+    tiffio.write_image(tmp_path / "sai.tif", pages, meta)
+    stack, names, bayer, _ = stitch.load_views([str(tmp_path / "sai.tif")], None)
+    assert bayer and names == meta["views"] and stack.shape == (4, 3, 32, 48)
+    np.testing.assert_allclose(stack.mean(axis=(2, 3)), np.tile(colour, (4, 1)), atol=1e-5)

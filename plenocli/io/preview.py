@@ -36,6 +36,20 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
     return np.concatenate(out, axis=1)
 
 
+def colour_pages(pages: np.ndarray, names: list[str] | None) -> np.ndarray | None:
+    """Pages (P, rows, cols) named R, G, B (one colour view) or VIEW.R, VIEW.G, VIEW.B (views
+    in page order) as RGB (rows, cols, 3) or (views, rows, cols, 3); None for other pages."""
+    names = list(names or [])
+    if names == ["R", "G", "B"]:
+        return np.stack(list(pages), axis=-1)
+    if not names or len(names) != len(pages) or len(names) % 3:
+        return None
+    views = [names[k].rpartition(".")[0] for k in range(0, len(names), 3)]
+    if names != [f"{v}.{c}" for v in views for c in "RGB"] or not all(views):
+        return None
+    return np.moveaxis(np.asarray(pages).reshape(len(views), 3, *pages.shape[1:]), 1, -1)
+
+
 def view_mosaic(stack: np.ndarray, n: int, channels: list[str], *,
                 cfa: str | None = None) -> np.ndarray:
     """N x N sub-aperture views (view-major pages of ``len(channels)`` channels each) in their

@@ -44,6 +44,16 @@ def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
     return list(groups.items())
 
 
+def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
+    """The 2 x 2 Bayer pattern of one page at the crop's pixel (0, 0) (the page's own in
+    ``view_colours``, e.g. quad-Bayer SAIs, else the file's ``cfa``), or None: not a mosaic."""
+    colours = meta.get("view_colours")
+    pattern = colours[page] if colours and page < len(colours) else meta.get("cfa")
+    if not pattern or len(str(pattern)) != 4:
+        return None
+    return shift_pattern(pattern, top, left)
+
+
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols), their names, whether any
     was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata."""
@@ -52,15 +62,15 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     for path in inputs:
         data, meta = tiffio.read_image(path)
         first_meta = first_meta or meta
-        cfa = meta.get("cfa")
+        top, left = 0, 0
         area = meta.get("active_area")
         if area:  # stitch the light-sensitive area only
             top, left, bottom, right = area
             data = data[:, top:bottom, left:right]
-            cfa = shift_pattern(cfa, top, left)
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
-            if len(pages) == 1 and cfa:
+            cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
+            if cfa:
                 found.append((name, np.moveaxis(demosaic(data[pages[0]], cfa), -1, 0)))
                 bayer = True
             else:
