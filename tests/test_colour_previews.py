@@ -6,8 +6,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from plenocli.colour.demosaic import mosaic
 from plenocli.io import tiffio
-from plenocli.io.preview import colour_pages
+from plenocli.io.preview import colour_pages, view_mosaic
 from plenocli.pipeline.stages import decode, flat, sai, simulate
 
 
@@ -51,3 +52,13 @@ def test_colour_pages_groups_rgb_triplets_only():
     assert colour_pages(pages[:3], ["R", "G", "B"]).shape == (2, 2, 3)
     assert colour_pages(pages[:3], ["A", "B", "S"]) is None
     assert colour_pages(pages, ["A.R", "A.G", "A.B", "B.G", "B.R", "B.B"]) is None
+
+
+def test_quad_bayer_sais_are_shown_in_colour():
+    """Each SAI of a quad-Bayer sensor is a (half-resolution) mosaic of its own: the N x N
+    arrangement shows every view in its colour."""
+    colour = np.array([0.2, 0.5, 0.8], np.float32)
+    stack = np.stack([mosaic(np.broadcast_to(colour, (16, 24, 3)), "GRBG")] * 4)
+    picture = view_mosaic(stack, 2, ["raw"], cfa="GRBG")
+    assert picture.shape == (16, 24, 3)  # 2 x 2 views of 8 x 12 RGB pixels
+    np.testing.assert_allclose(picture.reshape(-1, 3), np.tile(colour, (16 * 24, 1)), atol=1e-6)
