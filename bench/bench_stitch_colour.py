@@ -5,7 +5,8 @@ views of ``make demo``; when it is missing, a ``simulate dualpixel-prism --pixel
 through decode, bias and flat, the same size), stitched with the demo's rig both ways in the same
 run: the views made RGB (``colour.demosaic``, the default method, at full resolution; or
 ``model.cfa.half_size_rgb``, one RGB pixel per 2 x 2 cell), then ``stitch.stitch``. Times are
-the best of ``--repeat`` runs; file I/O is left out.
+the best of ``--repeat`` runs; file I/O is left out. Memory: the tracemalloc peak of numpy
+allocations during one more run of each.
 
     PYTHONPATH=. python bench/bench_stitch_colour.py [--views FILE.tif] [--repeat 3]
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -53,11 +55,17 @@ def mosaics(path: Path) -> tuple[np.ndarray, str]:
 
 
 def run_case(views: np.ndarray, cfa: str, rgb_of, rig, repeat: int):
+    """Best time, the last result and the numpy peak (bytes) of one run."""
     def once():
         stack = np.stack([np.moveaxis(rgb_of(v, cfa), -1, 0) for v in views])
         return stitch(stack, layout="1x2", rig=rig)
 
-    return best_time(once, repeat)
+    seconds, result = best_time(once, repeat)
+    tracemalloc.start()
+    once()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return seconds, result, peak
 
 
 def main() -> None:
@@ -74,12 +82,14 @@ def main() -> None:
     results = {}
     for name, rgb_of in (("half-size RGB (before)", half_size_rgb),
                          ("full-resolution demosaic", demosaic)):
-        seconds, (pano, report) = run_case(views, cfa, rgb_of, rig, args.repeat)
-        results[name] = seconds
+        seconds, (pano, report), peak = run_case(views, cfa, rgb_of, rig, args.repeat)
+        results[name] = seconds, peak
         print(f"{name:26s} {seconds:6.2f} s   panorama {pano.shape[2]} x {pano.shape[1]}, "
-              f"residual {report.residual_px:.3f} px (in its own pixels)")
-    half, full = results.values()
-    print(f"ratio full / half-size = {full / half:.2f} x for 4 x the pixels")
+              f"residual {report.residual_px:.3f} px (in its own pixels), numpy peak "
+              f"{peak / 2**20:.0f} MiB = {peak / pano.nbytes:.1f} x the panorama")
+    (half, half_peak), (full, full_peak) = results.values()
+    print(f"ratio full / half-size = {full / half:.2f} x the time, {full_peak / half_peak:.2f} x "
+          "the memory, for 4 x the pixels")
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ import pytest
 
 from plenocli.colour.demosaic import mosaic
 from plenocli.colour.metrics import delta_e_2000
+from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.model import colour as colour_model
 from plenocli.pipeline.stages import bias, decode, develop, flat, simulate, stitch
@@ -247,3 +248,16 @@ def test_views_with_their_own_bayer_patterns_are_each_demosaiced(tmp_path):
     stack, names, bayer, _ = stitch.load_views([str(tmp_path / "sai.tif")], None)
     assert bayer and names == meta["views"] and stack.shape == (4, 3, 32, 48)
     np.testing.assert_allclose(stack.mean(axis=(2, 3)), np.tile(colour, (4, 1)), atol=1e-5)
+
+
+@pytest.mark.parametrize("pattern,shape,message", [
+    ("RGBW", (32, 48), "not a 2 x 2 Bayer pattern"),
+    ("RGGB", (2, 48), "at least 4 x 4 pixels"),
+])
+def test_bayer_views_that_cannot_be_demosaiced_are_refused(tmp_path, pattern, shape, message):
+    pages = np.ones((2, *shape), np.float32)
+    meta = {"views": ["A", "B"], "cfa": pattern, "active_area": [0, 0, *shape]}
+    tiffio.write_image(tmp_path / "views.tif", pages, meta)
+    with pytest.raises(InputError, match=message):
+        stitch.run([str(tmp_path / "views.tif")], str(tmp_path / "panorama.tif"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["views.tif"]

@@ -71,7 +71,11 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
         for name, pages in _view_groups(names, Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
             if cfa:
-                found.append((name, np.moveaxis(demosaic(data[pages[0]], cfa), -1, 0)))
+                try:
+                    rgb = demosaic(data[pages[0]], cfa)
+                except ValueError as err:
+                    raise InputError(f"{path}: view {name}: {err}") from err
+                found.append((name, np.moveaxis(rgb, -1, 0)))
                 bayer = True
             else:
                 found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
