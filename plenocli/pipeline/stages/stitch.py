@@ -104,7 +104,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
-    stack, names, cfa, meta = load_views(inputs, views)
+    stack, names, bayer, meta = load_views(inputs, views)
     transform = None
     if transform_in:
         path = Path(transform_in)
@@ -126,13 +126,13 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                   overlap_tolerance=overlap_tolerance)
     record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                              "rig": rig})
-    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": cfa}
+    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
     page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
                   else [f"C{c}" for c in range(pano.shape[0])])
-    out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, active_area=None,
-                                   masked_areas=None, origin=None,
+    out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, view_colours=None,
+                                   active_area=None, masked_areas=None, origin=None,
                                    stitch={k: rep[k] for k in ("model", "layout", "shifts_px",
                                                                "residual_px", "origin_px")})
     tiffio.write_image(output, pano.astype(np.float32), out_meta, protect=protect)
