@@ -73,3 +73,12 @@ def test_refocus_preview_is_in_colour(refocused):
     for ch in range(3):
         assert np.corrcoef(png[..., ch][finite], image[ch][finite])[0, 1] > 0.9
     assert np.abs(png[..., 0] - png[..., 2])[finite].mean() > 3
+
+
+def test_preview_of_several_bayer_views_shows_each_in_colour():
+    """Refocused A, B (pages A.R, A.G, A.B, B.R, ...) preview as two RGB views side by side."""
+    stack = np.arange(2 * 6 * 4 * 5, dtype=np.float32).reshape(12, 4, 5)  # two g values
+    names = [f"{v}.{c}@g{g}" for g in (3, 4) for v in "AB" for c in "RGB"]
+    views = refocus._best_picture(stack, names, [3.0, 4.0], 4.0, rgb=True)
+    assert views.shape == (2, 4, 5, 3)
+    np.testing.assert_array_equal(views[1, ..., 0], stack[9])  # B.R at g = 4
