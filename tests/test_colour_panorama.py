@@ -26,6 +26,7 @@ from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.model import colour as colour_model
 from plenocli.pipeline.stages import bias, decode, develop, flat, simulate, stitch
+from plenocli.stitch.views import fill_nan, fill_nan_channels
 from plenocli.synth import prismcam, prismsets
 from plenocli.synth.chart import colour_chart
 
@@ -261,3 +262,15 @@ def test_bayer_views_that_cannot_be_demosaiced_are_refused(tmp_path, pattern, sh
     with pytest.raises(InputError, match=message):
         stitch.run([str(tmp_path / "views.tif")], str(tmp_path / "panorama.tif"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["views.tif"]
+
+
+def test_channels_sharing_their_nan_pixels_are_filled_like_one_channel_at_a_time():
+    rng = np.random.default_rng(3)
+    channels = rng.random((3, 40, 50)).astype(np.float32)
+    channels[:, 10:20, 5:15] = np.nan  # a demosaiced view: every channel masked alike
+    channels[:, :, 45:] = np.nan
+    one_by_one = np.stack([fill_nan(c) for c in channels])
+    np.testing.assert_array_equal(fill_nan_channels(channels), one_by_one)
+    channels[1, 30, 30] = np.nan  # masks that differ: still channel by channel
+    np.testing.assert_array_equal(fill_nan_channels(channels),
+                                  np.stack([fill_nan(c) for c in channels]))

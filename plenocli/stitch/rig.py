@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from plenocli.optics import prism as optics_prism
-from plenocli.stitch.views import fill_nan
+from plenocli.stitch.views import fill_nan_channels
 
 MAP_BAND_PIXELS = 1 << 18  # canvas pixels ray-traced at a time
 
@@ -215,9 +215,10 @@ def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.nd
         cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                           borderValue=0) > 0.999
         cover &= ~bad
+        filled = fill_nan_channels(stack[k].astype(np.float32))
         for c in range(n_chan):
-            img = fill_nan(stack[k, c].astype(np.float32))
-            warped = cv2.remap(img, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+            warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
+                               borderMode=cv2.BORDER_REPLICATE)
             out[k, c] = np.where(cover, warped, np.nan)
     return out, origin_xy[:, ::-1].copy()
 
