@@ -43,6 +43,7 @@ CAMERA = np.array([[0.80, 0.15, 0.05], [0.10, 0.80, 0.10], [0.05, 0.20, 0.75]]) 
     * np.array([0.55, 1.0, 0.7])[:, None]
 B_CAST = {"R": 1.10, "G": 1.0, "B": 0.88}  # view B's exposure per colour, off A's (per channel)
 CLIPPED_BOX = (slice(60, 66), slice(250, 256))  # view B pixels made NaN (clipped), B alone
+ORIGINAL_MAKE_CHART = prismcam.make_chart  # the simulator's own chart (the tests patch it)
 
 
 def _camera_chart(cam, view_pixels, *, seed, scene):
@@ -54,9 +55,6 @@ def _camera_chart(cam, view_pixels, *, seed, scene):
         r0, r1, c0, c1 = _checker_box_px(chart)
         image[r0:r1, c0:c1] = colour_chart(r1 - r0, c1 - c0)[0]
     return prismcam.Chart((image @ CAMERA.T * 255).astype(np.float32), chart.half_mm)
-
-
-ORIGINAL_MAKE_CHART = prismcam.make_chart
 
 
 def _checker_box_px(chart) -> tuple[int, int, int, int]:
