@@ -220,3 +220,15 @@ def test_raw_frame_previews_take_off_the_black_level(tmp_path):
     write_png(tmp_path / "p.png", frame, cfa="RGGB")
     bgr = cv2.imread(str(tmp_path / "p.png")).astype(int)
     assert bgr[:, :20].max() <= 2 and bgr[:, 30:].min() >= 250
+
+
+def test_blown_highlights_are_the_enclosed_masked_pixels():
+    scene = np.ones((20, 30, 3), np.float32)
+    scene[5:8, 10:14, 1] = np.nan  # a clipped highlight (one channel is enough)
+    scene[:, :3] = np.nan  # outside the views of a panorama: reaches the edge
+    inside = np.zeros((20, 30), bool)
+    inside[5:8, 10:14] = True
+    np.testing.assert_array_equal(dev.blown_highlights(scene, whole_frame=False), inside)
+    everything = inside.copy()
+    everything[:, :3] = True
+    np.testing.assert_array_equal(dev.blown_highlights(scene, whole_frame=True), everything)

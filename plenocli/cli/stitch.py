@@ -43,8 +43,10 @@ def stitch(**params):
 
     Views come from one file (dual-pixel A and B, the four sub-apertures of sai) or several (the
     left and right refocused images). Pages VIEW.R, VIEW.G, VIEW.B are one colour view; a file
-    of pages R, G, B is one view named after the file. Bayer views are stitched as half-size
-    RGB. Exposure is matched from the overlaps; the panorama is NaN where no view covers it.
+    of pages R, G, B is one view named after the file. Bayer views are demosaiced and stitched
+    as full-resolution RGB (develop the panorama for its colour). Exposure is matched per
+    channel from the overlaps; the panorama is NaN where no view has data (outside the views,
+    or clipped in every view covering it).
 
     \b
     Example:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from plenocli.colour.balance import normalised_gains
 from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
@@ -94,6 +95,20 @@ def _per_band(rgb: np.ndarray, matrix: np.ndarray, *, in_place: bool,
             band = encode(band, encode_space)
         out[start:start + BAND_ROWS] = band
     return out
+
+
+def blown_highlights(scene: np.ndarray, *, whole_frame: bool) -> np.ndarray:
+    """The masked (NaN) pixels (rows, cols) of ``scene`` (rows, cols, 3) that are clipped
+    highlights, which a photograph shows white (as a camera shows a blown highlight).
+
+    In a view that fills its frame (``whole_frame``) every masked pixel is one. In a panorama or
+    a refocused image only the masked areas enclosed by image data are: a masked area that
+    reaches the image's edge is outside what the views cover, and stays black.
+    """
+    masked = ~np.isfinite(scene).all(axis=-1)
+    if whole_frame or not masked.any():
+        return masked
+    return ndimage.binary_fill_holes(~masked) & masked
 
 
 def exposure_scale(scene: np.ndarray, *, exposure_ev: float = 0.0,

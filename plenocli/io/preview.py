@@ -26,7 +26,8 @@ def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
 
 
 def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 4) -> np.ndarray:
-    """Views (views, rows, cols) as one picture, left to right, with NaN gaps between them."""
+    """Views (views, rows, cols), or RGB views (views, rows, cols, 3), as one picture, left to
+    right, with NaN gaps between them (Bayer views of pattern ``cfa`` as half-size RGB)."""
     tiles = [half_size_rgb(v, cfa) if cfa else np.asarray(v, np.float32) for v in views]
     spacer = np.full((tiles[0].shape[0], gap, *tiles[0].shape[2:]), np.nan, np.float32)
     out = [tiles[0]]
@@ -35,29 +36,50 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
     return np.concatenate(out, axis=1)
 
 
-def view_mosaic(stack: np.ndarray, n: int, channels: list[str]) -> np.ndarray:
+def colour_pages(pages: np.ndarray, names: list[str] | None) -> np.ndarray | None:
+    """Pages (P, rows, cols) named R, G, B (one colour view) or VIEW.R, VIEW.G, VIEW.B (views
+    in page order) as RGB (rows, cols, 3) or (views, rows, cols, 3); None for other pages."""
+    names = list(names or [])
+    if names == ["R", "G", "B"]:
+        return np.stack(list(pages), axis=-1)
+    if not names or len(names) != len(pages) or len(names) % 3:
+        return None
+    views = [names[k].rpartition(".")[0] for k in range(0, len(names), 3)]
+    if names != [f"{v}.{c}" for v in views for c in "RGB"] or not all(views):
+        return None
+    return np.moveaxis(np.asarray(pages).reshape(len(views), 3, *pages.shape[1:]), 1, -1)
+
+
+def view_mosaic(stack: np.ndarray, n: int, channels: list[str], *,
+                cfa: str | None = None) -> np.ndarray:
     """N x N sub-aperture views (view-major pages of ``len(channels)`` channels each) in their
-    N x N arrangement: an RGB picture when the channels are R, G, B, else their mean."""
+    N x N arrangement: an RGB picture when the channels are R, G, B or each view is a Bayer
+    mosaic of pattern ``cfa`` (half-size RGB), else their mean."""
     tiles = stack.reshape(n * n, len(channels), *stack.shape[1:]).astype(np.float32)
-    tiles = np.moveaxis(tiles, 1, -1) if channels == ["R", "G", "B"] else tiles.mean(axis=1)
+    if cfa and len(channels) == 1:
+        tiles = np.stack([half_size_rgb(t[0], cfa) for t in tiles])
+    elif channels == ["R", "G", "B"]:
+        tiles = np.moveaxis(tiles, 1, -1)
+    else:
+        tiles = tiles.mean(axis=1)
     rows = [np.concatenate(list(tiles[i * n:(i + 1) * n]), axis=1) for i in range(n)]
     return np.concatenate(rows, axis=0)
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = None,
               max_side: int = 2048, protect: tuple = (), colour: dict | None = None) -> None:
-    """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) RGB image, or
-    (views, rows, cols) views side by side. Bayer data is shown in colour with the camera's
-    white balance and matrix from ``colour`` (the frames' metadata), else grey-world balanced."""
-    bayer = bool(cfa)
-    if image.ndim == 3 and image.shape[-1] != 3:
+    """Write a display PNG of a 2-D frame (Bayer if ``cfa``), an (rows, cols, 3) camera RGB
+    image, (views, rows, cols) views or (views, rows, cols, 3) RGB views side by side. Colour
+    (Bayer or RGB) is shown in the camera's colour: white balance and matrix from ``colour``
+    (the frames' metadata), else grey-world balanced."""
+    if image.ndim == 4 or (image.ndim == 3 and image.shape[-1] != 3):
         image, cfa = views_side_by_side(image, cfa), None
     img = np.asarray(half_size_rgb(image, cfa) if cfa and image.ndim == 2 else image, np.float32)
     scale = max(img.shape[:2]) / max_side
     if scale > 1:  # shrink first: the stretch below then works on a few megapixels, not 60
         size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-    if bayer and img.ndim == 3:
+    if img.ndim == 3:
         img = display_colour(img, colour)
     else:
         img = to_display(img)

@@ -10,7 +10,7 @@ from scipy import ndimage
 
 from plenocli.errors import InputError
 from plenocli.stitch.registration import difference_row
-from plenocli.stitch.views import corners_xy, fill_nan, translation_matrix
+from plenocli.stitch.views import corners_xy, fill_nan_channels, translation_matrix
 
 
 def canvas(transforms: list[np.ndarray], shape: tuple[int, int]) -> tuple[np.ndarray, tuple]:
@@ -76,8 +76,9 @@ def warp_views(stack: np.ndarray, transforms: list[np.ndarray], offset: np.ndarr
                       border=cv2.BORDER_CONSTANT) > 0.999
         weights[k][box] = np.where(cover, _warp(_feather_weight(valid), m, box_shape,
                                                 interp=cv2.INTER_LINEAR), 0)
+        filled = fill_nan_channels(stack[k])
         for c in range(n_chan):
-            img = _warp(fill_nan(stack[k, c]), m, box_shape, interp=cv2.INTER_LANCZOS4)
+            img = _warp(filled[c], m, box_shape, interp=cv2.INTER_LANCZOS4)
             warped[k, c][box] = np.where(cover, img, np.nan)
     return warped, weights
 

@@ -119,6 +119,21 @@ def fill_nan(image: np.ndarray) -> np.ndarray:
     return image[tuple(idx)]
 
 
+def fill_nan_channels(channels: np.ndarray) -> np.ndarray:
+    """:func:`fill_nan` of every channel of (C, rows, cols); channels with the same NaN pixels
+    (a demosaiced view, a rig canvas) share one distance transform."""
+    bad = ~np.isfinite(channels)
+    if not bad.any():
+        return channels
+    if not (bad == bad[0]).all():
+        return np.stack([fill_nan(c) for c in channels])
+    if bad[0].all():
+        return np.zeros_like(channels)
+    rows, cols = ndimage.distance_transform_edt(bad[0], return_distances=False,
+                                                return_indices=True)
+    return channels[:, rows, cols]
+
+
 def highpass(image: np.ndarray) -> np.ndarray:
     """Texture only: image minus a wide Gaussian blur, float32 (removes vignetting and offsets).
 

@@ -61,7 +61,7 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
              shown(input), shown(output), levels[0]["mode"], ",".join(names), cols, rows,
              out_meta["clipped_pixels"])
     if preview:
-        write_png(preview, views[:2], cfa=new_cfa, protect=(input,))
+        write_png(preview, views[:2], cfa=new_cfa, protect=(input,), colour=meta.get("colour"))
 
 
 def _summary(info: dict, name: str) -> dict:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from plenocli.io import raw, tiffio
 from plenocli.io.framing import active_area
-from plenocli.io.preview import write_png
+from plenocli.io.preview import colour_pages, write_png
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -24,5 +24,7 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
              ",".join(meta["views"]), data.shape[2], data.shape[1], meta.get("cfa") or "none")
     if preview:
         area = active_area(meta, data.shape[1:])
-        write_png(preview, area.crop(data[0]).astype("float32"), cfa=area.cfa, protect=(input,))
+        rgb = colour_pages(area.crop(data), meta.get("views"))  # an RGB image: its colours
+        write_png(preview, (area.crop(data[0]) if rgb is None else rgb).astype("float32"),
+                  cfa=area.cfa, protect=(input,), colour=meta.get("colour"))
 

@@ -56,7 +56,9 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
                               camera_to_srgb=to_srgb, in_place=True)
         del data
         scale = dev.exposure_scale(scene, exposure_ev=exposure)
+        blown = dev.blown_highlights(scene, whole_frame=not {"stitch", "refocus"} & meta.keys())
         encoded = dev.output_encoded(scene, space, scale, in_place=not linear)
+        encoded[blown] = 1.0
     except ValueError as err:
         raise InputError(f"{input}: view {chosen.name}: {err}") from err
     params = dict(view=chosen.name, method=method if chosen.cfa else None, wb=wb,

@@ -7,7 +7,7 @@ import numpy as np
 from plenocli.errors import InputError
 from plenocli.flatfield import apply_gain, white_gains
 from plenocli.io import tiffio
-from plenocli.io.preview import write_png
+from plenocli.io.preview import colour_pages, write_png
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -48,7 +48,9 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         gain_meta = tiffio.derived_meta(ref_meta, gain_record)
         tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source))
     if preview:
-        write_png(preview, corrected[:2], cfa=meta.get("cfa"), protect=(input, source))
+        rgb = colour_pages(corrected, meta.get("views"))  # R, G, B pages: one colour picture
+        write_png(preview, corrected[:2] if rgb is None else rgb, cfa=meta.get("cfa"),
+                  protect=(input, source), colour=meta.get("colour"))
 
 
 def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:

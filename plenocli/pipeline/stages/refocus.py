@@ -66,7 +66,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
              f", sharpest g = {best:g}" if sweep and best is not None else "")
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
-                  protect=(input, grid))
+                  protect=(input, grid), colour=meta.get("colour"))
 
 
 def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[float], *,
@@ -97,11 +97,15 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
 
 def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
                   best: float | None, *, rgb: bool) -> np.ndarray:
-    """The pages of the sharpest g: an RGB picture for colour channels, else their mean."""
+    """The pages of the sharpest g: RGB for colour channels (several views: (views, rows, cols,
+    3), shown side by side), else their mean."""
     per = len(stack) // len(g_values)
     k = g_values.index(best) if best is not None else 0
     chunk = stack[k * per:(k + 1) * per]
     rgb = rgb or [n.split("@")[0] for n in names[:per]] == list(rf.CHANNELS)
+    if rgb:  # pages R, G, B, or VIEW.R, VIEW.G, VIEW.B per view
+        views = np.moveaxis(chunk.reshape(-1, 3, *chunk.shape[1:]), 1, -1)
+        return views[0] if len(views) == 1 else views
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
-        return np.dstack(chunk) if rgb else np.nanmean(chunk, axis=0)
+        return np.nanmean(chunk, axis=0)

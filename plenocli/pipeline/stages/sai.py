@@ -61,4 +61,5 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
              f" x {len(pages)} channels" if len(pages) > 1 else "", stack.shape[2],
              stack.shape[1], ", approximate S-hat" if framing.grid else "")
     if preview:
-        write_png(preview, view_mosaic(stack, n, pages), protect=protect)
+        write_png(preview, view_mosaic(stack, n, pages, cfa=colours[0] if same else None),
+                  protect=protect, colour=meta.get("colour"))

@@ -3,8 +3,10 @@
 Views are found by page name: a page ``VIEW.CHANNEL`` (``S00.R``, ``S00.G``, ...) is one channel
 of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is a view of its
 own. A file that holds a single view (e.g. a left or right refocused image) names it after the
-file (``left.tif`` -> ``left``). A
-single-page Bayer view is stitched as half-size RGB.
+file (``left.tif`` -> ``left``). A single-page Bayer view is demosaiced
+(``plenocli.colour.demosaic``, the default method) and stitched as full-resolution camera RGB;
+clipped (NaN) pixels stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
+gives it the camera's white balance and colour matrix.
 """
 
 from __future__ import annotations
@@ -16,11 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import stitch as stitch_lib
+from plenocli.colour.demosaic import demosaic
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.preview import write_png
-from plenocli.model.cfa import half_size_rgb, shift_pattern
+from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
 from plenocli.stitch import PrismRig
@@ -41,24 +44,38 @@ def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
     return list(groups.items())
 
 
+def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
+    """The 2 x 2 Bayer pattern of one page at the crop's pixel (0, 0) (the page's own in
+    ``view_colours``, e.g. quad-Bayer SAIs, else the file's ``cfa``), or None: not a mosaic."""
+    colours = meta.get("view_colours")
+    pattern = colours[page] if colours and page < len(colours) else meta.get("cfa")
+    if not pattern or len(str(pattern)) != 4:
+        return None
+    return shift_pattern(pattern, top, left)
+
+
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols), their names, whether any
-    was a Bayer mosaic (stitched half-size), and the first file's metadata."""
+    was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata."""
     found: list[tuple[str, np.ndarray]] = []
     bayer, first_meta = False, None
     for path in inputs:
         data, meta = tiffio.read_image(path)
         first_meta = first_meta or meta
-        cfa = meta.get("cfa")
+        top, left = 0, 0
         area = meta.get("active_area")
         if area:  # stitch the light-sensitive area only
             top, left, bottom, right = area
             data = data[:, top:bottom, left:right]
-            cfa = shift_pattern(cfa, top, left)
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
-            if len(pages) == 1 and cfa:  # registration needs whole CFA cells
-                found.append((name, np.moveaxis(half_size_rgb(data[pages[0]], cfa), -1, 0)))
+            cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
+            if cfa:
+                try:
+                    rgb = demosaic(data[pages[0]], cfa)
+                except ValueError as err:
+                    raise InputError(f"{path}: view {name}: {err}") from err
+                found.append((name, np.moveaxis(rgb, -1, 0)))
                 bayer = True
             else:
                 found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
@@ -87,7 +104,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
-    stack, names, cfa, meta = load_views(inputs, views)
+    stack, names, bayer, meta = load_views(inputs, views)
     transform = None
     if transform_in:
         path = Path(transform_in)
@@ -109,13 +126,13 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                   overlap_tolerance=overlap_tolerance)
     record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                              "rig": rig})
-    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_half_size": cfa}
+    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
     page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
                   else [f"C{c}" for c in range(pano.shape[0])])
-    out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, active_area=None,
-                                   masked_areas=None, origin=None,
+    out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, view_colours=None,
+                                   active_area=None, masked_areas=None, origin=None,
                                    stitch={k: rep[k] for k in ("model", "layout", "shifts_px",
                                                                "residual_px", "origin_px")})
     tiffio.write_image(output, pano.astype(np.float32), out_meta, protect=protect)
@@ -128,7 +145,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                    protect=protect)
     if preview:
         image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
-        write_png(preview, image, protect=protect)
+        write_png(preview, image, protect=protect, colour=meta.get("colour"))
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %s px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1],

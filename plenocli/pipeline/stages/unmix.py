@@ -141,13 +141,21 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
                                                 "unit independent noise in every input view")
         tiffio.write_image(noise_map, gains, gain_meta, protect=protect)
     if preview:
-        shown_pages = out[groups[0], top:bottom, left:right]
-        write_png(preview, shown_pages, cfa=cfa if info["layout"] == "cfa" else None,
-                  protect=protect)
+        write_png(preview, _preview_views(out[:, top:bottom, left:right], groups, info),
+                  cfa=cfa if info["layout"] == "cfa" else None, protect=protect,
+                  colour=meta.get("colour"))
     log.info("unmix: %s -> %s (%s; noise gain median %.3g, max %.3g; condition number up to "
              "%.3g%s)", ", ".join(shown(p) for p in inputs), shown(output),
              ",".join(info["views"]), summary["noise_gain_median"], summary["noise_gain_max"],
              summary["condition_max"], f", Tikhonov {regularise:g}" if regularise else "")
+
+
+def _preview_views(pages: np.ndarray, groups: list[list[int]], info: dict) -> np.ndarray:
+    """The unmixed views to show: (views, rows, cols, 3) when the groups are the R, G, B planes
+    of the views, else the pages of the first group."""
+    if info["layout"] == "channels" and list(info["colours"]) == ["R", "G", "B"]:
+        return np.stack([pages[g] for g in groups], axis=-1)
+    return pages[groups[0]]
 
 
 def _summary(gains: np.ndarray, names: list[str], cond: np.ndarray, regularise: float) -> dict:
