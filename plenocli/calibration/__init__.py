@@ -27,15 +27,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from plenocli.calibration.candidates import Lattice
-from plenocli.calibration.centres import mean_micro_image, refine_centres, symmetry_centre
-from plenocli.calibration.fit import (
-    LatticeFit,
-    brightest_offset,
-    compare_grids,
-    fit_grid,
-    fit_lattice,
-    phase_offset,
+from plenocli.calibration.centres import (
+    LensCentre,
+    lens_centre,
+    mean_micro_image,
+    refine_centres,
+    symmetry_centre,
 )
+from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.lenstypes import classify
 from plenocli.calibration.search import border_lattice, find_lattice, hypotheses, view_for, views
@@ -60,11 +59,13 @@ class CalibrationReport:
     fit: LatticeFit
     verdict: Verdict
     lens_types: dict | None = None
+    lens_centre: LensCentre | None = None   # None when the offset came from --start
 
     def to_dict(self) -> dict:
         return {**{k: (v if isinstance(v, bool) else float(v) if isinstance(v, float)
                        else int(v)) for k, v in self.fit.__dict__.items()},
-                "confidence": self.verdict.to_dict(), "lens_types": self.lens_types}
+                "confidence": self.verdict.to_dict(), "lens_types": self.lens_types,
+                "lens_centre": self.lens_centre.to_dict() if self.lens_centre else None}
 
 
 def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = None,
@@ -115,13 +116,17 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     if sure:
         found = border.lattice
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
+    centre = None
     if start is None:
-        guess = LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind,
+        centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0),
+                                            found.kind))
+        if not centre.sure:
+            raise CalibrationError(
+                f"{found.describe()} lattice found, but its lens centres cannot be told from the "
+                f"holes between them (the mean micro-image is as round about a hole: asymmetry "
+                f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); {WHAT_TO_DO}")
+        guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
                          image_shape=image.shape)
-        guess = LensGrid(found.pitch_px, found.angle_rad, phase_offset(flat, guess), found.kind,
-                         image_shape=image.shape)
-        guess = LensGrid(found.pitch_px, found.angle_rad, brightest_offset(flat, guess),
-                         found.kind, image_shape=image.shape)
     else:
         guess = start
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
@@ -141,7 +146,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
                         indices=grid.indices, lens_type_of_coset=coset)
         type_info = {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
                      "p_value": types.p_value}
-    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info)
+    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
+                                   lens_centre=centre)
 
 
 def _corner_error(border, shape: tuple[int, int]) -> float:

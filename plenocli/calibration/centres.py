@@ -4,6 +4,8 @@ and its border are), and the independent checks built on the same property."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numba
 import numpy as np
@@ -129,6 +131,104 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
     return idx, centres, refined
 
 
+
+
+FOLD_BINS = 24      # bins of the folded lattice cell per lattice direction; a multiple of 6 so
+#                     the holes (1/3, 1/3) and edge midpoints (1/2, 0) of the cell fall on bins
+RIVAL_RATIO = 3.0   # the lens centre must be this many times rounder than any other point
+
+
+@dataclass(frozen=True)
+class LensCentre:
+    """Which of the lattice's symmetry points are the lens centres, and how sure that is.
+
+    ``asymmetry`` is the mean squared difference between the frame's mean micro-image and
+    itself turned by one lattice step (60 deg hex, 90 deg square) about the chosen point,
+    relative to twice its variance (0: round about it, 1: uncorrelated); ``rival_asymmetry``
+    is the same about the best other symmetry point (a hole or an edge midpoint)."""
+
+    offset_xy: tuple[float, float]
+    asymmetry: float
+    rival_asymmetry: float
+
+    @property
+    def sure(self) -> bool:
+        return self.rival_asymmetry >= RIVAL_RATIO * self.asymmetry
+
+    def to_dict(self) -> dict:
+        return {"asymmetry": float(self.asymmetry),
+                "rival_asymmetry": float(self.rival_asymmetry)}
+
+
+def lens_centre(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> LensCentre:
+    """The lens centres among the symmetry points of a lattice of known pitch and angle.
+
+    Every pixel of the central ``side`` px is folded into one lattice cell (its fractional
+    lattice coordinates): the mean micro-image of the frame, scene content averaged out. A
+    micro-image is round about its lens centre (round aperture, round vignetting, a round or
+    hexagonal lens border), whether Keplerian or Galilean, bright or dark in the middle, with
+    or without gaps: the mean micro-image keeps the full turn symmetry of the lattice (6-fold
+    hex, 4-fold square) only about the lens centres. The holes (triangle centres of a hex
+    lattice) are only 3-fold, edge midpoints 2-fold, though both are point-symmetric or bright
+    on some frames. A square lattice's cell centre is 4-fold too: of the two, the brighter
+    (vignetting) is taken.
+    """
+    n = FOLD_BINS
+    cell = _folded_cell(flat, grid, bins=n, side=side)
+    turned = _turn_asymmetry(cell, grid.lattice)
+    a0, b0 = np.unravel_index(int(np.nanargmin(turned)), turned.shape)
+    if grid.lattice == "hex":
+        rivals = [(n // 3, n // 3), (2 * n // 3, 2 * n // 3), (n // 2, 0), (0, n // 2),
+                  (n // 2, n // 2)]
+    else:
+        rivals = [(n // 2, 0), (0, n // 2)]
+        across = ((a0 + n // 2) % n, (b0 + n // 2) % n)
+        if cell[across] > cell[a0, b0]:
+            a0, b0 = across
+    rival = min(float(turned[(a0 + da) % n, (b0 + db) % n]) for da, db in rivals)
+    b1, b2 = grid.basis()
+    xy = np.asarray(grid.offset_xy) + (a0 + 0.5) / n * b1 + (b0 + 0.5) / n * b2
+    return LensCentre((float(xy[0]), float(xy[1])), float(turned[a0, b0]), rival)
+
+
+def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int, side: int) -> np.ndarray:
+    """(bins, bins) mean of the central crop by fractional lattice coordinates (u along b1,
+    v along b2, from the grid's offset); NaN where no pixel fell."""
+    rows, cols = flat.shape
+    size_r, size_c = min(rows, side), min(cols, side)
+    r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
+    inv = np.linalg.inv(grid.basis().T)
+    total = np.zeros(bins * bins)
+    count = np.zeros(bins * bins)
+    x = np.arange(c0, c0 + size_c, dtype=np.float64) - grid.offset_xy[0]
+    for top in range(r0, r0 + size_r, 256):   # row bands keep the temporaries small
+        band = flat[top:min(top + 256, r0 + size_r), c0:c0 + size_c]
+        y = np.arange(top, top + band.shape[0], dtype=np.float64)[:, None] - grid.offset_xy[1]
+        u = np.floor((inv[0, 0] * x + inv[0, 1] * y) * bins).astype(np.int64) % bins
+        v = np.floor((inv[1, 0] * x + inv[1, 1] * y) * bins).astype(np.int64) % bins
+        key = (u * bins + v).ravel()
+        total += np.bincount(key, band.ravel().astype(np.float64), bins * bins)
+        count += np.bincount(key, None, bins * bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (total / count).reshape(bins, bins)
+
+
+def _turn_asymmetry(cell: np.ndarray, lattice: str) -> np.ndarray:
+    """(n, n): for every bin centre as the pivot, the mean squared difference between the
+    periodic cell and the cell turned by one lattice step about it, over twice its variance.
+    In lattice coordinates the turn is an integer map: hex (du, dv) -> (-dv, du + dv) (b1 ->
+    b2, b2 -> b2 - b1), square (du, dv) -> (-dv, du)."""
+    n = cell.shape[0]
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a0, b0 = a[:, :, None, None], b[:, :, None, None]
+    da, db = a[None, None] - a0, b[None, None] - b0
+    turned_a = (a0 - db) % n
+    turned_b = (b0 + da + db) % n if lattice == "hex" else (b0 + da) % n
+    diff = cell[turned_a, turned_b] - cell[None, None]
+    spread = 2 * float(np.nanvar(cell))
+    if not spread > 0:
+        return np.ones((n, n))
+    return np.nanmean(diff * diff, axis=(2, 3)) / spread
 
 
 def mean_micro_image(image: np.ndarray, centres: np.ndarray, *, half: int) -> np.ndarray:

@@ -85,7 +85,6 @@ def reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: 
                     image_shape=shape)
 
 
-
 def rotate_indices(idx: np.ndarray, turns: int, lattice: str) -> np.ndarray:
     """Indices of the same lenses after the basis turned by ``turns`` lattice steps
     (b1' = R(-turns*step) b1 ...), i.e. the new basis is the old one rotated back."""
@@ -127,29 +126,6 @@ def compare_grids(ours: LensGrid, other: LensGrid, image_shape: tuple[int, int])
             "max_px": float(dist.max()), "mean_shift_xy": [float(v) for v in d.mean(axis=0)],
             "pitch_diff_px": float(ours.pitch_px - other.pitch_px),
             "angle_diff_deg": float(np.degrees(dang))}
-
-
-def phase_offset(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> tuple[float, float]:
-    """A lattice point from the phases of the fundamentals (direct DFT over a central crop):
-    every micro-image is brightest at its centre (vignetting), so the fundamentals peak there."""
-    rows, cols = flat.shape
-    size_r, size_c = min(rows, side), min(cols, side)
-    r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
-    crop = flat[r0:r0 + size_r, c0:c0 + size_c].astype(np.float64)
-    wr, wc = np.hanning(size_r), np.hanning(size_c)
-    crop = (crop - crop.mean()) * wr[:, None] * wc[None, :]
-    xc, yc = c0 + (size_c - 1) / 2, r0 + (size_r - 1) / 2
-    x = np.arange(size_c) - (size_c - 1) / 2
-    y = np.arange(size_r) - (size_r - 1) / 2
-    direct = grid.basis()
-    recip = np.linalg.inv(direct).T
-    frac = []
-    for g in recip:
-        coeff = np.exp(-2j * np.pi * g[1] * y) @ crop @ np.exp(-2j * np.pi * g[0] * x)
-        frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
-    x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
-    return float(x0[0]), float(x0[1])
-
 
 
 @dataclass(frozen=True)
@@ -214,27 +190,6 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
                     image_shape=(rows, cols), centres_xy=ideal if scene else final,
                     indices=idx_out), report
-
-
-def brightest_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
-    """The offset among the lattice's own and its holes' (the triangle centres of a hex
-    lattice, the cell centre of a square one) whose positions are brightest on average over
-    the frame: every micro-image is brightest at its centre (vignetting), Keplerian or
-    Galilean, while holes and gaps are point-symmetric too and would hold a symmetry fit."""
-    b1, b2 = grid.basis()
-    shifts = [np.zeros(2), (b1 + b2) / 3, 2 * (b1 + b2) / 3] if grid.lattice == "hex" \
-        else [np.zeros(2), (b1 + b2) / 2]
-    _, centres = grid.lens_centres()
-    rows, cols = flat.shape
-    best, where = -np.inf, np.asarray(grid.offset_xy)
-    for shift in shifts:
-        xy = np.rint(centres + shift).astype(np.int64)
-        inside = (xy[:, 0] >= 0) & (xy[:, 0] < cols) & (xy[:, 1] >= 0) & (xy[:, 1] < rows)
-        level = float(np.mean(flat[xy[inside, 1], xy[inside, 0]]))
-        if level > best:
-            best, where = level, np.asarray(grid.offset_xy) + shift
-    return float(where[0]), float(where[1])
-
 
 
 def _robust_fit(idx, centres, refined, grid):
