@@ -59,7 +59,7 @@ class CalibrationReport:
     fit: LatticeFit
     verdict: Verdict
     lens_types: dict | None = None
-    lens_centre: LensCentre | None = None   # None when the offset came from --start
+    lens_centre: LensCentre | None = None
 
     def to_dict(self) -> dict:
         return {**{k: (v if isinstance(v, bool) else float(v) if isinstance(v, float)
@@ -116,19 +116,14 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     if sure:
         found = border.lattice
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
-    centre = None
-    if start is None:
-        centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0),
-                                            found.kind))
-        if not centre.sure:
-            raise CalibrationError(
-                f"{found.describe()} lattice found, but its lens centres cannot be told from the "
-                f"holes between them (the mean micro-image is as round about a hole: asymmetry "
-                f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); {WHAT_TO_DO}")
-        guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
-                         image_shape=image.shape)
-    else:
-        guess = start
+    centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind))
+    if not centre.sure:
+        raise CalibrationError(
+            f"{found.describe()} lattice found, but its lens centres cannot be told from the "
+            f"holes between them (the mean micro-image is as round about a hole: asymmetry "
+            f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); {WHAT_TO_DO}")
+    guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
+                     image_shape=image.shape)
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
     if not fit.centres_refined and not sure:
         raise CalibrationError(

@@ -160,21 +160,22 @@ class LensCentre:
                 "rival_asymmetry": float(self.rival_asymmetry)}
 
 
-def lens_centre(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> LensCentre:
+def lens_centre(flat: np.ndarray, grid: LensGrid) -> LensCentre:
     """The lens centres among the symmetry points of a lattice of known pitch and angle.
 
-    Every pixel of the central ``side`` px is folded into one lattice cell (its fractional
-    lattice coordinates): the mean micro-image of the frame, scene content averaged out. A
-    micro-image is round about its lens centre (round aperture, round vignetting, a round or
-    hexagonal lens border), whether Keplerian or Galilean, bright or dark in the middle, with
-    or without gaps: the mean micro-image keeps the full turn symmetry of the lattice (6-fold
-    hex, 4-fold square) only about the lens centres. The holes (triangle centres of a hex
-    lattice) are only 3-fold, edge midpoints 2-fold, though both are point-symmetric or bright
-    on some frames. A square lattice's cell centre is 4-fold too: of the two, the brighter
-    (vignetting) is taken.
+    Every pixel is folded into one lattice cell (by its fractional lattice coordinates): the
+    mean micro-image of the frame, scene content averaged out. A micro-image is round about
+    its lens centre (round aperture, round vignetting, a round or hexagonal lens border),
+    Keplerian or Galilean, bright or dark in the middle, with or without gaps: the mean
+    micro-image keeps the full turn symmetry of the lattice (6-fold hex, 4-fold square) only
+    about the lens centres. The holes (triangle centres of a hex lattice) are only 3-fold,
+    edge midpoints 2-fold, though both are point-symmetric and, on some frames, brighter. A
+    square lattice's cell centre is 4-fold too: of the two, the brighter (vignetting) is
+    taken. The centre is refined between bins by a quadratic through the asymmetry around
+    its minimum: the offset of a lattice whose pitch and angle are known, from every pixel.
     """
     n = FOLD_BINS
-    cell = _folded_cell(flat, grid, bins=n, side=side)
+    cell = _folded_cell(flat, grid, bins=n)
     turned = _turn_asymmetry(cell, grid.lattice)
     a0, b0 = np.unravel_index(int(np.nanargmin(turned)), turned.shape)
     if grid.lattice == "hex":
@@ -186,17 +187,32 @@ def lens_centre(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> LensCe
         if cell[across] > cell[a0, b0]:
             a0, b0 = across
     rival = min(float(turned[(a0 + da) % n, (b0 + db) % n]) for da, db in rivals)
+    fa, fb = _quadratic_minimum(turned, a0, b0)
     b1, b2 = grid.basis()
-    xy = np.asarray(grid.offset_xy) + (a0 + 0.5) / n * b1 + (b0 + 0.5) / n * b2
+    xy = np.asarray(grid.offset_xy) + (a0 + 0.5 + fa) / n * b1 + (b0 + 0.5 + fb) / n * b2
     return LensCentre((float(xy[0]), float(xy[1])), float(turned[a0, b0]), rival)
 
 
-def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int, side: int) -> np.ndarray:
-    """(bins, bins) mean of the central crop by fractional lattice coordinates (u along b1,
-    v along b2, from the grid's offset); NaN where no pixel fell."""
+def _quadratic_minimum(values: np.ndarray, a0: int, b0: int) -> tuple[float, float]:
+    """Sub-bin position (within +-1 bin) of the minimum of a periodic 2-D array at (a0, b0),
+    from a quadratic through its 3 x 3 neighbourhood."""
+    n = values.shape[0]
+    da, db = (d.ravel() for d in np.meshgrid([-1, 0, 1], [-1, 0, 1], indexing="ij"))
+    z = values[(a0 + da) % n, (b0 + db) % n]
+    design = np.stack([np.ones(9), da, db, da * da, da * db, db * db], axis=1)
+    c = np.linalg.lstsq(design, z, rcond=None)[0]
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not (np.all(np.isfinite(hessian)) and np.linalg.det(hessian) > 0 and hessian[0, 0] > 0):
+        return 0.0, 0.0
+    step = np.clip(-np.linalg.solve(hessian, c[1:3]), -1.0, 1.0)
+    return float(step[0]), float(step[1])
+
+
+def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int) -> np.ndarray:
+    """(bins, bins) mean of the image by fractional lattice coordinates (u along b1, v along
+    b2, from the grid's offset); NaN where no pixel fell."""
     rows, cols = flat.shape
-    size_r, size_c = min(rows, side), min(cols, side)
-    r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
+    r0, c0, size_r, size_c = 0, 0, rows, cols
     inv = np.linalg.inv(grid.basis().T)
     total = np.zeros(bins * bins)
     count = np.zeros(bins * bins)

@@ -155,8 +155,8 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     centre is far from the lattice (dead pixels, a bright scene edge) are dropped, robustly.
     When the residuals are large the image is a scene whose content moves the centres (they
     are not point-symmetric): then pitch and angle are ``border`` (measured from the border
-    repetition, when given), only the offset comes from the centres, and the centres written
-    are the lattice's."""
+    repetition, when given), the offset is the guess's (the centre of the frame's mean
+    micro-image, see :func:`lens_centre`), and the centres written are the lattice's."""
     rows, cols = flat.shape
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
@@ -173,11 +173,7 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     rms = _residual_rms(grid, idx, centres, use)
     scene = rms > SCENE_RESIDUAL * grid.pitch_px
     if scene and border is not None:
-        basis = LensGrid(*border, (0.0, 0.0), grid.lattice).basis()
-        i, j = grid.nearest_index(centres[use, 0], centres[use, 1])
-        origin = np.median(centres[use] - i[:, None] * basis[0] - j[:, None] * basis[1], axis=0)
-        grid = reindexed(*border, (float(origin[0]), float(origin[1])), grid.lattice,
-                         (rows, cols))
+        grid = reindexed(*border, guess.offset_xy, grid.lattice, (rows, cols))
         se = (0.0, 0.0)
     idx_out, ideal = grid.lens_centres()
     final, measured = _on_grid(grid, idx_out, ideal, centres, use)

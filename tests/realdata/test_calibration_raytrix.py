@@ -9,6 +9,7 @@ import pytest
 from plenocli import calibration
 from plenocli.errors import CalibrationError
 from plenocli.io import raytrix
+from plenocli.model.lensgrid import LensGrid
 
 pytestmark = pytest.mark.realdata
 
@@ -75,14 +76,22 @@ def test_boys2_galilean_pitch_against_the_hand_picked_corners(realdata):
     assert abs(np.degrees((grid.angle_rad - np.pi / 6 + step / 2) % step - step / 2)) <= 0.05
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: the offset lands ~32 px (about half a "
-                   "row step) from the hand-picked corner micro-images on this Galilean frame")
-def test_boys2_galilean_centres_on_the_hand_picked_corners(realdata):
+def _corner_lattice(corners):
+    """The least-squares hex lattice through the four hand-picked corner centres (rows
+    horizontal: 32 row steps of sqrt(3) pitches across, 41 pitch steps down; with b1 down and
+    b2 = b1 turned 60 deg, a row step is b1 - 2 b2)."""
+    idx = np.array([[0, 0], [32, -64], [41, 0], [73, -64]])
+    return LensGrid(*calibration.fit_lattice(idx, corners), "hex")
+
+
+def test_boys2_galilean_centres_on_the_corner_lattice(realdata):
     image, corners = _boys2(realdata)
-    grid, _ = calibration.calibrate(image)
-    _, centres = grid.lens_centres()
-    for xy in corners:
-        assert np.min(np.hypot(*(centres - xy).T)) <= 3.0
+    grid, report = calibration.calibrate(image)
+    # the four corners do not lie on one similarity lattice (the best one misses them by up
+    # to 4.2 px, least-max 3.5 px): compare every lens with the lattice through them
+    far = calibration.compare_grids(grid, _corner_lattice(corners), image.shape)
+    assert far["max_px"] <= 3.0, far   # measured 1.4 px (32 px before the 6-fold choice)
+    assert report.lens_centre.rival_asymmetry >= 3 * report.lens_centre.asymmetry
 
 
 def test_r42_crop_right_or_refused(realdata):
