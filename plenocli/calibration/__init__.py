@@ -12,8 +12,11 @@ The method, as ``calibrate`` reads:
    signal at long lags (lattice points must all be peaks and every hole a trough, as far as the
    frame reaches); the winner must clearly beat every unrelated hypothesis and its own detuned
    copies, or the calibration is refused naming the rivals.
-4. **Centres and lattice** (``centres``, ``fit``): every micro-image's point-symmetry centre,
-   from the phase of the lattice's fundamentals; a robust least-squares lattice through them.
+4. **Centres and lattice** (``centres``, ``fit``): the lens centres are where the frame's mean
+   micro-image (every pixel folded into one lattice cell) keeps the lattice's full turn
+   symmetry (holes and edge midpoints do not); then every micro-image's point-symmetry centre
+   and a robust least-squares lattice through them (on a scene: the border lattice, bent by
+   the smooth field of the regions' mean micro-images).
 5. **Lens types** (``lenstypes``): for a hex array, whether the three cosets of the index-3
    sub-lattice differ in sharpness (a multi-focus array), and which is which.
 

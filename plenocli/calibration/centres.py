@@ -193,6 +193,30 @@ def lens_centre(flat: np.ndarray, grid: LensGrid) -> LensCentre:
     return LensCentre((float(xy[0]), float(xy[1])), float(turned[a0, b0]), rival)
 
 
+def regional_shifts(flat: np.ndarray, grid: LensGrid, *, tiles: int = 4
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Where the lens centres of each of ``tiles`` x ``tiles`` regions sit relative to
+    ``grid`` (px): the 6-fold centre of each region's own mean micro-image (see
+    :func:`lens_centre`), scene content averaged over the region's lenses. Regions whose mean
+    micro-image is not clearly round about one point, or whose centre is more than a quarter
+    pitch from the lattice, are left out. Returns (region middles (T, 2), shifts (T, 2))."""
+    rows, cols = flat.shape
+    middles, shifts = [], []
+    for r in range(tiles):
+        for c in range(tiles):
+            r0, r1 = rows * r // tiles, rows * (r + 1) // tiles
+            c0, c1 = cols * c // tiles, cols * (c + 1) // tiles
+            local = LensGrid(grid.pitch_px, grid.angle_rad,
+                             (grid.offset_xy[0] - c0, grid.offset_xy[1] - r0), grid.lattice)
+            found = lens_centre(flat[r0:r1, c0:c1], local)
+            x, y = found.offset_xy[0] + c0, found.offset_xy[1] + r0
+            shift = np.array([x, y]) - grid.lattice_xy(*grid.nearest_index(x, y))
+            if found.sure and np.hypot(*shift) <= 0.25 * grid.pitch_px:
+                middles.append(((c0 + c1 - 1) / 2, (r0 + r1 - 1) / 2))
+                shifts.append(shift)
+    return np.array(middles, float).reshape(-1, 2), np.array(shifts, float).reshape(-1, 2)
+
+
 def _quadratic_minimum(values: np.ndarray, a0: int, b0: int) -> tuple[float, float]:
     """Sub-bin position (within +-1 bin) of the minimum of a periodic 2-D array at (a0, b0),
     from a quadratic through its 3 x 3 neighbourhood."""

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plenocli.calibration.centres import refine_centres
+from plenocli.calibration.centres import refine_centres, regional_shifts
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
@@ -156,7 +156,9 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     When the residuals are large the image is a scene whose content moves the centres (they
     are not point-symmetric): then pitch and angle are ``border`` (measured from the border
     repetition, when given), the offset is the guess's (the centre of the frame's mean
-    micro-image, see :func:`lens_centre`), and the centres written are the lattice's."""
+    micro-image, see :func:`lens_centre`), and the centres written are the lattice's moved by
+    a smooth field through the centres of the regions' mean micro-images (:func:`smooth_field`;
+    a camera's array and main lens bend the lattice by a few tenths of a pixel)."""
     rows, cols = flat.shape
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
@@ -176,6 +178,9 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
         grid = reindexed(*border, guess.offset_xy, grid.lattice, (rows, cols))
         se = (0.0, 0.0)
     idx_out, ideal = grid.lens_centres()
+    if scene:   # the lattice, bent by the smooth field of the regions' mean micro-images
+        ideal = ideal + smooth_field(*regional_shifts(flat, grid), ideal, (rows, cols),
+                                     grid.pitch_px)
     final, measured = _on_grid(grid, idx_out, ideal, centres, use)
     resid = np.linalg.norm(final - ideal, axis=1)[measured]
     report = LatticeFit(lenses_total=len(idx_out), lenses_refined=int(refined.sum()),
@@ -186,6 +191,39 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
                     image_shape=(rows, cols), centres_xy=ideal if scene else final,
                     indices=idx_out), report
+
+
+FIELD_DEGREE = 2       # of the polynomial field through the regions' shifts (6 terms per axis)
+FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
+FIELD_AGREEMENT = 0.02  # robust scatter (pitches) of the regions about the field
+
+
+def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,
+                 shape: tuple[int, int], pitch_px: float) -> np.ndarray:
+    """(K, 2) shifts at points ``at`` from a robust (Huber-weighted) polynomial fit of degree
+    ``FIELD_DEGREE`` through regional shifts (T, 2) at ``middles``. Zero (the lattice as it
+    is) unless at least ``FIELD_REGIONS`` regions were measured and they scatter about the
+    field by at most ``FIELD_AGREEMENT`` pitch: the field corrects tenths of a pixel and is
+    only used where the regions agree on it."""
+    rows, cols = shape
+    if len(shifts) < FIELD_REGIONS:
+        return np.zeros_like(at)
+
+    def terms(xy):
+        u, v = (xy[:, 0] - cols / 2) / (cols / 2), (xy[:, 1] - rows / 2) / (rows / 2)
+        return np.stack([u ** a * v ** b for a in range(FIELD_DEGREE + 1)
+                         for b in range(FIELD_DEGREE + 1 - a)], axis=1)
+
+    design, weight = terms(middles), np.ones(len(shifts))
+    for _ in range(10):
+        w = np.sqrt(weight)[:, None]
+        coef = np.linalg.lstsq(design * w, shifts * w, rcond=None)[0]
+        resid = np.linalg.norm(shifts - design @ coef, axis=1)
+        scale = 1.4826 * float(np.median(resid))
+        weight = np.minimum(1.0, 2 * scale / np.maximum(resid, 1e-9))
+    if scale > FIELD_AGREEMENT * pitch_px:
+        return np.zeros_like(at)
+    return terms(at) @ coef
 
 
 def _robust_fit(idx, centres, refined, grid):

@@ -113,7 +113,7 @@ def test_start_from_xml_lands_on_the_symmetry_centres(realdata, name):
     mine = _symmetry_offsets(flat, ours, grid.pitch_px, image.shape)
     i, j = xml.nearest_index(ours[:, 0], ours[:, 1])
     theirs = _symmetry_offsets(flat, xml.lattice_xy(i, j), grid.pitch_px, image.shape)
-    # measured: ours 0.03-0.33 px (origami), 0.05-0.36 px (Fujita2) per region; the XML's
-    # further in most regions. The issue asks 0.2 px in every region: not reached yet.
-    assert np.median(mine) <= 0.25, mine
+    # measured: ours 0.01-0.15 px (origami), 0.03-0.14 px (Fujita2) per region; the XML's
+    # 0.26-1.38 px (origami), 0.05-0.39 px (Fujita2)
+    assert mine.max() <= 0.2, mine
     assert np.sum(theirs > mine) >= 6, (theirs, mine)
