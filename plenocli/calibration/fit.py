@@ -196,6 +196,7 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
 FIELD_DEGREE = 2       # of the polynomial field through the regions' shifts (6 terms per axis)
 FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
 FIELD_AGREEMENT = 0.02  # robust scatter (pitches) of the regions about the field
+FIELD_MAX = 0.05       # largest shift (pitches) of a lens by the field
 
 
 def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,
@@ -204,7 +205,9 @@ def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,
     ``FIELD_DEGREE`` through regional shifts (T, 2) at ``middles``. Zero (the lattice as it
     is) unless at least ``FIELD_REGIONS`` regions were measured and they scatter about the
     field by at most ``FIELD_AGREEMENT`` pitch: the field corrects tenths of a pixel and is
-    only used where the regions agree on it."""
+    only used where the regions agree on it. A field that would move a lens by more than
+    ``FIELD_MAX`` pitch is not a bend of the array but a disagreement with the border lattice
+    (a micro-image shape that changes over the frame moves its symmetry centre): zero then."""
     rows, cols = shape
     if len(shifts) < FIELD_REGIONS:
         return np.zeros_like(at)
@@ -221,9 +224,10 @@ def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,
         resid = np.linalg.norm(shifts - design @ coef, axis=1)
         scale = 1.4826 * float(np.median(resid))
         weight = np.minimum(1.0, 2 * scale / np.maximum(resid, 1e-9))
-    if scale > FIELD_AGREEMENT * pitch_px:
+    field = terms(at) @ coef
+    if scale > FIELD_AGREEMENT * pitch_px or np.hypot(*field.T).max() > FIELD_MAX * pitch_px:
         return np.zeros_like(at)
-    return terms(at) @ coef
+    return field
 
 
 def _robust_fit(idx, centres, refined, grid):
