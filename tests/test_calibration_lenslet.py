@@ -47,15 +47,16 @@ def test_scenes_with_borders_are_right(pitch, kind):
     assert report.verdict.contrast > 0 and report.lens_types is None
 
 
-@pytest.mark.parametrize("pitch", [23.2, 70.4])
-def test_galilean_overlapping_micro_images_centre_on_the_lenses(pitch):
+@pytest.mark.parametrize("pitch,lattice", [(23.2, "hex"), (70.4, "hex"), (30.0, "square")])
+def test_galilean_overlapping_micro_images_centre_on_the_lenses(pitch, lattice):
     """Micro-images larger than the pitch overlap and add (as on the Boys2 Galilean frame):
     the edge midpoints between lenses are brighter than the lens centres, so brightness
     cannot pick the lens centres among the lattice's symmetry points."""
     size = int(24 * pitch)
     image, truth = lenslet_scene((size, size), pitch_px=pitch, angle_rad=np.pi / 2,
-                                 galilean=True, fill=1.2, falloff=0.1, seed=5)
-    true = LensGrid(pitch, np.pi / 2, tuple(truth["offset_xy"]), image_shape=(size, size))
+                                 lattice=lattice, galilean=True, fill=1.2, falloff=0.1, seed=5)
+    true = LensGrid(pitch, np.pi / 2, tuple(truth["offset_xy"]), lattice,
+                    image_shape=(size, size))
     _, centres = true.lens_centres()
     b1 = true.basis()[0]
     inner = np.all((centres > 2 * pitch) & (centres < size - 2 * pitch), axis=1)

@@ -170,9 +170,11 @@ def lens_centre(flat: np.ndarray, grid: LensGrid) -> LensCentre:
     micro-image keeps the full turn symmetry of the lattice (6-fold hex, 4-fold square) only
     about the lens centres. The holes (triangle centres of a hex lattice) are only 3-fold,
     edge midpoints 2-fold, though both are point-symmetric and, on some frames, brighter. A
-    square lattice's cell centre is 4-fold too: of the two, the brighter (vignetting) is
-    taken. The centre is refined between bins by a quadratic through the asymmetry around
-    its minimum: the offset of a lattice whose pitch and angle are known, from every pixel.
+    square lattice's cell centre is 4-fold too: of the two, the one about which the mean
+    micro-image is round (unchanged by a 45 deg turn within 0.4 pitch) is the lens centre,
+    where four micro-images meet it is not. The centre is refined between bins by a quadratic
+    through the asymmetry around its minimum: the offset of a lattice whose pitch and angle
+    are known, from every pixel.
     """
     n = FOLD_BINS
     cell = _folded_cell(flat, grid, bins=n)
@@ -183,14 +185,47 @@ def lens_centre(flat: np.ndarray, grid: LensGrid) -> LensCentre:
                   (n // 2, n // 2)]
     else:
         rivals = [(n // 2, 0), (0, n // 2)]
-        across = ((a0 + n // 2) % n, (b0 + n // 2) % n)
-        if cell[across] > cell[a0, b0]:
-            a0, b0 = across
+    asymmetry = float(turned[a0, b0])
     rival = min(float(turned[(a0 + da) % n, (b0 + db) % n]) for da, db in rivals)
+    if grid.lattice == "square":   # the cell centre is 4-fold too: the rounder of the two
+        across = ((a0 + n // 2) % n, (b0 + n // 2) % n)
+        here, there = (_roundness(cell, *at) for at in ((a0, b0), across))
+        if there < here:
+            (a0, b0), here, there = across, there, here
+        asymmetry, rival = max(asymmetry, here), min(rival, there)
     fa, fb = _quadratic_minimum(turned, a0, b0)
     b1, b2 = grid.basis()
     xy = np.asarray(grid.offset_xy) + (a0 + 0.5 + fa) / n * b1 + (b0 + 0.5 + fb) / n * b2
-    return LensCentre((float(xy[0]), float(xy[1])), float(turned[a0, b0]), rival)
+    return LensCentre((float(xy[0]), float(xy[1])), asymmetry, rival)
+
+
+def _roundness(cell: np.ndarray, a0: int, b0: int, *, radius: float = 0.4) -> float:
+    """Asymmetry of a square lattice's folded cell under a 45 deg turn about bin (a0, b0),
+    within ``radius`` pitches (bilinear, periodic): about 0 inside a round micro-image, large
+    about the cell centre where four micro-images meet (only 4-fold)."""
+    n = cell.shape[0]
+    r, t = np.meshgrid(np.linspace(0, radius, 12)[1:], np.linspace(0, 2 * np.pi, 48,
+                                                                    endpoint=False))
+    du, dv = r * np.cos(t), r * np.sin(t)
+    turn = np.pi / 4
+    pu, pv = (a0 + 0.5) / n, (b0 + 0.5) / n
+    here = _periodic_sample(cell, pu + du, pv + dv)
+    turned = _periodic_sample(cell, pu + du * np.cos(turn) - dv * np.sin(turn),
+                              pv + du * np.sin(turn) + dv * np.cos(turn))
+    spread = 2 * float(np.nanvar(cell))
+    return float(np.nanmean((here - turned) ** 2)) / spread if spread > 0 else 1.0
+
+
+def _periodic_sample(cell: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear value of the periodic folded cell at fractional lattice coordinates."""
+    n = cell.shape[0]
+    x, y = u * n - 0.5, v * n - 0.5   # bin k holds the centre (k + 0.5) / n
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    i0, j0 = x0.astype(np.int64) % n, y0.astype(np.int64) % n
+    i1, j1 = (i0 + 1) % n, (j0 + 1) % n
+    return (cell[i0, j0] * (1 - fx) * (1 - fy) + cell[i1, j0] * fx * (1 - fy)
+            + cell[i0, j1] * (1 - fx) * fy + cell[i1, j1] * fx * fy)
 
 
 def regional_shifts(flat: np.ndarray, grid: LensGrid, *, tiles: int = 4
