@@ -144,3 +144,41 @@ def test_borderless_scene_crop_is_right_or_refused(seed, pitch, angle_rad, cfa):
         return
     rms, dpitch, dangle = _lattice_error(grid, true)
     assert dpitch <= 0.01 and dangle <= 0.01 and rms <= 0.5, (rms, dpitch, dangle)
+
+
+def test_smooth_field_recovers_a_bend_and_refuses_a_disagreement():
+    from plenocli.calibration.fit import smooth_field
+
+    shape, pitch = (2000, 3000), 25.0
+    yy, xx = np.mgrid[125:2000:250, 187.5:3000:375]
+    middles = np.stack([xx.ravel(), yy.ravel()], axis=1)
+
+    def bend(xy):   # a smooth field of a few tenths of a pixel, known analytically
+        u, v = (xy[:, 0] - 1500) / 1500, (xy[:, 1] - 1000) / 1000
+        return np.stack([0.1 + 0.2 * u * v, -0.15 * u + 0.1 * v * v], axis=1)
+
+    rng = np.random.default_rng(1)
+    shifts = bend(middles) + rng.normal(0, 0.02, middles.shape)
+    shifts[5] += (3.0, -2.0)   # one region misled by its scene
+    at = rng.uniform((0, 0), (3000, 2000), (500, 2))
+    assert np.abs(smooth_field(middles, shifts, at, shape, pitch) - bend(at)).max() < 0.05
+    # too few regions, or a field larger than 0.05 pitch: the lattice stays as it is
+    assert not smooth_field(middles[:8], shifts[:8], at, shape, pitch).any()
+    assert not smooth_field(middles, 20 * shifts, at, shape, pitch).any()
+
+
+@pytest.mark.parametrize("lattice", ["hex", "square"])
+def test_lens_centre_of_the_folded_micro_image(lattice):
+    from plenocli.calibration.centres import lens_centre
+
+    true = LensGrid(19.7, 0.3, (401.3, 398.6), lattice)
+    image, _ = white_image((800, 800), pitch_px=19.7, angle_rad=0.3, offset_xy=(401.3, 398.6),
+                           lattice=lattice, seed=2)
+    flat = calibration.flatten(image.astype(np.float32), scale_px=1.5 * 19.7)
+    # any offset: the fold finds the lens centres, not the holes or edge midpoints
+    found = lens_centre(flat, LensGrid(19.7, 0.3, (3.0, 7.0), lattice))
+    i, j = true.nearest_index(*found.offset_xy)
+    assert np.hypot(*(true.lattice_xy(i, j) - found.offset_xy)) <= 0.05   # measured 0.004
+    assert found.sure and found.asymmetry < 0.05
+    noise = np.random.default_rng(3).normal(100, 5, (800, 800)).astype(np.float32)
+    assert not lens_centre(noise, true).sure

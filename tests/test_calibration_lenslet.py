@@ -47,6 +47,27 @@ def test_scenes_with_borders_are_right(pitch, kind):
     assert report.verdict.contrast > 0 and report.lens_types is None
 
 
+@pytest.mark.parametrize("pitch,lattice", [(23.2, "hex"), (70.4, "hex"), (30.0, "square")])
+def test_galilean_overlapping_micro_images_centre_on_the_lenses(pitch, lattice):
+    """Micro-images larger than the pitch overlap and add (as on the Boys2 Galilean frame):
+    the edge midpoints between lenses are brighter than the lens centres, so brightness
+    cannot pick the lens centres among the lattice's symmetry points."""
+    size = int(24 * pitch)
+    image, truth = lenslet_scene((size, size), pitch_px=pitch, angle_rad=np.pi / 2,
+                                 lattice=lattice, galilean=True, fill=1.2, falloff=0.1, seed=5)
+    true = LensGrid(pitch, np.pi / 2, tuple(truth["offset_xy"]), lattice,
+                    image_shape=(size, size))
+    _, centres = true.lens_centres()
+    b1 = true.basis()[0]
+    inner = np.all((centres > 2 * pitch) & (centres < size - 2 * pitch), axis=1)
+    at = np.rint(centres[inner]).astype(int)
+    mid = np.rint(centres[inner] + b1 / 2).astype(int)
+    assert image[mid[:, 1], mid[:, 0]].mean() > 1.2 * image[at[:, 1], at[:, 0]].mean()
+    grid, report = calibration.calibrate(image)
+    assert _is_right(grid, true)
+    assert report.lens_centre.rival_asymmetry >= 3 * report.lens_centre.asymmetry
+
+
 @pytest.mark.parametrize("pitch", [8.0, 18.0, 35.0, 70.0])
 @pytest.mark.parametrize("kind", ["multi", "double", "sqrt3"])
 def test_multi_focus_and_traps_are_right_or_refused(pitch, kind):

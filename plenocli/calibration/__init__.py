@@ -12,8 +12,11 @@ The method, as ``calibrate`` reads:
    signal at long lags (lattice points must all be peaks and every hole a trough, as far as the
    frame reaches); the winner must clearly beat every unrelated hypothesis and its own detuned
    copies, or the calibration is refused naming the rivals.
-4. **Centres and lattice** (``centres``, ``fit``): every micro-image's point-symmetry centre,
-   from the phase of the lattice's fundamentals; a robust least-squares lattice through them.
+4. **Centres and lattice** (``centres``, ``fit``): the lens centres are where the frame's mean
+   micro-image (every pixel folded into one lattice cell) keeps the lattice's full turn
+   symmetry (holes and edge midpoints do not); then every micro-image's point-symmetry centre
+   and a robust least-squares lattice through them (on a scene: the border lattice, bent by
+   the smooth field of the regions' mean micro-images).
 5. **Lens types** (``lenstypes``): for a hex array, whether the three cosets of the index-3
    sub-lattice differ in sharpness (a multi-focus array), and which is which.
 
@@ -27,15 +30,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from plenocli.calibration.candidates import Lattice
-from plenocli.calibration.centres import mean_micro_image, refine_centres, symmetry_centre
-from plenocli.calibration.fit import (
-    LatticeFit,
-    brightest_offset,
-    compare_grids,
-    fit_grid,
-    fit_lattice,
-    phase_offset,
+from plenocli.calibration.centres import (
+    LensCentre,
+    lens_centre,
+    mean_micro_image,
+    refine_centres,
+    symmetry_centre,
 )
+from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.lenstypes import classify
 from plenocli.calibration.search import border_lattice, find_lattice, hypotheses, view_for, views
@@ -60,11 +62,13 @@ class CalibrationReport:
     fit: LatticeFit
     verdict: Verdict
     lens_types: dict | None = None
+    lens_centre: LensCentre | None = None
 
     def to_dict(self) -> dict:
         return {**{k: (v if isinstance(v, bool) else float(v) if isinstance(v, float)
                        else int(v)) for k, v in self.fit.__dict__.items()},
-                "confidence": self.verdict.to_dict(), "lens_types": self.lens_types}
+                "confidence": self.verdict.to_dict(), "lens_types": self.lens_types,
+                "lens_centre": self.lens_centre.to_dict() if self.lens_centre else None}
 
 
 def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = None,
@@ -115,15 +119,14 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     if sure:
         found = border.lattice
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
-    if start is None:
-        guess = LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind,
-                         image_shape=image.shape)
-        guess = LensGrid(found.pitch_px, found.angle_rad, phase_offset(flat, guess), found.kind,
-                         image_shape=image.shape)
-        guess = LensGrid(found.pitch_px, found.angle_rad, brightest_offset(flat, guess),
-                         found.kind, image_shape=image.shape)
-    else:
-        guess = start
+    centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind))
+    if not centre.sure:
+        raise CalibrationError(
+            f"{found.describe()} lattice found, but its lens centres cannot be told from the "
+            f"holes between them (the mean micro-image is as round about a hole: asymmetry "
+            f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); {WHAT_TO_DO}")
+    guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
+                     image_shape=image.shape)
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
     if not fit.centres_refined and not sure:
         raise CalibrationError(
@@ -141,7 +144,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
                         indices=grid.indices, lens_type_of_coset=coset)
         type_info = {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
                      "p_value": types.p_value}
-    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info)
+    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
+                                   lens_centre=centre)
 
 
 def _corner_error(border, shape: tuple[int, int]) -> float:

@@ -4,6 +4,8 @@ and its border are), and the independent checks built on the same property."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numba
 import numpy as np
@@ -129,6 +131,179 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
     return idx, centres, refined
 
 
+
+
+FOLD_BINS = 24      # bins of the folded lattice cell per lattice direction; a multiple of 6 so
+#                     the holes (1/3, 1/3) and edge midpoints (1/2, 0) of the cell fall on bins
+RIVAL_RATIO = 3.0   # the lens centre must be this many times rounder than any other point
+
+
+@dataclass(frozen=True)
+class LensCentre:
+    """Which of the lattice's symmetry points are the lens centres, and how sure that is.
+
+    ``asymmetry`` is the mean squared difference between the frame's mean micro-image and
+    itself turned by one lattice step (60 deg hex, 90 deg square) about the chosen point,
+    relative to twice its variance (0: round about it, 1: uncorrelated); ``rival_asymmetry``
+    is the same about the best other symmetry point (a hole or an edge midpoint)."""
+
+    offset_xy: tuple[float, float]
+    asymmetry: float
+    rival_asymmetry: float
+
+    @property
+    def sure(self) -> bool:
+        return self.rival_asymmetry >= RIVAL_RATIO * self.asymmetry
+
+    def to_dict(self) -> dict:
+        return {"asymmetry": float(self.asymmetry),
+                "rival_asymmetry": float(self.rival_asymmetry)}
+
+
+def lens_centre(flat: np.ndarray, grid: LensGrid) -> LensCentre:
+    """The lens centres among the symmetry points of a lattice of known pitch and angle.
+
+    Every pixel is folded into one lattice cell (by its fractional lattice coordinates): the
+    mean micro-image of the frame, scene content averaged out. A micro-image is round about
+    its lens centre (round aperture, round vignetting, a round or hexagonal lens border),
+    Keplerian or Galilean, bright or dark in the middle, with or without gaps: the mean
+    micro-image keeps the full turn symmetry of the lattice (6-fold hex, 4-fold square) only
+    about the lens centres. The holes (triangle centres of a hex lattice) are only 3-fold,
+    edge midpoints 2-fold, though both are point-symmetric and, on some frames, brighter. A
+    square lattice's cell centre is 4-fold too: of the two, the one about which the mean
+    micro-image is round (unchanged by a 45 deg turn within 0.4 pitch) is the lens centre,
+    where four micro-images meet it is not. The centre is refined between bins by a quadratic
+    through the asymmetry around its minimum: the offset of a lattice whose pitch and angle
+    are known, from every pixel.
+    """
+    n = FOLD_BINS
+    cell = _folded_cell(flat, grid, bins=n)
+    turned = _turn_asymmetry(cell, grid.lattice)
+    a0, b0 = np.unravel_index(int(np.nanargmin(turned)), turned.shape)
+    if grid.lattice == "hex":
+        rivals = [(n // 3, n // 3), (2 * n // 3, 2 * n // 3), (n // 2, 0), (0, n // 2),
+                  (n // 2, n // 2)]
+    else:
+        rivals = [(n // 2, 0), (0, n // 2)]
+    asymmetry = float(turned[a0, b0])
+    rival = min(float(turned[(a0 + da) % n, (b0 + db) % n]) for da, db in rivals)
+    if grid.lattice == "square":   # the cell centre is 4-fold too: the rounder of the two
+        across = ((a0 + n // 2) % n, (b0 + n // 2) % n)
+        here, there = (_roundness(cell, *at) for at in ((a0, b0), across))
+        if there < here:
+            (a0, b0), here, there = across, there, here
+        asymmetry, rival = max(asymmetry, here), min(rival, there)
+    fa, fb = _quadratic_minimum(turned, a0, b0)
+    b1, b2 = grid.basis()
+    xy = np.asarray(grid.offset_xy) + (a0 + 0.5 + fa) / n * b1 + (b0 + 0.5 + fb) / n * b2
+    return LensCentre((float(xy[0]), float(xy[1])), asymmetry, rival)
+
+
+def _roundness(cell: np.ndarray, a0: int, b0: int, *, radius: float = 0.4) -> float:
+    """Asymmetry of a square lattice's folded cell under a 45 deg turn about bin (a0, b0),
+    within ``radius`` pitches (bilinear, periodic): about 0 inside a round micro-image, large
+    about the cell centre where four micro-images meet (only 4-fold)."""
+    n = cell.shape[0]
+    r, t = np.meshgrid(np.linspace(0, radius, 12)[1:], np.linspace(0, 2 * np.pi, 48,
+                                                                    endpoint=False))
+    du, dv = r * np.cos(t), r * np.sin(t)
+    turn = np.pi / 4
+    pu, pv = (a0 + 0.5) / n, (b0 + 0.5) / n
+    here = _periodic_sample(cell, pu + du, pv + dv)
+    turned = _periodic_sample(cell, pu + du * np.cos(turn) - dv * np.sin(turn),
+                              pv + du * np.sin(turn) + dv * np.cos(turn))
+    spread = 2 * float(np.nanvar(cell))
+    return float(np.nanmean((here - turned) ** 2)) / spread if spread > 0 else 1.0
+
+
+def _periodic_sample(cell: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Bilinear value of the periodic folded cell at fractional lattice coordinates."""
+    n = cell.shape[0]
+    x, y = u * n - 0.5, v * n - 0.5   # bin k holds the centre (k + 0.5) / n
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = x - x0, y - y0
+    i0, j0 = x0.astype(np.int64) % n, y0.astype(np.int64) % n
+    i1, j1 = (i0 + 1) % n, (j0 + 1) % n
+    return (cell[i0, j0] * (1 - fx) * (1 - fy) + cell[i1, j0] * fx * (1 - fy)
+            + cell[i0, j1] * (1 - fx) * fy + cell[i1, j1] * fx * fy)
+
+
+def regional_shifts(flat: np.ndarray, grid: LensGrid, *, tiles: int = 4
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Where the lens centres of each of ``tiles`` x ``tiles`` regions sit relative to
+    ``grid`` (px): the 6-fold centre of each region's own mean micro-image (see
+    :func:`lens_centre`), scene content averaged over the region's lenses. Regions whose mean
+    micro-image is not clearly round about one point, or whose centre is more than a quarter
+    pitch from the lattice, are left out. Returns (region middles (T, 2), shifts (T, 2))."""
+    rows, cols = flat.shape
+    middles, shifts = [], []
+    for r in range(tiles):
+        for c in range(tiles):
+            r0, r1 = rows * r // tiles, rows * (r + 1) // tiles
+            c0, c1 = cols * c // tiles, cols * (c + 1) // tiles
+            local = LensGrid(grid.pitch_px, grid.angle_rad,
+                             (grid.offset_xy[0] - c0, grid.offset_xy[1] - r0), grid.lattice)
+            found = lens_centre(flat[r0:r1, c0:c1], local)
+            x, y = found.offset_xy[0] + c0, found.offset_xy[1] + r0
+            shift = np.array([x, y]) - grid.lattice_xy(*grid.nearest_index(x, y))
+            if found.sure and np.hypot(*shift) <= 0.25 * grid.pitch_px:
+                middles.append(((c0 + c1 - 1) / 2, (r0 + r1 - 1) / 2))
+                shifts.append(shift)
+    return np.array(middles, float).reshape(-1, 2), np.array(shifts, float).reshape(-1, 2)
+
+
+def _quadratic_minimum(values: np.ndarray, a0: int, b0: int) -> tuple[float, float]:
+    """Sub-bin position (within +-1 bin) of the minimum of a periodic 2-D array at (a0, b0),
+    from a quadratic through its 3 x 3 neighbourhood."""
+    n = values.shape[0]
+    da, db = (d.ravel() for d in np.meshgrid([-1, 0, 1], [-1, 0, 1], indexing="ij"))
+    z = values[(a0 + da) % n, (b0 + db) % n]
+    design = np.stack([np.ones(9), da, db, da * da, da * db, db * db], axis=1)
+    c = np.linalg.lstsq(design, z, rcond=None)[0]
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if not (np.all(np.isfinite(hessian)) and np.linalg.det(hessian) > 0 and hessian[0, 0] > 0):
+        return 0.0, 0.0
+    step = np.clip(-np.linalg.solve(hessian, c[1:3]), -1.0, 1.0)
+    return float(step[0]), float(step[1])
+
+
+def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int) -> np.ndarray:
+    """(bins, bins) mean of the image by fractional lattice coordinates (u along b1, v along
+    b2, from the grid's offset); NaN where no pixel fell."""
+    rows, cols = flat.shape
+    r0, c0, size_r, size_c = 0, 0, rows, cols
+    inv = np.linalg.inv(grid.basis().T)
+    total = np.zeros(bins * bins)
+    count = np.zeros(bins * bins)
+    x = np.arange(c0, c0 + size_c, dtype=np.float64) - grid.offset_xy[0]
+    for top in range(r0, r0 + size_r, 256):   # row bands keep the temporaries small
+        band = flat[top:min(top + 256, r0 + size_r), c0:c0 + size_c]
+        y = np.arange(top, top + band.shape[0], dtype=np.float64)[:, None] - grid.offset_xy[1]
+        u = np.floor((inv[0, 0] * x + inv[0, 1] * y) * bins).astype(np.int64) % bins
+        v = np.floor((inv[1, 0] * x + inv[1, 1] * y) * bins).astype(np.int64) % bins
+        key = (u * bins + v).ravel()
+        total += np.bincount(key, band.ravel().astype(np.float64), bins * bins)
+        count += np.bincount(key, None, bins * bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (total / count).reshape(bins, bins)
+
+
+def _turn_asymmetry(cell: np.ndarray, lattice: str) -> np.ndarray:
+    """(n, n): for every bin centre as the pivot, the mean squared difference between the
+    periodic cell and the cell turned by one lattice step about it, over twice its variance.
+    In lattice coordinates the turn is an integer map: hex (du, dv) -> (-dv, du + dv) (b1 ->
+    b2, b2 -> b2 - b1), square (du, dv) -> (-dv, du)."""
+    n = cell.shape[0]
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a0, b0 = a[:, :, None, None], b[:, :, None, None]
+    da, db = a[None, None] - a0, b[None, None] - b0
+    turned_a = (a0 - db) % n
+    turned_b = (b0 + da + db) % n if lattice == "hex" else (b0 + da) % n
+    diff = cell[turned_a, turned_b] - cell[None, None]
+    spread = 2 * float(np.nanvar(cell))
+    if not spread > 0:
+        return np.ones((n, n))
+    return np.nanmean(diff * diff, axis=(2, 3)) / spread
 
 
 def mean_micro_image(image: np.ndarray, centres: np.ndarray, *, half: int) -> np.ndarray:

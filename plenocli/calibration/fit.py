@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plenocli.calibration.centres import refine_centres
+from plenocli.calibration.centres import refine_centres, regional_shifts
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
@@ -85,7 +85,6 @@ def reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: 
                     image_shape=shape)
 
 
-
 def rotate_indices(idx: np.ndarray, turns: int, lattice: str) -> np.ndarray:
     """Indices of the same lenses after the basis turned by ``turns`` lattice steps
     (b1' = R(-turns*step) b1 ...), i.e. the new basis is the old one rotated back."""
@@ -129,29 +128,6 @@ def compare_grids(ours: LensGrid, other: LensGrid, image_shape: tuple[int, int])
             "angle_diff_deg": float(np.degrees(dang))}
 
 
-def phase_offset(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> tuple[float, float]:
-    """A lattice point from the phases of the fundamentals (direct DFT over a central crop):
-    every micro-image is brightest at its centre (vignetting), so the fundamentals peak there."""
-    rows, cols = flat.shape
-    size_r, size_c = min(rows, side), min(cols, side)
-    r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
-    crop = flat[r0:r0 + size_r, c0:c0 + size_c].astype(np.float64)
-    wr, wc = np.hanning(size_r), np.hanning(size_c)
-    crop = (crop - crop.mean()) * wr[:, None] * wc[None, :]
-    xc, yc = c0 + (size_c - 1) / 2, r0 + (size_r - 1) / 2
-    x = np.arange(size_c) - (size_c - 1) / 2
-    y = np.arange(size_r) - (size_r - 1) / 2
-    direct = grid.basis()
-    recip = np.linalg.inv(direct).T
-    frac = []
-    for g in recip:
-        coeff = np.exp(-2j * np.pi * g[1] * y) @ crop @ np.exp(-2j * np.pi * g[0] * x)
-        frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
-    x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
-    return float(x0[0]), float(x0[1])
-
-
-
 @dataclass(frozen=True)
 class LatticeFit:
     """How well the per-lens centres fit the lattice (pixels)."""
@@ -179,8 +155,10 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     centre is far from the lattice (dead pixels, a bright scene edge) are dropped, robustly.
     When the residuals are large the image is a scene whose content moves the centres (they
     are not point-symmetric): then pitch and angle are ``border`` (measured from the border
-    repetition, when given), only the offset comes from the centres, and the centres written
-    are the lattice's."""
+    repetition, when given), the offset is the guess's (the centre of the frame's mean
+    micro-image, see :func:`lens_centre`), and the centres written are the lattice's moved by
+    a smooth field through the centres of the regions' mean micro-images (:func:`smooth_field`;
+    a camera's array and main lens bend the lattice by a few tenths of a pixel)."""
     rows, cols = flat.shape
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
@@ -197,13 +175,12 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     rms = _residual_rms(grid, idx, centres, use)
     scene = rms > SCENE_RESIDUAL * grid.pitch_px
     if scene and border is not None:
-        basis = LensGrid(*border, (0.0, 0.0), grid.lattice).basis()
-        i, j = grid.nearest_index(centres[use, 0], centres[use, 1])
-        origin = np.median(centres[use] - i[:, None] * basis[0] - j[:, None] * basis[1], axis=0)
-        grid = reindexed(*border, (float(origin[0]), float(origin[1])), grid.lattice,
-                         (rows, cols))
+        grid = reindexed(*border, guess.offset_xy, grid.lattice, (rows, cols))
         se = (0.0, 0.0)
     idx_out, ideal = grid.lens_centres()
+    if scene:   # the lattice, bent by the smooth field of the regions' mean micro-images
+        ideal = ideal + smooth_field(*regional_shifts(flat, grid), ideal, (rows, cols),
+                                     grid.pitch_px)
     final, measured = _on_grid(grid, idx_out, ideal, centres, use)
     resid = np.linalg.norm(final - ideal, axis=1)[measured]
     report = LatticeFit(lenses_total=len(idx_out), lenses_refined=int(refined.sum()),
@@ -216,25 +193,41 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
                     indices=idx_out), report
 
 
-def brightest_offset(flat: np.ndarray, grid: LensGrid) -> tuple[float, float]:
-    """The offset among the lattice's own and its holes' (the triangle centres of a hex
-    lattice, the cell centre of a square one) whose positions are brightest on average over
-    the frame: every micro-image is brightest at its centre (vignetting), Keplerian or
-    Galilean, while holes and gaps are point-symmetric too and would hold a symmetry fit."""
-    b1, b2 = grid.basis()
-    shifts = [np.zeros(2), (b1 + b2) / 3, 2 * (b1 + b2) / 3] if grid.lattice == "hex" \
-        else [np.zeros(2), (b1 + b2) / 2]
-    _, centres = grid.lens_centres()
-    rows, cols = flat.shape
-    best, where = -np.inf, np.asarray(grid.offset_xy)
-    for shift in shifts:
-        xy = np.rint(centres + shift).astype(np.int64)
-        inside = (xy[:, 0] >= 0) & (xy[:, 0] < cols) & (xy[:, 1] >= 0) & (xy[:, 1] < rows)
-        level = float(np.mean(flat[xy[inside, 1], xy[inside, 0]]))
-        if level > best:
-            best, where = level, np.asarray(grid.offset_xy) + shift
-    return float(where[0]), float(where[1])
+FIELD_DEGREE = 2       # of the polynomial field through the regions' shifts (6 terms per axis)
+FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
+FIELD_AGREEMENT = 0.02  # robust scatter (pitches) of the regions about the field
+FIELD_MAX = 0.05       # largest shift (pitches) of a lens by the field
 
+
+def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,
+                 shape: tuple[int, int], pitch_px: float) -> np.ndarray:
+    """(K, 2) shifts at points ``at`` from a robust (Huber-weighted) polynomial fit of degree
+    ``FIELD_DEGREE`` through regional shifts (T, 2) at ``middles``. Zero (the lattice as it
+    is) unless at least ``FIELD_REGIONS`` regions were measured and they scatter about the
+    field by at most ``FIELD_AGREEMENT`` pitch: the field corrects tenths of a pixel and is
+    only used where the regions agree on it. A field that would move a lens by more than
+    ``FIELD_MAX`` pitch is not a bend of the array but a disagreement with the border lattice
+    (a micro-image shape that changes over the frame moves its symmetry centre): zero then."""
+    rows, cols = shape
+    if len(shifts) < FIELD_REGIONS:
+        return np.zeros_like(at)
+
+    def terms(xy):
+        u, v = (xy[:, 0] - cols / 2) / (cols / 2), (xy[:, 1] - rows / 2) / (rows / 2)
+        return np.stack([u ** a * v ** b for a in range(FIELD_DEGREE + 1)
+                         for b in range(FIELD_DEGREE + 1 - a)], axis=1)
+
+    design, weight = terms(middles), np.ones(len(shifts))
+    for _ in range(10):
+        w = np.sqrt(weight)[:, None]
+        coef = np.linalg.lstsq(design * w, shifts * w, rcond=None)[0]
+        resid = np.linalg.norm(shifts - design @ coef, axis=1)
+        scale = 1.4826 * float(np.median(resid))
+        weight = np.minimum(1.0, 2 * scale / np.maximum(resid, 1e-9))
+    field = terms(at) @ coef
+    if scale > FIELD_AGREEMENT * pitch_px or np.hypot(*field.T).max() > FIELD_MAX * pitch_px:
+        return np.zeros_like(at)
+    return field
 
 
 def _robust_fit(idx, centres, refined, grid):

@@ -23,16 +23,25 @@ TRAPS = ("double", "sqrt3")
 
 def micro_image_mask(grid: LensGrid, shape: tuple[int, int], *, fill: float = 0.92,
                      edge_px: float = 0.8, falloff: float = 0.5) -> np.ndarray:
-    """(rows, cols) float64 in [0, 1]: each micro-image a disc of diameter ``fill`` x pitch,
-    darkening towards its rim (``falloff``) with a soft edge of ``edge_px``."""
+    """(rows, cols) float64 >= 0: each micro-image a disc of diameter ``fill`` x pitch,
+    darkening towards its rim (``falloff``) with a soft edge of ``edge_px``. With ``fill`` > 1
+    the discs overlap and add (as on Galilean cameras whose micro-images spill into their
+    neighbours): the overlaps between lenses are then brighter than the lens centres."""
     rows, cols = shape
     yy, xx = np.mgrid[0:rows, 0:cols].astype(np.float64)
     i, j = grid.nearest_index(xx, yy)
-    c = grid.lattice_xy(i, j)
-    d = np.hypot(xx - c[..., 0], yy - c[..., 1])
     radius = fill * grid.pitch_px / 2
-    shade = (1 - falloff * np.clip(d / radius, 0, 1) ** 2) ** 2
-    return shade * 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
+    near = [(0, 0)]
+    if fill > 1:
+        near += [(1, 0), (-1, 0), (0, 1), (0, -1)] + \
+            ([(1, -1), (-1, 1)] if grid.lattice == "hex" else [(1, 1), (-1, -1), (1, -1), (-1, 1)])
+    total = np.zeros(shape)
+    for di, dj in near:
+        c = grid.lattice_xy(i + di, j + dj)
+        d = np.hypot(xx - c[..., 0], yy - c[..., 1])
+        shade = (1 - falloff * np.clip(d / radius, 0, 1) ** 2) ** 2
+        total += shade * 0.5 * (1 - np.tanh((d - radius) / max(edge_px, 1e-3)))
+    return total
 
 
 def trap_pattern(grid: LensGrid, shape: tuple[int, int], kind: str) -> np.ndarray:
@@ -60,7 +69,8 @@ def trap_pattern(grid: LensGrid, shape: tuple[int, int], kind: str) -> np.ndarra
 def lenslet_scene(shape: tuple[int, int], *, pitch_px: float, angle_rad: float = 0.0,
                   offset_xy: tuple[float, float] | None = None, lattice: str = "hex",
                   galilean: bool = False, multi_focus: bool = False, trap: str | None = None,
-                  g_true: float = 3.0, noise: float = 0.01, seed: int = 0
+                  fill: float = 0.92, falloff: float = 0.5, g_true: float = 3.0,
+                  noise: float = 0.01, seed: int = 0
                   ) -> tuple[np.ndarray, dict]:
     """A lenslet frame of a textured plane, with its ground truth.
 
@@ -74,6 +84,8 @@ def lenslet_scene(shape: tuple[int, int], *, pitch_px: float, angle_rad: float =
         0, 1, 2 on the cosets (i - j) mod 3 = 0, 1, 2)
     trap : None, "double" or "sqrt3": a scene periodic on that relative of the lattice, as
         strong as the texture
+    fill, falloff : micro-image diameter (pitches; > 1 overlapping, see
+        :func:`micro_image_mask`) and darkening towards the rim
     g_true : virtual depth of the plane (magnitude)
     noise : Gaussian noise, relative to the mean level
 
@@ -104,11 +116,12 @@ def lenslet_scene(shape: tuple[int, int], *, pitch_px: float, angle_rad: float =
         content = np.choose(coset, blurred)
     if trap is not None:
         content = 0.5 * content + 0.5 * content.mean() * 2 * trap_pattern(grid, shape, trap)
-    image = content * micro_image_mask(grid, shape)
+    image = content * micro_image_mask(grid, shape, fill=fill, falloff=falloff)
     image += rng.normal(0.0, noise * float(image.mean()), image.shape)
     truth = {"lattice": lattice, "pitch_px": float(pitch_px), "angle_rad": float(angle_rad),
              "offset_xy": [float(v) for v in offset_xy], "image_shape": [rows, cols],
              "galilean": bool(galilean), "multi_focus": bool(multi_focus), "trap": trap,
+             "fill": float(fill), "falloff": float(falloff),
              "g_true": float(g_true), "seed": int(seed),
              "lens_type_of_coset": [0, 1, 2] if multi_focus else None}
     return image.astype(np.float32), truth

@@ -9,6 +9,7 @@ import pytest
 from plenocli import calibration
 from plenocli.errors import CalibrationError
 from plenocli.io import raytrix
+from plenocli.model.lensgrid import LensGrid
 
 pytestmark = pytest.mark.realdata
 
@@ -43,7 +44,8 @@ def _symmetry_offsets(flat, centres, pitch, shape):
 def test_no_hint_matches_the_camera_xml(realdata, name):
     image, xml = _frame(realdata, name)
     grid, report = calibration.calibrate(image)
-    assert abs(grid.pitch_px / xml.pitch_px - 1) <= 0.0008   # measured 0.07 % / 0.01 %
+    # measured +0.070 % / +0.008 %; origami's XML pitch is not its frame's (next test)
+    assert abs(grid.pitch_px / xml.pitch_px - 1) <= (0.0008 if name == "origami" else 0.0005)
     step = np.pi / 3
     dang = (grid.angle_rad - xml.angle_rad + step / 2) % step - step / 2
     assert abs(np.degrees(dang)) <= 0.02
@@ -51,6 +53,22 @@ def test_no_hint_matches_the_camera_xml(realdata, name):
     if name == "origami":   # its XML offset lines up with the micro-images
         assert calibration.compare_grids(grid, xml, image.shape)["max_px"] <= 2.0
     assert report.lens_types is not None   # both are multi-focus (Raytrix) arrays
+
+
+def test_origami_pitch_is_the_frames_not_the_xmls(realdata):
+    """The independent point-symmetry check places the micro-images of the eight outer 3 x 3
+    regions on our pitch (0.07 % above the XML's), and 0.4-0.6 px off a lattice of the XML's
+    pitch with our offset and angle: the XML does not describe this frame's pitch to 0.05 %."""
+    image, xml = _frame(realdata, "origami")
+    grid, _ = calibration.calibrate(image)
+    flat = calibration.flatten(image, scale_px=grid.pitch_px)
+    offsets = []
+    for pitch in (grid.pitch_px, xml.pitch_px):
+        lattice = LensGrid(pitch, grid.angle_rad, grid.offset_xy, image_shape=image.shape)
+        offsets.append(_symmetry_offsets(flat, lattice.lens_centres()[1], grid.pitch_px,
+                                         image.shape))
+    ours, theirs = (np.delete(o, 4) for o in offsets)   # the middle region is on both
+    assert ours.max() <= 0.25 and theirs.min() >= 0.35, (ours, theirs)
 
 
 def _boys2(realdata):
@@ -75,14 +93,22 @@ def test_boys2_galilean_pitch_against_the_hand_picked_corners(realdata):
     assert abs(np.degrees((grid.angle_rad - np.pi / 6 + step / 2) % step - step / 2)) <= 0.05
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: the offset lands ~32 px (about half a "
-                   "row step) from the hand-picked corner micro-images on this Galilean frame")
-def test_boys2_galilean_centres_on_the_hand_picked_corners(realdata):
+def _corner_lattice(corners):
+    """The least-squares hex lattice through the four hand-picked corner centres (rows
+    horizontal: 32 row steps of sqrt(3) pitches across, 41 pitch steps down; with b1 down and
+    b2 = b1 turned 60 deg, a row step is b1 - 2 b2)."""
+    idx = np.array([[0, 0], [32, -64], [41, 0], [73, -64]])
+    return LensGrid(*calibration.fit_lattice(idx, corners), "hex")
+
+
+def test_boys2_galilean_centres_on_the_corner_lattice(realdata):
     image, corners = _boys2(realdata)
-    grid, _ = calibration.calibrate(image)
-    _, centres = grid.lens_centres()
-    for xy in corners:
-        assert np.min(np.hypot(*(centres - xy).T)) <= 3.0
+    grid, report = calibration.calibrate(image)
+    # the four corners do not lie on one similarity lattice (the best one misses them by up
+    # to 4.2 px, least-max 3.5 px): compare every lens with the lattice through them
+    far = calibration.compare_grids(grid, _corner_lattice(corners), image.shape)
+    assert far["max_px"] <= 3.0, far   # measured 1.4 px (32 px before the 6-fold choice)
+    assert report.lens_centre.rival_asymmetry >= 3 * report.lens_centre.asymmetry
 
 
 def test_r42_crop_right_or_refused(realdata):
@@ -104,7 +130,7 @@ def test_start_from_xml_lands_on_the_symmetry_centres(realdata, name):
     mine = _symmetry_offsets(flat, ours, grid.pitch_px, image.shape)
     i, j = xml.nearest_index(ours[:, 0], ours[:, 1])
     theirs = _symmetry_offsets(flat, xml.lattice_xy(i, j), grid.pitch_px, image.shape)
-    # measured: ours 0.03-0.33 px (origami), 0.05-0.36 px (Fujita2) per region; the XML's
-    # further in most regions. The issue asks 0.2 px in every region: not reached yet.
-    assert np.median(mine) <= 0.25, mine
+    # measured: ours 0.01-0.15 px (origami), 0.03-0.14 px (Fujita2) per region; the XML's
+    # 0.26-1.38 px (origami), 0.05-0.39 px (Fujita2)
+    assert mine.max() <= 0.2, mine
     assert np.sum(theirs > mine) >= 6, (theirs, mine)
