@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 import pytest
@@ -14,13 +16,23 @@ from plenocli.model.lensgrid import LensGrid
 pytestmark = pytest.mark.realdata
 
 
+@functools.cache
+def _no_hint(path: str):
+    """calibrate() of the frame at ``path``, once per session (several tests read it)."""
+    return calibration.calibrate(_load(path))
+
+
 def _load(path):
     return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)[..., :3].astype(np.float32).sum(-1)
 
 
+def _png(realdata, name):
+    return str(next((realdata / "raytrix" / name).glob("*.png")))
+
+
 def _frame(realdata, name):
     folder = realdata / "raytrix" / name
-    image = _load(next(folder.glob("*.png")))
+    image = _load(_png(realdata, name))
     xml = raytrix.grid_from_calib(raytrix.read_calib(next(folder.glob("*.xml"))), image.shape)
     return image, xml
 
@@ -43,7 +55,7 @@ def _symmetry_offsets(flat, centres, pitch, shape):
 @pytest.mark.parametrize("name", ["origami", "fujita2"])
 def test_no_hint_matches_the_camera_xml(realdata, name):
     image, xml = _frame(realdata, name)
-    grid, report = calibration.calibrate(image)
+    grid, report = _no_hint(_png(realdata, name))
     # measured +0.070 % / +0.008 %; origami's XML pitch is not its frame's (next test)
     assert abs(grid.pitch_px / xml.pitch_px - 1) <= (0.0008 if name == "origami" else 0.0005)
     step = np.pi / 3
@@ -60,7 +72,7 @@ def test_origami_pitch_is_the_frames_not_the_xmls(realdata):
     regions on our pitch (0.07 % above the XML's), and 0.4-0.6 px off a lattice of the XML's
     pitch with our offset and angle: the XML does not describe this frame's pitch to 0.05 %."""
     image, xml = _frame(realdata, "origami")
-    grid, _ = calibration.calibrate(image)
+    grid, _ = _no_hint(_png(realdata, "origami"))
     flat = calibration.flatten(image, scale_px=grid.pitch_px)
     offsets = []
     for pitch in (grid.pitch_px, xml.pitch_px):
@@ -87,7 +99,7 @@ def test_boys2_galilean_pitch_against_the_hand_picked_corners(realdata):
     # rows are horizontal; a row step is sqrt(3) pitches; 32 steps from left to right
     steps = np.hypot(*(corners[1] - corners[0])) + np.hypot(*(corners[3] - corners[2]))
     corner_pitch = steps / 2 / 32 / np.sqrt(3)
-    grid, _ = calibration.calibrate(image)
+    grid, _ = _no_hint(_png(realdata, "boys2_galilean"))
     assert abs(grid.pitch_px / corner_pitch - 1) <= 0.003
     step = np.pi / 3
     assert abs(np.degrees((grid.angle_rad - np.pi / 6 + step / 2) % step - step / 2)) <= 0.05
@@ -103,7 +115,7 @@ def _corner_lattice(corners):
 
 def test_boys2_galilean_centres_on_the_corner_lattice(realdata):
     image, corners = _boys2(realdata)
-    grid, report = calibration.calibrate(image)
+    grid, report = _no_hint(_png(realdata, "boys2_galilean"))
     # the four corners do not lie on one similarity lattice (the best one misses them by up
     # to 4.2 px, least-max 3.5 px): compare every lens with the lattice through them
     far = calibration.compare_grids(grid, _corner_lattice(corners), image.shape)
