@@ -145,7 +145,9 @@ def phase_offset(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> tuple
     recip = np.linalg.inv(direct).T
     frac = []
     for g in recip:
-        coeff = np.exp(-2j * np.pi * g[1] * y) @ crop @ np.exp(-2j * np.pi * g[0] * x)
+        phase_y = 2 * np.pi * g[1] * y   # real products: no complex copy of the crop
+        along_x = np.cos(phase_y) @ crop - 1j * (np.sin(phase_y) @ crop)
+        coeff = along_x @ np.exp(-2j * np.pi * g[0] * x)
         frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
     x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
     return float(x0[0]), float(x0[1])
@@ -185,9 +187,11 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
     for core in (CORE_PITCHES, None):
-        idx, centres, refined = refine_centres(flat, grid)
+        mid = grid.lattice_xy(0, 0)
+        # a centre moves by under 0.3 pitch: lenses farther out cannot enter the core
+        near = None if core is None else (mid, (core + 0.5) * grid.pitch_px)
+        idx, centres, refined = refine_centres(flat, grid, near=near)
         if core is not None:
-            mid = grid.lattice_xy(0, 0)
             refined = refined & (np.hypot(*(centres - mid).T) <= core * grid.pitch_px)
         if int(refined.sum()) < MIN_LENSES:
             raise CalibrationError(f"only {int(refined.sum())} whole micro-images fit in the "

@@ -46,16 +46,16 @@ def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarr
     varies over the frame far more than between neighbours, and cancels. Returns (which lenses,
     values)."""
     log_s = np.log(np.maximum(sharpness, 1e-12))
-    lookup = {key: k for k, key in enumerate(map(tuple, indices.tolist()))}
+    if not len(indices):
+        return np.empty(0, np.int64), np.empty(0)
+    # lens number by index, with a frame of -1 around it for the missing neighbours
+    at = indices - indices.min(axis=0) + 1
+    lookup = np.full(tuple(at.max(axis=0) + 2), -1, np.int64)
+    lookup[at[:, 0], at[:, 1]] = np.arange(len(indices))
     steps = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1))
-    rows, values = [], []
-    for k, (i, j) in enumerate(indices.tolist()):
-        near = [lookup.get((i + di, j + dj)) for di, dj in steps]
-        if None in near:
-            continue
-        rows.append(k)
-        values.append(log_s[k] - float(np.mean(log_s[near])))
-    return np.asarray(rows, np.int64), np.asarray(values)
+    near = np.stack([lookup[at[:, 0] + di, at[:, 1] + dj] for di, dj in steps], axis=1)
+    rows = np.flatnonzero((near >= 0).all(axis=1))
+    return rows, log_s[rows] - log_s[near[rows]].mean(axis=1)
 
 
 def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
