@@ -69,11 +69,15 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     ``signal`` (one of each +- pair), as z-scores against a robust background per ring of
     radius (a scene's 1/f spectrum, noise), sub-bin by a parabola in log magnitude."""
     rows, cols = signal.shape
-    win = (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
-    data = (signal - np.float32(signal.mean())) * win
+    data = signal - np.float32(signal.mean())
+    data *= np.hanning(rows).astype(np.float32)[:, None]   # Hann window, one axis at a time
+    data *= np.hanning(cols).astype(np.float32)[None, :]
     size = max(rows, cols)
     spec = scipy.fft.rfft2(data, s=(size, size), workers=-1)
-    logmag = np.log(np.abs(spec) + 1e-12)
+    logmag = np.abs(spec)
+    del spec
+    logmag += 1e-12
+    np.log(logmag, out=logmag)
     fy = np.fft.fftfreq(size)[:, None]
     fx = np.fft.rfftfreq(size)[None, :]
     radius = np.hypot(fx, fy)
@@ -121,10 +125,10 @@ def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarra
     """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
     are a minority of each ring and do not inflate it."""
     nring = size // 4 + 2
-    ring = np.minimum((radius * size / 4).astype(np.int64), nring - 1).ravel()
+    ring = np.minimum(radius * (size / 4), nring - 1).astype(np.int16).ravel()
     # grouped by ring (a stable sort of small integers is a radix sort), then two order
     # statistics per ring by partition: no full sort of the spectrum
-    grouped = logmag.ravel()[np.argsort(ring.astype(np.int16), kind="stable")]
+    grouped = logmag.ravel()[np.argsort(ring, kind="stable")]
     count = np.bincount(ring, minlength=nring)
     start = np.concatenate([[0], np.cumsum(count)])
     median, low = np.zeros(nring), np.zeros(nring)

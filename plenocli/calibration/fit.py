@@ -135,19 +135,23 @@ def phase_offset(flat: np.ndarray, grid: LensGrid, *, side: int = 2048) -> tuple
     rows, cols = flat.shape
     size_r, size_c = min(rows, side), min(cols, side)
     r0, c0 = (rows - size_r) // 2, (cols - size_c) // 2
-    crop = flat[r0:r0 + size_r, c0:c0 + size_c].astype(np.float64)
+    crop = flat[r0:r0 + size_r, c0:c0 + size_c]
+    mean = float(crop.mean(dtype=np.float64))
     wr, wc = np.hanning(size_r), np.hanning(size_c)
-    crop = (crop - crop.mean()) * wr[:, None] * wc[None, :]
     xc, yc = c0 + (size_c - 1) / 2, r0 + (size_r - 1) / 2
     x = np.arange(size_c) - (size_c - 1) / 2
     y = np.arange(size_r) - (size_r - 1) / 2
     direct = grid.basis()
     recip = np.linalg.inv(direct).T
+    phase_y = 2 * np.pi * np.outer(recip[:, 1], y)
+    along_x = np.zeros((2, size_c), complex)
+    for top in range(0, size_r, 256):   # row blocks, real products: no full float64 copy
+        rows_ = slice(top, top + 256)
+        block = (crop[rows_].astype(np.float64) - mean) * wr[rows_, None] * wc[None, :]
+        along_x += np.cos(phase_y[:, rows_]) @ block - 1j * (np.sin(phase_y[:, rows_]) @ block)
     frac = []
-    for g in recip:
-        phase_y = 2 * np.pi * g[1] * y   # real products: no complex copy of the crop
-        along_x = np.cos(phase_y) @ crop - 1j * (np.sin(phase_y) @ crop)
-        coeff = along_x @ np.exp(-2j * np.pi * g[0] * x)
+    for g, row in zip(recip, along_x, strict=True):
+        coeff = row @ np.exp(-2j * np.pi * g[0] * x)
         frac.append(-np.angle(coeff) / (2 * np.pi))   # g . (x0 - centre) mod 1
     x0 = np.array([xc, yc]) + frac[0] * direct[0] + frac[1] * direct[1]
     return float(x0[0]), float(x0[1])

@@ -27,7 +27,8 @@ class LensTypes:
 def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np.ndarray:
     """Mean |Laplacian| of the flattened image over a disc of 0.35 pitch around each centre
     (K,): the micro-image's own detail, away from its border."""
-    lap = np.abs(cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3))
+    lap = cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3)
+    np.abs(lap, out=lap)
     radius = 0.35 * pitch_px
     # the disc mean is a box-free convolution with a normalised disc kernel, read at the centres
     half = int(np.ceil(radius))

@@ -71,10 +71,15 @@ class Autocorrelation:
         for acf, signal in zip(self.stack, signals, strict=True):
             data = signal - np.float32(signal.mean())
             spectrum = scipy.fft.rfft2(data, s=shape, workers=-1)
-            power = (spectrum.real * spectrum.real + spectrum.imag * spectrum.imag)
+            del data
+            power = np.abs(spectrum)
             del spectrum
+            power *= power
             wrapped = scipy.fft.irfft2(power, s=shape, workers=-1)
-            acf[...] = wrapped[np.ix_(lag_r % shape[0], lag_c % shape[1])] / overlap
+            del power
+            acf[...] = wrapped[np.ix_(lag_r % shape[0], lag_c % shape[1])]
+            del wrapped
+            acf /= overlap
             acf /= max(float(acf[ext_r, ext_c]), 1e-30)
         self.acfs = list(self.stack)
         self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
