@@ -30,15 +30,30 @@ def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np
     lap = cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3)
     np.abs(lap, out=lap)
     radius = 0.35 * pitch_px
-    # the disc mean is a box-free convolution with a normalised disc kernel, read at the centres
     half = int(np.ceil(radius))
     yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
-    kernel = (np.hypot(xx, yy) <= radius).astype(np.float32)
-    mean = cv2.filter2D(lap, cv2.CV_32F, kernel / kernel.sum(), borderType=cv2.BORDER_REFLECT)
-    rows, cols = mean.shape
+    inside = np.hypot(xx, yy) <= radius
+    dy, dx = yy[inside], xx[inside]
+    rows, cols = lap.shape
     c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, cols - 1)
     r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, rows - 1)
-    return mean[r, c]
+    # the disc mean at the centres only (mirrored at the frame's edge), a block of lenses at a
+    # time: a filter over the whole frame costs more than the lenses' own pixels
+    out = np.empty(len(c))
+    block = max(1, 2 ** 20 // len(dy))
+    for top in range(0, len(c), block):
+        rr = _mirrored(r[top:top + block, None] + dy[None, :], rows)
+        cc = _mirrored(c[top:top + block, None] + dx[None, :], cols)
+        out[top:top + block] = np.take(lap, rr * cols + cc).mean(axis=1, dtype=np.float64)
+    return out
+
+
+def _mirrored(index: np.ndarray, size: int) -> np.ndarray:
+    """Indices beyond [0, size) mirrored back (edge pixel repeated, as BORDER_REFLECT)."""
+    if index.min() < 0 or index.max() >= size:
+        index = np.where(index < 0, -index - 1, index)
+        index = np.where(index >= size, 2 * size - 1 - index, index)
+    return index
 
 
 def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
