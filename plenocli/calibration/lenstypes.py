@@ -40,7 +40,7 @@ def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np
     # the disc mean at the centres only (mirrored at the frame's edge), a block of lenses at a
     # time: a filter over the whole frame costs more than the lenses' own pixels
     out = np.empty(len(c))
-    block = max(1, 2 ** 20 // len(dy))
+    block = max(1, 2 ** 18 // len(dy))
     for top in range(0, len(c), block):
         rr = _mirrored(r[top:top + block, None] + dy[None, :], rows)
         cc = _mirrored(c[top:top + block, None] + dx[None, :], cols)
