@@ -10,6 +10,7 @@ stronger than the fundamental. So every peak is taken as several hypotheses and
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -70,20 +71,19 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     radius (a scene's 1/f spectrum, noise), sub-bin by a parabola in log magnitude."""
     rows, cols = signal.shape
     data = signal - np.float32(signal.mean())
-    data *= np.hanning(rows).astype(np.float32)[:, None]   # Hann window, one axis at a time
-    data *= np.hanning(cols).astype(np.float32)[None, :]
+    data *= (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
     size = max(rows, cols)
     spec = scipy.fft.rfft2(data, s=(size, size), workers=-1)
     logmag = np.abs(spec)
     del spec
     logmag += 1e-12
     np.log(logmag, out=logmag)
-    fy = np.fft.fftfreq(size)[:, None]
-    fx = np.fft.rfftfreq(size)[None, :]
-    radius = np.hypot(fx, fy)
-    z = _ring_zscore(logmag, radius, size)
-    valid = radius > 3.0 / min(rows, cols)
+    rings = _rings(size)
+    z = _ring_zscore(logmag, rings)
+    valid = rings.radius > 3.0 / min(rows, cols)
     if cfa:   # residual mosaic sits at the Nyquist corners
+        fy = np.fft.fftfreq(size)[:, None]
+        fx = np.fft.rfftfreq(size)[None, :]
         for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
             valid &= np.hypot(fx - nx, fy - ny) > 0.03
     z = np.where(valid, z, -np.inf).astype(np.float32)
@@ -121,24 +121,44 @@ def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
     return [lat for f in first for lat in [f, *f.relatives()]]
 
 
-def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarray:
-    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
-    are a minority of each ring and do not inflate it."""
+@dataclass(frozen=True)
+class _Rings:
+    """The radius (cycles/px) of every bin of a (size, size // 2 + 1) real spectrum, its ring
+    of 4 bins, the bins grouped by ring (``order``) and where each ring starts there."""
+
+    radius: np.ndarray
+    ring: np.ndarray
+    order: np.ndarray
+    start: np.ndarray
+
+
+@functools.lru_cache(maxsize=2)
+def _rings(size: int) -> _Rings:
+    """The ring geometry of a spectrum size (the views share a few sizes: kept, not redone)."""
+    radius = np.hypot(np.fft.rfftfreq(size)[None, :], np.fft.fftfreq(size)[:, None])
     nring = size // 4 + 2
-    ring = np.minimum(radius * (size / 4), nring - 1).astype(np.int16).ravel()
-    # grouped by ring (a stable sort of small integers is a radix sort), then two order
-    # statistics per ring by partition: no full sort of the spectrum
-    grouped = logmag.ravel()[np.argsort(ring, kind="stable")]
-    count = np.bincount(ring, minlength=nring)
-    start = np.concatenate([[0], np.cumsum(count)])
-    median, low = np.zeros(nring), np.zeros(nring)
+    ring = np.minimum(radius * (size / 4), nring - 1).astype(np.int16)
+    # a stable sort of small integers is a radix sort
+    order = np.argsort(ring.ravel(), kind="stable").astype(np.int32)
+    start = np.concatenate([[0], np.cumsum(np.bincount(ring.ravel(), minlength=nring))])
+    for a in (radius, ring, order, start):
+        a.flags.writeable = False
+    return _Rings(radius, ring, order, start)
+
+
+def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
+    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
+    are a minority of each ring and do not inflate it. Two order statistics per ring by
+    partition: no full sort of the spectrum."""
+    grouped = logmag.ravel()[rings.order]
+    count = np.diff(rings.start)
+    median, low = np.zeros(len(count)), np.zeros(len(count))
     for r in np.flatnonzero(count):
         kth = ((count[r] * 16) // 100, count[r] // 2)
-        part = np.partition(grouped[start[r]:start[r + 1]], kth)
+        part = np.partition(grouped[rings.start[r]:rings.start[r + 1]], kth)
         low[r], median[r] = part[kth[0]], part[kth[1]]
     spread = np.maximum(median - low, 0.05)   # a flat field has no spread: no peak passes
-    ring = ring.reshape(logmag.shape)
-    return (logmag - median[ring]) / spread[ring]
+    return (logmag - median[rings.ring]) / spread[rings.ring]
 
 
 def _parabola(a, b, c):
