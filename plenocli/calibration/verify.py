@@ -77,7 +77,12 @@ class Autocorrelation:
             power *= power
             wrapped = scipy.fft.irfft2(power, s=shape, workers=-1)
             del power
-            acf[...] = wrapped[np.ix_(lag_r % shape[0], lag_c % shape[1])]
+            # lags -ext .. ext: the wrapped-around tail, then the head
+            for dst_r, src_r in ((slice(0, ext_r), slice(-ext_r, None)),
+                                 (slice(ext_r, None), slice(0, ext_r + 1))):
+                for dst_c, src_c in ((slice(0, ext_c), slice(-ext_c, None)),
+                                     (slice(ext_c, None), slice(0, ext_c + 1))):
+                    acf[dst_r, dst_c] = wrapped[src_r, src_c]
             del wrapped
             acf /= overlap
             acf /= max(float(acf[ext_r, ext_c]), 1e-30)
