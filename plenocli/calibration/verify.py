@@ -148,15 +148,11 @@ class Autocorrelation:
         dx, dy = dx[inside], dy[inside]
         cy, cx = self.acf.shape[0] // 2, self.acf.shape[1] // 2
         acf = self.acf
-        rows = (cy + np.rint(pts[:, 1])[:, None] + dy[None, :]).astype(np.int64)
-        cols = (cx + np.rint(pts[:, 0])[:, None] + dx[None, :]).astype(np.int64)
-        window = acf[rows, cols]                                   # (K, window)
-        top = np.argmax(window, axis=1)
-        r = rows[np.arange(len(top)), top]
-        c = cols[np.arange(len(top)), top]
+        r, c, height = _window_peaks(acf, cy + np.rint(pts[:, 1]).astype(np.int64),
+                                     cx + np.rint(pts[:, 0]).astype(np.int64),
+                                     dy.astype(np.int64), dx.astype(np.int64))
         found = np.stack([c - cx + _parabola(acf[r, c - 1], acf[r, c], acf[r, c + 1]),
                           r - cy + _parabola(acf[r - 1, c], acf[r, c], acf[r + 1, c])], axis=1)
-        height = np.maximum(window.max(axis=1) - np.median(window, axis=1), 0.0)
         return found * self.factor, np.stack([k, m], axis=1), height
 
     def _annulus(self, lattice: Lattice, near: float, far: float | None):
@@ -263,6 +259,26 @@ def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragm
             highest_hole = max(highest_hole, values[o].mean())
         worst = min(worst, (lowest_point - highest_hole) / spread)
     return worst
+
+
+@numba.njit(cache=True)
+def _window_peaks(acf, rows, cols, dy, dx):  # pragma: no cover - compiled
+    """For each window centred at (rows[i], cols[i]) with offsets (dy, dx): the row and column
+    of its maximum (the first one) and the maximum's height above the window's median
+    (numba kernel: no (lags x window) temporaries)."""
+    count = rows.shape[0]
+    top_r, top_c = np.empty(count, np.int64), np.empty(count, np.int64)
+    height = np.empty(count, acf.dtype)
+    values = np.empty(dy.shape[0], acf.dtype)
+    for i in range(count):
+        best = -np.inf
+        for w in range(dy.shape[0]):
+            values[w] = acf[rows[i] + dy[w], cols[i] + dx[w]]
+            if values[w] > best:
+                best = values[w]
+                top_r[i], top_c[i] = rows[i] + dy[w], cols[i] + dx[w]
+        height[i] = max(best - np.median(values), 0.0)
+    return top_r, top_c, height
 
 
 @dataclass(frozen=True)
