@@ -41,7 +41,7 @@ def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
     """One view per decimation 1, 2, 4, 8 that still holds a useful crop."""
     factors = [f for f in (1, 2, 4, 8) if f == 1 or min(image.shape) // f >= 160]
     out = {}
-    for factor, finer in zip(factors, [*factors[1:], None], strict=True):
+    for factor, coarser in zip(factors, [*factors[1:], None], strict=True):
         rows, cols = image.shape[0] // factor, image.shape[1] // factor
         # crop first (at full resolution), then decimate: an even factor averages the mosaic
         side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
@@ -52,8 +52,9 @@ def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
         if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
             flat = cv2.blur(flat, (2, 2))
         border = border_signal(flat)
-        # view_for sends this view the pitches below MIN_VIEW_PITCH views of the next one
-        widest = None if finer is None else MIN_VIEW_PITCH * finer / factor
+        # view_for judges here the pitches with less than MIN_VIEW_PITCH px per lens in the
+        # next, coarser view (the coarsest takes every wider one)
+        widest = None if coarser is None else MIN_VIEW_PITCH * coarser / factor
         acf = Autocorrelation((flat, border), factor, widest)
         suggested = [lat for signal in (flat, border)
                      for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
