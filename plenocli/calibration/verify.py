@@ -49,7 +49,11 @@ class Autocorrelation:
     """A(t) of the signals of one view (a crop at one decimation ``factor``): the flattened
     intensity (each micro-image bright inside, dark at its rim) and the border signal (its
     edges), each normalised by the overlap of the shifted crop with itself (every lag is a
-    mean, not a sum) and by A(0). A lattice must show in both."""
+    mean, not a sum) and by A(0). A lattice must show in both.
+
+    Only the lags a measure can sample are computed and kept: out to the reach plus the
+    farthest hole of ``widest_pitch`` (view px), the widest pitch this view judges (None: any
+    pitch whose annulus fits the reach)."""
 
     def __init__(self, signals: tuple[np.ndarray, ...], factor: int,
                  widest_pitch: float | None = None):
