@@ -27,7 +27,16 @@ def warm_refocus() -> None:
     refocus(frame, grid, s=0.5, g=2.0, view="left", cfa="RGGB")
 
 
-WARMERS = {"refocus": warm_refocus}
+def warm_calibrate() -> None:
+    """The calibration kernels (border contrast, micro-image symmetry centres)."""
+    from plenocli.calibration import calibrate
+    from plenocli.synth.whiteimage import white_image
+
+    image, _ = white_image((256, 256), pitch_px=12.0, angle_rad=0.1, offset_xy=(128.0, 128.0))
+    calibrate(image)
+
+
+WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate}
 
 
 def main() -> None:

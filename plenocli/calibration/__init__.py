@@ -100,8 +100,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     image = _checked(image, lattice, black_level, pitch_hint)
     all_views = views(image, cfa)
     if start is None:
-        verdict = find_lattice(all_views, hypotheses(all_views, cfa=bool(cfa),
-                                                     pitch_hint=pitch_hint))
+        verdict = find_lattice(all_views, hypotheses(all_views, pitch_hint=pitch_hint))
     else:
         verdict = _start_verdict(start, all_views)
     reason = doubt(verdict)

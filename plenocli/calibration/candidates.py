@@ -10,9 +10,11 @@ stronger than the fundamental. So every peak is taken as several hypotheses and
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 import scipy.fft
 
@@ -69,17 +71,20 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     ``signal`` (one of each +- pair), as z-scores against a robust background per ring of
     radius (a scene's 1/f spectrum, noise), sub-bin by a parabola in log magnitude."""
     rows, cols = signal.shape
-    win = (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
-    data = (signal - np.float32(signal.mean())) * win
+    data = signal - np.float32(signal.mean())
+    data *= (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
     size = max(rows, cols)
     spec = scipy.fft.rfft2(data, s=(size, size), workers=-1)
-    logmag = np.log(np.abs(spec) + 1e-12)
-    fy = np.fft.fftfreq(size)[:, None]
-    fx = np.fft.rfftfreq(size)[None, :]
-    radius = np.hypot(fx, fy)
-    z = _ring_zscore(logmag, radius, size)
-    valid = radius > 3.0 / min(rows, cols)
+    logmag = np.abs(spec)
+    del spec
+    logmag += 1e-12
+    np.log(logmag, out=logmag)
+    rings = _rings(size)
+    z = _ring_zscore(logmag, rings)
+    valid = rings.radius > 3.0 / min(rows, cols)
     if cfa:   # residual mosaic sits at the Nyquist corners
+        fy = np.fft.fftfreq(size)[:, None]
+        fx = np.fft.rfftfreq(size)[None, :]
         for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
             valid &= np.hypot(fx - nx, fy - ny) > 0.03
     z = np.where(valid, z, -np.inf).astype(np.float32)
@@ -117,23 +122,56 @@ def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
     return [lat for f in first for lat in [f, *f.relatives()]]
 
 
-def _ring_zscore(logmag: np.ndarray, radius: np.ndarray, size: int) -> np.ndarray:
-    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
-    are a minority of each ring and do not inflate it."""
+@dataclass(frozen=True)
+class _Rings:
+    """The radius (cycles/px) of every bin of a (size, size // 2 + 1) real spectrum, its ring
+    of 4 bins, the bins grouped by ring (``order``) and where each ring starts there."""
+
+    radius: np.ndarray
+    ring: np.ndarray
+    order: np.ndarray
+    start: np.ndarray
+
+
+@functools.lru_cache(maxsize=2)
+def _rings(size: int) -> _Rings:
+    """The ring geometry of a spectrum size (the views share a few sizes: kept, not redone)."""
+    radius = np.hypot(np.fft.rfftfreq(size)[None, :], np.fft.fftfreq(size)[:, None])
     nring = size // 4 + 2
-    ring = np.minimum((radius * size / 4).astype(np.int64), nring - 1).ravel()
-    lo, span = float(logmag.min()), float(np.ptp(logmag)) + 1e-9
-    key = ring + (logmag.ravel() - lo) * (0.999 / span)   # one sort: by ring, then value
-    key.sort()
-    count = np.bincount(ring, minlength=nring)
-    start = np.concatenate([[0], np.cumsum(count)[:-1]])
-    values = (key - np.repeat(np.arange(nring), count)) * (span / 0.999) + lo
-    safe = np.maximum(count, 1)
-    median = values[np.minimum(start + safe // 2, values.size - 1)]
-    low = values[np.minimum(start + (safe * 16) // 100, values.size - 1)]
+    ring = np.minimum(radius * (size / 4), nring - 1).astype(np.int16)
+    # a stable sort of small integers is a radix sort
+    order = np.argsort(ring.ravel(), kind="stable").astype(np.int32)
+    start = np.concatenate([[0], np.cumsum(np.bincount(ring.ravel(), minlength=nring))])
+    for a in (radius, ring, order, start):
+        a.flags.writeable = False
+    return _Rings(radius, ring, order, start)
+
+
+def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
+    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
+    are a minority of each ring and do not inflate it. Two order statistics per ring by
+    partition: no full sort of the spectrum."""
+    median, low = _ring_quantiles(logmag.ravel()[rings.order], rings.start)
     spread = np.maximum(median - low, 0.05)   # a flat field has no spread: no peak passes
-    ring = ring.reshape(logmag.shape)
-    return (logmag - median[ring]) / spread[ring]
+    return (logmag - median[rings.ring]) / spread[rings.ring]
+
+
+@numba.njit(cache=True)
+def _ring_quantiles(grouped, start):  # pragma: no cover - compiled
+    """The median and 16th percentile (the values of rank count // 2 and count * 16 // 100) of
+    each ring of ``grouped`` (values grouped by ring, ring r at start[r]:start[r + 1]), by
+    partition (numba kernel: one Python call, not one per ring)."""
+    rings = start.shape[0] - 1
+    median, low = np.zeros(rings), np.zeros(rings)
+    for r in range(rings):
+        count = start[r + 1] - start[r]
+        if count == 0:
+            continue
+        mid, k_low = count // 2, (count * 16) // 100
+        part = np.partition(grouped[start[r]:start[r + 1]], mid)
+        median[r] = part[mid]
+        low[r] = np.partition(part[:mid + 1], k_low)[k_low]   # the lower ranks are all there
+    return median, low
 
 
 def _parabola(a, b, c):

@@ -89,7 +89,8 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
 
 
 def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
-                   n_iter: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   n_iter: int = 5, near: tuple[np.ndarray, float] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-lens centres as point-symmetry centres of the micro-images.
 
     Each centre c minimises sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2 over the pixels x_k
@@ -105,6 +106,8 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
         narrower blur follows each lens's neighbours and tilts its micro-image)
     grid : the lattice to start from
     window : radius of the symmetry disc in units of the pitch
+    near : (point (x, y), radius px): only the lenses whose lattice position is that close are
+        refined (the others keep it, refined False)
 
     Returns
     -------
@@ -120,6 +123,8 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
     margin = radius + EDGE_MARGIN * grid.pitch_px + 2  # flattening is less sure at the border
     inner = ((ideal[:, 0] >= margin) & (ideal[:, 0] <= cols - 1 - margin)
              & (ideal[:, 1] >= margin) & (ideal[:, 1] <= rows - 1 - margin))
+    if near is not None:
+        inner &= np.hypot(*(ideal - np.asarray(near[0])).T) <= near[1]
     cx, cy, ok = _symmetry_centres(np.ascontiguousarray(flat, np.float32),
                                    ideal[inner, 0].copy(), ideal[inner, 1].copy(),
                                    float(radius), n_iter)

@@ -163,9 +163,11 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
     for core in (CORE_PITCHES, None):
-        idx, centres, refined = refine_centres(flat, grid)
+        mid = grid.lattice_xy(0, 0)
+        # a centre moves by under 0.3 pitch: lenses farther out cannot enter the core
+        near = None if core is None else (mid, (core + 0.5) * grid.pitch_px)
+        idx, centres, refined = refine_centres(flat, grid, near=near)
         if core is not None:
-            mid = grid.lattice_xy(0, 0)
             refined = refined & (np.hypot(*(centres - mid).T) <= core * grid.pitch_px)
         if int(refined.sum()) < MIN_LENSES:
             raise CalibrationError(f"only {int(refined.sum())} whole micro-images fit in the "

@@ -29,7 +29,7 @@ def flatten(image: np.ndarray, *, cfa: str | None = None, scale_px: float = 64.0
     for r in range(step):
         for c in range(step):
             plane = np.asarray(image[r::step, c::step], dtype=np.float32)
-            out[r::step, c::step] = plane / _blur(plane, scale_px / step)
+            np.divide(plane, _blur(plane, scale_px / step), out=out[r::step, c::step])
     finite = np.isfinite(out)
     if not finite.all():
         out[~finite] = 0.0
@@ -54,7 +54,7 @@ def _blur(plane: np.ndarray, sigma: float) -> np.ndarray:
     blurred = cv2.resize(fit, (cols, rows), interpolation=cv2.INTER_LINEAR) \
         if factor > 1 else fit
     floor = max(float(np.mean(blurred)) * 1e-3, 1e-12)
-    return np.maximum(blurred, floor)
+    return np.maximum(blurred, np.float32(floor), out=blurred)
 
 
 def _local_linear_1d(f: np.ndarray, sigma: float, axis: int) -> np.ndarray:

@@ -27,17 +27,33 @@ class LensTypes:
 def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np.ndarray:
     """Mean |Laplacian| of the flattened image over a disc of 0.35 pitch around each centre
     (K,): the micro-image's own detail, away from its border."""
-    lap = np.abs(cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3))
+    lap = cv2.Laplacian(np.asarray(flat, np.float32), cv2.CV_32F, ksize=3)
+    np.abs(lap, out=lap)
     radius = 0.35 * pitch_px
-    # the disc mean is a box-free convolution with a normalised disc kernel, read at the centres
     half = int(np.ceil(radius))
     yy, xx = np.mgrid[-half:half + 1, -half:half + 1]
-    kernel = (np.hypot(xx, yy) <= radius).astype(np.float32)
-    mean = cv2.filter2D(lap, cv2.CV_32F, kernel / kernel.sum(), borderType=cv2.BORDER_REFLECT)
-    rows, cols = mean.shape
+    inside = np.hypot(xx, yy) <= radius
+    dy, dx = yy[inside], xx[inside]
+    rows, cols = lap.shape
     c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, cols - 1)
     r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, rows - 1)
-    return mean[r, c]
+    # the disc mean at the centres only (mirrored at the frame's edge), a block of lenses at a
+    # time: a filter over the whole frame costs more than the lenses' own pixels
+    out = np.empty(len(c))
+    block = max(1, 2 ** 18 // len(dy))
+    for top in range(0, len(c), block):
+        rr = _mirrored(r[top:top + block, None] + dy[None, :], rows)
+        cc = _mirrored(c[top:top + block, None] + dx[None, :], cols)
+        out[top:top + block] = np.take(lap, rr * cols + cc).mean(axis=1, dtype=np.float64)
+    return out
+
+
+def _mirrored(index: np.ndarray, size: int) -> np.ndarray:
+    """Indices beyond [0, size) mirrored back (edge pixel repeated, as BORDER_REFLECT)."""
+    if index.min() < 0 or index.max() >= size:
+        index = np.where(index < 0, -index - 1, index)
+        index = np.where(index >= size, 2 * size - 1 - index, index)
+    return index
 
 
 def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -46,16 +62,16 @@ def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarr
     varies over the frame far more than between neighbours, and cancels. Returns (which lenses,
     values)."""
     log_s = np.log(np.maximum(sharpness, 1e-12))
-    lookup = {key: k for k, key in enumerate(map(tuple, indices.tolist()))}
+    if not len(indices):
+        return np.empty(0, np.int64), np.empty(0)
+    # lens number by index, with a frame of -1 around it for the missing neighbours
+    at = indices - indices.min(axis=0) + 1
+    lookup = np.full(tuple(at.max(axis=0) + 2), -1, np.int64)
+    lookup[at[:, 0], at[:, 1]] = np.arange(len(indices))
     steps = ((1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1))
-    rows, values = [], []
-    for k, (i, j) in enumerate(indices.tolist()):
-        near = [lookup.get((i + di, j + dj)) for di, dj in steps]
-        if None in near:
-            continue
-        rows.append(k)
-        values.append(log_s[k] - float(np.mean(log_s[near])))
-    return np.asarray(rows, np.int64), np.asarray(values)
+    near = np.stack([lookup[at[:, 0] + di, at[:, 1] + dj] for di, dj in steps], axis=1)
+    rows = np.flatnonzero((near >= 0).all(axis=1))
+    return rows, log_s[rows] - log_s[near[rows]].mean(axis=1)
 
 
 def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,

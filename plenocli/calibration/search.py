@@ -22,27 +22,27 @@ from plenocli.calibration.verify import Autocorrelation, Verdict, control_contra
 PITCH_RANGE_PX = (5.5, 110.0)   # searched; the documented range is 6-100 px
 VIEW_PX = 1024                  # side of the central crop each view looks at
 VIEW_FLAT_PX = 24.0             # flattening blur of a view (px of the view)
+MIN_VIEW_PITCH = 10.0           # px per lens in the view that judges a pitch
 REFINED = 4                     # hypotheses refined per search (and the best of each kind)
 
 
 @dataclass(frozen=True)
 class View:
-    """The central crop of the image decimated by ``factor``: its flattened intensity and its
-    border signal, and the autocorrelation of the border signal."""
+    """The central crop of the image decimated by ``factor``: the autocorrelation of its
+    flattened intensity and border signal, and the lattices its spectra and nearest
+    autocorrelation peaks suggest (px of the full image)."""
 
     factor: int
-    flat: np.ndarray
-    border: np.ndarray
     acf: Autocorrelation
+    suggested: tuple[Lattice, ...]
 
 
 def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
     """One view per decimation 1, 2, 4, 8 that still holds a useful crop."""
+    factors = [f for f in (1, 2, 4, 8) if f == 1 or min(image.shape) // f >= 160]
     out = {}
-    for factor in (1, 2, 4, 8):
+    for factor, coarser in zip(factors, [*factors[1:], None], strict=True):
         rows, cols = image.shape[0] // factor, image.shape[1] // factor
-        if factor > 1 and min(rows, cols) < 160:
-            break
         # crop first (at full resolution), then decimate: an even factor averages the mosaic
         side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
         r0, c0 = (image.shape[0] - side_r) // 2, (image.shape[1] - side_c) // 2
@@ -52,21 +52,29 @@ def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
         if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
             flat = cv2.blur(flat, (2, 2))
         border = border_signal(flat)
-        out[factor] = View(factor, flat, border, Autocorrelation((flat, border), factor))
+        # view_for judges here the pitches with less than MIN_VIEW_PITCH px per lens in the
+        # next, coarser view (the coarsest takes every wider one)
+        widest = None if coarser is None else MIN_VIEW_PITCH * coarser / factor
+        acf = Autocorrelation((flat, border), factor, widest)
+        suggested = [lat for signal in (flat, border)
+                     for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
+                     for lat in lattices_of_peak(g, factor)]
+        suggested += [lat for v in acf_peaks(acf.acf) for lat in lattices_of_lag(v, factor)]
+        out[factor] = View(factor, acf, tuple(suggested))
     return out
 
 
 def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:
-    """The most decimated view that still has 10 px per lens (the longest lags in pitches)."""
+    """The most decimated view that still has MIN_VIEW_PITCH px per lens (the longest lags in
+    pitches)."""
     best = min(all_views)
     for factor in sorted(all_views):
-        if lattice.pitch_px / factor >= 10.0:
+        if lattice.pitch_px / factor >= MIN_VIEW_PITCH:
             best = factor
     return all_views[best]
 
 
-def hypotheses(all_views: dict[int, View], *, cfa: bool, pitch_hint: float | None
-               ) -> list[Lattice]:
+def hypotheses(all_views: dict[int, View], *, pitch_hint: float | None) -> list[Lattice]:
     """Every lattice a spectral peak of a view suggests (both kinds, with relatives), inside
     the pitch range (or within 15 % of the hint)."""
     lo, hi = PITCH_RANGE_PX
@@ -74,11 +82,7 @@ def hypotheses(all_views: dict[int, View], *, cfa: bool, pitch_hint: float | Non
         lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
     out: list[Lattice] = []
     for view in all_views.values():
-        found = [lat for signal in (view.flat, view.border)
-                 for g in spectral_peaks(signal, cfa=cfa and view.factor == 1)
-                 for lat in lattices_of_peak(g, view.factor)]
-        found += [lat for v in acf_peaks(view.acf.acf) for lat in lattices_of_lag(v, view.factor)]
-        for lat in found:
+        for lat in view.suggested:
             if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
                 out.append(lat)
     return out

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.fft
 from scipy.optimize import minimize
@@ -40,59 +41,73 @@ from plenocli.calibration.candidates import Lattice, _parabola
 WIN_RATIO = 2.0        # the winner's contrast over any unrelated hypothesis
 NULL_RATIO = 3.0       # the winner's contrast over its own detuned copies
 MIN_CONTRAST = 0.15    # lattice points above holes by this share of the spread of A
+MIN_LAGS = 12          # fewer lattice lags in the annulus: no contrast
+HOLE_REACH = 1.2       # the farthest hole from its lattice point (2 |b1 + b2| / 3 = 1.155 pitches)
 
 
 class Autocorrelation:
     """A(t) of the signals of one view (a crop at one decimation ``factor``): the flattened
     intensity (each micro-image bright inside, dark at its rim) and the border signal (its
     edges), each normalised by the overlap of the shifted crop with itself (every lag is a
-    mean, not a sum) and by A(0). A lattice must show in both."""
+    mean, not a sum) and by A(0). A lattice must show in both.
 
-    def __init__(self, signals: tuple[np.ndarray, ...], factor: int):
+    Only the lags a measure can sample are computed and kept: out to the reach plus the
+    farthest hole of ``widest_pitch`` (view px), the widest pitch this view judges (None: any
+    pitch whose annulus fits the reach)."""
+
+    def __init__(self, signals: tuple[np.ndarray, ...], factor: int,
+                 widest_pitch: float | None = None):
         rows, cols = signals[0].shape
-        shape = (2 * rows, 2 * cols)   # zero padding: no wrap-around
-        # pixels a shift (dy, dx) keeps inside the crop, in the FFT's wrapped lag order
-        lag_r = np.minimum(np.arange(shape[0]), shape[0] - np.arange(shape[0]))
-        lag_c = np.minimum(np.arange(shape[1]), shape[1] - np.arange(shape[1]))
-        overlap = np.maximum(np.outer(np.maximum(rows - lag_r, 0), np.maximum(cols - lag_c, 0)),
-                             1.0).astype(np.float32)
-        self.acfs = []
-        for signal in signals:
-            data = signal - np.float32(signal.mean())
-            power = np.abs(scipy.fft.rfft2(data, s=shape, workers=-1)) ** 2
-            acf = scipy.fft.irfft2(power, s=shape, workers=-1) / overlap
-            self.acfs.append(np.fft.fftshift(acf / max(acf[0, 0], 1e-30)).astype(np.float32))
-        self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
         self.factor = factor
         self.reach = 0.45 * min(rows, cols)   # lags beyond this overlap too little of the crop
+        # only the lags a measure can sample are kept: the reach plus the farthest hole of the
+        # widest pitch judged in this view (no annulus holds more than reach / 1.5)
+        widest = self.reach / 1.5 if widest_pitch is None else widest_pitch
+        extent = int(np.ceil(self.reach + HOLE_REACH * widest)) + 3
+        ext_r, ext_c = min(extent, rows - 1), min(extent, cols - 1)
+        # zero padding by the kept lags: no wrap-around reaches them
+        shape = (scipy.fft.next_fast_len(rows + ext_r + 1, real=True),
+                 scipy.fft.next_fast_len(cols + ext_c + 1, real=True))
+        lag_r, lag_c = np.arange(-ext_r, ext_r + 1), np.arange(-ext_c, ext_c + 1)
+        # pixels a shift (dy, dx) keeps inside the crop: every lag is a mean, not a sum
+        overlap = np.outer(rows - np.abs(lag_r), cols - np.abs(lag_c)).astype(np.float32)
+        self.stack = np.empty((len(signals), len(lag_r), len(lag_c)), np.float32)
+        for acf, signal in zip(self.stack, signals, strict=True):
+            data = signal - np.float32(signal.mean())
+            spectrum = scipy.fft.rfft2(data, s=shape, workers=-1)
+            del data
+            power = np.abs(spectrum)
+            del spectrum
+            power *= power
+            wrapped = scipy.fft.irfft2(power, s=shape, workers=-1)
+            del power
+            # lags -ext .. ext: the wrapped-around tail, then the head
+            for dst_r, src_r in ((slice(0, ext_r), slice(-ext_r, None)),
+                                 (slice(ext_r, None), slice(0, ext_r + 1))):
+                for dst_c, src_c in ((slice(0, ext_c), slice(-ext_c, None)),
+                                     (slice(ext_c, None), slice(0, ext_c + 1))):
+                    acf[dst_r, dst_c] = wrapped[src_r, src_c]
+            del wrapped
+            acf /= overlap
+            acf /= max(float(acf[ext_r, ext_c]), 1e-30)
+        self.acfs = list(self.stack)
+        self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
 
     def contrast(self, lattice: Lattice, *, near: float = 3.0, far: float | None = None
                  ) -> float:
         """Contrast of ``lattice`` over lags from ``near`` pitches (or 15 % of the crop) to
         ``far`` pitches (default: as far as the crop reaches). See the module docstring."""
-        lags = self._lags(lattice, near, far)
-        if lags is None:
+        annulus = self._annulus(lattice, near, far)
+        if annulus is None:
             return -np.inf
-        pts, k, m = lags
-        b1, b2 = lattice.basis() / self.factor
-        classes = [((k % 2 == a) & (m % 2 == b)) for a in (0, 1) for b in (0, 1)]
+        basis, lo, hi, n = annulus
+        b1, b2 = basis
         if lattice.kind == "hex":
-            classes += [((k - m) % 3 == a) for a in (0, 1, 2)]
             holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
         else:
-            classes += [((k + m) % 2 == a) for a in (0, 1)]
             holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
         offsets = np.array([[0.0, 0.0], *holes])
-        lags = pts[None, :, :] + offsets[:, None, :]
-        worst = np.inf
-        for acf in self.acfs:
-            values = self._sample(lags, acf)   # (1 + holes, K)
-            point_means = [values[0][c].mean() for c in classes if c.any()]
-            spread = float(values.std())
-            if not spread > 0:
-                return -np.inf
-            worst = min(worst, float(min(point_means) - values[1:].mean(axis=1).max()) / spread)
-        return worst
+        return float(_contrast(self.stack, basis, offsets, lo, hi, n, lattice.kind == "hex"))
 
     def between(self, coarse: Lattice, fine: Lattice) -> np.ndarray:
         """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
@@ -137,32 +152,36 @@ class Autocorrelation:
         dx, dy = dx[inside], dy[inside]
         cy, cx = self.acf.shape[0] // 2, self.acf.shape[1] // 2
         acf = self.acf
-        rows = (cy + np.rint(pts[:, 1])[:, None] + dy[None, :]).astype(np.int64)
-        cols = (cx + np.rint(pts[:, 0])[:, None] + dx[None, :]).astype(np.int64)
-        window = acf[rows, cols]                                   # (K, window)
-        top = np.argmax(window, axis=1)
-        r = rows[np.arange(len(top)), top]
-        c = cols[np.arange(len(top)), top]
+        r, c, height = _window_peaks(acf, cy + np.rint(pts[:, 1]).astype(np.int64),
+                                     cx + np.rint(pts[:, 0]).astype(np.int64),
+                                     dy.astype(np.int64), dx.astype(np.int64))
         found = np.stack([c - cx + _parabola(acf[r, c - 1], acf[r, c], acf[r, c + 1]),
                           r - cy + _parabola(acf[r - 1, c], acf[r, c], acf[r + 1, c])], axis=1)
-        height = np.maximum(window.max(axis=1) - np.median(window, axis=1), 0.0)
         return found * self.factor, np.stack([k, m], axis=1), height
 
-    def _lags(self, lattice: Lattice, near: float, far: float | None):
-        """Lattice vectors (view px) of half the plane in the lag annulus, with indices."""
+    def _annulus(self, lattice: Lattice, near: float, far: float | None):
+        """Basis (view px), lag bounds lo, hi and index range n of the lag annulus, or None
+        when it holds less than 1.5 pitches."""
         basis = lattice.basis() / self.factor
         pitch = lattice.pitch_px / self.factor
         hi = self.reach if far is None else min(far * pitch, self.reach)
         lo = min(max(near * pitch, 0.15 * self.reach if far is None else 0.0), 0.8 * hi)
         if hi < 1.5 * pitch:
             return None
-        n = int(hi / (pitch * np.sin(np.pi / 3))) + 2
+        return basis, lo, hi, int(hi / (pitch * np.sin(np.pi / 3))) + 2
+
+    def _lags(self, lattice: Lattice, near: float, far: float | None):
+        """Lattice vectors (view px) of half the plane in the lag annulus, with indices."""
+        annulus = self._annulus(lattice, near, far)
+        if annulus is None:
+            return None
+        basis, lo, hi, n = annulus
         k, m = np.meshgrid(np.arange(-n, n + 1), np.arange(0, n + 1), indexing="ij")
         k, m = k.ravel(), m.ravel()
         pts = k[:, None] * basis[0] + m[:, None] * basis[1]
         dist = np.hypot(pts[:, 0], pts[:, 1])
         keep = (dist >= lo) & (dist <= hi)
-        if keep.sum() < 12:
+        if keep.sum() < MIN_LAGS:
             return None
         return pts[keep], k[keep], m[keep]
 
@@ -178,6 +197,92 @@ class Autocorrelation:
         top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
         bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
         return top * (1 - fy) + bottom * fy
+
+
+@numba.njit(cache=True)
+def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
+    """``Autocorrelation.contrast`` (numba kernel: a search evaluates it hundreds of times).
+    The lattice lags k b1 + m b2 (m >= 0) with lo <= |lag| <= hi; each signal's A sampled
+    bilinearly at every lag plus every offset (0: the lattice point, then its holes); point
+    classes by (k mod 2, m mod 2) and by (k - m) mod 3 (hex) or (k + m) mod 2 (square). The
+    minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal without spread."""
+    size = (2 * n + 1) * (n + 1)
+    lag_x, lag_y = np.empty(size), np.empty(size)
+    coset_a, coset_b = np.empty(size, np.int64), np.empty(size, np.int64)
+    kept = 0
+    for k in range(-n, n + 1):
+        for m in range(0, n + 1):
+            x = k * basis[0, 0] + m * basis[1, 0]
+            y = k * basis[0, 1] + m * basis[1, 1]
+            dist = np.hypot(x, y)
+            if dist >= lo and dist <= hi:
+                lag_x[kept], lag_y[kept] = x, y
+                coset_a[kept] = 2 * (k % 2) + m % 2
+                coset_b[kept] = 4 + ((k - m) % 3 if hexagonal else (k + m) % 2)
+                kept += 1
+    if kept < MIN_LAGS:
+        return -np.inf
+    n_sig, rows, cols = acfs.shape
+    n_off = offsets.shape[0]
+    values = np.empty((n_off, kept))
+    worst = np.inf
+    for s in range(n_sig):
+        a = acfs[s]
+        total = 0.0
+        for o in range(n_off):
+            for i in range(kept):
+                x = lag_x[i] + offsets[o, 0] + cols // 2
+                y = lag_y[i] + offsets[o, 1] + rows // 2
+                x0 = min(max(int(np.floor(x)), 0), cols - 2)
+                y0 = min(max(int(np.floor(y)), 0), rows - 2)
+                fx = min(max(x - x0, 0.0), 1.0)
+                fy = min(max(y - y0, 0.0), 1.0)
+                top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+                bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+                values[o, i] = top * (1 - fy) + bottom * fy
+                total += values[o, i]
+        mean = total / (n_off * kept)
+        var = 0.0
+        for o in range(n_off):
+            for i in range(kept):
+                var += (values[o, i] - mean) ** 2
+        spread = np.sqrt(var / (n_off * kept))
+        if not spread > 0:
+            return -np.inf
+        sums, counts = np.zeros(7), np.zeros(7)
+        for i in range(kept):
+            for c in (coset_a[i], coset_b[i]):
+                sums[c] += values[0, i]
+                counts[c] += 1
+        lowest_point = np.inf
+        for c in range(7):
+            if counts[c] > 0:
+                lowest_point = min(lowest_point, sums[c] / counts[c])
+        highest_hole = -np.inf
+        for o in range(1, n_off):
+            highest_hole = max(highest_hole, values[o].mean())
+        worst = min(worst, (lowest_point - highest_hole) / spread)
+    return worst
+
+
+@numba.njit(cache=True)
+def _window_peaks(acf, rows, cols, dy, dx):  # pragma: no cover - compiled
+    """For each window centred at (rows[i], cols[i]) with offsets (dy, dx): the row and column
+    of its maximum (the first one) and the maximum's height above the window's median
+    (numba kernel: no (lags x window) temporaries)."""
+    count = rows.shape[0]
+    top_r, top_c = np.empty(count, np.int64), np.empty(count, np.int64)
+    height = np.empty(count, acf.dtype)
+    values = np.empty(dy.shape[0], acf.dtype)
+    for i in range(count):
+        best = -np.inf
+        for w in range(dy.shape[0]):
+            values[w] = acf[rows[i] + dy[w], cols[i] + dx[w]]
+            if values[w] > best:
+                best = values[w]
+                top_r[i], top_c[i] = rows[i] + dy[w], cols[i] + dx[w]
+        height[i] = max(best - np.median(values), 0.0)
+    return top_r, top_c, height
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,9 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
         meta = {}
     if views.ndim != 3 or views.shape[1] == 0 or views.shape[2] == 0:
         raise InputError(f"{p}: image of shape {views.shape}; expected (rows, cols) or views")
-    image = views.astype(np.float32).sum(axis=0)
+    image = views[0].astype(np.float32)
+    for view in views[1:]:   # one plane at a time: no float copy of every view
+        image += view
     cfa = meta.get("cfa")
     top, left = 0, 0
     area = meta.get("active_area")
