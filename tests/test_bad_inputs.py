@@ -413,3 +413,41 @@ def test_outputs_that_collide_are_refused(option, inputs, tmp_path):
     result = run_bad(inputs, tmp_path / "out", ["decode", "{i}/dp.dng", "-o", "{o}/x.tif",
                                                 option, "{o}/x.tif"])
     assert_one_line(result, 1, ("two outputs",))
+
+
+def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
+                 top: str = "") -> str:
+    return (f"out: {out}\n{top}steps:\n"
+            f"  decode:\n    input: {inputs}/dp.dng\n    output: \"{{out}}/f.tif\"\n"
+            f"  bias:\n    input: \"{{out}}/f.tif\"\n    output: \"{{out}}/b.tif\"\n{extra_bias}"
+            f"{extra_steps}")
+
+
+@pytest.mark.parametrize("name,parts,words", [
+    ("duplicate-parameter", {"extra_bias": "    smooth: 1\n    smooth: 2\n"}, ("twice",)),
+    ("duplicate-step", {"extra_steps": "  decode:\n    input: x.dng\n    output: y.tif\n"},
+     ("twice",)),
+    ("step-scalar", {"extra_steps": "  sai: 5\n"}, ("mapping",)),
+    ("stage-list", {"extra_steps": "  x:\n    stage: [bias]\n"}, ("stage",)),
+    ("two-writers", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                     "    output: \"{out}/f.tif\"\n"}, ("both write",)),
+    ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
+                                   "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
+    ("preview-is-output", {"extra_bias": "    preview: \"{out}/b.tif\"\n"}, ("two outputs",)),
+])
+def test_config_structure_is_checked_before_any_step_runs(name, parts, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out, **parts))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("value", ["5", "[a, b]", "{a: 1}"])
+def test_config_out_must_be_one_folder(value, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"out: {out}", f"out: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("'out:'",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]

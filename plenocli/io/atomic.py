@@ -127,6 +127,16 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
         if folder.exists() and not folder.is_dir():
             raise InputError(f"output folder {folder} is a file; give a folder")
         _check_folder(folder / "x")
+    check_distinct(outputs, inputs)
+    for out in outputs:
+        if out.is_dir():
+            raise InputError(f"output {out} is a folder; give a file name")
+        _check_folder(out)
+
+
+def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
+    """Every output distinct from the others and from the inputs (InputError otherwise)."""
+    outputs, inputs = [Path(p) for p in outputs], [Path(p) for p in inputs]
     for k, out in enumerate(outputs):
         for other in outputs[:k]:
             if _same_path(out, other):
@@ -135,9 +145,6 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
             if _same_path(out, src):
                 raise InputError(f"output {out} is also an input; choose another output path "
                                  "(plenocli never overwrites its inputs)")
-        if out.is_dir():
-            raise InputError(f"output {out} is a folder; give a file name")
-        _check_folder(out)
 
 
 def remove_stale_temporaries(dest: Path) -> None:
