@@ -408,11 +408,29 @@ def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
     assert_one_line(result, 1, words)
 
 
-@pytest.mark.parametrize("option", ["--preview"])
-def test_outputs_that_collide_are_refused(option, inputs, tmp_path):
-    result = run_bad(inputs, tmp_path / "out", ["decode", "{i}/dp.dng", "-o", "{o}/x.tif",
-                                                option, "{o}/x.tif"])
-    assert_one_line(result, 1, ("two outputs",))
+@pytest.mark.parametrize("args,words", [
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{o}/x.tif"],
+     ("two outputs",)),
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{i}/biased.tif"],
+     ("also an input",)),
+])
+def test_outputs_that_collide_are_refused(args, words, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", [*args, "-o", "{o}/x.tif"])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("args", [
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x.jpg"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.png"],
+    ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "-o", "{o}/x.tif", "--save-gain",
+     "{o}/g.png"],
+    ["develop", "{i}/biased.tif", "--view", "S", "-o", "{o}/x.jpg", "--linear", "{o}/l.png"],
+    ["optics", "{i}/none.yaml", "--json", "{o}/x.yaml"],
+])
+def test_an_output_named_for_another_format_is_refused(args, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, ("ending in",))
 
 
 def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
@@ -433,7 +451,7 @@ def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str
                                      "    output: \"{out}/f.tif\"\n"}, ("both write",)),
     ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
                                    "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
-    ("preview-is-output", {"extra_bias": "    preview: \"{out}/b.tif\"\n"}, ("two outputs",)),
+    ("preview-not-png", {"extra_bias": "    preview: \"{out}/b.jpg\"\n"}, ("ending in .png",)),
 ])
 def test_config_structure_is_checked_before_any_step_runs(name, parts, words, inputs, tmp_path):
     out = tmp_path / "out"

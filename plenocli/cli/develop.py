@@ -27,7 +27,7 @@ class WhiteBalance(click.ParamType):
 
 @click.command(short_help="Develop a colour view into a photograph (TIFF, JPEG, PNG).")
 @options.input_arg
-@options.output_opt
+@options.output_option()
 @click.option("--view", default=None,
               help="Which view to develop (e.g. S); needed when the file holds several.")
 @click.option("--method", type=click.Choice(METHODS), default=DEFAULT_METHOD,
@@ -49,7 +49,7 @@ class WhiteBalance(click.ParamType):
 @click.option("--recover-highlights", type=click.Path(dir_okay=False), default=None,
               help="Dual-pixel: rebuild S (and B) from A where only S clipped, with the A/S "
                    "split of this white image (views A, B, S, processed like INPUT).")
-@click.option("--linear", type=click.Path(dir_okay=False), default=None,
+@click.option("--linear", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the scene-referred linear sRGB as a float32 TIFF (R, G, B pages).")
 @options.preview_opt
 @options.stage_command

@@ -8,7 +8,7 @@ from plenocli.cli import options
 @click.option("--sensor-mm",
               type=options.FiniteFloat(min=0, min_open=True), default=3.6, show_default=True,
               help="Side of the square sensor (mm), for the field of view.")
-@click.option("--json", type=click.Path(dir_okay=False), default=None,
+@click.option("--json", type=options.OutputFile(".json"), default=None,
               help="Also write the figures as JSON here.")
 @click.option("--crosstalk", is_flag=True,
               help="Also trace a quad-pixel micro-lens array behind the lens and report the "

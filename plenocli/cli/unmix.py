@@ -13,7 +13,7 @@ from plenocli.cli import options
               show_default=True,
               help="Tikhonov lambda (units of M, diagonal 1): damps ill-conditioned pixels; "
                    "0 = exact inverse.")
-@click.option("--noise-map", type=click.Path(dir_okay=False), default=None,
+@click.option("--noise-map", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the per-pixel noise gain of every unmixed view (TIFF).")
 @options.preview_opt
 @options.stage_command
