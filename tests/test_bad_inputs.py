@@ -365,6 +365,9 @@ CASES = [
                            "nan"], 2, ()),
     ("batch-inputs-none", ["batch", "{i}/none.yaml", "--inputs", "{i}/nothing/*.dng"], 1,
      ("matches no file",)),
+    ("unmix-regularise-huge", ["unmix", "{i}/qg/views.tif", "--mixing", "{i}/qg/mixing.tif",
+                               "--regularise", "1e308", "-o", "{o}/u.tif"], 2,
+     ("'--regularise'",)),
     # info
     ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
     ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),

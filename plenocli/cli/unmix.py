@@ -9,7 +9,7 @@ from plenocli.cli import options
 @click.option("--mixing", required=True, type=click.Path(dir_okay=False),
               help="Mixing file from plenocli crosstalk --mixing-out (masked whites of this rig, "
                    "processed like these views).")
-@click.option("--regularise", type=options.FiniteFloat(min=0.0), default=0.0,
+@click.option("--regularise", type=options.FiniteFloat(min=0.0, max=1.0), default=0.0,
               show_default=True,
               help="Tikhonov lambda (units of M, diagonal 1): damps ill-conditioned pixels; "
                    "0 = exact inverse.")
