@@ -342,6 +342,10 @@ CASES = [
                          ("mask-width", "inf"), ("mask-width", "-1")]],
     ("sai-grid-hex", ["sai", "{i}/rt/frames.tif", "-n", "2", "--grid", "{i}/rt/grid.yaml", "-o",
                       "{o}/v.tif"], 1, ("square",)),
+    ("sai-of-views", ["sai", "{o}/../views.tif", "-o", "{o}/v.tif"], 1, ("already sai views",)),
+    ("sai-dualpixel-views", ["sai", "{i}/biased.tif", "-o", "{o}/v.tif"], 1, ("dual-pixel",)),
+    ("sai-micro-image-mono", ["sai", "{i}/f512.tif", "--cfa-layout", "micro-image", "-o",
+                              "{o}/v.tif"], 1, ("no CFA",)),
     ("sai-cfa-layout", ["sai", "{i}/f512.tif", "--cfa-layout", "diagonal", "-o", "{o}/v.tif"],
      2, ("cfa-layout",)),
     # metadata a stage reads, edited or damaged
@@ -392,6 +396,10 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_is_one_line_and_leaves_nothing(case, inputs, tmp_path):
     name, args, code, words = case
+    if "views.tif" in " ".join(args):
+        result = CliRunner().invoke(cli, ["sai", str(inputs / "f512.tif"), "-o",
+                                          str(tmp_path / "views.tif")])
+        assert result.exit_code == 0, result.output
     if "clipped_frames" in " ".join(args):
         result = CliRunner().invoke(cli, ["decode", str(inputs / "clipped.dng"), "-o",
                                           str(tmp_path / "clipped_frames.tif")])
