@@ -366,6 +366,14 @@ CASES = [
     ("sai-grid-pitch-below-n", ["sai", "{i}/rt/frames.tif", "--grid", "{i}/grid_square_tiny.yaml",
                                 "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
     ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
+    # crosstalk
+    ("crosstalk-views-twice", ["crosstalk", "{i}/biased.tif", "--views", "A,A", "-o",
+                               "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-views-twice-by-number", ["crosstalk", "{i}/biased.tif", "--views", "A,0", "-o",
+                                         "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
+                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
+     ("--mask-widths",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ()),

@@ -34,7 +34,14 @@ def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.nd
         else:
             raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
                              "pass --views with names from that list")
+    _check_once([names[k] for k in idx])
     return data[idx], [names[k] for k in idx]
+
+
+def _check_once(names: list[str]) -> None:
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"--views names view {twice[0]!r} twice; name each view once")
 
 
 def _intended_index(spec: str | None, names: list[str], path: str) -> int | None:
@@ -57,6 +64,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
         raise InputError("no input given; pass one views TIFF per masked capture")
+    if grid and not mask_widths:
+        raise ConfigError("--grid is used only with --mask-widths (the Raytrix sweep); leave it "
+                          "out, or give --mask-widths")
     if mixing_out:
         if mask_widths:
             raise ConfigError("--mixing-out and --mask-widths do not go together; measure the "
@@ -180,6 +190,7 @@ def load_mixing_views(path: str, views: str | None) -> dict:
         if views:
             wanted = [v.strip() for v in views.split(",") if v.strip()]
             missing = [v for v in wanted if v not in names]
+            _check_once(wanted)
             if missing:
                 raise InputError(f"{path}: view {missing[0]!r} is not in the input (views: "
                                  f"{','.join(names)}); pass --views with names from that list")
