@@ -180,7 +180,8 @@ def _hash_folder(folder: Path) -> dict[str, str]:
 def run_bad(inputs: Path, out: Path, args: list[str]):
     out.mkdir(exist_ok=True)
     before = _hash_folder(inputs)
-    argv = [a.format(i=inputs, o=out) for a in args]
+    lens = Path(__file__).parents[1] / "configs" / "lenses" / "paper_table2.yaml"
+    argv = [a.format(i=inputs, o=out, l=lens) for a in args]
     result = CliRunner().invoke(cli, argv)
     assert _hash_folder(inputs) == before, "an input changed"
     left = [p.name for p in out.rglob("*")]
@@ -374,6 +375,16 @@ CASES = [
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
                                       "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
      ("--mask-widths",)),
+    # optics
+    ("optics-png", ["optics", "{i}/huge.png"], 1, ("not a YAML lens",)),
+    ("optics-prism-n-1", ["optics", "{l}", "--prism-n", "1"], 2, ("'--prism-n'",)),
+    ("optics-prism-n-huge", ["optics", "{l}", "--prism-n", "1e9"], 2, ("'--prism-n'",)),
+    ("optics-prism-reflects", ["optics", "{l}", "--prism-apex-deg", "89.9"], 1,
+     ("totally",)),
+    ("optics-pixel-huge", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e9"], 2,
+     ("'--pixel-um'",)),
+    ("optics-pixel-tiny", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e-9"], 2,
+     ("'--pixel-um'",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ()),

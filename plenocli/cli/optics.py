@@ -18,12 +18,13 @@ from plenocli.cli import options
               default=1 / 15, show_default=True,
               help="Cross mask width as a fraction of the stop diameter.")
 @click.option("--pixel-um",
-              type=options.FiniteFloat(min=0, min_open=True), default=1.2, show_default=True,
+              type=options.FiniteFloat(min=0.1, max=100), default=1.2, show_default=True,
               help="Pixel size (um) for --crosstalk.")
 @click.option("--object-distance-mm",
               type=options.FiniteFloat(min=0, min_open=True), default=2000.0, show_default=True,
               help="White board distance (mm) for --crosstalk.")
-@click.option("--prism-n", type=options.FiniteFloat(min=1), default=1.74, show_default=True,
+@click.option("--prism-n", type=options.FiniteFloat(min=1, max=4, min_open=True), default=1.74,
+              show_default=True,
               help="Prism index for the deviation figures.")
 @click.option("--prism-apex-deg",
               type=options.FiniteFloat(min=0, max=90, max_open=True),
