@@ -124,7 +124,8 @@ def _check_value(kind: str, key: str, value, default) -> None:
         ok = number(value, whole=isinstance(default, int))
     elif isinstance(default, (tuple, list)):
         ok = (isinstance(value, (tuple, list)) and len(value) == len(default)
-              and all(number(v, whole=isinstance(d, int)) for v, d in zip(value, default, strict=True)))
+              and all(number(v, whole=isinstance(d, int))
+                      for v, d in zip(value, default, strict=True)))
     else:
         ok = isinstance(value, type(default))
     if not ok:
