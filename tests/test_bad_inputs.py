@@ -402,6 +402,10 @@ CASES = [
      ("s must be",)),
     ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
                                      "g_true=-1"], 1, ("g must be",)),
+    ("bias-crop-below-cfa-cell", ["bias", "{i}/frames.tif", "--crop", "1x1", "-o", "{o}/b.tif"],
+     1, ("CFA cell",)),
+    ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
+                         "{o}/d.jpg"], 2, ("100 times",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ()),

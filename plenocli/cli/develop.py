@@ -4,6 +4,8 @@ from plenocli.cli import options
 from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
 from plenocli.model.colour import OUTPUT_SPACES
 
+MAX_GAIN_RATIO = 100.0  # beyond any light source: a typo, and float overflow further on
+
 
 class WhiteBalance(click.ParamType):
     """``as-shot`` or three positive finite gains ``R,G,B``."""
@@ -21,6 +23,10 @@ class WhiteBalance(click.ParamType):
             gains = []
         if len(gains) != 3 or not all(g > 0 and g < float("inf") for g in gains):
             self.fail(f"{value!r}: give as-shot or three positive gains R,G,B (e.g. 2.1,1,1.6)",
+                      param, ctx)
+        if max(gains) > MAX_GAIN_RATIO * min(gains):
+            self.fail(f"{value!r}: one gain is more than {MAX_GAIN_RATIO:g} times another; "
+                      "white-balance gains are within a few times each other (e.g. 2.1,1,1.6)",
                       param, ctx)
         return ",".join(repr(g) for g in gains)
 
