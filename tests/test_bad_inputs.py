@@ -109,6 +109,8 @@ def inputs(tmp_path_factory) -> Path:
     _plenocli_tiff(d / "f511x509.tif", rng.random((509, 511), np.float32))
     _plenocli_tiff(d / "f3.tif", rng.random((3, 3), np.float32))
     _plenocli_tiff(d / "nan.tif", np.full((32, 32), np.nan, np.float32))
+    _plenocli_tiff(d / "white_xy.tif", rng.random((2, 32, 32), np.float32), cfa="RGGB",
+                   views=["X", "Y"])
     _plain_tiff(d / "complex.tif", (rng.random((16, 16)) + 1j).astype(np.complex64))
     _plain_tiff(d / "bool.tif", rng.random((16, 16)) > 0.5)
     _plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
@@ -406,6 +408,9 @@ CASES = [
      1, ("CFA cell",)),
     ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
                          "{o}/d.jpg"], 2, ("100 times",)),
+    ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
+                                     "none", "--wb-from", "{i}/white_xy.tif", "-o",
+                                     "{o}/d.jpg"], 1, ("no view S",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ()),
