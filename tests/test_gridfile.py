@@ -124,3 +124,12 @@ def test_lens_tables_must_be_finite_and_compact(centres, indices, words):
     with pytest.raises(ValueError, match=words):
         LensGrid(pitch_px=20.0, angle_rad=0.0, offset_xy=(0.0, 0.0),
                  centres_xy=np.array(centres), indices=np.array(indices))
+
+
+def test_numpy_numbers_in_the_extra_fields_are_written_as_plain_numbers(tmp_path):
+    path = tmp_path / "grid.yaml"
+    extra = {"calibration": {"pitch_px": np.float64(23.8323), "lenses": np.int64(451),
+                             "residuals": np.array([0.25, 0.5])}}
+    gridfile.write_grid(path, _grid(), {"stage": "calibrate"}, extra=extra)
+    doc = yaml.safe_load(path.read_text())
+    assert doc["calibration"] == {"pitch_px": 23.8323, "lenses": 451, "residuals": [0.25, 0.5]}
