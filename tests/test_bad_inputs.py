@@ -109,6 +109,9 @@ def inputs(tmp_path_factory) -> Path:
     _plenocli_tiff(d / "f511x509.tif", rng.random((509, 511), np.float32))
     _plenocli_tiff(d / "f3.tif", rng.random((3, 3), np.float32))
     _plenocli_tiff(d / "nan.tif", np.full((32, 32), np.nan, np.float32))
+    unmasked = 1 + 0.01 * rng.random((4, 64, 64), np.float32)
+    for k in range(4):
+        _plenocli_tiff(d / f"unmasked{k}.tif", unmasked, views=["S00", "S01", "S10", "S11"])
     _plenocli_tiff(d / "white_xy.tif", rng.random((2, 32, 32), np.float32), cfa="RGGB",
                    views=["X", "Y"])
     _plain_tiff(d / "complex.tif", (rng.random((16, 16)) + 1j).astype(np.complex64))
@@ -374,6 +377,16 @@ CASES = [
                                "{o}/c.json"], 1, ("twice",)),
     ("crosstalk-views-twice-by-number", ["crosstalk", "{i}/biased.tif", "--views", "A,0", "-o",
                                          "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-same-white-twice", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked0.tif",
+                                    "{i}/unmasked2.tif", "{i}/unmasked3.tif", "--intended",
+                                    "S00,S01,S10,S11", "--mixing-out", "{o}/m.tif", "-o",
+                                    "{o}/c.json"], 1, ("given twice",)),
+    ("crosstalk-whites-not-masked", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked1.tif",
+                                     "{i}/unmasked2.tif", "{i}/unmasked3.tif", "--intended",
+                                     "S00,S01,S10,S11", "--mixing-out", "{o}/m.tif", "-o",
+                                     "{o}/c.json"], 1, ("not brighter",)),
+    ("unmix-same-views-twice", ["unmix", "{i}/unmasked0.tif", "{i}/unmasked0.tif", "--mixing",
+                                "{i}/unmasked1.tif", "-o", "{o}/u.tif"], 1, ("given twice",)),
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
                                       "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
      ("--mask-widths",)),

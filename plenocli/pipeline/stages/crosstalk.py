@@ -235,6 +235,10 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                                                 cfa=cap["cfa"])
         except ValueError as err:
             raise InputError(f"{path}: {err}") from err
+        if not res["r"] < 1:  # the other parts as bright as the open one: M is singular
+            raise InputError(f"{path}: the open part {names[res['intended']]} is not brighter "
+                             f"than the others (r = {100 * res['r']:.0f} %): not a white with "
+                             "only that part open; check --intended and the mask")
         opened.append(res["intended"])
         captures.append({
             "input": path, "views": names, "intended": names[res["intended"]], "r": res["r"],
