@@ -451,6 +451,10 @@ CASES = [
     ("sai-truncated", ["sai", "{i}/truncated.tif", "-o", "{o}/v.tif"], 1, ("truncated",)),
     ("refocus-huge", ["refocus", "{i}/huge.tif", "--grid", "{i}/rt/grid.yaml", "-o",
                       "{o}/r.tif"], 1, ("200000",)),
+    ("bias-device", ["bias", "/dev/null", "-o", "{o}/b.tif"], 1, ("not a regular file",)),
+    ("info-device", ["info", "/dev/zero"], 1, ("not a regular file",)),
+    ("decode-folder-as-calib", ["decode", "{i}/f512.tif", "--camera", "raytrix", "--calib",
+                                "{i}/rt", "-o", "{o}/d.tif"], 2, ("directory",)),
     ("bias-complex", ["bias", "{i}/complex.tif", "-o", "{o}/b.tif"], 1, ("real",)),
 ]
 
@@ -555,3 +559,18 @@ def test_config_out_must_be_one_folder(value, inputs, tmp_path):
     result = run_bad(inputs, out, ["run", str(config)])
     assert_one_line(result, 1, ("'out:'",))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
+def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
+    import errno
+    from types import SimpleNamespace
+
+    from plenocli.io import atomic
+
+    monkeypatch.setattr(atomic.os, "statvfs", lambda p: SimpleNamespace(f_bavail=0,
+                                                                        f_frsize=4096))
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / "x.tif") as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError("6144 requested and 2992 written")  # numpy's short write: no errno
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "x.tif")
+    assert list(tmp_path.iterdir()) == []

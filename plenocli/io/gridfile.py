@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
 from plenocli.model.lensgrid import LensGrid
 from plenocli.model.provenance import json_safe
@@ -96,7 +96,7 @@ def read_grid(path: str | os.PathLike, *,
     for it (see ``plenocli.io.raytrix``)."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     with open(p, "rb") as fh:
         head = fh.read(256).lstrip()
     if p.suffix.lower() == ".xml" or head.startswith(b"<"):

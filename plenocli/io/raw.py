@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io import rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
 
@@ -38,7 +38,7 @@ def sniff(path: str | os.PathLike) -> str:
     """Guess the kind of a capture from its first bytes: canon-dp, dng, image or unknown."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     with open(p, "rb") as fh:
         head = fh.read(16)
     if head[:4] in (b"II*\x00", b"MM\x00*"):

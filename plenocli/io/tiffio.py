@@ -30,7 +30,7 @@ import numpy as np
 import tifffile
 
 from plenocli import __version__
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import atomic_path
 from plenocli.model.cfa import is_bayer
 
@@ -159,7 +159,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     """Read a TIFF as (views, rows, cols) and its plenocli metadata ({} for a foreign TIFF)."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     try:
         with open_tiff(p) as tif:
             if not tif.pages:
