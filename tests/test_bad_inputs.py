@@ -396,6 +396,8 @@ CASES = [
     ("optics-prism-n-huge", ["optics", "{l}", "--prism-n", "1e9"], 2, ("'--prism-n'",)),
     ("optics-prism-reflects", ["optics", "{l}", "--prism-apex-deg", "89.9"], 1,
      ("totally",)),
+    ("optics-sensor-beyond-image-circle", ["optics", "{l}", "--sensor-mm", "20"], 1,
+     ("image circle",)),
     ("optics-pixel-huge", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e9"], 2,
      ("'--pixel-um'",)),
     ("optics-pixel-tiny", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e-9"], 2,
