@@ -129,13 +129,20 @@ def inputs(tmp_path_factory) -> Path:
         bad = dict(meta, **change)
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **bad}))
+    for name, description in {
+            "meta_future": json.dumps({tiffio.FORMAT_KEY: 99, **meta}),
+            "meta_not_json": f'{{"{tiffio.FORMAT_KEY}": 1, "views": ["S",'}.items():
+        tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
+                         description=description)
     (d / "not_yaml.yaml").write_text("lens_grid: [unclosed\n")
     for name, change in {"meta_black": {"black_level": "abc"},
                          "meta_black_short": {"black_level": [[0] * 4]},
                          "meta_white": {"white_level": [None, None]},
                          "meta_cfa": {"cfa": "XYZW"}, "meta_cfa_int": {"cfa": 5},
                          "meta_masked": {"masked_areas": "x"},
-                         "meta_provenance": {"provenance": "x"}}.items():
+                         "meta_provenance": {"provenance": "x"},
+                         "meta_views_twice": {"views": ["S", "S"]},
+                         "meta_black_negative": {"black_level": [[-100] * 4] * 2}}.items():
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
     for name, text in {
@@ -359,7 +366,10 @@ CASES = [
       for name, word in [("meta_black", "black_level"), ("meta_black_short", "black_level"),
                          ("meta_white", "white_level"), ("meta_cfa", "cfa"),
                          ("meta_cfa_int", "cfa"), ("meta_masked", "masked area"),
-                         ("meta_provenance", "provenance")]],
+                         ("meta_provenance", "provenance"), ("meta_views_twice", "twice"),
+                         ("meta_black_negative", "black_level"), ("meta_future", "format 99"),
+                         ("meta_not_json", "damaged")]],
+    ("info-meta-not-json", ["info", "{i}/meta_not_json.tif"], 1, ("damaged",)),
     ("sai-meta-cfa", ["sai", "{i}/meta_cfa.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("cfa",)),
     *[(f"refocus-{name}", ["refocus", "{i}/rt/frames.tif", "--grid", f"{{i}}/{name}.yaml",
                            "-o", "{o}/r.tif"], 1, (word,))
