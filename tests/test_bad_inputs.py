@@ -90,6 +90,8 @@ def inputs(tmp_path_factory) -> Path:
         "shape_negative": {"image_shape": [-120, 160]},
         "lenses_nan": {"lenses": {"rows": [[0, 0, nan, 1.0], [0, 1, 3.0, 4.0]]}},
         "far_away": {"offset_xy": [1e9, 1e9]},
+        "pitch_beyond_frame": {"pitch_px": 5000.0},
+        "lens_twice": {"lenses": {"rows": [[0, 0, 10.0, 10.0], [0, 0, 11.0, 11.0]]}},
     }.items():
         _write_grid_yaml(d / f"grid_{name}.yaml", base, **change)
     _write_grid_yaml(d / "grid_noshape.yaml", {k: base[k] for k in base
@@ -108,7 +110,7 @@ def inputs(tmp_path_factory) -> Path:
     _plenocli_tiff(d / "f512.tif", rng.random((512, 512), np.float32))
     _plenocli_tiff(d / "f511x509.tif", rng.random((509, 511), np.float32))
     _plenocli_tiff(d / "f3.tif", rng.random((3, 3), np.float32))
-    _plenocli_tiff(d / "nan.tif", np.full((32, 32), np.nan, np.float32))
+    _plenocli_tiff(d / "nan.tif", np.full((64, 64), np.nan, np.float32))
     unmasked = 1 + 0.01 * rng.random((4, 64, 64), np.float32)
     for k in range(4):
         _plenocli_tiff(d / f"unmasked{k}.tif", unmasked, views=["S00", "S01", "S10", "S11"])
@@ -253,7 +255,9 @@ CASES = [
                           ("pitch_nan", ("pitch_px",)), ("pitch_inf", ("pitch_px",)),
                           ("pitch_tiny", ("pitch_px",)), ("rotation_inf", ("angle_rad",)),
                           ("shape_negative", ("image_shape",)), ("lenses_nan", ("centres",)),
-                          ("far_away", ("offset_xy",))]],
+                          ("far_away", ("offset_xy",)),
+                          ("pitch_beyond_frame", ("micro-images across",)),
+                          ("lens_twice", ("listed twice",))]],
     *[(f"refocus-xml-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
                                f"{{i}}/calib_{name}.xml", "-o", "{o}/r.tif"], 1, words)
       for name, words in [("basis_zero", ("lens_base",)), ("basis_parallel", ("parallel",)),

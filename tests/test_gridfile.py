@@ -53,15 +53,16 @@ def _edit_row(text: str, k: int, new: str) -> str:
     return "\n".join(lines)
 
 
+# rows edited to a lens not in the table (20, 16; 8, 16): a grid lists each lens once
 EDITS = {
-    "exponent": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5e+2, 2.0]"),
-    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 9, 1.5, 2.0]"),
-    "block_row": lambda t: _edit_row(t, 3, "    - - 9\n      - 9\n      - 1.5\n      - 2.0"),
-    "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [9, 9, 1.5, 2.0]"),
-    "blank_inside": lambda t: _edit_row(t, 3, "\n    - [9, 9, 1.5, 2.0]"),
-    "extra_spaces": lambda t: _edit_row(t, 3, "    - [ 9, 9, 1.5, 2.0 ]"),
+    "exponent": lambda t: _edit_row(t, 3, "    - [20, 16, 1.5e+2, 2.0]"),
+    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 16, 1.5, 2.0]"),
+    "block_row": lambda t: _edit_row(t, 3, "    - - 20\n      - 16\n      - 1.5\n      - 2.0"),
+    "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [20, 16, 1.5, 2.0]"),
+    "blank_inside": lambda t: _edit_row(t, 3, "\n    - [20, 16, 1.5, 2.0]"),
+    "extra_spaces": lambda t: _edit_row(t, 3, "    - [ 20, 16, 1.5, 2.0 ]"),
     "rows_indented": lambda t: t.replace("\n    - [", "\n      - ["),
-    "trailing_comment": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5, 2.0]  # moved"),
+    "trailing_comment": lambda t: _edit_row(t, 3, "    - [20, 16, 1.5, 2.0]  # moved"),
 }
 
 
