@@ -596,3 +596,20 @@ def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
         raise OSError("6144 requested and 2992 written")  # numpy's short write: no errno
     assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "x.tif")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_codec_is_named_not_taken_for_damage(tmp_path):
+    err = KeyError("<COMPRESSION.LZW: 5> requires the 'imagecodecs' package")
+    message = str(tiffio.read_error(tmp_path / "x.tif", err, "fallback"))
+    assert "compressed with LZW" in message and "imagecodecs" in message
+    assert str(tiffio.read_error(tmp_path / "x.tif", ValueError("bad"), "fallback")) == "fallback"
+
+
+def test_a_bigtiff_sensor_image_decodes(tmp_path):
+    sensor = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96)
+    tifffile.imwrite(tmp_path / "big.tif", sensor, bigtiff=True)
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "big.tif"), "-o",
+                                      str(tmp_path / "frames.tif")])
+    assert result.exit_code == 0, result.output
+    frames, _ = tiffio.read_image(tmp_path / "frames.tif")
+    assert np.array_equal(frames[0], sensor)

@@ -46,6 +46,17 @@ READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError
                RuntimeError, zlib.error)
 
 
+def read_error(path, err: Exception, fallback: str) -> InputError:
+    """One line for a TIFF that tifffile could not read: a missing codec says so (the file is
+    fine: another program compressed it); anything else gets ``fallback``."""
+    match = re.search(r"COMPRESSION\.(\w+).*requires the 'imagecodecs' package", str(err))
+    if match:
+        return InputError(f"{path}: compressed with {match.group(1)}, which this installation "
+                          "cannot decode; pip install imagecodecs, or save the TIFF "
+                          "uncompressed")
+    return InputError(fallback)
+
+
 def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                 protect: tuple = ()) -> None:
     """Write ``views`` (rows, cols) or (views, rows, cols) with ``meta`` atomically."""
@@ -171,8 +182,8 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             else:
                 data = _stack_pages(p, [page.asarray() for page in tif.pages])
     except READ_ERRORS as err:
-        raise InputError(f"{p}: not a readable TIFF image ({err}); "
-                         "pass an image written by plenocli or a plain TIFF") from err
+        raise read_error(p, err, f"{p}: not a readable TIFF image ({err}); pass an image "
+                                 "written by plenocli or a plain TIFF") from err
     meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
