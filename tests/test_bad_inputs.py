@@ -613,3 +613,12 @@ def test_a_bigtiff_sensor_image_decodes(tmp_path):
     assert result.exit_code == 0, result.output
     frames, _ = tiffio.read_image(tmp_path / "frames.tif")
     assert np.array_equal(frames[0], sensor)
+
+
+def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    text = _config_text(inputs, out).replace("  bias:\n", "  bias.v2:\n    stage: bias\n")
+    config.write_text(text)
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
+    assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))

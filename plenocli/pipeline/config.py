@@ -254,7 +254,7 @@ def _check_outputs_distinct(path: Path, steps: list[Step]) -> None:
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
     for item in overrides:
         target, sep, value = item.partition("=")
-        step, dot, param = target.partition(".")
+        step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
         if not sep or not dot or not param:
             raise ConfigError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
         if step not in steps:
