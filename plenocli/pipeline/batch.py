@@ -395,10 +395,19 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
 
 # ---------------------------------------------------------------- dask.distributed
 
+def _require_dask() -> None:
+    try:
+        import distributed  # noqa: F401
+    except ImportError as err:
+        raise PlenocliError("--scheduler needs dask.distributed, which is not installed; "
+                            "install it with: pip install 'plenocli[dask]'") from err
+
+
 def check_scheduler(address: str) -> None:
     """Before any work: ``address`` is HOST:PORT (optionally tcp:// or tls://) and something
     listens there. A Dask client built on a bad address waits, then complains while Python
     shuts down; a plain socket says at once."""
+    _require_dask()
     match = re.fullmatch(r"(?:(tcp|tls)://)?(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):(\d{1,5})",
                          address.strip())
     if match is None:
@@ -416,11 +425,9 @@ def check_scheduler(address: str) -> None:
 
 def _dask_results(address: str, config: str, captures: list[str],
                   kwargs: dict) -> Iterator[CaptureResult]:
-    try:
-        from distributed import Client, as_completed
-    except ImportError as err:
-        raise PlenocliError("--scheduler needs dask.distributed, which is not installed; "
-                            "install it with: pip install 'plenocli[dask]'") from err
+    _require_dask()
+    from distributed import Client, as_completed
+
     try:
         client = Client(address, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as err:
