@@ -206,6 +206,14 @@ def load_mixing_views(path: str, views: str | None) -> dict:
             "layout": layout, "cfa": cfa}
 
 
+def _check_open_part(path: str, name: str, r: float) -> None:
+    """The open part of a masked white must be its brightest: r >= 1 makes M singular."""
+    if not r < 1:
+        raise InputError(f"{path}: the open part {name} is not brighter than the others "
+                         f"(r = {100 * r:.0f} %): not a white with only that part open; check "
+                         "--intended and the mask")
+
+
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
@@ -235,10 +243,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                                                 cfa=cap["cfa"])
         except ValueError as err:
             raise InputError(f"{path}: {err}") from err
-        if not res["r"] < 1:  # the other parts as bright as the open one: M is singular
-            raise InputError(f"{path}: the open part {names[res['intended']]} is not brighter "
-                             f"than the others (r = {100 * res['r']:.0f} %): not a white with "
-                             "only that part open; check --intended and the mask")
+        _check_open_part(path, names[res["intended"]], res["r"])
         opened.append(res["intended"])
         captures.append({
             "input": path, "views": names, "intended": names[res["intended"]], "r": res["r"],
