@@ -1,6 +1,7 @@
 """Errors the user sees as one line: what was wrong, with which value, and what to do."""
 
 import errno
+import os
 
 
 class PlenocliError(Exception):
@@ -44,3 +45,13 @@ def os_error_message(err: OSError) -> str:
     path = err.filename if err.filename is not None else ""
     cause = _OS_HINTS.get(err.errno) or err.strerror or str(err) or type(err).__name__
     return f"{path}: {cause}" if path else cause
+
+
+def not_a_file(path: "str | os.PathLike") -> InputError:
+    """The error for an input path that is not a file to read: missing, a folder, or a device,
+    pipe or socket (which would block or read nothing)."""
+    if os.path.isdir(path):
+        return InputError(f"{path}: is a folder; pass a file")
+    if os.path.exists(path):
+        return InputError(f"{path}: not a regular file (a device, pipe or socket); pass a file")
+    return InputError(f"{path}: no such file")

@@ -43,6 +43,7 @@ VIEWS = {
 }
 CHANNELS = "RGB"
 MAX_G_VALUES = 1000          # a focal sweep longer than this is a typo, not a plan
+MIN_OUTPUT_SIDE = 4          # fewer refocused pixels a side hold no picture and no sharpness
 MAX_OUTPUT_PIXELS = 2 ** 28  # ~268 Mpx per channel: far beyond any sensor at s <= 1
 MAX_STACK_PIXELS = 2 ** 31   # a whole sweep's pages together: 8 GiB of float32
 # Voronoi-cell circumradius / pitch: no pixel is farther than this from its nearest lattice centre.
@@ -249,6 +250,11 @@ def check_output_size(shape: tuple[int, int], s: float, *, pages: int = 1) -> No
     scale ``s`` would be absurdly large: more than MAX_OUTPUT_PIXELS per page, or more than
     MAX_STACK_PIXELS for all ``pages`` of a sweep (g values x channels)."""
     rows_out, cols_out = output_shape(shape, s)
+    if min(rows_out, cols_out) < MIN_OUTPUT_SIDE:
+        raise ValueError(f"s = {s:g} makes a {cols_out} x {rows_out} image from a "
+                         f"{shape[1]} x {shape[0]} frame; s is the output size relative to the "
+                         f"sensor image (paper: 0.2): use an s that gives at least "
+                         f"{MIN_OUTPUT_SIDE} pixels a side")
     if rows_out * cols_out > MAX_OUTPUT_PIXELS:
         raise ValueError(f"s = {s:g} makes a {cols_out} x {rows_out} image from a "
                          f"{shape[1]} x {shape[0]} frame; s is the output size relative to the "
@@ -457,8 +463,7 @@ def _g_values(spec: str, text) -> list[float]:
     usage = (f"g must be a number, a list like 2,3,4 or a range like 2:6:0.5 "
              f"(start:stop:step, step > 0), got {text!r}")
     try:
-        parts = [float(p) for p in (spec.split(":") if ":" in spec else spec.split(","))
-                 if p.strip() or ":" in spec]
+        parts = [float(p) for p in (spec.split(":") if ":" in spec else spec.split(","))]
     except ValueError as err:
         raise ValueError(usage) from err
     if ":" in spec:

@@ -24,6 +24,7 @@ import numpy as np
 from plenocli.model.mixing import MixingField
 from plenocli.model.mixing import axis_weights as _axis_weights
 
+MAX_REGULARISE = 1.0  # lambda above M's diagonal damps the views more than it unmixes them
 SINGULAR_PIVOT = 1e-9  # a pivot below this (M entries are ~1) means M is singular there
 
 
@@ -272,8 +273,9 @@ def unmix(views: np.ndarray, mixing: MixingField, *, colour_pattern=None,
     if obs.shape[1:] != tuple(mixing.shape):
         raise ValueError(f"views are {obs.shape[1]} x {obs.shape[2]} but the mixing field is "
                          f"{mixing.shape[0]} x {mixing.shape[1]}")
-    if not (np.isfinite(regularise) and regularise >= 0):
-        raise ValueError(f"regularise must be a finite number >= 0, got {regularise}")
+    if not (np.isfinite(regularise) and 0 <= regularise <= MAX_REGULARISE):
+        raise ValueError(f"regularise must be a number in [0, {MAX_REGULARISE:g}] (units of M, "
+                         f"whose diagonal is 1; e.g. 0.05), got {regularise}")
     pattern = np.zeros((2, 2), np.int64)
     if colour_pattern is not None:
         pattern = np.asarray(colour_pattern, np.int64).reshape(2, 2)

@@ -90,6 +90,8 @@ def inputs(tmp_path_factory) -> Path:
         "shape_negative": {"image_shape": [-120, 160]},
         "lenses_nan": {"lenses": {"rows": [[0, 0, nan, 1.0], [0, 1, 3.0, 4.0]]}},
         "far_away": {"offset_xy": [1e9, 1e9]},
+        "pitch_beyond_frame": {"pitch_px": 5000.0},
+        "lens_twice": {"lenses": {"rows": [[0, 0, 10.0, 10.0], [0, 0, 11.0, 11.0]]}},
     }.items():
         _write_grid_yaml(d / f"grid_{name}.yaml", base, **change)
     _write_grid_yaml(d / "grid_noshape.yaml", {k: base[k] for k in base
@@ -108,7 +110,12 @@ def inputs(tmp_path_factory) -> Path:
     _plenocli_tiff(d / "f512.tif", rng.random((512, 512), np.float32))
     _plenocli_tiff(d / "f511x509.tif", rng.random((509, 511), np.float32))
     _plenocli_tiff(d / "f3.tif", rng.random((3, 3), np.float32))
-    _plenocli_tiff(d / "nan.tif", np.full((32, 32), np.nan, np.float32))
+    _plenocli_tiff(d / "nan.tif", np.full((64, 64), np.nan, np.float32))
+    unmasked = 1 + 0.01 * rng.random((4, 64, 64), np.float32)
+    for k in range(4):
+        _plenocli_tiff(d / f"unmasked{k}.tif", unmasked, views=["S00", "S01", "S10", "S11"])
+    _plenocli_tiff(d / "white_xy.tif", rng.random((2, 32, 32), np.float32), cfa="RGGB",
+                   views=["X", "Y"])
     _plain_tiff(d / "complex.tif", (rng.random((16, 16)) + 1j).astype(np.complex64))
     _plain_tiff(d / "bool.tif", rng.random((16, 16)) > 0.5)
     _plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
@@ -124,13 +131,20 @@ def inputs(tmp_path_factory) -> Path:
         bad = dict(meta, **change)
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **bad}))
+    for name, description in {
+            "meta_future": json.dumps({tiffio.FORMAT_KEY: 99, **meta}),
+            "meta_not_json": f'{{"{tiffio.FORMAT_KEY}": 1, "views": ["S",'}.items():
+        tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
+                         description=description)
     (d / "not_yaml.yaml").write_text("lens_grid: [unclosed\n")
     for name, change in {"meta_black": {"black_level": "abc"},
                          "meta_black_short": {"black_level": [[0] * 4]},
                          "meta_white": {"white_level": [None, None]},
                          "meta_cfa": {"cfa": "XYZW"}, "meta_cfa_int": {"cfa": 5},
                          "meta_masked": {"masked_areas": "x"},
-                         "meta_provenance": {"provenance": "x"}}.items():
+                         "meta_provenance": {"provenance": "x"},
+                         "meta_views_twice": {"views": ["S", "S"]},
+                         "meta_black_negative": {"black_level": [[-100] * 4] * 2}}.items():
         tifffile.imwrite(d / f"{name}.tif", frames, photometric="minisblack", metadata=None,
                          description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
     for name, text in {
@@ -180,7 +194,8 @@ def _hash_folder(folder: Path) -> dict[str, str]:
 def run_bad(inputs: Path, out: Path, args: list[str]):
     out.mkdir(exist_ok=True)
     before = _hash_folder(inputs)
-    argv = [a.format(i=inputs, o=out) for a in args]
+    lens = Path(__file__).parents[1] / "configs" / "lenses" / "paper_table2.yaml"
+    argv = [a.format(i=inputs, o=out, l=lens) for a in args]
     result = CliRunner().invoke(cli, argv)
     assert _hash_folder(inputs) == before, "an input changed"
     left = [p.name for p in out.rglob("*")]
@@ -223,6 +238,15 @@ CASES = [
                        "inf", "-o", "{o}/r.tif"], 2, ("g",)),
     ("refocus-s1000", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
                        "1000", "-o", "{o}/r.tif"], 1, ("s = 1000",)),
+    ("refocus-g-empty-item", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                              "--g", "1,,2", "-o", "{o}/r.tif"], 2, ("'--g'",)),
+    ("refocus-s-tiny", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
+                        "1e-9", "-o", "{o}/r.tif"], 1, ("at least 4 pixels",)),
+    ("refocus-g-huge", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g",
+                        "1e9", "-o", "{o}/r.tif"], 1, ("g = 1e+09", "no valid pixel")),
+    ("refocus-mask-covers-lens", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                                  "--view", "left", "--mask-width", "1e9", "-o", "{o}/r.tif"],
+     1, ("no valid pixel",)),
     ("refocus-s-nan", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
                        "nan", "-o", "{o}/r.tif"], 2, ("'--s'",)),
     *[(f"refocus-grid-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
@@ -231,7 +255,9 @@ CASES = [
                           ("pitch_nan", ("pitch_px",)), ("pitch_inf", ("pitch_px",)),
                           ("pitch_tiny", ("pitch_px",)), ("rotation_inf", ("angle_rad",)),
                           ("shape_negative", ("image_shape",)), ("lenses_nan", ("centres",)),
-                          ("far_away", ("offset_xy",))]],
+                          ("far_away", ("offset_xy",)),
+                          ("pitch_beyond_frame", ("micro-images across",)),
+                          ("lens_twice", ("listed twice",))]],
     *[(f"refocus-xml-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
                                f"{{i}}/calib_{name}.xml", "-o", "{o}/r.tif"], 1, words)
       for name, words in [("basis_zero", ("lens_base",)), ("basis_parallel", ("parallel",)),
@@ -318,6 +344,10 @@ CASES = [
                              "{o}/f.tif"], 2, ("percentile",)),
     ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
                         "-o", "{o}/f.tif"], 2, ("floor",)),
+    ("flat-not-bias-corrected", ["flat", "{i}/frames.tif", "--white", "{i}/frames.tif", "-o",
+                                 "{o}/f.tif"], 1, ("run plenocli bias first",)),
+    ("flat-white-not-bias-corrected", ["flat", "{i}/biased.tif", "--white", "{i}/frames.tif",
+                                       "-o", "{o}/f.tif"], 1, ("run plenocli bias first",)),
     ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "-o",
                             "{o}/f.tif"], 1, ("not a gain",)),
     ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
@@ -329,6 +359,10 @@ CASES = [
                          ("mask-width", "inf"), ("mask-width", "-1")]],
     ("sai-grid-hex", ["sai", "{i}/rt/frames.tif", "-n", "2", "--grid", "{i}/rt/grid.yaml", "-o",
                       "{o}/v.tif"], 1, ("square",)),
+    ("sai-of-views", ["sai", "{o}/../views.tif", "-o", "{o}/v.tif"], 1, ("already sai views",)),
+    ("sai-dualpixel-views", ["sai", "{i}/biased.tif", "-o", "{o}/v.tif"], 1, ("dual-pixel",)),
+    ("sai-micro-image-mono", ["sai", "{i}/f512.tif", "--cfa-layout", "micro-image", "-o",
+                              "{o}/v.tif"], 1, ("no CFA",)),
     ("sai-cfa-layout", ["sai", "{i}/f512.tif", "--cfa-layout", "diagonal", "-o", "{o}/v.tif"],
      2, ("cfa-layout",)),
     # metadata a stage reads, edited or damaged
@@ -336,7 +370,10 @@ CASES = [
       for name, word in [("meta_black", "black_level"), ("meta_black_short", "black_level"),
                          ("meta_white", "white_level"), ("meta_cfa", "cfa"),
                          ("meta_cfa_int", "cfa"), ("meta_masked", "masked area"),
-                         ("meta_provenance", "provenance")]],
+                         ("meta_provenance", "provenance"), ("meta_views_twice", "twice"),
+                         ("meta_black_negative", "black_level"), ("meta_future", "format 99"),
+                         ("meta_not_json", "damaged")]],
+    ("info-meta-not-json", ["info", "{i}/meta_not_json.tif"], 1, ("damaged",)),
     ("sai-meta-cfa", ["sai", "{i}/meta_cfa.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("cfa",)),
     *[(f"refocus-{name}", ["refocus", "{i}/rt/frames.tif", "--grid", f"{{i}}/{name}.yaml",
                            "-o", "{o}/r.tif"], 1, (word,))
@@ -349,13 +386,80 @@ CASES = [
     ("sai-grid-pitch-below-n", ["sai", "{i}/rt/frames.tif", "--grid", "{i}/grid_square_tiny.yaml",
                                 "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
     ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
+    # crosstalk
+    ("crosstalk-views-twice", ["crosstalk", "{i}/biased.tif", "--views", "A,A", "-o",
+                               "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-views-twice-by-number", ["crosstalk", "{i}/biased.tif", "--views", "A,0", "-o",
+                                         "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-same-white-twice", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked0.tif",
+                                    "{i}/unmasked2.tif", "{i}/unmasked3.tif", "--intended",
+                                    "S00,S01,S10,S11", "--mixing-out", "{o}/m.tif", "-o",
+                                    "{o}/c.json"], 1, ("given twice",)),
+    ("crosstalk-whites-not-masked", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked1.tif",
+                                     "{i}/unmasked2.tif", "{i}/unmasked3.tif", "--intended",
+                                     "S00,S01,S10,S11", "--mixing-out", "{o}/m.tif", "-o",
+                                     "{o}/c.json"], 1, ("not brighter",)),
+    ("unmix-same-views-twice", ["unmix", "{i}/unmasked0.tif", "{i}/unmasked0.tif", "--mixing",
+                                "{i}/unmasked1.tif", "-o", "{o}/u.tif"], 1, ("given twice",)),
+    ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
+                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
+     ("--mask-widths",)),
+    # optics
+    ("optics-png", ["optics", "{i}/huge.png"], 1, ("not a YAML lens",)),
+    ("optics-prism-n-1", ["optics", "{l}", "--prism-n", "1"], 2, ("'--prism-n'",)),
+    ("optics-prism-n-huge", ["optics", "{l}", "--prism-n", "1e9"], 2, ("'--prism-n'",)),
+    ("optics-prism-reflects", ["optics", "{l}", "--prism-apex-deg", "89.9"], 1,
+     ("totally",)),
+    ("optics-sensor-beyond-image-circle", ["optics", "{l}", "--sensor-mm", "20"], 1,
+     ("image circle",)),
+    ("optics-pixel-huge", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e9"], 2,
+     ("'--pixel-um'",)),
+    ("optics-pixel-tiny", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e-9"], 2,
+     ("'--pixel-um'",)),
+    # simulate
+    ("simulate-pixels-0", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "0"], 1,
+     ("--pixels 0",)),
+    ("simulate-pixels-huge", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "1000000"], 1,
+     ("smaller sensor",)),
+    ("simulate-rays-huge", ["simulate", "quadpixel-white", "-o", "{o}/s", "--pixels", "64",
+                            "--rays", "100000000"], 1, ("smaller sensor",)),
+    ("simulate-rows-x-cols-for-one-number", ["simulate", "dualpixel-white", "-o", "{o}/s",
+                                             "--pixels", "64x96"], 1, ("pixels = '64x96'",)),
+    ("simulate-param-nan", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param",
+                            "pitch_px=.nan"], 1, ("pitch_px = nan",)),
+    ("simulate-param-text", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param", "size=abc"],
+     1, ("size = 'abc'",)),
+    ("simulate-pixels-tiny", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "2"], 1,
+     ("at least 16",)),
+    ("simulate-pitch-negative", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param",
+                                 "pitch_px=-3"], 1, ("pitch_px must be",)),
+    ("simulate-rig-empty-views", ["simulate", "stereo-rig", "-o", "{o}/s", "--param",
+                                  "view_shape=[0, 0]"], 1, ("view_shape must be",)),
+    ("simulate-raytrix-s-0", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param", "s=0"], 1,
+     ("s must be",)),
+    ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
+                                     "g_true=-1"], 1, ("g must be",)),
+    ("bias-crop-below-cfa-cell", ["bias", "{i}/frames.tif", "--crop", "1x1", "-o", "{o}/b.tif"],
+     1, ("CFA cell",)),
+    ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
+                         "{o}/d.jpg"], 2, ("100 times",)),
+    ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
+                                     "none", "--wb-from", "{i}/white_xy.tif", "-o",
+                                     "{o}/d.jpg"], 1, ("no view S",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ()),
     ("batch-timeout-nan", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout",
                            "nan"], 2, ()),
+    ("batch-scheduler-malformed", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
+                                   "--scheduler", "nonsense"], 1, ("tcp://HOST:PORT",)),
+    ("batch-scheduler-not-there", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
+                                   "--scheduler", "tcp://127.0.0.1:1"], 1, ("cannot reach",)),
     ("batch-inputs-none", ["batch", "{i}/none.yaml", "--inputs", "{i}/nothing/*.dng"], 1,
      ("matches no file",)),
+    ("unmix-regularise-huge", ["unmix", "{i}/qg/views.tif", "--mixing", "{i}/qg/mixing.tif",
+                               "--regularise", "1e308", "-o", "{o}/u.tif"], 2,
+     ("'--regularise'",)),
     # info
     ("info-zlib-truncated", ["info", "{i}/zlib_trunc.tif"], 1, ("truncated",)),
     ("info-garbage", ["info", "{i}/garbage.tif"], 1, ("damaged",)),
@@ -369,6 +473,10 @@ CASES = [
     ("sai-truncated", ["sai", "{i}/truncated.tif", "-o", "{o}/v.tif"], 1, ("truncated",)),
     ("refocus-huge", ["refocus", "{i}/huge.tif", "--grid", "{i}/rt/grid.yaml", "-o",
                       "{o}/r.tif"], 1, ("200000",)),
+    ("bias-device", ["bias", "/dev/null", "-o", "{o}/b.tif"], 1, ("not a regular file",)),
+    ("info-device", ["info", "/dev/zero"], 1, ("not a regular file",)),
+    ("decode-folder-as-calib", ["decode", "{i}/f512.tif", "--camera", "raytrix", "--calib",
+                                "{i}/rt", "-o", "{o}/d.tif"], 2, ("directory",)),
     ("bias-complex", ["bias", "{i}/complex.tif", "-o", "{o}/b.tif"], 1, ("real",)),
 ]
 
@@ -376,6 +484,10 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_is_one_line_and_leaves_nothing(case, inputs, tmp_path):
     name, args, code, words = case
+    if "views.tif" in " ".join(args):
+        result = CliRunner().invoke(cli, ["sai", str(inputs / "f512.tif"), "-o",
+                                          str(tmp_path / "views.tif")])
+        assert result.exit_code == 0, result.output
     if "clipped_frames" in " ".join(args):
         result = CliRunner().invoke(cli, ["decode", str(inputs / "clipped.dng"), "-o",
                                           str(tmp_path / "clipped_frames.tif")])
@@ -408,8 +520,105 @@ def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
     assert_one_line(result, 1, words)
 
 
-@pytest.mark.parametrize("option", ["--preview"])
-def test_outputs_that_collide_are_refused(option, inputs, tmp_path):
-    result = run_bad(inputs, tmp_path / "out", ["decode", "{i}/dp.dng", "-o", "{o}/x.tif",
-                                                option, "{o}/x.tif"])
-    assert_one_line(result, 1, ("two outputs",))
+@pytest.mark.parametrize("args,words", [
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{o}/x.tif"],
+     ("two outputs",)),
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{i}/biased.tif"],
+     ("also an input",)),
+])
+def test_outputs_that_collide_are_refused(args, words, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", [*args, "-o", "{o}/x.tif"])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("args", [
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x.jpg"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.png"],
+    ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "-o", "{o}/x.tif", "--save-gain",
+     "{o}/g.png"],
+    ["develop", "{i}/biased.tif", "--view", "S", "-o", "{o}/x.jpg", "--linear", "{o}/l.png"],
+    ["optics", "{i}/none.yaml", "--json", "{o}/x.yaml"],
+])
+def test_an_output_named_for_another_format_is_refused(args, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, ("ending in",))
+
+
+def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
+                 top: str = "") -> str:
+    return (f"out: {out}\n{top}steps:\n"
+            f"  decode:\n    input: {inputs}/dp.dng\n    output: \"{{out}}/f.tif\"\n"
+            f"  bias:\n    input: \"{{out}}/f.tif\"\n    output: \"{{out}}/b.tif\"\n{extra_bias}"
+            f"{extra_steps}")
+
+
+@pytest.mark.parametrize("name,parts,words", [
+    ("duplicate-parameter", {"extra_bias": "    smooth: 1\n    smooth: 2\n"}, ("twice",)),
+    ("duplicate-step", {"extra_steps": "  decode:\n    input: x.dng\n    output: y.tif\n"},
+     ("twice",)),
+    ("step-scalar", {"extra_steps": "  sai: 5\n"}, ("mapping",)),
+    ("stage-list", {"extra_steps": "  x:\n    stage: [bias]\n"}, ("stage",)),
+    ("two-writers", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                     "    output: \"{out}/f.tif\"\n"}, ("both write",)),
+    ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
+                                   "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
+    ("preview-not-png", {"extra_bias": "    preview: \"{out}/b.jpg\"\n"}, ("ending in .png",)),
+])
+def test_config_structure_is_checked_before_any_step_runs(name, parts, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out, **parts))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("value", ["5", "[a, b]", "{a: 1}"])
+def test_config_out_must_be_one_folder(value, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"out: {out}", f"out: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("'out:'",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
+def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
+    import errno
+    from types import SimpleNamespace
+
+    from plenocli.io import atomic
+
+    monkeypatch.setattr(atomic.os, "statvfs", lambda p: SimpleNamespace(f_bavail=0,
+                                                                        f_frsize=4096))
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / "x.tif") as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError("6144 requested and 2992 written")  # numpy's short write: no errno
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "x.tif")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_codec_is_named_not_taken_for_damage(tmp_path):
+    err = KeyError("<COMPRESSION.LZW: 5> requires the 'imagecodecs' package")
+    message = str(tiffio.read_error(tmp_path / "x.tif", err, "fallback"))
+    assert "compressed with LZW" in message and "imagecodecs" in message
+    assert str(tiffio.read_error(tmp_path / "x.tif", ValueError("bad"), "fallback")) == "fallback"
+
+
+def test_a_bigtiff_sensor_image_decodes(tmp_path):
+    sensor = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96)
+    tifffile.imwrite(tmp_path / "big.tif", sensor, bigtiff=True)
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "big.tif"), "-o",
+                                      str(tmp_path / "frames.tif")])
+    assert result.exit_code == 0, result.output
+    frames, _ = tiffio.read_image(tmp_path / "frames.tif")
+    assert np.array_equal(frames[0], sensor)
+
+
+def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    text = _config_text(inputs, out).replace("  bias:\n", "  bias.v2:\n    stage: bias\n")
+    config.write_text(text)
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
+    assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))

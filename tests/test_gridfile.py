@@ -53,15 +53,16 @@ def _edit_row(text: str, k: int, new: str) -> str:
     return "\n".join(lines)
 
 
+# rows edited to a lens not in the table (20, 16; 8, 16): a grid lists each lens once
 EDITS = {
-    "exponent": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5e+2, 2.0]"),
-    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 9, 1.5, 2.0]"),
-    "block_row": lambda t: _edit_row(t, 3, "    - - 9\n      - 9\n      - 1.5\n      - 2.0"),
-    "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [9, 9, 1.5, 2.0]"),
-    "blank_inside": lambda t: _edit_row(t, 3, "\n    - [9, 9, 1.5, 2.0]"),
-    "extra_spaces": lambda t: _edit_row(t, 3, "    - [ 9, 9, 1.5, 2.0 ]"),
+    "exponent": lambda t: _edit_row(t, 3, "    - [20, 16, 1.5e+2, 2.0]"),
+    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 16, 1.5, 2.0]"),
+    "block_row": lambda t: _edit_row(t, 3, "    - - 20\n      - 16\n      - 1.5\n      - 2.0"),
+    "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [20, 16, 1.5, 2.0]"),
+    "blank_inside": lambda t: _edit_row(t, 3, "\n    - [20, 16, 1.5, 2.0]"),
+    "extra_spaces": lambda t: _edit_row(t, 3, "    - [ 20, 16, 1.5, 2.0 ]"),
     "rows_indented": lambda t: t.replace("\n    - [", "\n      - ["),
-    "trailing_comment": lambda t: _edit_row(t, 3, "    - [9, 9, 1.5, 2.0]  # moved"),
+    "trailing_comment": lambda t: _edit_row(t, 3, "    - [20, 16, 1.5, 2.0]  # moved"),
 }
 
 
@@ -124,3 +125,12 @@ def test_lens_tables_must_be_finite_and_compact(centres, indices, words):
     with pytest.raises(ValueError, match=words):
         LensGrid(pitch_px=20.0, angle_rad=0.0, offset_xy=(0.0, 0.0),
                  centres_xy=np.array(centres), indices=np.array(indices))
+
+
+def test_numpy_numbers_in_the_extra_fields_are_written_as_plain_numbers(tmp_path):
+    path = tmp_path / "grid.yaml"
+    extra = {"calibration": {"pitch_px": np.float64(23.8323), "lenses": np.int64(451),
+                             "residuals": np.array([0.25, 0.5])}}
+    gridfile.write_grid(path, _grid(), {"stage": "calibrate"}, extra=extra)
+    doc = yaml.safe_load(path.read_text())
+    assert doc["calibration"] == {"pitch_px": 23.8323, "lenses": 451, "residuals": [0.25, 0.5]}

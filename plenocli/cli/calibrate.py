@@ -5,7 +5,7 @@ from plenocli.cli import options
 
 @click.command(short_help="Calibrate the micro-lens grid from a white or scene image.")
 @options.input_arg
-@options.output_opt
+@options.output_option(".yaml", ".yml")
 @click.option("--lattice", type=click.Choice(["auto", "hex", "square"]), default="auto",
               show_default=True, help="Micro-lens lattice; auto finds the kind (a kind that "
               "does not fit the image is refused).")
@@ -15,7 +15,7 @@ from plenocli.cli import options
 @click.option("--start", type=click.Path(dir_okay=False), default=None,
               help="Refine this grid (plenocli YAML or Raytrix XML) instead of searching; the "
               "report says how far the result moved.")
-@click.option("--xml", type=click.Path(dir_okay=False), default=None,
+@click.option("--xml", type=options.OutputFile(".xml"), default=None,
               help="Also write the grid as Raytrix RayCalibData XML (with lens types).")
 @click.option("--compare", type=click.Path(dir_okay=False), default=None,
               help="Report the distance to another grid (YAML or RayCalibData XML).")

@@ -5,7 +5,7 @@ from plenocli.cli import options
 
 @click.command(short_help="Measure sub-aperture cross-talk from masked white captures.")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
-@options.output_opt
+@options.output_option(".json")
 @click.option("--views", default=None,
               help="Views to compare, by name or page number, e.g. A,B (leaves out the sum view "
                    "S that bias writes); default: all pages.")
@@ -26,7 +26,7 @@ from plenocli.cli import options
 @click.option("--g", "g", type=options.FiniteFloat(min=0, min_open=True),
               default=4.0, show_default=True,
               help="Refocus g (only with --mask-widths).")
-@click.option("--mixing-out", type=click.Path(dir_okay=False), default=None,
+@click.option("--mixing-out", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the mixing-matrix field M (TIFF) for plenocli unmix; needs one "
                    "masked white per pupil part (with --intended naming each one's open part).")
 @options.stage_command

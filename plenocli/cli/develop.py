@@ -4,6 +4,8 @@ from plenocli.cli import options
 from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
 from plenocli.model.colour import OUTPUT_SPACES
 
+MAX_GAIN_RATIO = 100.0  # beyond any light source: a typo, and float overflow further on
+
 
 class WhiteBalance(click.ParamType):
     """``as-shot`` or three positive finite gains ``R,G,B``."""
@@ -22,12 +24,16 @@ class WhiteBalance(click.ParamType):
         if len(gains) != 3 or not all(g > 0 and g < float("inf") for g in gains):
             self.fail(f"{value!r}: give as-shot or three positive gains R,G,B (e.g. 2.1,1,1.6)",
                       param, ctx)
+        if max(gains) > MAX_GAIN_RATIO * min(gains):
+            self.fail(f"{value!r}: one gain is more than {MAX_GAIN_RATIO:g} times another; "
+                      "white-balance gains are within a few times each other (e.g. 2.1,1,1.6)",
+                      param, ctx)
         return ",".join(repr(g) for g in gains)
 
 
 @click.command(short_help="Develop a colour view into a photograph (TIFF, JPEG, PNG).")
 @options.input_arg
-@options.output_opt
+@options.output_option()
 @click.option("--view", default=None,
               help="Which view to develop (e.g. S); needed when the file holds several.")
 @click.option("--method", type=click.Choice(METHODS), default=DEFAULT_METHOD,
@@ -49,7 +55,7 @@ class WhiteBalance(click.ParamType):
 @click.option("--recover-highlights", type=click.Path(dir_okay=False), default=None,
               help="Dual-pixel: rebuild S (and B) from A where only S clipped, with the A/S "
                    "split of this white image (views A, B, S, processed like INPUT).")
-@click.option("--linear", type=click.Path(dir_okay=False), default=None,
+@click.option("--linear", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the scene-referred linear sRGB as a float32 TIFF (R, G, B pages).")
 @options.preview_opt
 @options.stage_command

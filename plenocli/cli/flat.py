@@ -18,7 +18,7 @@ from plenocli.cli import options
               help="Percentile for --reference percentile.")
 @click.option("--floor", type=options.FiniteFloat(0, 1, max_open=True), default=0.05,
               show_default=True, help="Mask (NaN) pixels whose white is below floor x reference.")
-@click.option("--save-gain", type=click.Path(dir_okay=False), default=None,
+@click.option("--save-gain", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the gain map, for reuse with --gain.")
 @options.preview_opt
 @options.stage_command

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
 import signal
 import sys
 import warnings
@@ -14,9 +15,36 @@ import click
 from plenocli.errors import PlenocliError, Terminated, os_error_message
 from plenocli.progress import configure, working
 
-output_opt = click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-                          help="Output file (written atomically).")
-preview_opt = click.option("--preview", type=click.Path(dir_okay=False), default=None,
+TIFF = (".tif", ".tiff")
+
+
+class OutputFile(click.Path):
+    """A file a command writes, whose name must end in one of ``suffixes`` (any case): a name
+    saying another format (a preview named .jpg, frames named .png) would hold what it does not
+    say, and the make-style runner reads outputs by their suffix."""
+
+    def __init__(self, *suffixes: str):
+        super().__init__(dir_okay=False)
+        self.suffixes = suffixes
+
+    def convert(self, value, param, ctx):
+        value = super().convert(value, param, ctx)
+        if os.path.splitext(str(value))[1].lower() not in self.suffixes:
+            self.fail(f"{str(value)!r} is written as {self.suffixes[0][1:].upper()}; give a name "
+                      f"ending in {' or '.join(self.suffixes)}", param, ctx)
+        return value
+
+
+def output_option(*suffixes: str):
+    """The -o/--output option of a command whose output is a file of one of ``suffixes``
+    (any file name when none is given: the command checks it)."""
+    return click.option("-o", "--output", required=True,
+                        type=OutputFile(*suffixes) if suffixes else click.Path(dir_okay=False),
+                        help="Output file (written atomically).")
+
+
+output_opt = output_option(*TIFF)
+preview_opt = click.option("--preview", type=OutputFile(".png"), default=None,
                            help="Also write a PNG preview here.")
 input_arg = click.argument("input", type=click.Path(dir_okay=False))
 

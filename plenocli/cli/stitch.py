@@ -30,11 +30,11 @@ from plenocli.cli import options
               help="Tolerance on --overlap (fraction of the view).")
 @click.option("--transform-in", type=click.Path(dir_okay=False), default=None,
               help="Reapply a transform saved with --transform-out instead of registering.")
-@click.option("--transform-out", type=click.Path(dir_okay=False), default=None,
+@click.option("--transform-out", type=options.OutputFile(".json"), default=None,
               help="Save the transform (JSON) to reapply to later captures of the same rig.")
 @click.option("--blend", type=click.Choice(["feather", "multiband"]), default="feather",
               show_default=True, help="Seam blending.")
-@click.option("--report", type=click.Path(dir_okay=False), default=None,
+@click.option("--report", type=options.OutputFile(".json"), default=None,
               help="Write a JSON report (model, parameters, overlap, inliers, residual px).")
 @options.preview_opt
 @options.stage_command

@@ -9,11 +9,11 @@ from plenocli.cli import options
 @click.option("--mixing", required=True, type=click.Path(dir_okay=False),
               help="Mixing file from plenocli crosstalk --mixing-out (masked whites of this rig, "
                    "processed like these views).")
-@click.option("--regularise", type=options.FiniteFloat(min=0.0), default=0.0,
+@click.option("--regularise", type=options.FiniteFloat(min=0.0, max=1.0), default=0.0,
               show_default=True,
               help="Tikhonov lambda (units of M, diagonal 1): damps ill-conditioned pixels; "
                    "0 = exact inverse.")
-@click.option("--noise-map", type=click.Path(dir_okay=False), default=None,
+@click.option("--noise-map", type=options.OutputFile(*options.TIFF), default=None,
               help="Also write the per-pixel noise gain of every unmixed view (TIFF).")
 @options.preview_opt
 @options.stage_command

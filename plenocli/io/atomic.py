@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import errno
 import os
 import socket
 import tempfile
@@ -100,6 +101,12 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
             os.replace(tmp, dest)
         else:
             pending.files.append((tmp, dest))
+    except OSError as err:
+        full = err.errno is None and _device_full(dest.parent)  # before the space is freed
+        tmp.unlink(missing_ok=True)
+        if full:  # numpy and tifffile report a short write without errno
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(dest)) from err
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -127,6 +134,16 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
         if folder.exists() and not folder.is_dir():
             raise InputError(f"output folder {folder} is a file; give a folder")
         _check_folder(folder / "x")
+    check_distinct(outputs, inputs)
+    for out in outputs:
+        if out.is_dir():
+            raise InputError(f"output {out} is a folder; give a file name")
+        _check_folder(out)
+
+
+def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
+    """Every output distinct from the others and from the inputs (InputError otherwise)."""
+    outputs, inputs = [Path(p) for p in outputs], [Path(p) for p in inputs]
     for k, out in enumerate(outputs):
         for other in outputs[:k]:
             if _same_path(out, other):
@@ -135,9 +152,6 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
             if _same_path(out, src):
                 raise InputError(f"output {out} is also an input; choose another output path "
                                  "(plenocli never overwrites its inputs)")
-        if out.is_dir():
-            raise InputError(f"output {out} is a folder; give a file name")
-        _check_folder(out)
 
 
 def remove_stale_temporaries(dest: Path) -> None:
@@ -168,6 +182,15 @@ def _check_folder(out: Path) -> None:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"cannot write {out}: folder {folder} is not writable "
                          "(permission or a read-only file system); choose another folder")
+
+
+def _device_full(folder: Path, margin: int = 1 << 20) -> bool:
+    """Whether the file system of ``folder`` has less than ``margin`` bytes left."""
+    try:
+        stat = os.statvfs(folder)
+    except (OSError, AttributeError):
+        return False
+    return stat.f_bavail * stat.f_frsize < margin
 
 
 def _same_path(a: Path, b: Path) -> bool:

@@ -23,6 +23,7 @@ from plenocli.model.cfa import shift_pattern
 from plenocli.model.lensgrid import LensGrid
 
 COLOUR_PAGES = ["R", "G", "B"]
+MIN_LENSES_ACROSS = 2  # fewer micro-images across a frame leave nothing to refocus or cut
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,11 @@ def grid_framing(meta: dict, shape: tuple[int, int], grid: LensGrid, *,
                 "use a grid calibrated on a white image of the same camera and crop")
     else:
         top, left, bottom, right = _area(meta, shape)
+    if min(bottom - top, right - left) < MIN_LENSES_ACROSS * grid.pitch_px:
+        raise InputError(f"{grid_path}: lens pitch {grid.pitch_px:g} px, but the "
+                         f"{right - left} x {bottom - top} frame area holds fewer than "
+                         f"{MIN_LENSES_ACROSS} micro-images across; check the grid's pitch_px "
+                         "and that it belongs to these frames")
     dx, dy = f_col + left - g_col, f_row + top - g_row
     return _framing(meta, top, left, bottom, right, grid.shifted(dx, dy) if (dx or dy) else grid)
 

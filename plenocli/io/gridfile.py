@@ -9,9 +9,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
 from plenocli.model.lensgrid import LensGrid
+from plenocli.model.provenance import json_safe
 
 # libyaml's emitter and parser when PyYAML was built with it (10-50x faster)
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
@@ -30,7 +31,8 @@ def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
             f"    - [{i}, {j}, {x:.5f}, {y:.5f}]\n"
             for (i, j), (x, y) in zip(np.asarray(grid.indices).tolist(),
                                       np.asarray(grid.centres_xy).tolist(), strict=True))
-    text += _dump({**(extra or {}), "provenance": provenance})
+    # numpy scalars from the calibration (a float64 pitch) as plain numbers: YAML-safe dump
+    text += _dump(json_safe({**(extra or {}), "provenance": provenance}))
     write_text(path, text, protect=protect)
 
 
@@ -94,7 +96,7 @@ def read_grid(path: str | os.PathLike, *,
     for it (see ``plenocli.io.raytrix``)."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     with open(p, "rb") as fh:
         head = fh.read(256).lstrip()
     if p.suffix.lower() == ".xml" or head.startswith(b"<"):

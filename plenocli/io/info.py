@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io import raw as raw_io
 from plenocli.io.tiffio import open_tiff, read_meta
 from plenocli.model.lensgrid import LensGrid
@@ -29,7 +29,7 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
     """A summary of ``path``: kind, sizes, levels, geometry and provenance (JSON-ready)."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     head = {"file": str(p), "bytes": p.stat().st_size}
     suffix = p.suffix.lower()
     if suffix in (".yaml", ".yml"):

@@ -80,6 +80,7 @@ def read_lens(path: str | os.PathLike) -> Lens:
         raise InputError(f"{p}: no such lens file")
     try:
         doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{p}: not valid YAML ({err})") from err
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{p}: not a YAML lens prescription "
+                          f"({' '.join(str(err).split())})") from err
     return lens_from_dict(doc, source=str(p))

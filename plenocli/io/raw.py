@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io import rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
 
@@ -38,10 +38,10 @@ def sniff(path: str | os.PathLike) -> str:
     """Guess the kind of a capture from its first bytes: canon-dp, dng, image or unknown."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     with open(p, "rb") as fh:
         head = fh.read(16)
-    if head[:4] in (b"II*\x00", b"MM\x00*"):
+    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):  # TIFF, BigTIFF
         if head[8:10] == b"CR":
             return "canon-dp"
         try:
@@ -297,7 +297,8 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
             with tiffio.open_tiff(p) as tif:
                 data = tif.asarray()
         except tiffio.READ_ERRORS as err:
-            raise InputError(f"{p}: unreadable TIFF ({err}); the file may be truncated") from err
+            raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "
+                                            "truncated") from err
     else:
         import cv2
 

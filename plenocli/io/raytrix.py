@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
 from plenocli.model.lensgrid import LensGrid
 
@@ -151,7 +151,7 @@ def read_calib(path: str | os.PathLike) -> dict:
     """Read a RayCalibData XML file."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError as err:

@@ -30,7 +30,7 @@ import numpy as np
 import tifffile
 
 from plenocli import __version__
-from plenocli.errors import InputError
+from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import atomic_path
 from plenocli.model.cfa import is_bayer
 
@@ -44,6 +44,17 @@ COMPRESSION_NONE = 1
 # imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
 READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
                RuntimeError, zlib.error)
+
+
+def read_error(path, err: Exception, fallback: str) -> InputError:
+    """One line for a TIFF that tifffile could not read: a missing codec says so (the file is
+    fine: another program compressed it); anything else gets ``fallback``."""
+    match = re.search(r"COMPRESSION\.(\w+).*requires the 'imagecodecs' package", str(err))
+    if match:
+        return InputError(f"{path}: compressed with {match.group(1)}, which this installation "
+                          "cannot decode; pip install imagecodecs, or save the TIFF "
+                          "uncompressed")
+    return InputError(fallback)
 
 
 def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
@@ -159,7 +170,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     """Read a TIFF as (views, rows, cols) and its plenocli metadata ({} for a foreign TIFF)."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     try:
         with open_tiff(p) as tif:
             if not tif.pages:
@@ -171,16 +182,9 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             else:
                 data = _stack_pages(p, [page.asarray() for page in tif.pages])
     except READ_ERRORS as err:
-        raise InputError(f"{p}: not a readable TIFF image ({err}); "
-                         "pass an image written by plenocli or a plain TIFF") from err
-    meta: dict = {}
-    if description:
-        try:
-            parsed = json.loads(description)
-        except json.JSONDecodeError:
-            parsed = None
-        if isinstance(parsed, dict) and FORMAT_KEY in parsed:
-            meta = {k: v for k, v in parsed.items() if k != FORMAT_KEY}
+        raise read_error(p, err, f"{p}: not a readable TIFF image ({err}); pass an image "
+                                 "written by plenocli or a plain TIFF") from err
+    meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
     return data, meta
@@ -193,6 +197,10 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     if names is not None and (not isinstance(names, list) or len(names) != shape[0]):
         raise InputError(f"{path}: metadata names {names!r} for {shape[0]} pages; the file was "
                          "edited or damaged: write it again")
+    if names is not None and len(set(map(str, names))) != len(names):
+        twice = next(n for n in names if names.count(n) > 1)
+        raise InputError(f"{path}: metadata names view {twice!r} twice; the file was edited or "
+                         "damaged: write it again")
     areas = [("active_area", meta.get("active_area"))]
     areas += [("masked area", a) for a in (meta.get("masked_areas") or [])]
     for what, area in areas:
@@ -218,9 +226,9 @@ def check_levels(path, meta: dict, views: int) -> None:
     blacks, whites = meta.get("black_level"), meta.get("white_level")
     if blacks is not None and not (
             isinstance(blacks, list) and len(blacks) == views
-            and all(isinstance(b, list) and len(b) == 4 and all(_finite(v) for v in b)
+            and all(isinstance(b, list) and len(b) == 4 and all(_finite(v) and v >= 0 for v in b)
                     for b in blacks)):
-        raise InputError(f"{path}: black_level {blacks!r} is not 4 finite levels per view "
+        raise InputError(f"{path}: black_level {blacks!r} is not 4 finite levels >= 0 per view "
                          f"({views} views); the file was edited or damaged")
     if whites is not None and not (
             isinstance(whites, list) and len(whites) == views
@@ -270,12 +278,30 @@ def read_meta(path: str | os.PathLike) -> dict:
             description = tif.pages[0].description if tif.pages else ""
     except (*READ_ERRORS, InputError):
         return {}
+    return plenocli_meta(path, description)
+
+
+def plenocli_meta(path, description: str | None) -> dict:
+    """The plenocli metadata in a TIFF's description ({} for another program's description).
+
+    A description that starts as plenocli's but is not JSON, or names another format version,
+    is an InputError: its pixels would be read with the wrong geometry or levels."""
+    if not description:
+        return {}
     try:
-        parsed = json.loads(description) if description else {}
-    except json.JSONDecodeError:
+        parsed = json.loads(description)
+    except json.JSONDecodeError as err:
+        if description.lstrip().startswith(f'{{"{FORMAT_KEY}"'):
+            raise InputError(f"{path}: its plenocli metadata is damaged (not JSON: {err.msg}); "
+                             "write the file again") from err
         return {}
     if not isinstance(parsed, dict) or FORMAT_KEY not in parsed:
         return {}  # another program's JSON (tifffile writes {"shape": ...}) is not ours
+    version = parsed[FORMAT_KEY]
+    if not (isinstance(version, int) and 1 <= version <= FORMAT_VERSION):
+        raise InputError(f"{path}: plenocli format {version!r}, but this plenocli reads format "
+                         f"{FORMAT_VERSION}: made by another plenocli version, or damaged; "
+                         "process it with the plenocli that wrote it")
     return {k: v for k, v in parsed.items() if k != FORMAT_KEY}
 
 

@@ -208,6 +208,8 @@ def _check_centres(centres, indices) -> None:
     if not np.all(np.abs(xy) <= MAX_COORD_PX):
         raise ValueError("centres_xy must hold finite pixel coordinates; "
                          f"{int(np.sum(~(np.abs(xy) <= MAX_COORD_PX)))} values are not")
+    if ij.size and len(np.unique(ij.reshape(-1, 2), axis=0)) != len(ij):
+        raise ValueError("lens indices must be distinct; a lens (i, j) is listed twice")
     if ij.size:  # tables indexed by (i, j) are allocated from this span: keep it compact
         span = np.ptp(ij, axis=0).astype(np.float64) + 1
         if span[0] * span[1] > 16 * len(ij) + 1024:

@@ -171,6 +171,11 @@ def half_field_deg(lens: Lens, image_half_height_mm: float, *,
             hi = mid
         else:
             lo = mid
+    reached = abs(real_image_height(lens, np.array([lo]), wavelength_um=wavelength_um)[0])
+    if not (np.isfinite(reached) and reached >= image_half_height_mm * (1 - 1e-3)):
+        raise ValueError(f"no chief ray reaches {image_half_height_mm:g} mm off axis (the "
+                         f"lens's image circle ends near {reached:.3g} mm); give a smaller "
+                         "sensor (--sensor-mm)")
     return 0.5 * (lo + hi)
 
 

@@ -21,6 +21,8 @@ import numpy as np
 
 from plenocli.optics.lens import refract
 
+MAX_INDEX = 4.0  # above any optical glass or crystal in the visible (diamond: 2.42)
+
 
 def image_distance_mm(focal_mm: float, object_distance_mm: float) -> float:
     """D from the thin-lens equation: the sensor distance that images the plane at
@@ -45,13 +47,16 @@ def prism_deviation_deg(n: float, apex_deg: float) -> dict:
     deviation 2 asin(n sin(A/2)) - A) and ``normal_incidence_deg`` (exact, light entering the
     first face at normal incidence: asin(n sin A) - A).
     """
-    if n < 1:
-        raise ValueError(f"n {n} must be >= 1")
+    if not (math.isfinite(n) and 1 < n <= MAX_INDEX):
+        raise ValueError(f"prism index n {n} must be in (1, {MAX_INDEX:g}] (glass: ~1.5 to 2)")
     if not 0 <= apex_deg < 90:
         raise ValueError(f"apex_deg {apex_deg} must be in [0, 90)")
     a = math.radians(apex_deg)
     out = {"thin_deg": (n - 1.0) * apex_deg}
     s_min = n * math.sin(a / 2)
+    if s_min > 1:
+        raise ValueError(f"a prism of index {n:g} and apex {apex_deg:g} deg reflects every ray "
+                         f"totally (n sin(A/2) = {s_min:.3g} > 1); use a smaller apex angle")
     out["minimum_deg"] = math.degrees(2 * math.asin(s_min) - a) if s_min <= 1 else math.nan
     s_norm = n * math.sin(a)
     out["normal_incidence_deg"] = math.degrees(math.asin(s_norm) - a) if s_norm <= 1 else math.nan

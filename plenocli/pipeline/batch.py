@@ -19,7 +19,9 @@ import glob
 import logging
 import multiprocessing
 import os
+import re
 import signal
+import socket
 import sys
 import threading
 import time
@@ -39,6 +41,7 @@ from plenocli.progress import log, progress
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 DASK_CONNECT_TIMEOUT = "20s"
+DASK_PROBE_SECONDS = 10  # a scheduler that does not accept a connection in this is not there
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
            "memory); run it alone with plenocli run to see more")
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
@@ -173,6 +176,8 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     if timeout is not None and scheduler:
         raise ConfigError("--timeout limits local worker processes; with --scheduler set the "
                           "Dask workers' own limits instead")
+    if scheduler:
+        check_scheduler(scheduler)
     template = read_template(config, overrides)
     if not template.per_capture_steps():
         raise ConfigError(f"{config}: no step uses {{capture}} or {{name}}, so there is nothing "
@@ -398,13 +403,39 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
 
 # ---------------------------------------------------------------- dask.distributed
 
-def _dask_results(address: str, config: str, captures: list[str],
-                  kwargs: dict) -> Iterator[CaptureResult]:
+def _require_dask() -> None:
     try:
-        from distributed import Client, as_completed
+        import distributed  # noqa: F401
     except ImportError as err:
         raise PlenocliError("--scheduler needs dask.distributed, which is not installed; "
                             "install it with: pip install 'plenocli[dask]'") from err
+
+
+def check_scheduler(address: str) -> None:
+    """Before any work: ``address`` is HOST:PORT (optionally tcp:// or tls://) and something
+    listens there. A Dask client built on a bad address waits, then complains while Python
+    shuts down; a plain socket says at once."""
+    _require_dask()
+    match = re.fullmatch(r"(?:(tcp|tls)://)?(\[[0-9a-fA-F:.]+\]|[^\s:/\[\]]+):(\d{1,5})",
+                         address.strip())
+    if match is None:
+        raise ConfigError(f"--scheduler {address!r}: give the scheduler's address as "
+                          "tcp://HOST:PORT (e.g. tcp://10.0.0.5:8786)")
+    host, port = match.group(2).strip("[]"), int(match.group(3))
+    try:
+        with socket.create_connection((host, port), timeout=DASK_PROBE_SECONDS):
+            pass
+    except OSError as err:
+        raise PlenocliError(f"cannot reach the Dask scheduler at {address!r} "
+                            f"({err.strerror or err}); check the address and that it "
+                            "runs") from err
+
+
+def _dask_results(address: str, config: str, captures: list[str],
+                  kwargs: dict) -> Iterator[CaptureResult]:
+    _require_dask()
+    from distributed import Client, as_completed
+
     try:
         client = Client(address, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError, ValueError) as err:

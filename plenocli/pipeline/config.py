@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,7 +42,8 @@ from typing import Any
 
 import yaml
 
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, InputError
+from plenocli.io.atomic import check_distinct
 from plenocli.pipeline.registry import Stage, get_stages
 
 TOP_KEYS = ("description", "steps", "out")
@@ -122,6 +124,7 @@ class Template:
                                   f"{', '.join('{' + m + '}' for m in sorted(missing))}; "
                                   f"give {what}")
             steps.append(_make_step(self.path, base, name, _fill(body, values), stages))
+        _check_outputs_distinct(self.path, steps)
         return steps
 
 
@@ -131,7 +134,7 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     if not p.is_file():
         raise ConfigError(f"{p}: no such config file")
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+        doc = yaml.load(p.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
                 if _PLACEHOLDER.search(p.read_text(encoding="utf-8", errors="replace")) else "")
@@ -141,12 +144,40 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     for key in doc:
         if key not in TOP_KEYS:
             raise ConfigError(f"{p}: unknown top-level key {key!r}{closest(key, TOP_KEYS)}")
+    for name, body in doc["steps"].items():
+        if not (body is None or isinstance(body, dict)):
+            raise ConfigError(f"{p}: step {name!r} must be a mapping of parameters "
+                              f"(e.g. input: ..., output: ...), got {body!r}")
+        if not isinstance((body or {}).get("stage", ""), str):
+            raise ConfigError(f"{p}: step {name!r}: stage must be one stage name, got "
+                              f"{body['stage']!r}")
+    out = doc.get("out")
+    if out is not None and not isinstance(out, str):
+        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
-    template = Template(p, raw_steps, None if doc.get("out") is None else str(doc["out"]))
+    template = Template(p, raw_steps, out)
     _check_per_capture_outputs(template)
     return template
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
+    silently: a step or a parameter written twice would run with only one of them)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if not isinstance(key, (str, int, float, bool)):
+                continue  # an unhashable key: the base loader reports it
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"key {key!r} is given twice in one mapping; keep one",
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
 
 
 def yaml_problem(err: Exception) -> str:
@@ -204,10 +235,26 @@ def _check_per_capture_outputs(template: Template) -> None:
                         f"{{out}}/{{name}}/{Path(str(item)).name}")
 
 
+def _check_outputs_distinct(path: Path, steps: list[Step]) -> None:
+    """Before any step runs: no two steps write one file, no step writes its own input."""
+    writer: dict[str, str] = {}
+    for step in steps:
+        try:
+            check_distinct(step.output_paths(), step.input_paths())
+        except InputError as err:
+            raise ConfigError(f"{path}: step {step.name!r}: {err}") from err
+        for out in step.output_paths():
+            key = os.path.abspath(out)
+            if key in writer:
+                raise ConfigError(f"{path}: steps {writer[key]!r} and {step.name!r} both write "
+                                  f"{out}; give each step its own output path")
+            writer[key] = step.name
+
+
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
     for item in overrides:
         target, sep, value = item.partition("=")
-        step, dot, param = target.partition(".")
+        step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
         if not sep or not dot or not param:
             raise ConfigError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
         if step not in steps:

@@ -13,12 +13,13 @@ from __future__ import annotations
 import contextlib
 import importlib
 import inspect
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
 from plenocli.model.provenance import RESOLVED
 
@@ -73,6 +74,7 @@ class Stage:
         stage succeeded (nothing is left behind otherwise).
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
+        _check_listed_once(params, self.inputs)
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
         token = RESOLVED.set(dict(params))
@@ -81,6 +83,21 @@ class Stage:
                 yield
         finally:
             RESOLVED.reset(token)
+
+
+def _check_listed_once(params: dict[str, Any], roles: tuple[str, ...]) -> None:
+    """A file listed twice in one list of inputs (e.g. one masked white given for two pupil
+    parts) is a mistake: it would be measured as two captures."""
+    for name in roles:
+        value = params.get(name)
+        if not isinstance(value, (list, tuple)):
+            continue
+        seen: dict[str, str] = {}
+        for item in value:
+            key = os.path.realpath(item)
+            if key in seen:
+                raise InputError(f"{item} is given twice as {name.upper()}; give each file once")
+            seen[key] = item
 
 
 _TABLE = (

@@ -152,13 +152,14 @@ def dng_options(truth: dict) -> dict:
 def _active_size(pixels: str | int | None) -> tuple[int, int]:
     if not pixels:
         return 192, 256
-    if isinstance(pixels, int) or str(pixels).isdigit():
-        return int(pixels), int(pixels)
     try:
-        rows, cols = (int(v) for v in str(pixels).lower().split("x"))
+        rows, cols = ((int(pixels),) * 2 if isinstance(pixels, int) or str(pixels).isdigit()
+                      else (int(v) for v in str(pixels).lower().split("x")))
     except ValueError as err:
         raise ValueError(f"pixels {pixels!r}: give ROWSxCOLS (e.g. 192x256) or one number") \
             from err
+    if min(rows, cols) < 16:
+        raise ValueError(f"pixels {pixels!r}: give at least 16 x 16 (e.g. 192x256)")
     return rows, cols
 
 

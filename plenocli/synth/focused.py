@@ -101,8 +101,12 @@ def raytrix_scene(*, seed: int = 0, rows: int = 480, cols: int = 640, pitch_px: 
     info : dict
         JSON-ready parameters: seed, s, g_true, pitch, angle, offset, cfa, texture.
     """
-    from plenocli.refocus import output_shape  # only for the truth's shape
+    from plenocli.refocus import check_options, output_shape  # the truth's shape, s and g
 
+    check_options(s=s, g=g_true, view="full", mask_width=0.0, kernel="bilinear", radius=None,
+                  cfa=cfa, min_weight=0.0)
+    if not (np.isfinite(pitch_px) and pitch_px >= 2):
+        raise ValueError(f"pitch_px must be a number >= 2 (paper: 20.2), got {pitch_px}")
     rng = np.random.default_rng(seed)
     offset = tuple(float(v) for v in rng.uniform(0, pitch_px, 2))
     grid = LensGrid(pitch_px=float(pitch_px), angle_rad=float(angle_rad), offset_xy=offset,

@@ -231,6 +231,9 @@ def make_masked_white(*, view_shape: tuple[int, int] = (120, 160), n_views: int 
 
 def _simulate_rig(layout: str, *, seed: int, view_shape, overlap: float, model: str,
                   noise: float, ghost_r: float, vignetting: float) -> Simulation:
+    if len(view_shape) != 2 or min(view_shape) < 32:
+        raise ValueError(f"view_shape must be [ROWS, COLS], each at least 32, got "
+                         f"{list(view_shape)}")
     views, _, truth = make_rig(layout=layout, view_shape=tuple(view_shape), overlap=overlap,
                                model=model, noise=noise, ghost_r=ghost_r, vignetting=vignetting,
                                seed=seed)

@@ -160,6 +160,9 @@ def simulate_hexgrid_white(*, seed: int = 0, size: int = 1024, pitch_px: float =
     """``white.tif`` (a Bayer or mono white image, uint16), the truth (lattice and every true
     centre) and, for a hex lattice, ``grid_true.xml`` (the true lattice as RayCalibData). The
     offset is drawn from ``seed``."""
+    if not (np.isfinite(pitch_px) and 2 <= pitch_px <= size / 4):
+        raise ValueError(f"pitch_px must be a number from 2 to size / 4 = {size / 4:g} (a few "
+                         f"lenses across), got {pitch_px}")
     rng = np.random.default_rng(seed)
     offset = (size / 2 + rng.uniform(0, pitch_px), size / 2 + rng.uniform(0, pitch_px))
     image, truth = white_image((size, size), pitch_px=pitch_px, angle_rad=np.radians(angle_deg),

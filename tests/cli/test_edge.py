@@ -43,7 +43,7 @@ def digest(path: Path) -> str:
 
 def test_two_outputs_on_one_path_are_refused_before_any_work(tmp_path, frames):
     out = tmp_path / "b.tif"
-    result = invoke("bias", frames, "-o", out, "--preview", out)
+    result = invoke("flat", frames, "--white", frames, "-o", out, "--save-gain", out)
     assert result.exit_code == 1
     assert "given for two outputs" in one_line(result)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["frames.tif"]
@@ -51,7 +51,8 @@ def test_two_outputs_on_one_path_are_refused_before_any_work(tmp_path, frames):
 
 def test_an_output_that_is_an_input_is_refused(tmp_path, frames):
     before = digest(frames)
-    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", frames)
+    result = invoke("flat", frames, "--white", tmp_path / "w.tif", "-o", tmp_path / "b.tif",
+                    "--save-gain", frames)
     assert result.exit_code == 1 and "also an input" in one_line(result)
     assert digest(frames) == before
 

@@ -149,6 +149,11 @@ def test_crosstalk_mixing_needs_one_white_per_part(rig):
     assert res.exit_code == 1 and "one masked white per pupil part" in res.output
     res = _invoke("crosstalk", paths["masked_A"], paths["masked_A"], "--views", "A,B",
                   "-o", tmp / "c.json", "--mixing-out", tmp / "m.tif")
+    assert res.exit_code == 1 and "given twice" in res.output
+    again = tmp / "masked_A_again.tif"  # the same white under two names
+    again.write_bytes(paths["masked_A"].read_bytes())
+    res = _invoke("crosstalk", paths["masked_A"], again, "--views", "A,B",
+                  "-o", tmp / "c.json", "--mixing-out", tmp / "m.tif")
     assert res.exit_code == 1 and "open each pupil part once" in res.output
     assert not (tmp / "m.tif").exists() and not (tmp / "c.json").exists()
 

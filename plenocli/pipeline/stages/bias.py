@@ -86,6 +86,9 @@ def _central_crop(views: np.ndarray, crop: str, *, even: bool):
     height, width = views.shape[1:]
     if not (0 < rows <= height and 0 < cols <= width):
         raise InputError(f"crop {crop} does not fit the {height}x{width} active area")
+    if even and min(rows, cols) < 2:
+        raise InputError(f"crop {crop} is smaller than one 2 x 2 CFA cell; crop at least 2x2 "
+                         "(a few hundred pixels a side to see anything)")
     r0, c0 = (height - rows) // 2, (width - cols) // 2
     if even:  # keep the CFA phase
         r0, c0 = r0 - r0 % 2, c0 - c0 % 2

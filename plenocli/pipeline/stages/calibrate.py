@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import calibration
-from plenocli.errors import CalibrationError, InputError
+from plenocli.errors import CalibrationError, InputError, not_a_file
 from plenocli.io import gridfile, raytrix, tiffio
 from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import shift_pattern
@@ -21,7 +21,7 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
     level (DN, summed over views) and the metadata."""
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"{p}: no such file")
+        raise not_a_file(p)
     if p.suffix.lower() in (".tif", ".tiff"):
         views, meta = tiffio.read_image(p)
     else:

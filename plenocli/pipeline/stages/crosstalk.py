@@ -39,6 +39,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
         raise InputError("no input given; pass one views TIFF per masked capture")
+    if grid and not mask_widths:
+        raise ConfigError("--grid is used only with --mask-widths (the Raytrix sweep); leave it "
+                          "out, or give --mask-widths")
     if mixing_out:
         if mask_widths:
             raise ConfigError("--mixing-out and --mask-widths do not go together; measure the "
@@ -138,6 +141,14 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
 # The whole mixing matrix M from one masked white per pupil part (``--mixing-out``).
 
 
+def _check_open_part(path: str, name: str, r: float) -> None:
+    """The open part of a masked white must be its brightest: r >= 1 makes M singular."""
+    if not r < 1:
+        raise InputError(f"{path}: the open part {name} is not brighter than the others "
+                         f"(r = {100 * r:.0f} %): not a white with only that part open; check "
+                         "--intended and the mask")
+
+
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
@@ -163,6 +174,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                                                 tile_px=tile, cfa=white.cfa)
         except ValueError as err:
             raise InputError(f"{label}: {err}") from err
+        _check_open_part(label, names[res["intended"]], res["r"])
         opened.append(res["intended"])
         captures.append(_capture_entry(label, names, res, tile, white.cfa))
     if sorted(opened) != list(range(len(names))):

@@ -163,7 +163,7 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
     if wb_from is not None:
         if wb != "as-shot":
             raise ConfigError("give --wb or --wb-from, not both")
-        return _gains_from_white(wb_from, chosen.name), "white image"
+        return _gains_from_white(wb_from, chosen), "white image"
     if wb != "as-shot":
         try:
             return balance.normalised_gains([float(v) for v in wb.split(",")]), "--wb"
@@ -177,13 +177,25 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
     return balance.normalised_gains(as_shot), "as shot"
 
 
-def _gains_from_white(path: str, view_name: str) -> np.ndarray:
+def _gains_from_white(path: str, chosen: dev.ColourView) -> np.ndarray:
+    """Gains from the white image's view of the same name (or its only colour view), with the
+    same colour layout (mosaic or R, G, B pages) as the view developed."""
     data, meta = tiffio.read_image(path)
     data, cfa = _active(_levels(data, meta), meta)
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
-        white = next((v for v in views if v.name == view_name), views[0])
+        white = next((v for v in views if v.name == chosen.name),
+                     views[0] if len(views) == 1 else None)
+        if white is None:
+            raise ValueError(f"no view {chosen.name} among its colour views "
+                             f"({', '.join(v.name for v in views)}); use a white image "
+                             "processed like the input")
+        if bool(white.cfa) != bool(chosen.cfa):
+            kinds = ("a Bayer mosaic", "R, G, B pages")
+            raise ValueError(f"its view {white.name} is {kinds[not white.cfa]} but the view "
+                             f"developed is {kinds[not chosen.cfa]}; use a white image of the "
+                             "same camera, processed like the input")
         if white.cfa:
             return balance.gains_from_mosaic(data[white.pages[0]], white.cfa)
         return balance.gains_from_rgb(np.stack([data[k] for k in white.pages], axis=-1))

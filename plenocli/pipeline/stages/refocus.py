@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
@@ -86,6 +86,12 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
             if cfa and len(pages) > 1:
                 labels = [f"{name}.{c}" for c in rf.CHANNELS]
             for chan, label in zip(channels, labels, strict=True):
+                if not np.isfinite(chan).any():
+                    raise InputError(
+                        f"{label} at g = {g_value:g}: the refocused image holds no valid pixel "
+                        "(all NaN): the input is NaN under the grid, or g (paper: 4), "
+                        "--mask-width or --radius leave no pixel of the "
+                        f"{framing.grid.pitch_px:.3g} px micro-images; check them")
                 per_g.append(chan)
                 names.append(f"{label}@g{g_value:g}" if sweep else label)
         score = rf.sharpness(np.stack(per_g), lens_period_px=period)

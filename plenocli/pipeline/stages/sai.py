@@ -23,6 +23,7 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
     pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    _check_sensor_image(input, meta, pages, cfa_layout)
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
                else active_area(meta, data.shape[1:]))
@@ -63,3 +64,18 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     if preview:
         write_png(preview, view_mosaic(stack, n, pages, cfa=colours[0] if same else None),
                   protect=protect, colour=meta.get("colour"))
+
+
+
+def _check_sensor_image(path: str, meta: dict, pages: list[str], cfa_layout: str) -> None:
+    """Sub-aperture images are cut from a sensor image, not from views made from one."""
+    made = next((key for key in ("sai", "refocus") if key in meta), None)
+    if made is not None:
+        raise InputError(f"{path}: already {made} views (made by plenocli {made}); pass the "
+                         "frames they were made from (plenocli decode or bias output)")
+    if {"A", "B"} <= set(pages):
+        raise InputError(f"{path}: holds the dual-pixel views {', '.join(pages)}, already one "
+                         "sub-aperture image each; sai is for N x N pixel sensors")
+    if cfa_layout == "micro-image" and not meta.get("cfa"):
+        raise ConfigError(f"--cfa-layout micro-image: {path} has no CFA pattern (monochrome "
+                          "or RGB frames); leave --cfa-layout at pixel")

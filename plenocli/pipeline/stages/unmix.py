@@ -98,8 +98,10 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
         raise InputError("no input given; pass the views TIFF (or one TIFF per view)")
-    if not (np.isfinite(regularise) and regularise >= 0):
-        raise ConfigError(f"--regularise must be a finite number >= 0, got {regularise}")
+    top = unmix_lib.MAX_REGULARISE
+    if not (np.isfinite(regularise) and 0 <= regularise <= top):
+        raise ConfigError(f"--regularise must be a number in [0, {top:g}] (units of M, whose "
+                          f"diagonal is 1; e.g. 0.05), got {regularise}")
     field, mix_meta = read_mixing(mixing)
     info = mix_meta["mixing"]
     pages, names, meta = _load(inputs)
