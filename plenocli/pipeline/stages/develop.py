@@ -15,8 +15,8 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io import photo as export
 from plenocli.io import tiffio
 from plenocli.io.atomic import outputs_together, write_bytes
+from plenocli.io.framing import active_area
 from plenocli.model import colour as colour_matrix
-from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
 
@@ -39,7 +39,8 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
     except ValueError as err:
         raise ConfigError(str(err)) from err
     data, meta = tiffio.read_image(input)
-    data, cfa = _active(_levels(data, meta), meta)
+    framing = active_area(meta, data.shape[1:])
+    data, cfa = framing.crop(_levels(data, meta)), framing.cfa
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
@@ -99,16 +100,6 @@ def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
     return out
 
 
-def _active(data: np.ndarray, meta: dict) -> tuple[np.ndarray, str | None]:
-    """The light-sensitive area and its CFA pattern (the pattern moves with the crop)."""
-    cfa = meta.get("cfa")
-    area = meta.get("active_area")
-    if area and list(area) != [0, 0, *data.shape[1:]]:
-        top, left, bottom, right = (int(v) for v in area)
-        return data[:, top:bottom, left:right], shift_pattern(cfa, top, left)
-    return data, cfa
-
-
 def _stages(meta: dict) -> list[str]:
     records = [*meta.get("history", []), meta.get("provenance") or {}]
     return [r.get("stage") for r in records if r.get("stage") in ("bias", "flat")]
@@ -123,7 +114,8 @@ def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: st
                          f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
                          f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
                          "split must be measured in the same units (process both alike)")
-    white, white_cfa = _active(_levels(white, white_meta), white_meta)
+    white_area = active_area(white_meta, white.shape[1:])
+    white, white_cfa = white_area.crop(_levels(white, white_meta)), white_area.cfa
     white_names = list(white_meta.get("views") or [])
     for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
         if not {"A", "B", "S"} <= set(views_):
@@ -181,7 +173,8 @@ def _gains_from_white(path: str, chosen: dev.ColourView) -> np.ndarray:
     """Gains from the white image's view of the same name (or its only colour view), with the
     same colour layout (mosaic or R, G, B pages) as the view developed."""
     data, meta = tiffio.read_image(path)
-    data, cfa = _active(_levels(data, meta), meta)
+    framing = active_area(meta, data.shape[1:])
+    data, cfa = framing.crop(_levels(data, meta)), framing.cfa
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
