@@ -182,3 +182,14 @@ def test_lens_centre_of_the_folded_micro_image(lattice):
     assert found.sure and found.asymmetry < 0.05
     noise = np.random.default_rng(3).normal(100, 5, (800, 800)).astype(np.float32)
     assert not lens_centre(noise, true).sure
+
+
+def test_a_small_image_refused_with_the_hints_not_given_yet():
+    """8 lenses across a 160 px white: refused, and the message does not ask for the pitch it
+    was given but for a larger image."""
+    image, _ = white_image((160, 160), pitch_px=20.2, angle_rad=0.12, offset_xy=(80.0, 80.0))
+    with pytest.raises(CalibrationError) as err:
+        calibration.calibrate(image.astype(np.float32), pitch_hint=20.2, black_level=64)
+    message = str(err.value)
+    assert "--pitch" not in message and "larger image" in message, message
+    assert "8 lenses of 20.2 px across" in message

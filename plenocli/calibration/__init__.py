@@ -52,7 +52,7 @@ MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # a lattice read from the border repetition is used when its pitch and angle errors move the
 # frame's corner lenses by at most this share of a pitch
 CORNER_TOLERANCE = 0.05
-WHAT_TO_DO = "pass --pitch PX (approximate), a white image, or --start GRID.yaml|calib.xml"
+FEW_LENSES_ACROSS = 20  # below this many lenses across, a failure says the image is small
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
         raise CalibrationError(f"the start grid ({verdict.lattice.describe()}) does not fit this "
                                f"image: {reason}; check the --start file or calibrate without it")
     if reason:
-        raise CalibrationError(f"{reason}; {WHAT_TO_DO}")
+        raise CalibrationError(f"{reason}; {_what_to_do(image.shape, pitch_hint)}")
     found = verdict.lattice
     if lattice != "auto" and found.kind != lattice:
         raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
@@ -123,7 +123,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
         raise CalibrationError(
             f"{found.describe()} lattice found, but its lens centres cannot be told from the "
             f"holes between them (the mean micro-image is as round about a hole: asymmetry "
-            f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); {WHAT_TO_DO}")
+            f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); "
+            f"{_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
     guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
                      image_shape=image.shape)
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
@@ -131,7 +132,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
         raise CalibrationError(
             f"{found.describe()} lattice found, but on this scene neither the micro-image "
             f"centres nor the border repetition pin its pitch down (+-{border.pitch_err_px:.3f} "
-            f"px); {WHAT_TO_DO}")
+            f"px); {_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
     types = classify(flat, grid.indices, grid.centres_xy, grid.pitch_px) \
         if grid.lattice == "hex" else None
     type_info = None
@@ -145,6 +146,21 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
                      "p_value": types.p_value}
     return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
                                    lens_centre=centre)
+
+
+def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,
+                pitch_seen: float | None = None) -> str:
+    """What could make the image calibrate: the hints not given yet, a larger image when it
+    holds few lenses across."""
+    hints = ([] if pitch_hint else ["--pitch PX (approximate)"]) + [
+        "a white image", "--start GRID.yaml|calib.xml"]
+    advice = f"pass {', '.join(hints[:-1])} or {hints[-1]}"
+    pitch = pitch_hint or pitch_seen
+    across = min(shape) / pitch if pitch else None
+    if across is not None and across < FEW_LENSES_ACROSS:
+        return (f"the {shape[1]} x {shape[0]} px image holds only {across:.0f} lenses of "
+                f"{pitch:.1f} px across: calibrate on a larger image, or {advice}")
+    return advice
 
 
 def _corner_error(border, shape: tuple[int, int]) -> float:
