@@ -85,6 +85,16 @@ def test_set_values_are_parsed_like_shell_words(tmp_path):
     assert step.params["smooth"] == 9 and step.params["crop"] == "20x30"
 
 
+def test_a_yaml_list_is_the_comma_separated_word(tmp_path):
+    listed = load_config(_config(tmp_path, "refocus", "    g: [2, 3.5]\n"))[0]
+    typed = load_config(_config(tmp_path, "refocus"), ["refocus.g=2,3.5"])[0]
+    assert listed.params["g"] == typed.params["g"]
+    with pytest.raises(ConfigError, match="1,2"):   # as --smooth 1,2 is refused
+        load_config(_config(tmp_path, "bias", "    smooth: [1, 2]\n"))
+    with pytest.raises(ConfigError, match="plain value"):
+        load_config(_config(tmp_path, "refocus", "    g: [[2, 3]]\n"))
+
+
 @pytest.fixture
 def project(tmp_path):
     (tmp_path / "configs").mkdir()

@@ -33,8 +33,10 @@ def defaults(command: click.Command) -> dict[str, Any]:
 def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
     """The shell words that give ``command`` these parameter values (None = not given).
 
-    Raises ConfigError for a value no shell word could carry (a mapping, a list for a
-    one-value option, a non-boolean for a flag).
+    A list for a one-value option is the comma-separated word the shell would take
+    (``g: [2, 3]`` is ``--g=2,3``); the option's type then accepts or refuses it. Raises
+    ConfigError for a value no shell word could carry (a mapping, a nested list, a non-boolean
+    for a flag).
     """
     params = stage_parameters(command)
     options: list[str] = []
@@ -50,7 +52,9 @@ def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
         many = param.multiple if isinstance(param, click.Option) else param.nargs != 1
         items = list(value) if isinstance(value, (list, tuple)) else [value]
         if len(items) != 1 and not many:
-            raise ConfigError(f"{_label(param)}: expected one value, got a list {items!r}")
+            if isinstance(param, click.Argument) or param.is_flag or not items:
+                raise ConfigError(f"{_label(param)}: expected one value, got a list {items!r}")
+            items = [",".join(_word(param, v) for v in items)]
         if isinstance(param, click.Argument):
             positional.extend(_word(param, v) for v in items)
         elif param.is_flag:
