@@ -208,30 +208,29 @@ def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.nd
     if size.prod() > 16 * rows * cols:
         raise ValueError(f"the rig spreads a view over {size[0]} x {size[1]} px; check its "
                          "focal_mm, sensor_mm and prism")
-    out = np.full((n_views, n_chan, size[1], size[0]), np.nan, np.float32)
+    out = np.empty((n_views, n_chan, size[1], size[0]), np.float32)
     for k in range(n_views):
-        mx, my, bad = _view_maps(rig, k, origin_xy[k], (size[1], size[0]), (rows, cols))
         valid = np.isfinite(stack[k]).all(axis=0).astype(np.float32)
-        cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                          borderValue=0) > 0.999
-        cover &= ~bad
-        filled = fill_nan_channels(stack[k].astype(np.float32))
-        for c in range(n_chan):
-            warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
-                               borderMode=cv2.BORDER_REPLICATE)
-            out[k, c] = np.where(cover, warped, np.nan)
+        filled = fill_nan_channels(np.asarray(stack[k], np.float32))
+        for band, mx, my, bad in _view_maps(rig, k, origin_xy[k], (size[1], size[0]),
+                                            (rows, cols)):
+            cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                              borderValue=0) > 0.999
+            cover &= ~bad
+            for c in range(n_chan):
+                warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
+                                   borderMode=cv2.BORDER_REPLICATE)
+                out[k, c, band] = np.where(cover, warped, np.nan)
     return out, origin_xy[:, ::-1].copy()
 
 
 def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[int, int],
-               shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """cv2.remap maps (float32, -10 where no ray) of a canvas (rows, cols) whose pixel (0, 0) is
-    common pixel ``origin_xy``, and where no ray gets through. Traced in bands of about
-    MAP_BAND_PIXELS: the ray tracing's float64 temporaries stay a few tens of MB at any size."""
+               shape: tuple[int, int]):
+    """cv2.remap maps of a canvas (rows, cols) whose pixel (0, 0) is common pixel
+    ``origin_xy``, band by band of about MAP_BAND_PIXELS: yields (row slice, map x, map y,
+    where no ray gets through), the maps float32 (-10 where no ray). The ray tracing's float64
+    temporaries and the maps stay a few tens of MB at any size."""
     rows, cols = canvas
-    mx = np.empty(canvas, np.float32)
-    my = np.empty(canvas, np.float32)
-    bad = np.empty(canvas, bool)
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
     for r0 in range(0, rows, step):
@@ -239,10 +238,9 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         gy = np.arange(band.start, band.stop, dtype=np.float64)[:, None] + origin_xy[1]
         vx, vy = common_to_view(rig, view, np.broadcast_to(gx, (len(gy), cols)),
                                 np.broadcast_to(gy, (len(gy), cols)), shape)
-        bad[band] = ~(np.isfinite(vx) & np.isfinite(vy))
-        mx[band] = np.where(bad[band], -10, vx)
-        my[band] = np.where(bad[band], -10, vy)
-    return mx, my, bad
+        bad = ~(np.isfinite(vx) & np.isfinite(vy))
+        yield (band, np.where(bad, -10, vx).astype(np.float32),
+               np.where(bad, -10, vy).astype(np.float32), bad)
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
