@@ -5,9 +5,9 @@ through decode, bias and flat; or ``--views FILE.tif``), views A and B demosaice
 (``colour.demosaic``), then ``stitch.stitch`` with the demo's rig by the code of this checkout
 and by the code of ``--baseline`` (a git commit, exported with ``git archive``), each in its own
 process, one after the other in the same run. Printed per variant: wall time (best of
-``--repeat``), the tracemalloc peak of the stitch (the views given to it excluded, they are the
-caller's) as MiB and as a multiple of the float32 RGB panorama; then the ratios and how far the
-panoramas and shifts differ.
+``--repeat``, traced), the tracemalloc peak of the stitch (the views given to it excluded, they
+are the caller's) as MiB and as a multiple of the float32 RGB panorama; then the ratios and
+how far the panoramas and shifts differ.
 
     PYTHONPATH=. python bench/bench_stitch_memory.py [--pixels 1536] [--baseline 11b8dca]
 """
@@ -32,15 +32,15 @@ from plenocli.pipeline.stages.stitch import load_rig
 from plenocli.stitch import stitch
 stack = np.load(sys.argv[1])
 rig = load_rig(sys.argv[2])
-times = []
+times, peak, pano = [], 0, None
+tracemalloc.start()
 for _ in range(int(sys.argv[4])):
+    del pano
+    tracemalloc.reset_peak()
     start = time.perf_counter()
     pano, report = stitch(stack, layout="1x2", rig=rig)
     times.append(time.perf_counter() - start)
-    del pano
-tracemalloc.start()
-pano, report = stitch(stack, layout="1x2", rig=rig)
-peak = tracemalloc.get_traced_memory()[1]
+    peak = max(peak, tracemalloc.get_traced_memory()[1])
 tracemalloc.stop()
 np.save(sys.argv[3], pano)
 print(json.dumps({"seconds": min(times), "peak": peak, "pano_bytes": pano.nbytes,
@@ -73,8 +73,8 @@ def _run(code_root: Path, stack_file: Path, out: Path, repeat: int) -> dict:
     result = subprocess.run(
         [sys.executable, "-c", RUNNER, str(stack_file),
          str(ROOT / "configs" / "rigs" / "dualpixel_prism.yaml"), str(out), str(repeat)],
-        env={"PYTHONPATH": str(code_root), "PATH": "/usr/bin:/bin"}, capture_output=True,
-        text=True, check=True)
+        env={"PYTHONPATH": str(code_root), "PATH": "/usr/bin:/bin"}, cwd=code_root,
+        capture_output=True, text=True, check=True)
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
