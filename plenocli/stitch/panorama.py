@@ -107,14 +107,12 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
                    overlap_tolerance=overlap_tolerance)
     rig = _rig_of(rig, transform, n_views)
-    own = False  # whether ``stack`` is this function's own (NaN filled in place when warping)
+    own = bool(distortion_k1) or rig is not None  # a new stack: its NaN are filled in place
     if distortion_k1:
         stack = np.stack([[undistort(ch, distortion_k1) for ch in v] for v in stack])
-        own = True
     origins = None
     if rig is not None:
         stack, origins, layout = _undistort_rig(stack, rig, layout)
-        own = True
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
