@@ -16,7 +16,7 @@ import numpy as np
 
 from plenocli.errors import InputError
 from plenocli.stitch import compose
-from plenocli.stitch.quality import pair_residuals
+from plenocli.stitch.quality import overlap_residual
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
 from plenocli.stitch.rig import PrismRig, rig_axis_and_field, undistort_views
 from plenocli.stitch.views import (
@@ -24,6 +24,7 @@ from plenocli.stitch.views import (
     LAYOUTS,
     MODELS,
     as_view_stack,
+    fill_nan_channels,
     luminance,
     neighbour_pairs,
     undistort,
@@ -106,21 +107,22 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
                    overlap_tolerance=overlap_tolerance)
     rig = _rig_of(rig, transform, n_views)
+    own = bool(distortion_k1) or rig is not None  # a new stack: its NaN are filled in place
     if distortion_k1:
         stack = np.stack([[undistort(ch, distortion_k1) for ch in v] for v in stack])
     origins = None
     if rig is not None:
         stack, origins, layout = _undistort_rig(stack, rig, layout)
-    luma = luminance(stack)
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
     transforms, layout, source, pair_info, closure = _transforms(
-        luma, transform, layout, model, origins, search, view_shape=(rows, cols))
+        luminance(stack), transform, layout, model, origins, search, view_shape=(rows, cols))
     pairs = neighbour_pairs(layout)
-    panorama, warped, weights, offset, gains = _composite(stack, transforms, pairs,
-                                                          match_gain=match_gain, blend=blend)
-    residuals = pair_residuals(warped, weights, pairs)
+    canvas_shape = list(stack.shape[-2:])
+    panorama, layers, offset, gains, residuals = _composite(
+        stack, transforms, pairs, match_gain=match_gain, blend=blend, fill_in_place=own)
+    del stack
     pair_info = _pair_report(pair_info, pairs, residuals)
     measured = [res for res, _ in residuals if res is not None]
     covered = np.isfinite(panorama).all(axis=0)
@@ -131,7 +133,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     report = StitchReport(
         model=model, layout=layout, n_views=n_views, channels=n_chan if colour else 1,
         view_shape=[rows, cols], distortion_k1=distortion_k1, blend=blend, rig=rig_dict,
-        canvas_shape=list(stack.shape[-2:]) if rig is not None else None,
+        canvas_shape=canvas_shape if rig is not None else None,
         canvas_origins_px=origins.tolist() if origins is not None else None,
         axis_px=axis_px, field_deg=field_deg, transform_source=source,
         transform={"model": model, "layout": layout, "view_shape": [rows, cols],
@@ -142,7 +144,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         residual_px=float(np.sqrt(np.mean(np.square(measured)))) if measured else None,
         closure_px=closure, panorama_shape=list(panorama.shape[1:]),
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
-        coverage_fraction=float((weights.sum(axis=0) > 0).mean()))
+        coverage_fraction=float((layers.total > 0).mean()))
     return (panorama if colour else panorama[0]), report
 
 
@@ -176,17 +178,30 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
 
 
 def _composite(stack: np.ndarray, transforms: list[np.ndarray], pairs: list, *,
-               match_gain: bool, blend: str):
-    """The blended panorama (C, rows', cols') and what it was made of: the warped views, their
-    weights, the view-0 -> panorama translation and the per-view, per-channel gains."""
+               match_gain: bool, blend: str, fill_in_place: bool):
+    """The blended panorama (C, rows', cols'), the views' layers on it, the view-0 -> panorama
+    translation, the per-view, per-channel gains and per pair (residual px, overlap area).
+    The views' NaN are filled (nearest value) in ``stack`` itself when ``fill_in_place``."""
+    valid = [np.isfinite(view).all(axis=0) for view in stack]
+    filled = [fill_nan_channels(view, in_place=fill_in_place) for view in stack]
     offset, pano_shape = compose.canvas(transforms, stack.shape[-2:])
-    warped, weights = compose.warp_views(stack, transforms, offset, pano_shape)
+    layers = compose.place_views(valid, transforms, offset, pano_shape)
+    del valid
+    layers, offset = compose.trim_to_coverage(layers, offset)
+    overlaps = compose.pair_overlaps(layers, pairs)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = compose.match_gains(warped, weights, pairs)
-        warped *= gains[:, :, None, None].astype(np.float32)
-    warped, weights, offset = compose.trim_to_coverage(warped, weights, offset)
-    return compose.blend(warped, weights, blend), warped, weights, offset, gains
+        gains = compose.match_gains(filled, layers, pairs, overlaps)
+    residuals = []
+    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+        if overlap is None:
+            residuals.append((None, 0))
+            continue
+        region, both = overlap
+        luma_a = compose.overlap_luminance(filled, layers, a, region, gains)
+        luma_b = compose.overlap_luminance(filled, layers, b, region, gains)
+        residuals.append((overlap_residual(luma_a, luma_b, both), int(both.sum())))
+    return compose.blend(filled, layers, gains, blend), layers, offset, gains, residuals
 
 
 def _check_options(n_views: int, *, layout: str, model: str, blend: str,

@@ -79,8 +79,10 @@ def _photometric_residual(warped: np.ndarray, template: np.ndarray, inside: np.n
     views' gains and vignetting over the overlap, a linear least-squares fit) and its Huber
     weights (occlusions, ghosts or clipped pixels do not pull the fit)."""
     design = np.concatenate([poly * warped[:, None], np.ones((warped.size, 1))], axis=1)
-    normal = design[inside].T @ design[inside]
-    rhs = design[inside].T @ template[inside]
+    used = design[inside]  # one copy of the rows used (N x 16 float64), not three
+    normal = used.T @ used
+    rhs = used.T @ template[inside]
+    del used
     coef = np.linalg.lstsq(normal, rhs, rcond=None)[0]
     err = np.where(inside, design @ coef - template, 0.0)
     sigma = 1.4826 * float(np.median(np.abs(err[inside]))) + 1e-12

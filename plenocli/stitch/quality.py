@@ -38,7 +38,6 @@ def bounding_box(mask: np.ndarray) -> tuple[slice, slice] | None:
     return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
 
 
-
 def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
     """[start, stop) of the longest run of True in a 1-D boolean array, or None."""
     padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
@@ -50,8 +49,9 @@ def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
     return int(starts[k]), int(stops[k])
 
 
-def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) -> float | None:
-    """RMS (px) of local shifts left between two warped views, over blocks of their overlap."""
+def overlap_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) -> float | None:
+    """RMS (px) of local shifts left between two warped views (same-size crops of the canvas,
+    one channel), over blocks of their overlap ``both``; None when it is too small to measure."""
     from skimage.registration import phase_cross_correlation
 
     ys, xs = np.nonzero(both)
@@ -85,20 +85,3 @@ def _block_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) ->
     if not shifts:
         return None
     return float(np.sqrt(np.mean(np.sum(np.square(shifts), axis=1))))
-
-
-
-
-def pair_residuals(warped: np.ndarray, weights: np.ndarray,
-                   pairs: list[tuple[int, int, str]]) -> list[tuple[float | None, int]]:
-    """Per neighbour pair: the block residual (px, None when the overlap is too small to
-    measure) and the overlap area (canvas px) of the warped views (V, C, rows, cols)."""
-    out = []
-    for a, b, _ in pairs:
-        both = (weights[a] > 0) & (weights[b] > 0)
-        box = bounding_box(both)
-        res = None if box is None else _block_residual(
-            warped[(a, slice(None)) + box].mean(axis=0),
-            warped[(b, slice(None)) + box].mean(axis=0), both[box])
-        out.append((res, int(both.sum())))
-    return out

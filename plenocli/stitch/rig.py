@@ -31,11 +31,14 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from plenocli.optics import prism as optics_prism
 from plenocli.stitch.views import fill_nan_channels
 
-MAP_BAND_PIXELS = 1 << 18  # canvas pixels ray-traced at a time
+MAP_BAND_PIXELS = 1 << 18  # canvas pixels ray-traced or resampled at a time
+MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
+MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
 
 
 @dataclass(frozen=True)
@@ -208,41 +211,110 @@ def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.nd
     if size.prod() > 16 * rows * cols:
         raise ValueError(f"the rig spreads a view over {size[0]} x {size[1]} px; check its "
                          "focal_mm, sensor_mm and prism")
-    out = np.full((n_views, n_chan, size[1], size[0]), np.nan, np.float32)
+    out = np.empty((n_views, n_chan, size[1], size[0]), np.float32)
     for k in range(n_views):
-        mx, my, bad = _view_maps(rig, k, origin_xy[k], (size[1], size[0]), (rows, cols))
         valid = np.isfinite(stack[k]).all(axis=0).astype(np.float32)
-        cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                          borderValue=0) > 0.999
-        cover &= ~bad
-        filled = fill_nan_channels(stack[k].astype(np.float32))
-        for c in range(n_chan):
-            warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
-                               borderMode=cv2.BORDER_REPLICATE)
-            out[k, c] = np.where(cover, warped, np.nan)
+        filled = fill_nan_channels(np.asarray(stack[k], np.float32))
+        for band, mx, my, bad in _view_maps(rig, k, origin_xy[k], (size[1], size[0]),
+                                            (rows, cols)):
+            cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                              borderValue=0) > 0.999
+            cover &= ~bad
+            # canvas pixels more than a pixel off the view come out NaN whatever is resampled
+            # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off
+            # its slow border path
+            off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+            mx[off_view] = 4
+            my[off_view] = 4
+            for c in range(n_chan):
+                warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
+                                   borderMode=cv2.BORDER_REPLICATE)
+                out[k, c, band] = np.where(cover, warped, np.nan)
     return out, origin_xy[:, ::-1].copy()
 
 
+def _traced(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
+            shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`common_to_view` in bands of about MAP_BAND_PIXELS points (the ray tracing's
+    float64 temporaries stay a few tens of MB); x, y are common pixels of equal 2-D shape."""
+    vx, vy = np.empty(x.shape), np.empty(x.shape)
+    step = max(1, MAP_BAND_PIXELS // max(1, x.shape[1]))
+    for r0 in range(0, x.shape[0], step):
+        band = slice(r0, r0 + step)
+        vx[band], vy[band] = common_to_view(rig, view, x[band], y[band], shape)
+    return vx, vy
+
+
+def _cubic_weights(n: int, pitch: int) -> tuple[np.ndarray, np.ndarray]:
+    """For pixels 0..n-1 on a node grid of ``pitch`` px starting one pitch before pixel 0: the
+    index of each pixel's first stencil node and its 4-point Lagrange weights (n, 4)."""
+    pos = np.arange(n)
+    first = pos // pitch  # nodes first .. first + 3 sit at -1, 0, 1, 2 pitches from it
+    t = (pos % pitch / pitch)[:, None]
+    weights = np.concatenate([-t * (t - 1) * (t - 2) / 6, (t + 1) * (t - 1) * (t - 2) / 2,
+                              -(t + 1) * t * (t - 2) / 2, (t + 1) * t * (t - 1) / 6], axis=1)
+    return first, weights
+
+
+def _rough_cells(rig: PrismRig, view: int, nodes: list[np.ndarray], node_x: np.ndarray,
+                 node_y: np.ndarray, pitch: int, shape: tuple[int, int]) -> np.ndarray:
+    """(cells y, cells x) bool: the grid cells (and their neighbours) where the interpolated
+    map misses the ray traced through the cell's centre by more than MAP_TOLERANCE_PX, or has
+    no value (near total reflection, where the map steepens); their pixels are traced."""
+    mid = np.array([-1.0, 9.0, 9.0, -1.0]) / 16  # 4-point Lagrange weights half-way
+    centre_x = node_x[1:-2] + pitch / 2
+    centre_y = node_y[1:-2] + pitch / 2
+    traced = _traced(rig, view, *np.meshgrid(centre_x, centre_y), shape)
+    rough = np.zeros(traced[0].shape, bool)
+    for node, exact in zip(nodes, traced, strict=True):
+        along = sum(node[:, j:j + len(centre_x)] * mid[j] for j in range(4))
+        interpolated = sum(along[j:j + len(centre_y)] * mid[j] for j in range(4))
+        rough |= ~(np.abs(interpolated - exact) <= MAP_TOLERANCE_PX)
+    return ndimage.binary_dilation(rough, structure=np.ones((3, 3), bool))
+
+
 def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[int, int],
-               shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """cv2.remap maps (float32, -10 where no ray) of a canvas (rows, cols) whose pixel (0, 0) is
-    common pixel ``origin_xy``, and where no ray gets through. Traced in bands of about
-    MAP_BAND_PIXELS: the ray tracing's float64 temporaries stay a few tens of MB at any size."""
+               shape: tuple[int, int]):
+    """cv2.remap maps of a canvas (rows, cols) whose pixel (0, 0) is common pixel
+    ``origin_xy``, band by band of about MAP_BAND_PIXELS: yields (row slice, map x, map y,
+    where no ray gets through), the maps float32 (-10 where no ray).
+
+    Rays are traced exactly on a grid of nodes (one pitch beyond the canvas on each side; the
+    pitch is the view's width / MAP_NODES_PER_VIEW, at most 16 px) and the maps between them
+    interpolated by separable 4-point Lagrange cubics. The maps are smooth on the scale of the
+    view (the error falls as the 4th power of the pitch over the view's width), so this stays
+    within the float32 maps' own rounding of tracing every pixel for about 2/pitch^2 of the
+    rays: every cell's interpolation is checked against a ray traced through its centre, and
+    the pixels of cells that miss it by more than MAP_TOLERANCE_PX, or whose nodes lose their
+    ray (total reflection), are traced exactly."""
     rows, cols = canvas
-    mx = np.empty(canvas, np.float32)
-    my = np.empty(canvas, np.float32)
-    bad = np.empty(canvas, bool)
+    pitch = int(np.clip(shape[1] // MAP_NODES_PER_VIEW, 1, 16))
+    node_y = (np.arange((rows - 1) // pitch + 4) - 1.0) * pitch + origin_xy[1]
+    node_x = (np.arange((cols - 1) // pitch + 4) - 1.0) * pitch + origin_xy[0]
+    nodes = _traced(rig, view, *np.meshgrid(node_x, node_y), shape)
+    lost = ndimage.binary_dilation(~(np.isfinite(nodes[0]) & np.isfinite(nodes[1])),
+                                   structure=np.ones((3, 3), bool))
+    nodes = [np.where(lost, np.nan, node) for node in nodes]
+    rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
+    first_x, weights_x = _cubic_weights(cols, pitch)
+    along_x = [sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)) for node in nodes]
+    del nodes
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
     for r0 in range(0, rows, step):
         band = slice(r0, min(r0 + step, rows))
-        gy = np.arange(band.start, band.stop, dtype=np.float64)[:, None] + origin_xy[1]
-        vx, vy = common_to_view(rig, view, np.broadcast_to(gx, (len(gy), cols)),
-                                np.broadcast_to(gy, (len(gy), cols)), shape)
-        bad[band] = ~(np.isfinite(vx) & np.isfinite(vy))
-        mx[band] = np.where(bad[band], -10, vx)
-        my[band] = np.where(bad[band], -10, vy)
-    return mx, my, bad
+        first_y, weights_y = _cubic_weights(band.stop, pitch)
+        first_y, weights_y = first_y[band], weights_y[band]
+        vx, vy = (sum(a[first_y + j] * weights_y[:, j, None] for j in range(4))
+                  for a in along_x)
+        exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
+        if exact.any():
+            ys, xs = np.nonzero(exact)
+            tx, ty = common_to_view(rig, view, gx[xs], ys + (r0 + origin_xy[1]), shape)
+            vx[ys, xs], vy[ys, xs] = tx, ty
+        bad = ~(np.isfinite(vx) & np.isfinite(vy))
+        yield (band, np.where(bad, -10, vx).astype(np.float32),
+               np.where(bad, -10, vy).astype(np.float32), bad)
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,

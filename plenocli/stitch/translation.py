@@ -10,7 +10,7 @@ from plenocli.errors import InputError
 from plenocli.stitch.ncc import search_highpassed
 from plenocli.stitch.photometric import match_photometry, refine_homography
 from plenocli.stitch.quality import aligned_correlation
-from plenocli.stitch.views import fill_nan, highpass, translation_matrix, valid_eroded
+from plenocli.stitch.views import highpass, translation_matrix, valid_eroded
 
 
 def _overlap_crops(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
@@ -136,19 +136,20 @@ def _ecc_subpixel(a: np.ndarray, b: np.ndarray, dy0: int, dx0: int) -> tuple[flo
     if crops is None:
         raise InputError("no overlap found between the views; check the layout (--layout) and "
                          "that the views overlap")
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return 0.0, 0.0, "template"
     _, _, (y0, x0) = crops
-    ra, rb = fill_nan(a).astype(np.float32), fill_nan(b).astype(np.float32)
+    ra, rb = np.asarray(a, np.float32), np.asarray(b, np.float32)
     rows_ov, cols_ov = crops[0].shape
-    has_nan = not (np.isfinite(a).all() and np.isfinite(b).all())
     ca = ra[y0:y0 + rows_ov, x0:x0 + cols_ov]
     cb = rb[y0 - dy0:y0 - dy0 + rows_ov, x0 - dx0:x0 - dx0 + cols_ov]
     warp = np.float32([[1, 0, x0 - dx0], [0, 1, y0 - dy0]])  # crop of a -> b
     method = "ecc"
     # two passes: the photometric ratio field is re-estimated once the shift is sub-pixel
-    # (views with no-data regions, e.g. undistorted canvases, skip ECC: it cannot mask them).
-    # ECC stops once its correlation gains less than 1e-6: the photometric fit sets the
+    # (views with no-data regions, e.g. undistorted canvases, skip ECC above: it cannot mask
+    # them). ECC stops once its correlation gains less than 1e-6: the photometric fit sets the
     # final shift (1e-8 took ten times the iterations for the same final result)
-    for _ in range(0 if has_nan else 2):
+    for _ in range(2):
         b_on_a = cv2.warpAffine(rb, warp, (cols_ov, rows_ov),
                                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                 borderMode=cv2.BORDER_REPLICATE)
@@ -160,8 +161,6 @@ def _ecc_subpixel(a: np.ndarray, b: np.ndarray, dy0: int, dx0: int) -> tuple[flo
         except cv2.error:
             method = "phase-correlation"
             break
-    if has_nan:
-        return 0.0, 0.0, "template"
     if method == "ecc":
         ty, tx = float(warp[1, 2]) - (y0 - dy0), float(warp[0, 2]) - (x0 - dx0)
     else:

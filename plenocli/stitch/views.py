@@ -61,7 +61,12 @@ def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray,
             raise InputError(f"view {k} has shape {a.shape} but view 0 has {first} (different "
                              f"{what}); stitch needs views of one size and one channel count")
     colour = len(first) == 3
-    stack = np.stack([a if colour else a[np.newaxis] for a in arrays]).astype(np.float32)
+    if isinstance(views, np.ndarray) and views.dtype == np.float32:
+        stack = views if colour else views[:, np.newaxis]  # read only: no copy of the caller's
+    else:
+        stack = np.empty((len(arrays),) + (first if colour else (1,) + first), np.float32)
+        for k, a in enumerate(arrays):
+            stack[k] = a
     if min(stack.shape[-2:]) < 32:
         raise InputError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
                          "register; need at least 32 x 32")
@@ -71,10 +76,15 @@ def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray,
 def luminance(stack: np.ndarray) -> np.ndarray:
     """(V, rows, cols): the channel mean of a (V, C, rows, cols) stack (NaN where no channel has
     data). Refuses a view without data or without texture."""
-    if stack.shape[1] > 1:
+    n_views, n_chan, rows, cols = stack.shape
+    if n_chan > 1:
+        luma = np.empty((n_views, rows, cols), np.float32)
+        step = max(1, (1 << 20) // cols)  # bands: nanmean's temporaries stay small
         with warnings.catch_warnings():  # no-data pixels (all NaN) stay NaN
             warnings.simplefilter("ignore", RuntimeWarning)
-            luma = np.nanmean(stack, axis=1)
+            for k in range(n_views):
+                for r0 in range(0, rows, step):
+                    luma[k, r0:r0 + step] = np.nanmean(stack[k, :, r0:r0 + step], axis=0)
     else:
         luma = stack[:, 0]
     for k in range(len(luma)):
@@ -119,19 +129,27 @@ def fill_nan(image: np.ndarray) -> np.ndarray:
     return image[tuple(idx)]
 
 
-def fill_nan_channels(channels: np.ndarray) -> np.ndarray:
+def fill_nan_channels(channels: np.ndarray, *, in_place: bool = False) -> np.ndarray:
     """:func:`fill_nan` of every channel of (C, rows, cols); channels with the same NaN pixels
-    (a demosaiced view, a rig canvas) share one distance transform."""
+    (a demosaiced view, a rig canvas) share one distance transform. ``in_place``: fill
+    ``channels`` itself (no copy) and return it."""
     bad = ~np.isfinite(channels)
     if not bad.any():
         return channels
+    out = channels if in_place else np.empty_like(channels)
     if not (bad == bad[0]).all():
-        return np.stack([fill_nan(c) for c in channels])
+        for c in range(len(channels)):
+            out[c] = fill_nan(channels[c])
+        return out
     if bad[0].all():
-        return np.zeros_like(channels)
+        out[...] = 0
+        return out
     rows, cols = ndimage.distance_transform_edt(bad[0], return_distances=False,
                                                 return_indices=True)
-    return channels[:, rows, cols]
+    del bad
+    for c in range(len(channels)):
+        out[c] = channels[c][rows, cols]
+    return out
 
 
 def highpass(image: np.ndarray) -> np.ndarray:

@@ -55,10 +55,11 @@ def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
 
 
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
-    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols), their names, whether any
-    was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata."""
-    found: list[tuple[str, np.ndarray]] = []
-    bayer, first_meta = False, None
+    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32, their names, whether
+    any was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata.
+    Only the views wanted are demosaiced, one at a time, straight into the stack."""
+    found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa))
+    first_meta = None
     for path in inputs:
         data, meta = tiffio.read_image(path)
         first_meta = first_meta or meta
@@ -70,16 +71,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
-            if cfa:
-                try:
-                    rgb = demosaic(data[pages[0]], cfa)
-                except ValueError as err:
-                    raise InputError(f"{path}: view {name}: {err}") from err
-                found.append((name, np.moveaxis(rgb, -1, 0)))
-                bayer = True
-            else:
-                found.append((name, data[pages].astype(np.float32).squeeze(axis=0)
-                              if len(pages) == 1 else data[pages].astype(np.float32)))
+            found.append((name, (path, data, pages, cfa)))
     if views:
         by_name = dict(found)
         wanted = [v.strip() for v in views.split(",") if v.strip()]
@@ -88,12 +80,37 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
             raise InputError(f"view {missing[0]!r} is not in the input (views: "
                              f"{','.join(n for n, _ in found)}); pass --views with those names")
         found = [(v, by_name[v]) for v in wanted]
-    shapes = {a.shape for _, a in found}
-    if len(shapes) > 1:
-        listing = ", ".join(f"{n} {'x'.join(map(str, a.shape))}" for n, a in found)
+    shapes = [_view_shape(*source) for _, source in found]
+    if len(set(shapes)) > 1:
+        listing = ", ".join(f"{n} {'x'.join(map(str, shape))}"
+                            for (n, _), shape in zip(found, shapes, strict=True))
         raise InputError(f"the views differ in size or colour channels ({listing}); stitch "
                          "views of one capture, processed the same way")
-    return np.stack([a for _, a in found]), [n for n, _ in found], bayer, first_meta
+    stack = np.empty((len(found),) + shapes[0], np.float32)
+    for k, (name, source) in enumerate(found):
+        _fill_view(stack[k], name, *source)
+    return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
+
+
+def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None) -> tuple:
+    """The shape of a view once loaded: (3, rows, cols) demosaiced, else its pages'."""
+    if cfa:
+        return (3,) + data.shape[1:]
+    return data.shape[1:] if len(pages) == 1 else (len(pages),) + data.shape[1:]
+
+
+def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: list[int],
+               cfa: str | None) -> None:
+    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB."""
+    if not cfa:
+        out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
+        return
+    try:
+        rgb = demosaic(data[pages[0]], cfa)
+    except ValueError as err:
+        raise InputError(f"{path}: view {name}: {err}") from err
+    for c in range(3):
+        out[c] = rgb[..., c]
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
@@ -135,7 +152,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                                    active_area=None, masked_areas=None, origin=None,
                                    stitch={k: rep[k] for k in ("model", "layout", "shifts_px",
                                                                "residual_px", "origin_px")})
-    tiffio.write_image(output, pano.astype(np.float32), out_meta, protect=protect)
+    tiffio.write_image(output, pano, out_meta, protect=protect)
     if report:
         write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
