@@ -261,3 +261,27 @@ def test_origami_refocused_crops_offset_recovered(realdata):
     b = image[..., 10:rows - 10, 10 + dx:10 + dx + w]
     _, report = stitch(np.stack([a, b]), layout="1x2")
     assert np.abs(np.array(report.shifts_px[1]) - [0, dx]).max() < 0.5
+
+
+def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
+    """Four views reach the last one through two neighbours; one pair matched 12 px off its
+    true place must stop the stitch, not make a ghosted panorama."""
+    from plenocli.stitch import registration
+
+    true = {(0, 1): (1.0, 100.0), (0, 2): (80.0, -2.0), (1, 3): (79.0, 3.0),
+            (2, 3): (0.0, 105.0)}
+
+    def measured(shifts):
+        def pair(luma, a, b, direction, model, search, prior, tol):
+            return np.array(shifts[(a, b)], float), {}
+        return pair
+
+    luma = np.zeros((4, 120, 160), np.float32)
+    expected = {pair: (None, None) for pair in true}
+    monkeypatch.setattr(registration, "_measure_pair", measured(true))
+    _, _, closure = registration.register(luma, "2x2", "translation", {}, expected)
+    assert closure < 1e-9
+    monkeypatch.setattr(registration, "_measure_pair",
+                        measured({**true, (2, 3): (0.0, 117.0)}))
+    with pytest.raises(InputError, match="do not close"):
+        registration.register(luma, "2x2", "translation", {}, expected)

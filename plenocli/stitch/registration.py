@@ -11,6 +11,10 @@ from plenocli.stitch.homography import estimate_homography
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import corners_xy, neighbour_pairs, translation_matrix
 
+# A 2 x 2 layout reaches the fourth view two ways; correct pair registrations agree within a
+# fraction of a pixel (noise), a wrong match by about the size of the shift it got wrong.
+MAX_CLOSURE_PX = 2.0
+
 
 def difference_row(a: int, b: int, n_views: int) -> np.ndarray:
     """Design-matrix row of a pair measurement x_b - x_a, with view 0 fixed (x_0 = 0)."""
@@ -124,9 +128,17 @@ def register(luma: np.ndarray, layout: str, model: str, search: dict, expected: 
         pair_info.append({"views": [a, b], "direction": direction, **info})
     if model == "homography":
         transforms, closure = _chain_homographies(measured, n_views, luma.shape[1:])
-        return transforms, pair_info, closure
-    pos, closure = _solve_translations([(a, b, d) for (a, b), d in measured.items()], n_views)
-    return [translation_matrix(*p) for p in pos], pair_info, (closure if n_views > 2 else None)
+    else:
+        pos, closure = _solve_translations([(a, b, d) for (a, b), d in measured.items()],
+                                           n_views)
+        transforms, closure = [translation_matrix(*p) for p in pos], \
+            (closure if n_views > 2 else None)
+    if closure is not None and not closure <= MAX_CLOSURE_PX:
+        raise InputError(f"the pair registrations do not close around the 2 x 2 loop (closure "
+                         f"{closure:.1f} px, at most {MAX_CLOSURE_PX:g}): one pair matched the "
+                         "wrong place; pass --rig or --overlap so the search looks near the "
+                         "expected shifts")
+    return transforms, pair_info, closure
 
 
 def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str):

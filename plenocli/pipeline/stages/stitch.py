@@ -163,11 +163,20 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     if preview:
         image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
         write_png(preview, image, protect=protect, colour=meta.get("colour"))
-    log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %s px)",
+    log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
-             ",".join(names), pano.shape[2], pano.shape[1],
-             "n/a (overlap too small to measure)" if rep["residual_px"] is None
-             else f"{rep['residual_px']:.3f}")
+             ",".join(names), pano.shape[2], pano.shape[1], _alignment(rep))
+
+
+def _alignment(rep: dict) -> str:
+    """How well the views line up, as the log says it: the overlap residual, else the loop
+    closure of the pairwise shifts (a 2 x 2 layout), else why neither was measured."""
+    if rep["residual_px"] is not None:
+        return f"residual {rep['residual_px']:.3f} px"
+    if rep.get("closure_px") is not None:
+        return (f"loop closure {rep['closure_px']:.3f} px (overlaps too narrow for a "
+                "residual)")
+    return "overlaps too narrow to measure a residual"
 
 
 def load_rig(path: str) -> PrismRig:
