@@ -191,3 +191,22 @@ def test_quad_bayer_sais_are_half_resolution_mosaics(tmp_path):
     assert lin.shape == (3, rows // 2, cols // 2)
     inner = np.moveaxis(lin, 0, -1)[4:-4, 4:-4]
     np.testing.assert_allclose(inner, np.broadcast_to(20000 * colour, inner.shape), rtol=1e-3)
+
+
+def test_wb_from_a_dual_pixel_white_takes_its_sum_view_for_a_panorama(tmp_path):
+    """A stitched panorama (pages R, G, B) has no view of the white's names: the gains come
+    from the white's full-pupil sum S (here the only view without a green cast)."""
+    cast = np.array([0.5, 1.0, 0.7], np.float32)
+    pano = np.ones((3, 32, 48), np.float32) * cast[:, None, None] * 1000
+    write_image(tmp_path / "pano.tif", pano, {"views": ["R", "G", "B"], "cfa": None})
+    s_white = mosaic(np.ones((32, 48, 3), np.float32) * cast * 2000, "RGGB")
+    skewed = mosaic(np.ones((32, 48, 3), np.float32) * [1.0, 2.0, 1.0] * 1000, "RGGB")
+    write_image(tmp_path / "white.tif", np.stack([skewed, skewed, s_white]),
+                {"views": ["A", "B", "S"], "cfa": "RGGB"})
+    result = invoke("develop", tmp_path / "pano.tif", "--wb-from", tmp_path / "white.tif",
+                    "--matrix", "none", "-o", tmp_path / "p.tif", "--linear",
+                    tmp_path / "lin.tif")
+    assert result.exit_code == 0, result.output
+    lin, _ = read_image(tmp_path / "lin.tif")
+    means = lin.reshape(3, -1).mean(axis=1)
+    np.testing.assert_allclose(means / means[1], 1.0, atol=1e-4)   # neutral after S's gains

@@ -170,25 +170,22 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
 
 
 def _gains_from_white(path: str, chosen: dev.ColourView) -> np.ndarray:
-    """Gains from the white image's view of the same name (or its only colour view), with the
-    same colour layout (mosaic or R, G, B pages) as the view developed."""
+    """Gains from the white image's view of the same name; for a view the white does not have
+    (a panorama or refocused image made from its views), its full-pupil sum S or its only
+    colour view. Gains are per colour, so a Bayer white serves a demosaiced view and back."""
     data, meta = tiffio.read_image(path)
     framing = active_area(meta, data.shape[1:])
     data, cfa = framing.crop(_levels(data, meta)), framing.cfa
     names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
-        white = next((v for v in views if v.name == chosen.name),
-                     views[0] if len(views) == 1 else None)
+        by_name = {v.name: v for v in views}
+        white = by_name.get(chosen.name) or by_name.get("S") or (
+            views[0] if len(views) == 1 else None)
         if white is None:
-            raise ValueError(f"no view {chosen.name} among its colour views "
-                             f"({', '.join(v.name for v in views)}); use a white image "
-                             "processed like the input")
-        if bool(white.cfa) != bool(chosen.cfa):
-            kinds = ("a Bayer mosaic", "R, G, B pages")
-            raise ValueError(f"its view {white.name} is {kinds[not white.cfa]} but the view "
-                             f"developed is {kinds[not chosen.cfa]}; use a white image of the "
-                             "same camera, processed like the input")
+            raise ValueError(f"no view {chosen.name} (nor a sum view S) among its colour views "
+                             f"({', '.join(by_name)}); use a white image processed like the "
+                             "input")
         if white.cfa:
             return balance.gains_from_mosaic(data[white.pages[0]], white.cfa)
         return balance.gains_from_rgb(np.stack([data[k] for k in white.pages], axis=-1))
