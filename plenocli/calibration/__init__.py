@@ -33,9 +33,7 @@ from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.centres import (
     LensCentre,
     lens_centre,
-    mean_micro_image,
     refine_centres,
-    symmetry_centre,
 )
 from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice
 from plenocli.calibration.flatten import flatten
@@ -46,7 +44,7 @@ from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
 __all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
-           "mean_micro_image", "refine_centres", "symmetry_centre"]
+           "refine_centres"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # a lattice read from the border repetition is used when its pitch and angle errors move the
@@ -127,7 +125,9 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
             f"{_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
     guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
                      image_shape=image.shape)
-    grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad) if sure else None)
+    grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad,
+                                              border.pitch_err_px, border.angle_err_rad)
+                         if sure else None)
     if not fit.centres_refined and not sure:
         raise CalibrationError(
             f"{found.describe()} lattice found, but on this scene neither the micro-image "

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numba
 import numpy as np
 
@@ -134,8 +133,6 @@ def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
     centres[inner, 0] = np.where(ok, cx, ideal[inner, 0])
     centres[inner, 1] = np.where(ok, cy, ideal[inner, 1])
     return idx, centres, refined
-
-
 
 
 FOLD_BINS = 24      # bins of the folded lattice cell per lattice direction; a multiple of 6 so
@@ -276,13 +273,12 @@ def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int) -> np.ndarray:
     """(bins, bins) mean of the image by fractional lattice coordinates (u along b1, v along
     b2, from the grid's offset); NaN where no pixel fell."""
     rows, cols = flat.shape
-    r0, c0, size_r, size_c = 0, 0, rows, cols
     inv = np.linalg.inv(grid.basis().T)
     total = np.zeros(bins * bins)
     count = np.zeros(bins * bins)
-    x = np.arange(c0, c0 + size_c, dtype=np.float64) - grid.offset_xy[0]
-    for top in range(r0, r0 + size_r, 256):   # row bands keep the temporaries small
-        band = flat[top:min(top + 256, r0 + size_r), c0:c0 + size_c]
+    x = np.arange(cols, dtype=np.float64) - grid.offset_xy[0]
+    for top in range(0, rows, 256):   # row bands keep the temporaries small
+        band = flat[top:min(top + 256, rows)]
         y = np.arange(top, top + band.shape[0], dtype=np.float64)[:, None] - grid.offset_xy[1]
         u = np.floor((inv[0, 0] * x + inv[0, 1] * y) * bins).astype(np.int64) % bins
         v = np.floor((inv[1, 0] * x + inv[1, 1] * y) * bins).astype(np.int64) % bins
@@ -309,45 +305,4 @@ def _turn_asymmetry(cell: np.ndarray, lattice: str) -> np.ndarray:
     if not spread > 0:
         return np.ones((n, n))
     return np.nanmean(diff * diff, axis=(2, 3)) / spread
-
-
-def mean_micro_image(image: np.ndarray, centres: np.ndarray, *, half: int) -> np.ndarray:
-    """Average of the micro-images around ``centres`` (K, 2), resampled bilinearly on a
-    (2 half + 1)^2 grid centred on each centre: its symmetry centre is the grid's bias."""
-    rows, cols = image.shape
-    offs = np.arange(-half, half + 1, dtype=np.float32)
-    acc = np.zeros((len(offs), len(offs)), np.float64)
-    img = np.asarray(image, np.float32)
-    keep = ((centres[:, 0] > half + 1) & (centres[:, 0] < cols - half - 2)
-            & (centres[:, 1] > half + 1) & (centres[:, 1] < rows - half - 2))
-    for x, y in centres[keep]:
-        mapx = (x + offs)[None, :].repeat(len(offs), 0).astype(np.float32)
-        mapy = (y + offs)[:, None].repeat(len(offs), 1).astype(np.float32)
-        acc += cv2.remap(img, mapx, mapy, cv2.INTER_LINEAR)
-    return acc / max(int(keep.sum()), 1)
-
-
-def symmetry_centre(patch: np.ndarray, *, radius: float) -> tuple[float, float]:
-    """Point-symmetry centre (dx, dy) of a patch relative to its middle pixel (px).
-
-    Minimises sum over |r| < radius of (P(c + r) - P(c - r))^2 over sub-pixel c (bilinear
-    resampling, Nelder-Mead)."""
-    from scipy.optimize import minimize
-
-    n = patch.shape[0]
-    mid = (n - 1) / 2
-    yy, xx = np.mgrid[0:n, 0:n].astype(np.float32) - np.float32(mid)
-    inside = np.hypot(xx, yy) < radius
-    p = patch.astype(np.float32)
-
-    def cost(c):
-        fwd = cv2.remap(p, (mid + c[0] + xx).astype(np.float32),
-                        (mid + c[1] + yy).astype(np.float32), cv2.INTER_CUBIC)
-        back = cv2.remap(p, (mid + c[0] - xx).astype(np.float32),
-                         (mid + c[1] - yy).astype(np.float32), cv2.INTER_CUBIC)
-        return float(np.sum((fwd - back)[inside] ** 2))
-
-    res = minimize(cost, np.zeros(2), method="Nelder-Mead",
-                   options={"xatol": 1e-4, "fatol": 1e-12, "maxiter": 400})
-    return float(res.x[0]), float(res.x[1])
 

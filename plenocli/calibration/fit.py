@@ -85,20 +85,6 @@ def reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: 
                     image_shape=shape)
 
 
-def rotate_indices(idx: np.ndarray, turns: int, lattice: str) -> np.ndarray:
-    """Indices of the same lenses after the basis turned by ``turns`` lattice steps
-    (b1' = R(-turns*step) b1 ...), i.e. the new basis is the old one rotated back."""
-    i, j = idx[:, 0], idx[:, 1]
-    for _ in range(turns % (6 if lattice == "hex" else 4)):
-        # old basis rotated by -step becomes the new one: old b1 = new b2, old b2 = new b2 - new b1
-        # (hex) / old b1 = new b2, old b2 = -new b1 (square). Then a lens i b1 + j b2 (old) is:
-        if lattice == "hex":
-            i, j = -j, i + j
-        else:
-            i, j = -j, i
-    return np.stack([i, j], axis=1)
-
-
 def compare_grids(ours: LensGrid, other: LensGrid, image_shape: tuple[int, int]) -> dict:
     """Distance between two grids over every lens of ``ours`` inside the image (px).
 
@@ -147,18 +133,20 @@ CORE_PITCHES = 12.0     # the first fit uses lenses within this many pitches of 
 
 
 def fit_grid(flat: np.ndarray, guess: LensGrid, *,
-             border: tuple[float, float] | None = None) -> tuple[LensGrid, LatticeFit]:
+             border: tuple[float, float, float, float] | None = None
+             ) -> tuple[LensGrid, LatticeFit]:
     """The lattice through the point-symmetry centres of the micro-images, from ``guess``.
 
     A first fit over the lenses near the middle corrects the pitch and rotation before the
     whole frame is refined (a 0.5 % pitch error is half a lens 100 lenses out). Lenses whose
     centre is far from the lattice (dead pixels, a bright scene edge) are dropped, robustly.
     When the residuals are large the image is a scene whose content moves the centres (they
-    are not point-symmetric): then pitch and angle are ``border`` (measured from the border
-    repetition, when given), the offset is the guess's (the centre of the frame's mean
-    micro-image, see :func:`lens_centre`), and the centres written are the lattice's moved by
-    a smooth field through the centres of the regions' mean micro-images (:func:`smooth_field`;
-    a camera's array and main lens bend the lattice by a few tenths of a pixel)."""
+    are not point-symmetric): then pitch and angle are those of ``border`` (pitch, angle and
+    their standard errors, measured from the border repetition, when given), the offset is
+    the guess's (the centre of the frame's mean micro-image, see :func:`lens_centre`), and the
+    centres written are the lattice's moved by a smooth field through the centres of the
+    regions' mean micro-images (:func:`smooth_field`; a camera's array and main lens bend the
+    lattice by a few tenths of a pixel)."""
     rows, cols = flat.shape
     grid = reindexed(guess.pitch_px, guess.angle_rad, guess.offset_xy, guess.lattice,
                      (rows, cols))
@@ -177,8 +165,8 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
     rms = _residual_rms(grid, idx, centres, use)
     scene = rms > SCENE_RESIDUAL * grid.pitch_px
     if scene and border is not None:
-        grid = reindexed(*border, guess.offset_xy, grid.lattice, (rows, cols))
-        se = (0.0, 0.0)
+        grid = reindexed(*border[:2], guess.offset_xy, grid.lattice, (rows, cols))
+        se = border[2:]
     idx_out, ideal = grid.lens_centres()
     if scene:   # the lattice, bent by the smooth field of the regions' mean micro-images
         ideal = ideal + smooth_field(*regional_shifts(flat, grid), ideal, (rows, cols),

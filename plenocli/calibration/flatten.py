@@ -86,8 +86,6 @@ def _local_linear_1d(f: np.ndarray, sigma: float, axis: int) -> np.ndarray:
     return ca * gf + cb * (g(f * t_img) - t_img * gf)
 
 
-
-
 def border_signal(flat: np.ndarray) -> np.ndarray:
     """|grad| of a flattened image (central differences), clipped at its 99th percentile: the
     micro-image borders are edges in every lenslet image, whatever the scene; a few strong

@@ -112,8 +112,8 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
     first.sort(key=lambda t: -t[1])
     chosen: list[Lattice] = []
     for lat, c in first:   # one per neighbourhood: a scene repetition comes in many variants
-        if c > 0 and len(chosen) < REFINED and not any(lat.same_as(c, rel=0.06, angle=0.06)
-                                             for c in chosen):
+        if c > 0 and len(chosen) < REFINED and not any(
+                lat.same_as(other, rel=0.06, angle=0.06) for other in chosen):
             chosen.append(lat)
     for kind in ("hex", "square"):   # the best of each kind, to say which kind fits
         chosen += [lat for lat, c in first

@@ -95,7 +95,7 @@ class Autocorrelation:
 
     def contrast(self, lattice: Lattice, *, near: float = 3.0, far: float | None = None
                  ) -> float:
-        """Contrast of ``lattice`` over lags from ``near`` pitches (or 15 % of the crop) to
+        """Contrast of ``lattice`` over lags from ``near`` pitches (or 15 % of the reach) to
         ``far`` pitches (default: as far as the crop reaches). See the module docstring."""
         annulus = self._annulus(lattice, near, far)
         if annulus is None:

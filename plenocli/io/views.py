@@ -55,7 +55,7 @@ def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.nd
         else:
             raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
                              "pass --views with names from that list")
-    _check_once([names[k] for k in idx])
+    check_named_once([names[k] for k in idx])
     return data[idx], [names[k] for k in idx]
 
 
@@ -74,7 +74,7 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
                 raise InputError(f"{path}: view {missing[0]!r} is not in the input (views: "
                                  f"{','.join(names)}); pass --views with names from that list")
             names = _wanted(views)
-            _check_once(names)
+            check_named_once(names)
         index = {n: k for k, n in enumerate(page_names)}
         stack = np.stack([[data[index[f"{v}.{c}"]] for c in channels] for v in names])
         return ColourViews(stack.astype(np.float64), names, channels, "channels", None)
@@ -109,7 +109,8 @@ def read_masked_whites(inputs: list[str], views: str | None
     return loaded, labels
 
 
-def _check_once(names: list[str]) -> None:
+def check_named_once(names: list[str]) -> None:
+    """A --views list names each view once (a view stacked twice is no second view)."""
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ConfigError(f"--views names view {twice[0]!r} twice; name each view once")

@@ -134,10 +134,13 @@ def register(luma: np.ndarray, layout: str, model: str, search: dict, expected: 
         transforms, closure = [translation_matrix(*p) for p in pos], \
             (closure if n_views > 2 else None)
     if closure is not None and not closure <= MAX_CLOSURE_PX:
+        guided = any(prior is not None for prior, _ in expected.values())
+        advice = ("check that --rig or --overlap describes these views (the search looked "
+                  "near the shifts they predict)") if guided else (
+            "pass --rig or --overlap so the search looks near the expected shifts")
         raise InputError(f"the pair registrations do not close around the 2 x 2 loop (closure "
                          f"{closure:.1f} px, at most {MAX_CLOSURE_PX:g}): one pair matched the "
-                         "wrong place; pass --rig or --overlap so the search looks near the "
-                         "expected shifts")
+                         f"wrong place; {advice}")
     return transforms, pair_info, closure
 
 

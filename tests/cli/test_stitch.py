@@ -159,3 +159,12 @@ def test_stitch_removes_a_known_distortion(tmp_path):
     res = CliRunner().invoke(cli, ["stitch", str(path), "--distortion", "nan",
                                    "-o", str(tmp_path / "bad.tif")])
     assert res.exit_code == 2 and "--distortion" in res.output
+
+
+def test_a_view_named_twice_is_refused(tmp_path):
+    views = np.random.default_rng(0).random((2, 40, 60)).astype(np.float32)
+    tiffio.write_image(tmp_path / "v.tif", views, {"views": ["A", "B"], "cfa": None})
+    result = CliRunner().invoke(cli, ["stitch", str(tmp_path / "v.tif"), "--views", "A,A",
+                                      "-o", str(tmp_path / "p.tif")])
+    assert result.exit_code == 1 and "twice" in result.output, result.output
+    assert not (tmp_path / "p.tif").exists()

@@ -66,7 +66,6 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                   protect=protect, colour=meta.get("colour"))
 
 
-
 def _check_sensor_image(path: str, meta: dict, pages: list[str], cfa_layout: str) -> None:
     """Sub-aperture images are cut from a sensor image, not from views made from one."""
     made = next((key for key in ("sai", "refocus") if key in meta), None)

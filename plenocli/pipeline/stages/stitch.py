@@ -22,7 +22,9 @@ from plenocli.colour.demosaic import demosaic
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
+from plenocli.io.framing import active_area
 from plenocli.io.preview import write_png
+from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
@@ -62,12 +64,10 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     first_meta = None
     for path in inputs:
         data, meta = tiffio.read_image(path)
-        first_meta = first_meta or meta
-        top, left = 0, 0
-        area = meta.get("active_area")
-        if area:  # stitch the light-sensitive area only
-            top, left, bottom, right = area
-            data = data[:, top:bottom, left:right]
+        if first_meta is None:
+            first_meta = meta
+        framing = active_area(meta, data.shape[1:])  # the light-sensitive area only
+        data, top, left = framing.crop(data), framing.top, framing.left
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
@@ -75,6 +75,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     if views:
         by_name = dict(found)
         wanted = [v.strip() for v in views.split(",") if v.strip()]
+        check_named_once(wanted)
         missing = [v for v in wanted if v not in by_name]
         if missing:
             raise InputError(f"view {missing[0]!r} is not in the input (views: "
