@@ -191,3 +191,14 @@ def test_start_from_xml_lands_on_the_symmetry_centres(realdata, name):
     # 0.26-1.38 px (origami), 0.05-0.39 px (Fujita2)
     assert mine.max() <= 0.2, mine
     assert np.sum(theirs > mine) >= 6, (theirs, mine)
+
+
+def test_a_lossy_compressed_frame_calibrates_like_the_original(realdata, tmp_path):
+    """Fujita2 saved as JPEG at quality 60 (8x8 block artefacts on every micro-image)."""
+    image, xml = _frame(realdata, "fujita2")
+    rgb = cv2.imread(_png(realdata, "fujita2"), cv2.IMREAD_COLOR)
+    cv2.imwrite(str(tmp_path / "f.jpg"), rgb, [cv2.IMWRITE_JPEG_QUALITY, 60])
+    grid, _ = calibration.calibrate(_load(tmp_path / "f.jpg"))
+    original, _ = _no_hint(_png(realdata, "fujita2"))
+    assert abs(grid.pitch_px / xml.pitch_px - 1) <= 0.0005
+    assert calibration.compare_grids(grid, original, image.shape)["max_px"] <= 0.5

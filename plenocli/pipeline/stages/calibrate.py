@@ -29,7 +29,8 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
 
         data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         if data is None:
-            raise InputError(f"{p}: unreadable image; pass a TIFF, PNG or BMP white image")
+            raise InputError(f"{p}: unreadable image; pass a TIFF, PNG, JPEG or BMP image of "
+                             "the lens array")
         views = np.moveaxis(data[..., :3], -1, 0) if data.ndim == 3 else data[np.newaxis]
         meta = {}
     if views.ndim != 3 or views.shape[1] == 0 or views.shape[2] == 0:
