@@ -90,10 +90,15 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         flat = calibration.flatten(image, cfa=cfa, scale_px=max(grid.pitch_px, 8.0))
         write_grid_overlay(preview, flat, grid.lens_centres()[1], grid.pitch_px,
                            protect=protect)
+    fit = report.fit
+    centres = (f"residual RMS {fit.residual_rms_px:.4f} px" if fit.centres_refined else
+               f"a scene: centres from the border lattice (pitch +-{fit.pitch_se_px:.4f} px); "
+               f"the content moves the micro-images' own centres by {fit.residual_rms_px:.2f} "
+               "px RMS")
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
-             "%d lenses, residual RMS %.4f px, contrast %.3f", shown(input), shown(output),
-             grid.lattice, grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy,
-             report.fit.lenses_total, report.fit.residual_rms_px, report.verdict.contrast)
+             "%d lenses, %s, contrast %.3f", shown(input), shown(output), grid.lattice,
+             grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy, fit.lenses_total,
+             centres, report.verdict.contrast)
     for key in ("moved_from_start", "compare"):
         if key in extra:
             c = extra[key]
