@@ -98,3 +98,25 @@ def test_masked_views_report_and_heat_map(tmp_path):
     assert doc["r"] == pytest.approx(0.2, rel=1e-6)
     assert doc["captures"][0]["intended"] == "A"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_colour_pages_and_a_sum_view_are_not_other_views(tmp_path):
+    """r compares pupil parts: the colour pages of one view are one view, and a dual-pixel
+    file's S = A + B is left out by default (refused when named)."""
+    cast = np.array([0.5, 1.0, 0.7], np.float32)[:, None, None]
+    pages = np.ones((6, 64, 64), np.float32)
+    pages[:3] *= 1000 * cast   # A open
+    pages[3:] *= 100 * cast    # B: 10 % cross-talk
+    tiffio.write_image(tmp_path / "rgb.tif", pages, {"views": ["A.R", "A.G", "A.B", "B.R", "B.G",
+                                                        "B.B"], "cfa": None})
+    frames = np.ones((3, 64, 64), np.float32) * np.array([900, 100, 1000], np.float32)[:, None,
+                                                                                      None]
+    tiffio.write_image(tmp_path / "dp.tif", frames, {"views": ["A", "B", "S"], "cfa": None})
+    for name, r in (("rgb", 0.1), ("dp", 100 / 900)):
+        result = CliRunner().invoke(cli, ["crosstalk", str(tmp_path / f"{name}.tif"), "-o",
+                                          str(tmp_path / f"{name}.json")])
+        assert result.exit_code == 0, result.output
+        assert json.loads((tmp_path / f"{name}.json").read_text())["r"] == pytest.approx(r)
+    result = CliRunner().invoke(cli, ["crosstalk", str(tmp_path / "dp.tif"), "--views", "A,B,S",
+                                      "-o", str(tmp_path / "x.json")])
+    assert result.exit_code == 1 and "sum A + B" in result.output

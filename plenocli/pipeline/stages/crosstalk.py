@@ -11,10 +11,10 @@ from plenocli import crosstalk as crosstalk_lib
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
-from plenocli.io.framing import active_area, frame_grid, sensor_image
+from plenocli.io.framing import frame_grid, sensor_image
 from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
-from plenocli.io.views import read_masked_whites, select_views
+from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.progress import log, shown
 
@@ -76,19 +76,29 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
 
 
 def _measure(path: str, views: str | None, intended: str | None, tile: int) -> dict:
-    """The cross-talk of one masked capture, as its entry in the report."""
-    data, meta = tiffio.read_image(path)
-    # e.g. --views A,B after bias: the sum view S must not count as "another view"
-    data, names = select_views(data, meta, views)
-    framing = active_area(meta, data.shape[1:])
-    cfa = framing.cfa
-    idx = _intended_index(intended, names, path)
+    """The cross-talk of one masked capture, as its entry in the report. Colour pages of one
+    view (A.R, A.G, A.B) are one view: r compares views, over the flux of every colour."""
+    capture = read_colour_views(path, pupil_parts(path, views))
+    idx = _intended_index(intended, capture.names, path)
     try:
-        res = crosstalk_lib.crosstalk_ratio(framing.crop(data), intended=idx, tile_px=tile,
-                                            cfa=cfa)
+        res = crosstalk_lib.crosstalk_ratio(capture.data.sum(axis=1), intended=idx,
+                                            tile_px=tile, cfa=capture.cfa)
     except ValueError as err:
         raise InputError(f"{path}: {err}") from err
-    return _capture_entry(path, names, res, tile, cfa)
+    _check_open_part(path, capture.names[res["intended"]], res["r"])
+    return _capture_entry(path, capture.names, res, tile, capture.cfa)
+
+
+def pupil_parts(path: str, views: str | None) -> str | None:
+    """The views to compare: ``views`` as given; by default a dual-pixel file's A and B, since
+    its sum S = A + B is no pupil part of its own (it would count as "another view")."""
+    if views is not None:
+        if {"A", "B", "S"} <= {v.strip() for v in views.split(",")}:
+            raise ConfigError(f"--views {views}: S is the sum A + B, not a pupil part of its "
+                              "own; leave it out (--views A,B)")
+        return views
+    names = {n.rpartition(".")[0] or n for n in tiffio.read_meta(path).get("views") or []}
+    return "A,B" if {"A", "B", "S"} <= names else None
 
 
 def _capture_entry(path: str, names: list[str], res: dict, tile: int, cfa: str | None) -> dict:
@@ -152,7 +162,7 @@ def _check_open_part(path: str, name: str, r: float) -> None:
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
-    whites, labels = read_masked_whites(inputs, views)
+    whites, labels = read_masked_whites(inputs, pupil_parts(inputs[0], views))
     first = whites[0]
     for label, white in zip(labels[1:], whites[1:], strict=True):
         if not white.same_kind(first):
