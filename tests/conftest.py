@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -17,3 +18,12 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real captures not found at {REALDATA}")
     return REALDATA
+
+
+@pytest.fixture
+def project(tmp_path):
+    """A copy of the demo config and fixture in a temp folder (outputs land there too)."""
+    (tmp_path / "configs").mkdir()
+    shutil.copy(ROOT / "configs" / "demo_dualpixel.yaml", tmp_path / "configs")
+    shutil.copytree(ROOT / "fixtures" / "dualpixel", tmp_path / "fixtures" / "dualpixel")
+    return tmp_path / "configs" / "demo_dualpixel.yaml"

@@ -2,7 +2,6 @@
 resolved parameters; the runner reruns a step whose resolved parameters changed."""
 
 import re
-import shutil
 from pathlib import Path
 
 import pytest
@@ -93,14 +92,6 @@ def test_a_yaml_list_is_the_comma_separated_word(tmp_path):
         load_config(_config(tmp_path, "bias", "    smooth: [1, 2]\n"))
     with pytest.raises(ConfigError, match="plain value"):
         load_config(_config(tmp_path, "refocus", "    g: [[2, 3]]\n"))
-
-
-@pytest.fixture
-def project(tmp_path):
-    (tmp_path / "configs").mkdir()
-    shutil.copy(ROOT / "configs" / "demo_dualpixel.yaml", tmp_path / "configs")
-    shutil.copytree(ROOT / "fixtures" / "dualpixel", tmp_path / "fixtures" / "dualpixel")
-    return tmp_path / "configs" / "demo_dualpixel.yaml"
 
 
 def test_removing_a_parameter_reruns_the_step(project):

@@ -2,7 +2,6 @@
 
 import os
 import re
-import shutil
 import time
 from pathlib import Path
 
@@ -13,15 +12,6 @@ from plenocli.pipeline.config import load_config
 from plenocli.pipeline.runner import plan, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture
-def project(tmp_path):
-    """A copy of the demo config and fixture in a temp folder (outputs land there too)."""
-    (tmp_path / "configs").mkdir()
-    shutil.copy(ROOT / "configs" / "demo_dualpixel.yaml", tmp_path / "configs")
-    shutil.copytree(ROOT / "fixtures" / "dualpixel", tmp_path / "fixtures" / "dualpixel")
-    return tmp_path / "configs" / "demo_dualpixel.yaml"
 
 
 def ran(decisions):

@@ -38,10 +38,7 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
         fmt = export.output_format(output)
     except ValueError as err:
         raise ConfigError(str(err)) from err
-    data, meta = tiffio.read_image(input)
-    framing = active_area(meta, data.shape[1:])
-    data, cfa = framing.crop(_levels(data, meta)), framing.cfa
-    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    data, meta, cfa, names = _read(input)
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
     except ValueError as err:
@@ -85,6 +82,15 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
              shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains))
 
 
+def _read(path: str) -> tuple[np.ndarray, dict, str | None, list[str]]:
+    """A views file as DN above black over its active area: pages, metadata, the area's CFA
+    and the view names."""
+    data, meta = tiffio.read_image(path)
+    framing = active_area(meta, data.shape[1:])
+    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    return framing.crop(_levels(data, meta)), meta, framing.cfa, names
+
+
 def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
     """Raw integer frames (decode output) as DN above black, NaN where they reached the white
     level; processed (float) views are returned as they are."""
@@ -108,15 +114,12 @@ def _stages(meta: dict) -> list[str]:
 def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: str,
              path: str, meta: dict) -> tuple[np.ndarray, np.ndarray]:
     """Dual-pixel highlight recovery: S (and B) rebuilt from A where only S clipped."""
-    white, white_meta = tiffio.read_image(white_path)
+    white, white_meta, white_cfa, white_names = _read(white_path)
     if _stages(white_meta) != _stages(meta):
         raise InputError(f"--recover-highlights {white_path}: the white image went through "
                          f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
                          f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
                          "split must be measured in the same units (process both alike)")
-    white_area = active_area(white_meta, white.shape[1:])
-    white, white_cfa = white_area.crop(_levels(white, white_meta)), white_area.cfa
-    white_names = list(white_meta.get("views") or [])
     for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
         if not {"A", "B", "S"} <= set(views_):
             raise InputError(f"--recover-highlights: {file} ({label}) has views "
@@ -173,10 +176,7 @@ def _gains_from_white(path: str, chosen: dev.ColourView) -> np.ndarray:
     """Gains from the white image's view of the same name; for a view the white does not have
     (a panorama or refocused image made from its views), its full-pupil sum S or its only
     colour view. Gains are per colour, so a Bayer white serves a demosaiced view and back."""
-    data, meta = tiffio.read_image(path)
-    framing = active_area(meta, data.shape[1:])
-    data, cfa = framing.crop(_levels(data, meta)), framing.cfa
-    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    data, meta, cfa, names = _read(path)
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
         by_name = {v.name: v for v in views}
