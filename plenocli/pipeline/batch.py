@@ -18,6 +18,7 @@ import ctypes
 import glob
 import logging
 import multiprocessing
+import multiprocessing.connection
 import os
 import re
 import signal
@@ -388,17 +389,27 @@ def _pool_round(jobs: int, config: str, captures: list[str], kwargs: dict,
 
 
 def _terminate(pool: ProcessPoolExecutor) -> None:
-    """Stop the workers now; each one removes its half-written temporary file first."""
+    """Stop the workers now; each one removes its half-written temporary file first.
+
+    The pool's manager thread reaps the workers. Exits are watched on the workers' sentinels,
+    and reaping is left to that thread and waited for: two threads joining one process race
+    for its exit status, and the loser sees a dead worker as still running."""
     processes = list((pool._processes or {}).values())  # no public API for the worker list
+    manager = pool._executor_manager_thread
     pool.shutdown(wait=False, cancel_futures=True)
     for proc in processes:
-        if proc.is_alive():
-            proc.terminate()
+        proc.terminate()
+    running = {proc.sentinel: proc for proc in processes}
     deadline = time.monotonic() + 10.0
-    for proc in processes:
-        proc.join(max(0.0, deadline - time.monotonic()))
-        if proc.is_alive():
-            proc.kill()
+    while running and (left := deadline - time.monotonic()) > 0:
+        for sentinel in multiprocessing.connection.wait(list(running), left):
+            del running[sentinel]
+    for proc in running.values():
+        proc.kill()
+    if manager is not None:
+        manager.join(10.0)
+    for proc in processes:  # reaped already, unless the manager thread hung
+        proc.join(1.0)
 
 
 # ---------------------------------------------------------------- dask.distributed
