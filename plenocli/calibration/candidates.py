@@ -22,6 +22,7 @@ from plenocli.model.lensgrid import LATTICES
 
 PEAK_Z = 4.0          # a spectral peak stands this many robust sigma above its ring
 PEAKS_PER_SPECTRUM = 8
+RING_SAMPLES = 512    # bins per ring that its background statistics are taken from
 
 
 @dataclass(frozen=True)
@@ -74,7 +75,7 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     data = signal - np.float32(signal.mean())
     data *= (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
     size = max(rows, cols)
-    spec = scipy.fft.rfft2(data, s=(size, size), workers=-1)
+    spec = scipy.fft.rfft2(data, s=(size, size), workers=1)
     logmag = np.abs(spec)
     del spec
     logmag += 1e-12
@@ -125,7 +126,9 @@ def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
 @dataclass(frozen=True)
 class _Rings:
     """The radius (cycles/px) of every bin of a (size, size // 2 + 1) real spectrum, its ring
-    of 4 bins, the bins grouped by ring (``order``) and where each ring starts there."""
+    of 4 bins, and the bins its statistics are taken from grouped by ring (``order``: every
+    bin of a small ring, an even spread of RING_SAMPLES of a larger one) with where each ring
+    starts there."""
 
     radius: np.ndarray
     ring: np.ndarray
@@ -133,18 +136,25 @@ class _Rings:
     start: np.ndarray
 
 
-@functools.lru_cache(maxsize=2)
+@functools.lru_cache(maxsize=4)
 def _rings(size: int) -> _Rings:
     """The ring geometry of a spectrum size (the views share a few sizes: kept, not redone)."""
     radius = np.hypot(np.fft.rfftfreq(size)[None, :], np.fft.fftfreq(size)[:, None])
     nring = size // 4 + 2
     ring = np.minimum(radius * (size / 4), nring - 1).astype(np.int16)
-    # a stable sort of small integers is a radix sort
+    # a stable sort of small integers is a radix sort; within a ring, bins in raster order
     order = np.argsort(ring.ravel(), kind="stable").astype(np.int32)
-    start = np.concatenate([[0], np.cumsum(np.bincount(ring.ravel(), minlength=nring))])
-    for a in (radius, ring, order, start):
+    counts = np.bincount(ring.ravel(), minlength=nring)
+    start = np.concatenate([[0], np.cumsum(counts)])
+    # a quantile of RING_SAMPLES values is within a few % of the ring's: the outer rings of a
+    # large spectrum hold thousands of bins
+    stride = np.maximum(counts // RING_SAMPLES, 1)
+    rank = np.arange(order.size) - np.repeat(start[:-1], counts)
+    sample = order[rank % np.repeat(stride, counts) == 0]
+    sample_start = np.concatenate([[0], np.cumsum(-(-counts // stride))])
+    for a in (radius, ring, sample, sample_start):
         a.flags.writeable = False
-    return _Rings(radius, ring, order, start)
+    return _Rings(radius, ring, sample, sample_start)
 
 
 def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
@@ -156,7 +166,7 @@ def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
     return (logmag - median[rings.ring]) / spread[rings.ring]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _ring_quantiles(grouped, start):  # pragma: no cover - compiled
     """The median and 16th percentile (the values of rank count // 2 and count * 16 // 100) of
     each ring of ``grouped`` (values grouped by ring, ring r at start[r]:start[r + 1]), by

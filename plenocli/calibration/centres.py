@@ -272,21 +272,32 @@ def _quadratic_minimum(values: np.ndarray, a0: int, b0: int) -> tuple[float, flo
 def _folded_cell(flat: np.ndarray, grid: LensGrid, *, bins: int) -> np.ndarray:
     """(bins, bins) mean of the image by fractional lattice coordinates (u along b1, v along
     b2, from the grid's offset); NaN where no pixel fell."""
-    rows, cols = flat.shape
     inv = np.linalg.inv(grid.basis().T)
-    total = np.zeros(bins * bins)
-    count = np.zeros(bins * bins)
-    x = np.arange(cols, dtype=np.float64) - grid.offset_xy[0]
-    for top in range(0, rows, 256):   # row bands keep the temporaries small
-        band = flat[top:min(top + 256, rows)]
-        y = np.arange(top, top + band.shape[0], dtype=np.float64)[:, None] - grid.offset_xy[1]
-        u = np.floor((inv[0, 0] * x + inv[0, 1] * y) * bins).astype(np.int64) % bins
-        v = np.floor((inv[1, 0] * x + inv[1, 1] * y) * bins).astype(np.int64) % bins
-        key = (u * bins + v).ravel()
-        total += np.bincount(key, band.ravel().astype(np.float64), bins * bins)
-        count += np.bincount(key, None, bins * bins)
+    total, count = _fold(np.ascontiguousarray(flat, np.float32), inv,
+                         float(grid.offset_xy[0]), float(grid.offset_xy[1]), bins)
     with np.errstate(invalid="ignore", divide="ignore"):
         return (total / count).reshape(bins, bins)
+
+
+@numba.njit(parallel=True, cache=True)
+def _fold(flat, inv, x0, y0, bins):  # pragma: no cover - compiled
+    """Sums and counts of the pixels per bin of fractional lattice coordinates (``inv``: the
+    inverse of the basis as columns), one accumulator per band of rows (numba kernel: no
+    per-pixel temporaries)."""
+    rows, cols = flat.shape
+    bands = (rows + 255) // 256
+    total = np.zeros((bands, bins * bins))
+    count = np.zeros((bands, bins * bins))
+    for band in numba.prange(bands):
+        for r in range(band * 256, min(band * 256 + 256, rows)):
+            y = r - y0
+            for c in range(cols):
+                x = c - x0
+                u = int(np.floor((inv[0, 0] * x + inv[0, 1] * y) * bins)) % bins
+                v = int(np.floor((inv[1, 0] * x + inv[1, 1] * y) * bins)) % bins
+                total[band, u * bins + v] += flat[r, c]
+                count[band, u * bins + v] += 1.0
+    return total.sum(axis=0), count.sum(axis=0)
 
 
 def _turn_asymmetry(cell: np.ndarray, lattice: str) -> np.ndarray:

@@ -247,13 +247,13 @@ def _on_grid(grid: LensGrid, idx, ideal, centres, use):
     """The measured centres placed on the lenses (idx) of ``grid`` (the ideal centre where a
     lens has none), and which lenses have one."""
     i, j = grid.nearest_index(centres[:, 0], centres[:, 1])
-    source = {(a, b): k for k, (a, b) in enumerate(zip(i.tolist(), j.tolist(), strict=True))
-              if use[k]}
+    i, j = i[use], j[use]
+    lo = np.minimum(idx.min(axis=0), [i.min(initial=0), j.min(initial=0)])
+    hi = np.maximum(idx.max(axis=0), [i.max(initial=0), j.max(initial=0)])
+    source = np.full(tuple(hi - lo + 1), -1, np.int64)   # measured centre by lens index
+    source[i - lo[0], j - lo[1]] = np.flatnonzero(use)
+    src = source[idx[:, 0] - lo[0], idx[:, 1] - lo[1]]
+    measured = src >= 0
     final = ideal.copy()
-    measured = np.zeros(len(idx), bool)
-    for k, key in enumerate(map(tuple, idx.tolist())):
-        src = source.get(key)
-        if src is not None:
-            final[k] = centres[src]
-            measured[k] = True
+    final[measured] = centres[src[measured]]
     return final, measured

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 from scipy import stats
 
@@ -37,23 +38,26 @@ def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np
     rows, cols = lap.shape
     c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, cols - 1)
     r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, rows - 1)
-    # the disc mean at the centres only (mirrored at the frame's edge), a block of lenses at a
-    # time: a filter over the whole frame costs more than the lenses' own pixels
-    out = np.empty(len(c))
-    block = max(1, 2 ** 18 // len(dy))
-    for top in range(0, len(c), block):
-        rr = _mirrored(r[top:top + block, None] + dy[None, :], rows)
-        cc = _mirrored(c[top:top + block, None] + dx[None, :], cols)
-        out[top:top + block] = np.take(lap, rr * cols + cc).mean(axis=1, dtype=np.float64)
+    # the disc mean at the centres only: a filter over the whole frame costs more than the
+    # lenses' own pixels
+    return _disc_means(lap, r, c, dy.astype(np.int64), dx.astype(np.int64))
+
+
+@numba.njit(parallel=True, cache=True)
+def _disc_means(image, r, c, dy, dx):  # pragma: no cover - compiled
+    """Mean of ``image`` at (r + dy, c + dx) per centre, indices beyond the frame mirrored
+    back (edge pixel repeated, as BORDER_REFLECT)."""
+    rows, cols = image.shape
+    out = np.empty(r.shape[0])
+    for k in numba.prange(r.shape[0]):
+        acc = 0.0
+        for w in range(dy.shape[0]):
+            y, x = r[k] + dy[w], c[k] + dx[w]
+            y = -y - 1 if y < 0 else (2 * rows - 1 - y if y >= rows else y)
+            x = -x - 1 if x < 0 else (2 * cols - 1 - x if x >= cols else x)
+            acc += image[y, x]
+        out[k] = acc / dy.shape[0]
     return out
-
-
-def _mirrored(index: np.ndarray, size: int) -> np.ndarray:
-    """Indices beyond [0, size) mirrored back (edge pixel repeated, as BORDER_REFLECT)."""
-    if index.min() < 0 or index.max() >= size:
-        index = np.where(index < 0, -index - 1, index)
-        index = np.where(index >= size, 2 * size - 1 - index, index)
-    return index
 
 
 def local_contrast(indices: np.ndarray, sharpness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -4,6 +4,8 @@ autocorrelation of the view that suits its pitch."""
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import cv2
@@ -38,30 +40,35 @@ class View:
 
 
 def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
-    """One view per decimation 1, 2, 4, 8 that still holds a useful crop."""
+    """One view per decimation 1, 2, 4, 8 that still holds a useful crop (built side by side:
+    the FFTs, filters and kernels they spend their time in release the GIL)."""
     factors = [f for f in (1, 2, 4, 8) if f == 1 or min(image.shape) // f >= 160]
-    out = {}
-    for factor, coarser in zip(factors, [*factors[1:], None], strict=True):
-        rows, cols = image.shape[0] // factor, image.shape[1] // factor
-        # crop first (at full resolution), then decimate: an even factor averages the mosaic
-        side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
-        r0, c0 = (image.shape[0] - side_r) // 2, (image.shape[1] - side_c) // 2
-        r0, c0 = r0 - r0 % 2, c0 - c0 % 2
-        crop = decimate(image[r0:r0 + side_r, c0:c0 + side_c], factor)
-        flat = flatten(crop, cfa=cfa if factor == 1 else None, scale_px=VIEW_FLAT_PX)
-        if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
-            flat = cv2.blur(flat, (2, 2))
-        border = border_signal(flat)
-        # view_for judges here the pitches with less than MIN_VIEW_PITCH px per lens in the
-        # next, coarser view (the coarsest takes every wider one)
-        widest = None if coarser is None else MIN_VIEW_PITCH * coarser / factor
-        acf = Autocorrelation((flat, border), factor, widest)
-        suggested = [lat for signal in (flat, border)
-                     for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
-                     for lat in lattices_of_peak(g, factor)]
-        suggested += [lat for v in acf_peaks(acf.acf) for lat in lattices_of_lag(v, factor)]
-        out[factor] = View(factor, acf, tuple(suggested))
-    return out
+    coarser = [*factors[1:], None]
+    with ThreadPoolExecutor(max_workers=min(len(factors), os.cpu_count() or 1)) as pool:
+        built = pool.map(lambda f, c: _view(image, cfa, f, c), factors, coarser)
+        return dict(zip(factors, built, strict=True))
+
+
+def _view(image: np.ndarray, cfa: str | None, factor: int, coarser: int | None) -> View:
+    rows, cols = image.shape[0] // factor, image.shape[1] // factor
+    # crop first (at full resolution), then decimate: an even factor averages the mosaic
+    side_r, side_c = min(rows, VIEW_PX) * factor, min(cols, VIEW_PX) * factor
+    r0, c0 = (image.shape[0] - side_r) // 2, (image.shape[1] - side_c) // 2
+    r0, c0 = r0 - r0 % 2, c0 - c0 % 2
+    crop = decimate(image[r0:r0 + side_r, c0:c0 + side_c], factor)
+    flat = flatten(crop, cfa=cfa if factor == 1 else None, scale_px=VIEW_FLAT_PX)
+    if cfa and factor == 1:   # what is left of the mosaic beats with small pitches
+        flat = cv2.blur(flat, (2, 2))
+    border = border_signal(flat)
+    # view_for judges here the pitches with less than MIN_VIEW_PITCH px per lens in the
+    # next, coarser view (the coarsest takes every wider one)
+    widest = None if coarser is None else MIN_VIEW_PITCH * coarser / factor
+    acf = Autocorrelation((flat, border), factor, widest)
+    suggested = [lat for signal in (flat, border)
+                 for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
+                 for lat in lattices_of_peak(g, factor)]
+    suggested += [lat for v in acf_peaks(acf.acf) for lat in lattices_of_lag(v, factor)]
+    return View(factor, acf, tuple(suggested))
 
 
 def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:
@@ -80,11 +87,16 @@ def hypotheses(all_views: dict[int, View], *, pitch_hint: float | None) -> list[
     lo, hi = PITCH_RANGE_PX
     if pitch_hint is not None:
         lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
+    inside = [lat for view in all_views.values() for lat in view.suggested
+              if lo <= lat.pitch_px <= hi]
     out: list[Lattice] = []
-    for view in all_views.values():
-        for lat in view.suggested:
-            if lo <= lat.pitch_px <= hi and not any(lat.same_as(o) for o in out):
-                out.append(lat)
+    log_pitch, is_hex = np.empty(len(inside)), np.empty(len(inside), bool)
+    for lat in inside:   # the first of each set of hypotheses that are the same lattice
+        n, lp, hexagonal = len(out), np.log(lat.pitch_px), lat.kind == "hex"
+        near = np.flatnonzero((is_hex[:n] == hexagonal) & (np.abs(log_pitch[:n] - lp) <= 0.011))
+        if not any(lat.same_as(out[k]) for k in near):
+            log_pitch[n], is_hex[n] = lp, hexagonal
+            out.append(lat)
     return out
 
 
@@ -116,8 +128,8 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
                 lat.same_as(other, rel=0.06, angle=0.06) for other in chosen):
             chosen.append(lat)
     for kind in ("hex", "square"):   # the best of each kind, to say which kind fits
-        chosen += [lat for lat, c in first
-                   if c > 0 and lat.kind == kind and lat not in chosen][:1]
+        if not any(lat.kind == kind for lat in chosen):
+            chosen += [lat for lat, c in first if c > 0 and lat.kind == kind][:1]
     if not chosen:   # no hypothesis has its points above its holes even over near lags
         return Verdict(first[0][0], first[0][1])
     acf_for = lambda lat: view_for(lat, all_views).acf   # noqa: E731
@@ -165,14 +177,16 @@ def border_lattice(lattice: Lattice, all_views: dict[int, View]) -> BorderLattic
         current, se = start, (np.inf, np.inf)
         for _ in range(4):
             lags, idx, height = acf.peak_lags(current)
-            if len(lags) < 6:
-                return BorderLattice(lattice, np.inf, np.inf)
-            if not height.sum() > 0:
+            if len(lags) < 6 or not height.sum() > 0:
                 return BorderLattice(lattice, np.inf, np.inf)
             pitch, angle, se = lattice_from_lags(lags, idx, height, lattice=lattice.kind)
             if not pitch > 0:
                 return BorderLattice(lattice, np.inf, np.inf)
-            current = Lattice(lattice.kind, pitch, angle)
+            moved = Lattice(lattice.kind, pitch, angle)
+            still = moved.same_as(current, rel=1e-7, angle=1e-7)
+            current = moved
+            if still:   # the peaks no longer move
+                break
         ends.append((current, se))
     (a, se_a), (b, se_b) = ends
     step = np.pi / 3 if lattice.kind == "hex" else np.pi / 2

@@ -74,12 +74,12 @@ class Autocorrelation:
         self.stack = np.empty((len(signals), len(lag_r), len(lag_c)), np.float32)
         for acf, signal in zip(self.stack, signals, strict=True):
             data = signal - np.float32(signal.mean())
-            spectrum = scipy.fft.rfft2(data, s=shape, workers=-1)
+            spectrum = scipy.fft.rfft2(data, s=shape, workers=1)
             del data
             power = np.abs(spectrum)
             del spectrum
             power *= power
-            wrapped = scipy.fft.irfft2(power, s=shape, workers=-1)
+            wrapped = scipy.fft.irfft2(power, s=shape, workers=1)
             del power
             # lags -ext .. ext: the wrapped-around tail, then the head
             for dst_r, src_r in ((slice(0, ext_r), slice(-ext_r, None)),
@@ -199,7 +199,7 @@ class Autocorrelation:
         return top * (1 - fy) + bottom * fy
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
     """``Autocorrelation.contrast`` (numba kernel: a search evaluates it hundreds of times).
     The lattice lags k b1 + m b2 (m >= 0) with lo <= |lag| <= hi; each signal's A sampled
@@ -265,7 +265,7 @@ def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragm
     return worst
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _window_peaks(acf, rows, cols, dy, dx):  # pragma: no cover - compiled
     """For each window centred at (rows[i], cols[i]) with offsets (dy, dx): the row and column
     of its maximum (the first one) and the maximum's height above the window's median
