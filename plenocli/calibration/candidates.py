@@ -73,7 +73,8 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     radius (a scene's 1/f spectrum, noise), sub-bin by a parabola in log magnitude."""
     rows, cols = signal.shape
     data = signal - np.float32(signal.mean())
-    data *= (np.hanning(rows)[:, None] * np.hanning(cols)[None, :]).astype(np.float32)
+    data *= np.hanning(rows).astype(np.float32)[:, None]
+    data *= np.hanning(cols).astype(np.float32)[None, :]
     size = max(rows, cols)
     spec = scipy.fft.rfft2(data, s=(size, size), workers=1)
     logmag = np.abs(spec)
@@ -88,7 +89,7 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
         fx = np.fft.rfftfreq(size)[None, :]
         for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
             valid &= np.hypot(fx - nx, fy - ny) > 0.03
-    z = np.where(valid, z, -np.inf).astype(np.float32)
+    z[~valid] = -np.inf
     local = cv2.dilate(z, np.ones((5, 5), np.uint8))
     peaks = np.argwhere((z >= local) & (z > PEAK_Z))
     order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:count]
@@ -163,7 +164,9 @@ def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
     partition: no full sort of the spectrum."""
     median, low = _ring_quantiles(logmag.ravel()[rings.order], rings.start)
     spread = np.maximum(median - low, 0.05)   # a flat field has no spread: no peak passes
-    return (logmag - median[rings.ring]) / spread[rings.ring]
+    z = logmag - median.astype(np.float32)[rings.ring]
+    z /= spread.astype(np.float32)[rings.ring]
+    return z
 
 
 @numba.njit(cache=True, nogil=True)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -37,6 +37,7 @@ class View:
     factor: int
     acf: Autocorrelation
     suggested: tuple[Lattice, ...]
+    borders: dict = field(default_factory=dict, compare=False, repr=False)   # border_lattice's
 
 
 def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
@@ -170,8 +171,15 @@ class BorderLattice:
 def border_lattice(lattice: Lattice, all_views: dict[int, View]) -> BorderLattice:
     """Pitch and angle from the far border-autocorrelation peaks, iterated from two starts
     0.3 % apart (the peak centroids lean towards the prediction; converged, they agree unless
-    the frame is too small for its scene to have stopped repeating)."""
-    acf = view_for(lattice, all_views).acf
+    the frame is too small for its scene to have stopped repeating). Kept per view: a
+    search measures its winner again, and so does the calibration."""
+    view = view_for(lattice, all_views)
+    if lattice not in view.borders:
+        view.borders[lattice] = _border_lattice(lattice, view.acf)
+    return view.borders[lattice]
+
+
+def _border_lattice(lattice: Lattice, acf: Autocorrelation) -> BorderLattice:
     ends = []
     for start in (lattice.scaled(0.997), lattice.scaled(1.003)):
         current, se = start, (np.inf, np.inf)
@@ -183,7 +191,7 @@ def border_lattice(lattice: Lattice, all_views: dict[int, View]) -> BorderLattic
             if not pitch > 0:
                 return BorderLattice(lattice, np.inf, np.inf)
             moved = Lattice(lattice.kind, pitch, angle)
-            still = moved.same_as(current, rel=1e-7, angle=1e-7)
+            still = moved.same_as(current, rel=1e-5, angle=1e-5)
             current = moved
             if still:   # the peaks no longer move
                 break

@@ -70,17 +70,21 @@ class Autocorrelation:
                  scipy.fft.next_fast_len(cols + ext_c + 1, real=True))
         lag_r, lag_c = np.arange(-ext_r, ext_r + 1), np.arange(-ext_c, ext_c + 1)
         # pixels a shift (dy, dx) keeps inside the crop: every lag is a mean, not a sum
-        overlap = np.outer(rows - np.abs(lag_r), cols - np.abs(lag_c)).astype(np.float32)
+        overlap_r = (rows - np.abs(lag_r)).astype(np.float32)[:, None]
+        overlap_c = (cols - np.abs(lag_c)).astype(np.float32)[None, :]
         self.stack = np.empty((len(signals), len(lag_r), len(lag_c)), np.float32)
         for acf, signal in zip(self.stack, signals, strict=True):
-            data = signal - np.float32(signal.mean())
-            spectrum = scipy.fft.rfft2(data, s=shape, workers=1)
-            del data
-            power = np.abs(spectrum)
-            del spectrum
+            padded = np.zeros(shape, np.float32)
+            np.subtract(signal, np.float32(signal.mean()), out=padded[:rows, :cols])
+            spectrum = scipy.fft.rfft2(padded, workers=1, overwrite_x=True)
+            del padded
+            power, imag = spectrum.real, spectrum.imag   # |F|^2 in place: no temporaries
             power *= power
-            wrapped = scipy.fft.irfft2(power, s=shape, workers=1)
-            del power
+            imag *= imag
+            power += imag
+            imag[...] = 0.0
+            wrapped = scipy.fft.irfft2(spectrum, s=shape, workers=1, overwrite_x=True)
+            del spectrum, power, imag
             # lags -ext .. ext: the wrapped-around tail, then the head
             for dst_r, src_r in ((slice(0, ext_r), slice(-ext_r, None)),
                                  (slice(ext_r, None), slice(0, ext_r + 1))):
@@ -88,7 +92,8 @@ class Autocorrelation:
                                      (slice(ext_c, None), slice(0, ext_c + 1))):
                     acf[dst_r, dst_c] = wrapped[src_r, src_c]
             del wrapped
-            acf /= overlap
+            acf /= overlap_r
+            acf /= overlap_c
             acf /= max(float(acf[ext_r, ext_c]), 1e-30)
         self.acfs = list(self.stack)
         self.acf = self.acfs[-1]   # the border signal's: its peaks are the sharpest
@@ -310,12 +315,15 @@ class Verdict:
                             "contrast": round(c, 4)} for lat, c in self.rivals]}
 
 
+REFINE_STAGES = ((1.5, 6.0, 0.01, 20), (3.0, 14.0, 0.003, 20), (None, None, 0.001, 30))
+
+
 def refine(lattice: Lattice, acf: Autocorrelation) -> tuple[Lattice, float]:
     """Local maximum of the contrast around ``lattice``: Nelder-Mead in (log pitch, angle),
-    first over near lags (a wide basin), then over all lags (a sharp one)."""
+    first over near lags (a wide basin), then over all lags (a sharp one); REFINE_STAGES:
+    (near, far pitches, first step, evaluations)."""
     current = lattice
-    for near, far, span, evaluations in ((1.5, 6.0, 0.01, 30), (3.0, 14.0, 0.003, 30),
-                                         (None, None, 0.001, 40)):
+    for near, far, span, evaluations in REFINE_STAGES:
         def cost(p, base=current, near=near, far=far):
             cand = Lattice(base.kind, base.pitch_px * np.exp(p[0]), base.angle_rad + p[1])
             c = acf.contrast(cand) if near is None else acf.contrast(cand, near=near, far=far)
