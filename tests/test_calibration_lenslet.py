@@ -140,3 +140,14 @@ def test_photo_is_refused():
     photo = 100 + 50 * np.sin(xx / 37.0) * np.cos(yy / 53.0) + rng.normal(0, 3, (600, 800))
     with pytest.raises(CalibrationError, match="no micro-lens lattice"):
         calibration.calibrate(photo)
+
+
+def test_anova_p_value_is_scipys_f_oneway():
+    from scipy import stats
+
+    from plenocli.calibration.lenstypes import anova_p_value
+
+    rng = np.random.default_rng(3)
+    for shift in (0.0, 0.05, 0.3):
+        groups = [rng.normal(k * shift, 1.0, 40 + 7 * k) for k in range(3)]
+        assert anova_p_value(groups) == pytest.approx(stats.f_oneway(*groups).pvalue, rel=1e-9)

@@ -46,7 +46,9 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
             for r in range(r_lo, r_hi + 1):
                 dy = r - y
                 j0 = iy2 - r
-                for c in range(c_lo, c_hi + 1):
+                half = np.sqrt(max(r2 - dy * dy, 0.0))   # the disc's chord on this row
+                for c in range(max(c_lo, int(np.ceil(x - half))),
+                               min(c_hi, int(np.floor(x + half))) + 1):
                     dx = c - x
                     d2 = dx * dx + dy * dy
                     if d2 >= r2:

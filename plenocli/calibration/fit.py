@@ -44,7 +44,8 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
     if weights is not None:
         w = np.sqrt(np.concatenate([weights, weights]))
         a, b = a * w[:, None], b * w
-    sol, *_ = np.linalg.lstsq(a, b, rcond=None)
+    normal = a.T @ a   # 4 x 4: solved as is (the design is well conditioned), not by SVD
+    sol = np.linalg.lstsq(normal, a.T @ b, rcond=None)[0]
     ox, oy, u, v = sol
     pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
     if not return_se:
@@ -53,7 +54,7 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
         return pitch, angle, (float(ox), float(oy)), (np.inf, np.inf)
     # standard errors from the normal equations: pitch along (u, v), angle across it
     dof = max(len(b) - 4, 1)
-    cov = np.linalg.pinv(a.T @ a) * float(np.sum((a @ sol - b) ** 2)) / dof
+    cov = np.linalg.pinv(normal) * float(np.sum((a @ sol - b) ** 2)) / dof
     radial = np.array([u, v]) / pitch
     across = np.array([-v, u]) / pitch
     se_pitch = float(np.sqrt(radial @ cov[2:, 2:] @ radial))

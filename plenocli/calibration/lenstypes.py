@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import cv2
 import numba
 import numpy as np
-from scipy import stats
+from scipy import special
 
 SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in sharpness
 
@@ -88,7 +88,7 @@ def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
     groups = [local[coset[rows] == k] for k in range(3)]
     if min(len(g) for g in groups) < 10:
         return None
-    p_value = float(stats.f_oneway(*groups).pvalue)
+    p_value = anova_p_value(groups)
     if not p_value < SIGNIFICANCE:
         return None
     means = np.array([float(np.median(g)) for g in groups])
@@ -97,3 +97,17 @@ def classify(flat: np.ndarray, indices: np.ndarray, centres: np.ndarray,
     type_of_coset[rank] = np.arange(3)
     return LensTypes(types=type_of_coset[coset],
                      sharpness=tuple(float(np.exp(v)) for v in means[rank]), p_value=p_value)
+
+
+def anova_p_value(groups: list[np.ndarray]) -> float:
+    """p-value of the one-way ANOVA F test that the groups share one mean (as
+    ``scipy.stats.f_oneway``, whose module alone would take 0.5 s of the command's start)."""
+    values = np.concatenate(groups)
+    grand = values.mean()
+    between = sum(len(g) * (g.mean() - grand) ** 2 for g in groups)
+    within = sum(((g - g.mean()) ** 2).sum() for g in groups)
+    df_between, df_within = len(groups) - 1, len(values) - len(groups)
+    if not within > 0:
+        return 0.0 if between > 0 else 1.0
+    return float(special.fdtrc(df_between, df_within,
+                               (between / df_between) / (within / df_within)))

@@ -74,24 +74,7 @@ class Autocorrelation:
         overlap_c = (cols - np.abs(lag_c)).astype(np.float32)[None, :]
         self.stack = np.empty((len(signals), len(lag_r), len(lag_c)), np.float32)
         for acf, signal in zip(self.stack, signals, strict=True):
-            padded = np.zeros(shape, np.float32)
-            np.subtract(signal, np.float32(signal.mean()), out=padded[:rows, :cols])
-            spectrum = scipy.fft.rfft2(padded, workers=1, overwrite_x=True)
-            del padded
-            power, imag = spectrum.real, spectrum.imag   # |F|^2 in place: no temporaries
-            power *= power
-            imag *= imag
-            power += imag
-            imag[...] = 0.0
-            wrapped = scipy.fft.irfft2(spectrum, s=shape, workers=1, overwrite_x=True)
-            del spectrum, power, imag
-            # lags -ext .. ext: the wrapped-around tail, then the head
-            for dst_r, src_r in ((slice(0, ext_r), slice(-ext_r, None)),
-                                 (slice(ext_r, None), slice(0, ext_r + 1))):
-                for dst_c, src_c in ((slice(0, ext_c), slice(-ext_c, None)),
-                                     (slice(ext_c, None), slice(0, ext_c + 1))):
-                    acf[dst_r, dst_c] = wrapped[src_r, src_c]
-            del wrapped
+            _lags_of_autocorrelation(signal, shape, acf)
             acf /= overlap_r
             acf /= overlap_c
             acf /= max(float(acf[ext_r, ext_c]), 1e-30)
@@ -202,6 +185,32 @@ class Autocorrelation:
         top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
         bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
         return top * (1 - fy) + bottom * fy
+
+
+def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np.ndarray
+                             ) -> None:
+    """The autocorrelation (sums) of ``signal`` minus its mean at lags -ext .. ext (``out``
+    of (2 ext_r + 1, 2 ext_c + 1)), by FFTs zero-padded to ``shape``. The transforms go one
+    axis at a time: the padding rows are never transformed, and of the inverse only the rows
+    of the kept lags."""
+    ext_r, ext_c = out.shape[0] // 2, out.shape[1] // 2
+    centred = signal - np.float32(signal.mean())
+    spectrum = scipy.fft.rfft(centred, n=shape[1], axis=1, workers=1)
+    del centred
+    spectrum = scipy.fft.fft(spectrum, n=shape[0], axis=0, workers=1, overwrite_x=True)
+    power, imag = spectrum.real, spectrum.imag   # |F|^2 in place: no temporaries
+    power *= power
+    imag *= imag
+    power += imag
+    imag[...] = 0.0
+    spectrum = scipy.fft.ifft(spectrum, axis=0, workers=1, overwrite_x=True)
+    # lags -ext .. ext: the wrapped-around tail, then the head
+    kept = np.concatenate([spectrum[shape[0] - ext_r:], spectrum[:ext_r + 1]])
+    del spectrum, power, imag
+    wrapped = scipy.fft.irfft(kept, n=shape[1], axis=1, workers=1)
+    del kept
+    out[:, :ext_c] = wrapped[:, shape[1] - ext_c:]
+    out[:, ext_c:] = wrapped[:, :ext_c + 1]
 
 
 @numba.njit(cache=True, nogil=True)
