@@ -4,13 +4,16 @@ frames through the whole command (process start, imports, file reading, YAML wri
 one numpy rfft2 of the same image; times are printed in seconds and as ratios to it. The whole
 command is also timed in CPU seconds (user + system of the child process): on a shared machine
 the wall time grows with the load, the CPU time much less. Peak memory (tracemalloc, in memory)
-is printed as a multiple of the float32 image.
+is printed as a multiple of the float32 image. With ``--baseline COMMIT`` the white image is
+also calibrated by that commit's code and by this checkout's, each in a fresh process one
+after the other, and the ratio of their times printed.
 
-    PYTHONPATH=. .venv/bin/python bench/bench_calibrate.py [REALDATA_DIR]
+    PYTHONPATH=. .venv/bin/python bench/bench_calibrate.py [REALDATA_DIR] [--baseline COMMIT]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -22,7 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench.timing import best_time
+from bench.timing import ROOT, best_time, export_package
 from plenocli import calibration
 from plenocli.synth.whiteimage import white_image
 
@@ -73,13 +76,52 @@ def _command(name: str, path: Path, target_s: float, shape: tuple[int, int],
           f"{wall / base:.0f} x rfft2 ({base * 1e3:.0f} ms), CPU {cpu:.2f} s; {status}")
 
 
+WHITE_RUNNER = """
+import sys, time
+import numpy as np
+from plenocli import calibration
+from plenocli.synth.whiteimage import white_image
+warm, _ = white_image((256, 256), pitch_px=12.0, angle_rad=0.1, offset_xy=(128, 128))
+calibration.calibrate(warm)
+white, _ = white_image((2048, 2048), pitch_px=20.2, angle_rad=0.05, offset_xy=(1024.3, 1024.6),
+                       seed=1)
+image, best = white.astype(np.float32) - 64, float("inf")
+for _ in range(5):
+    start = time.perf_counter()
+    calibration.calibrate(image)
+    best = min(best, time.perf_counter() - start)
+print(best)
+"""
+
+
+def _against(commit: str) -> None:
+    """The white image by ``commit``'s code and by this checkout's, in fresh processes."""
+    with tempfile.TemporaryDirectory() as tmp:
+        seconds = {}
+        for name, root in ((f"baseline {commit}", export_package(commit, Path(tmp))),
+                           ("this checkout", ROOT)):
+            run = subprocess.run([sys.executable, "-c", WHITE_RUNNER], capture_output=True,
+                                 text=True, check=True, cwd=root,
+                                 env={**os.environ, "PYTHONPATH": str(root)})
+            seconds[name] = float(run.stdout.split()[-1])
+            print(f"white 2048 x 2048 in memory, {name}: {seconds[name]:.3f} s", flush=True)
+        before, after = seconds.values()
+        print(f"ratio this / baseline: {after / before:.2f}")
+
+
 def main() -> None:
-    realdata = Path(sys.argv[1] if len(sys.argv) > 1 else "../shared/realdata") / "raytrix"
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("realdata", nargs="?", default="../shared/realdata")
+    parser.add_argument("--baseline", help="a git commit to compare the white image with")
+    args = parser.parse_args()
+    realdata = Path(args.realdata) / "raytrix"
     warm, _ = white_image((256, 256), pitch_px=12.0, angle_rad=0.1, offset_xy=(128, 128))
     calibration.calibrate(warm)   # compile (or load) the numba kernels
     white, _ = white_image((2048, 2048), pitch_px=20.2, angle_rad=0.05,
                            offset_xy=(1024.3, 1024.6), seed=1)
-    _in_memory("white 2048 x 2048 in memory", white.astype(np.float32) - 64, 0.3)
+    _in_memory("white 2048 x 2048 in memory", white.astype(np.float32) - 64, 0.3, repeat=5)
+    if args.baseline:
+        _against(args.baseline)
     frames = {"origami 4 Mpx": realdata / "origami" / "frame0.png",
               "boys2 12 Mpx": realdata / "boys2_galilean" / "frame0.png"}
     for name, path in frames.items():

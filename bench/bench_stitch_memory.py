@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from bench.timing import ROOT, export_package
 
 RUNNER = """
 import json, sys, time, tracemalloc
@@ -94,9 +94,7 @@ def main() -> None:
         del stack
         base = folder / "baseline"
         base.mkdir()
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline, "plenocli"],
-                                 capture_output=True, check=True).stdout
-        subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
+        export_package(args.baseline, base)
         results = {}
         for name, root in ((f"baseline {args.baseline}", base), ("this checkout", ROOT)):
             res = _run(root, folder / "stack.npy", folder / f"{len(results)}.npy", args.repeat)

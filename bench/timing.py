@@ -1,6 +1,10 @@
 """Timing helper shared by the benchmarks (run them as ``PYTHONPATH=. python bench/bench_X.py``)."""
 
+import subprocess
 import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def best_time(func, repeat: int):
@@ -11,3 +15,12 @@ def best_time(func, repeat: int):
         result = func()
         times.append(time.perf_counter() - start)
     return min(times), result
+
+
+def export_package(commit: str, dest: Path) -> Path:
+    """The ``plenocli`` package of a git commit of this repository, unpacked into ``dest``
+    (to be put on PYTHONPATH: a baseline run by the same benchmark)."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit, "plenocli"],
+                             capture_output=True, check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    return dest
