@@ -6,7 +6,8 @@ command is also timed in CPU seconds (user + system of the child process): on a 
 the wall time grows with the load, the CPU time much less. Peak memory (tracemalloc, in memory)
 is printed as a multiple of the float32 image. With ``--baseline COMMIT`` the white image is
 also calibrated by that commit's code and by this checkout's, each in a fresh process one
-after the other, and the ratio of their times printed.
+after the other, and the ratio of their times printed (each side draws the white image with
+its own generator: compare commits whose ``plenocli.synth`` draws it alike).
 
     PYTHONPATH=. .venv/bin/python bench/bench_calibrate.py [REALDATA_DIR] [--baseline COMMIT]
 """
@@ -25,7 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench.timing import ROOT, best_time, export_package
+from bench.timing import ROOT, best_time, export_package, run_python
 from plenocli import calibration
 from plenocli.synth.whiteimage import white_image
 
@@ -100,10 +101,7 @@ def _against(commit: str) -> None:
         seconds = {}
         for name, root in ((f"baseline {commit}", export_package(commit, Path(tmp))),
                            ("this checkout", ROOT)):
-            run = subprocess.run([sys.executable, "-c", WHITE_RUNNER], capture_output=True,
-                                 text=True, check=True, cwd=root,
-                                 env={**os.environ, "PYTHONPATH": str(root)})
-            seconds[name] = float(run.stdout.split()[-1])
+            seconds[name] = float(run_python(WHITE_RUNNER, root=root).split()[-1])
             print(f"white 2048 x 2048 in memory, {name}: {seconds[name]:.3f} s", flush=True)
         before, after = seconds.values()
         print(f"ratio this / baseline: {after / before:.2f}")

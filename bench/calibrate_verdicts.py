@@ -7,7 +7,8 @@ kind, pitch within 0.1 %, angle within 0.02 deg, every lens within 0.1 pitch of 
 centre), *wrong* or *refused*; a real frame is reported as found (kind, pitch, angle) or
 refused. With ``--baseline COMMIT`` the same frames go through that commit's code too (in a
 fresh process) and every frame whose verdict, lattice or pitch (beyond 1e-4 relative) differs
-is listed.
+is listed. Each side draws the synthetic frames with its own generator (``plenocli.synth``):
+compare commits that draw them alike.
 
     PYTHONPATH=. .venv/bin/python bench/calibrate_verdicts.py [REALDATA] [--baseline COMMIT]
 """
@@ -16,14 +17,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-from bench.timing import ROOT, export_package
+from bench.timing import ROOT, export_package, run_python
 
 RUNNER = r"""
 import json, sys
@@ -81,9 +79,7 @@ print(json.dumps(results))
 
 
 def _verdicts(root: Path, realdata: str) -> dict:
-    run = subprocess.run([sys.executable, "-c", RUNNER, realdata], capture_output=True, text=True,
-                         check=True, cwd=root, env={**os.environ, "PYTHONPATH": str(root)})
-    return json.loads(run.stdout.splitlines()[-1])
+    return json.loads(run_python(RUNNER, realdata, root=root).splitlines()[-1])
 
 
 def _differs(a: dict, b: dict) -> bool:

@@ -1,6 +1,8 @@
 """Timing helper shared by the benchmarks (run them as ``PYTHONPATH=. python bench/bench_X.py``)."""
 
+import os
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -24,3 +26,13 @@ def export_package(commit: str, dest: Path) -> Path:
                              capture_output=True, check=True).stdout
     subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
     return dest
+
+
+def run_python(code: str, *args: str, root: Path) -> str:
+    """The standard output of ``code`` run by this Python with ``root`` first on its path (a
+    failure raises with the child's error output, not only its exit status)."""
+    run = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True,
+                         cwd=root, env={**os.environ, "PYTHONPATH": str(root)})
+    if run.returncode:
+        raise RuntimeError(f"the run under {root} failed:\n{run.stderr}")
+    return run.stdout

@@ -414,6 +414,23 @@ def test_interrupt_between_results_stops_the_workers(forked_pool, monkeypatch):
     assert not multiprocessing.active_children()  # "slow" would sleep on for a minute
 
 
+def test_second_interrupt_while_stopping_kills_the_workers(forked_pool, monkeypatch):
+    import multiprocessing
+    from types import SimpleNamespace
+
+    def interrupted(sentinels, timeout):   # Ctrl-C again while the workers are given time
+        raise KeyboardInterrupt
+
+    results = forked_pool._pool_results(2, "cfg", ["/x/fine.dng", "/x/stuck.dng"], {}, None)
+    assert next(results).name == "fine"
+    monkeypatch.setattr(forked_pool, "connection", SimpleNamespace(wait=interrupted))
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        results.close()
+    assert time.monotonic() - start < 5   # "stuck" ignores SIGTERM: killed, not waited for
+    assert not multiprocessing.active_children()
+
+
 def test_timeout_must_be_positive(shoot):
     _, config, captures = shoot
     with pytest.raises(ConfigError, match="--timeout"):

@@ -22,7 +22,7 @@ from plenocli.model.lensgrid import LATTICES
 
 PEAK_Z = 4.0          # a spectral peak stands this many robust sigma above its ring
 PEAKS_PER_SPECTRUM = 8
-RING_SAMPLES = 512    # bins per ring that its background statistics are taken from
+RING_SAMPLES = 512    # a ring's statistics come from 512-1023 of its bins (all if fewer)
 
 
 @dataclass(frozen=True)
@@ -128,8 +128,8 @@ def lattices_of_lag(lag: np.ndarray, factor: float = 1.0) -> list[Lattice]:
 class _Rings:
     """The radius (cycles/px) of every bin of a (size, size // 2 + 1) real spectrum, its ring
     of 4 bins, and the bins its statistics are taken from grouped by ring (``order``: every
-    bin of a small ring, an even spread of RING_SAMPLES of a larger one) with where each ring
-    starts there."""
+    bin of a small ring, an even spread of RING_SAMPLES to twice that of a larger one) with
+    where each ring starts there."""
 
     radius: np.ndarray
     ring: np.ndarray
@@ -147,8 +147,8 @@ def _rings(size: int) -> _Rings:
     order = np.argsort(ring.ravel(), kind="stable").astype(np.int32)
     counts = np.bincount(ring.ravel(), minlength=nring)
     start = np.concatenate([[0], np.cumsum(counts)])
-    # a quantile of RING_SAMPLES values is within a few % of the ring's: the outer rings of a
-    # large spectrum hold thousands of bins
+    # every stride-th bin of a ring of thousands: the spread (median - 16th percentile) moves
+    # by 4 % on average (22 % at most), which only shifts which weak peaks propose hypotheses
     stride = np.maximum(counts // RING_SAMPLES, 1)
     rank = np.arange(order.size) - np.repeat(start[:-1], counts)
     sample = order[rank % np.repeat(stride, counts) == 0]

@@ -44,8 +44,10 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
     if weights is not None:
         w = np.sqrt(np.concatenate([weights, weights]))
         a, b = a * w[:, None], b * w
-    normal = a.T @ a   # 4 x 4: solved as is (the design is well conditioned), not by SVD
-    sol = np.linalg.lstsq(normal, a.T @ b, rcond=None)[0]
+    # the 4 x 4 normal equations, not the 2K x 4 design: well conditioned, as lens indices
+    # count from the middle of the frame
+    inverse = np.linalg.pinv(a.T @ a)
+    sol = inverse @ (a.T @ b)
     ox, oy, u, v = sol
     pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
     if not return_se:
@@ -54,7 +56,7 @@ def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex
         return pitch, angle, (float(ox), float(oy)), (np.inf, np.inf)
     # standard errors from the normal equations: pitch along (u, v), angle across it
     dof = max(len(b) - 4, 1)
-    cov = np.linalg.pinv(normal) * float(np.sum((a @ sol - b) ** 2)) / dof
+    cov = inverse * float(np.sum((a @ sol - b) ** 2)) / dof
     radial = np.array([u, v]) / pitch
     across = np.array([-v, u]) / pitch
     se_pitch = float(np.sqrt(radial @ cov[2:, 2:] @ radial))

@@ -46,7 +46,8 @@ def lens_sharpness(flat: np.ndarray, centres: np.ndarray, pitch_px: float) -> np
 @numba.njit(parallel=True, cache=True)
 def _disc_means(image, r, c, dy, dx):  # pragma: no cover - compiled
     """Mean of ``image`` at (r + dy, c + dx) per centre, indices beyond the frame mirrored
-    back (edge pixel repeated, as BORDER_REFLECT)."""
+    back once (edge pixel repeated, as BORDER_REFLECT): offsets must be smaller than the
+    frame (a disc of 0.35 pitch is, in any frame that holds lenses)."""
     rows, cols = image.shape
     out = np.empty(r.shape[0])
     for k in numba.prange(r.shape[0]):

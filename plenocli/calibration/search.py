@@ -45,7 +45,8 @@ def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
     the FFTs, filters and kernels they spend their time in release the GIL)."""
     factors = [f for f in (1, 2, 4, 8) if f == 1 or min(image.shape) // f >= 160]
     coarser = [*factors[1:], None]
-    # numba's thread count is the process's budget (one in a batch worker)
+    # numba's thread count is the process's budget (one in a batch worker); a view calls no
+    # parallel numba kernel (numba's workqueue layer refuses parallel launches from threads)
     with ThreadPoolExecutor(max_workers=min(len(factors), numba.get_num_threads())) as pool:
         built = pool.map(lambda f, c: _view(image, cfa, f, c), factors, coarser)
         return dict(zip(factors, built, strict=True))

@@ -18,7 +18,6 @@ import ctypes
 import glob
 import logging
 import multiprocessing
-import multiprocessing.connection
 import os
 import re
 import signal
@@ -30,6 +29,7 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from multiprocessing import connection
 from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, PlenocliError
@@ -401,15 +401,21 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
         proc.terminate()
     running = {proc.sentinel: proc for proc in processes}
     deadline = time.monotonic() + 10.0
-    while running and (left := deadline - time.monotonic()) > 0:
-        for sentinel in multiprocessing.connection.wait(list(running), left):
-            del running[sentinel]
+    again = None
+    try:
+        while running and (left := deadline - time.monotonic()) > 0:
+            for sentinel in connection.wait(list(running), left):
+                del running[sentinel]
+    except KeyboardInterrupt as interrupt:   # a second Ctrl-C: the grace time is over
+        again = interrupt
     for proc in running.values():
         proc.kill()
     if manager is not None:
         manager.join(10.0)
     for proc in processes:  # reaped already, unless the manager thread hung
         proc.join(1.0)
+    if again is not None:
+        raise again
 
 
 # ---------------------------------------------------------------- dask.distributed
