@@ -7,6 +7,7 @@ import tifffile
 
 from plenocli.errors import InputError
 from plenocli.io import raw as rawio
+from plenocli.io.dng import write_dng
 from plenocli.pipeline.stages.simulate import write_dualpixel_raw
 from plenocli.synth.dualpixel import dualpixel_capture
 
@@ -143,3 +144,26 @@ def test_dng_active_area_beyond_the_image_is_refused(tmp_path):
               black_levels=[0], white_level=1000, active_area=[0, 0, 4000, 6000])
     with pytest.raises(InputError, match="active_area"):
         rawio.decode(tmp_path / "x.dng")
+
+
+@pytest.mark.parametrize("compression", [("jpeg", {"lossless": True}), ("lzw", None)])
+def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
+    """Cameras and Adobe's converter write DNGs in lossless-JPEG tiles: the same frames."""
+    rng = np.random.default_rng(5)
+    frames = rng.integers(500, 15000, (2, 300, 420)).astype(np.uint16)
+    write_dng(tmp_path / "plain.dng", frames, cfa="RGGB", black_levels=[512, 512],
+                  white_level=16383, active_area=[2, 4, 300, 420])
+    with tifffile.TiffFile(tmp_path / "plain.dng") as tif:
+        tags = [[(t.code, t.dtype, t.count, t.value, True) for t in page.tags.values()
+                 if t.code >= 33421] for page in tif.pages]
+    name, args = compression
+    with tifffile.TiffWriter(tmp_path / "packed.dng") as writer:
+        for k, frame in enumerate(frames):
+            writer.write(frame, photometric=32803, compression=name, compressionargs=args,
+                         tile=(128, 128), subfiletype=0, description=f"frame{k}",
+                         metadata=None, extratags=tags[k])
+    with tifffile.TiffFile(tmp_path / "packed.dng") as tif:
+        assert tif.pages[0].compression != 1 and tif.pages[0].is_tiled
+    plain, plain_meta = rawio.decode(tmp_path / "plain.dng")
+    packed, packed_meta = rawio.decode(tmp_path / "packed.dng")
+    assert np.array_equal(packed, plain) and packed_meta["cfa"] == plain_meta["cfa"]
