@@ -167,3 +167,11 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
     plain, plain_meta = rawio.decode(tmp_path / "plain.dng")
     packed, packed_meta = rawio.decode(tmp_path / "packed.dng")
     assert np.array_equal(packed, plain) and packed_meta["cfa"] == plain_meta["cfa"]
+    if name == "lzw":   # a damaged tile is refused as damage (the codec is there)
+        with tifffile.TiffFile(tmp_path / "packed.dng") as tif:
+            start = tif.pages[0].dataoffsets[0]
+        data = bytearray((tmp_path / "packed.dng").read_bytes())
+        data[start + 100:start + 2100] = bytes(2000)   # inside the first tile
+        (tmp_path / "damaged.dng").write_bytes(bytes(data))
+        with pytest.raises(InputError, match="raw IFD 0 is damaged"):
+            rawio.decode(tmp_path / "damaged.dng")

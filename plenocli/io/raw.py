@@ -234,11 +234,8 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                 try:
                     data = page.asarray()
                 except ValueError as err:
-                    if int(page.compression) != 1:  # a codec tifffile lacks
-                        raise InputError(f"{path}: cannot decode raw IFD {k} ({err}); for "
-                                         "compressed DNGs install imagecodecs") from err
-                    raise InputError(f"{path}: raw IFD {k} is incomplete ({err}); the file "
-                                     "may be truncated") from err
+                    raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
+                                            "copy or export the DNG again") from err
                 if data.ndim != 2:
                     raise InputError(f"{path}: raw IFD {k} has shape {data.shape}; "
                                      "plenocli reads one-sample raw (CFA or mono) DNGs")
