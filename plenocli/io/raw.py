@@ -231,14 +231,16 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             frames, blacks, whites, names = [], [], [], []
             for k, page in enumerate(raws):
                 tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
+                if len(page.shape) != 2:  # from the header: refused before decoding
+                    raise InputError(f"{path}: raw IFD {k} has shape {page.shape}; plenocli reads "
+                                     "one-sample raw (CFA or mono) DNGs: convert the capture "
+                                     "to DNG without demosaicing")
+                tiffio.check_segments(path, page)
                 try:
                     data = page.asarray()
-                except ValueError as err:
+                except tiffio.READ_ERRORS as err:  # the codecs' own errors too
                     raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
                                             "copy or export the DNG again") from err
-                if data.ndim != 2:
-                    raise InputError(f"{path}: raw IFD {k} has shape {data.shape}; "
-                                     "plenocli reads one-sample raw (CFA or mono) DNGs")
                 frames.append(data)
                 blacks.append(_dng_black(page))
                 white = _tag(page, 50717, None)
@@ -292,6 +294,8 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
     if p.suffix.lower() in (".tif", ".tiff"):
         try:
             with tiffio.open_tiff(p) as tif:
+                for page in tif.pages:
+                    tiffio.check_segments(p, page)
                 data = tif.asarray()
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "

@@ -40,6 +40,10 @@ FORMAT_VERSION = 1
 # page is 30 times a full-frame raw; a larger claim is damage, not a sensor.
 MAX_PAGE_PIXELS = 2 ** 30
 COMPRESSION_NONE = 1
+# JPEG (lossless in raw DNGs, baseline in other TIFFs) and DNG 1.4's lossy JPEG.
+JPEG_COMPRESSIONS = (7, 34892)
+JPEG_START_OF_SCAN, JPEG_END_OF_IMAGE = b"\xff\xda", b"\xff\xd9"
+JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}  # SOF0..SOF15
 # What reading a damaged file raises, from tifffile or the codec of a compressed page (zlib,
 # imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
 READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
@@ -158,6 +162,51 @@ def check_page(path: Path, page) -> None:
                              f"{end}, the file has {size} bytes); copy or write it again")
 
 
+def check_segments(path, page) -> None:
+    """Refuse a page with a tile or strip that would decode to made-up pixels without an error.
+
+    tifffile fills a segment of no bytes with zeros; libjpeg-turbo and the lossless-JPEG decoder
+    fill a cut JPEG stream with made-up values, and tifffile casts JPEG samples of more bits than
+    BitsPerSample says into the smaller type. A whole JPEG stream has its end marker after the
+    last start-of-scan (byte stuffing keeps it out of the coded data)."""
+    kind = "tile" if page.is_tiled else "strip"
+    counts = [int(c) for c in page.databytecounts]
+    if 0 in counts:
+        raise InputError(f"{path}: damaged TIFF ({kind} {counts.index(0)} has no data: byte count "
+                         "0); copy or write the file again")
+    if int(page.compression) not in JPEG_COMPRESSIONS:
+        return
+    handle = page.parent.filehandle
+    for k, (offset, count) in enumerate(zip(page.dataoffsets, counts, strict=True)):
+        handle.seek(offset)
+        segment = handle.read(count)
+        scan = segment.rfind(JPEG_START_OF_SCAN)
+        if scan < 0 or segment.find(JPEG_END_OF_IMAGE, scan) < 0:
+            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} stops before its end: cut "
+                             "short or a wrong byte count); copy or write the file again")
+        bits = _jpeg_precision(segment)
+        if bits is not None and bits > 8 * page.dtype.itemsize:
+            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} holds {bits}-bit samples, "
+                             f"the header says {page.bitspersample} bits per sample); copy or "
+                             "write the file again")
+
+
+def _jpeg_precision(stream: bytes) -> int | None:
+    """Bits per sample in a JPEG stream's frame header (SOFn); None if there is none."""
+    pos = 2  # after the start-of-image marker
+    while pos + 5 <= len(stream) and stream[pos] == 0xFF:
+        marker = stream[pos + 1]
+        if marker == 0xFF:  # fill byte
+            pos += 1
+        elif marker in JPEG_FRAME_MARKERS:
+            return stream[pos + 4]
+        elif marker == JPEG_START_OF_SCAN[1]:
+            return None
+        else:
+            pos += 2 + int.from_bytes(stream[pos + 2:pos + 4], "big")
+    return None
+
+
 def check_real_dtype(path, dtype) -> None:
     """Sensor and plenocli images hold real numbers: unsigned or 16+ bit integers, or floats."""
     dtype = np.dtype(dtype) if dtype is not None else None
@@ -177,6 +226,8 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
                 raise InputError(f"{p}: the TIFF holds no image")
             description = tif.pages[0].description
             series = tif.series[0] if len(tif.series) == 1 else None
+            for page in tif.pages:
+                check_segments(p, page)
             if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
