@@ -1,0 +1,256 @@
+"""DNG and TIFF variants cameras and converters write, through ``plenocli decode`` (the CLI):
+every lossless one gives exactly the frame it was made from; lossy JPEG gives what the file
+holds; damaged or unsupported ones are refused with one line, nothing left behind.
+
+The files are written here with tifffile and imagecodecs from seeded frames; DNG tags tifffile
+will not write for one sample (LinearRaw) and damage are patched into the bytes afterwards.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import imagecodecs
+import numpy as np
+import pytest
+import tifffile
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.errors import InputError
+from plenocli.io import tiffio
+
+ROWS, COLS = 75, 101  # not a multiple of any tile or strip below
+LINEAR_RAW = 34892
+LOSSLESS_JPEG = {"compression": "jpeg", "compressionargs": {"lossless": True}}
+
+
+def _frame(dtype=np.uint16, high=16384, seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    if np.dtype(dtype).kind == "f":
+        return (rng.random((ROWS, COLS)) * 4000).astype(dtype)
+    return rng.integers(0, high, (ROWS, COLS)).astype(dtype)
+
+
+def _dng_tags(cfa: bool, white: int) -> list:
+    tags = [(50706, "B", 4, (1, 4, 0, 0), True), (50707, "B", 4, (1, 4, 0, 0), True),
+            (50708, "s", 0, "variants", True), (50717, "I", 1, (white,), True)]
+    if cfa:
+        tags += [(33421, "H", 2, (2, 2), True), (33422, "B", 4, (0, 1, 1, 2), True)]
+    return tags
+
+
+def _write_dng(path: Path, frame, *, linear: bool = False, subifd: bool = False,
+               byteorder: str = "<", bigtiff: bool = False, white: int = 65535, **options):
+    """A one-frame DNG: CFA, or LinearRaw (written as grey, then its Photometric patched)."""
+    tags = _dng_tags(cfa=not linear, white=white)
+    with tifffile.TiffWriter(path, byteorder=byteorder, bigtiff=bigtiff) as writer:
+        if subifd:  # as converters do: a JPEG preview on top, the raw in its SubIFD
+            preview = np.random.default_rng(1).integers(0, 255, (24, 32, 3), dtype=np.uint8)
+            writer.write(preview, photometric="rgb", subfiletype=1, subifds=1, metadata=None,
+                         compression="jpeg", extratags=tags[:3])
+            tags = tags[3:]
+        writer.write(frame, photometric="minisblack" if linear else 32803, subfiletype=0,
+                     metadata=None, extratags=tags, **options)
+    if linear:
+        _patch_raw_tag(path, 262, LINEAR_RAW)
+
+
+def _raw_page(tif: tifffile.TiffFile):
+    pages = list(tif.pages) + [sub for page in tif.pages if page.subifds for sub in page.pages]
+    return next(p for p in pages if not int(p.subfiletype) & 1)
+
+
+def _patch_raw_tag(path: Path, code: int, value: int, index: int = 0) -> None:
+    """Write ``value`` as entry ``index`` of the raw IFD's tag ``code`` (in place)."""
+    with tifffile.TiffFile(path) as tif:
+        tag = _raw_page(tif).tags[code]
+        size = {3: 2, 4: 4, 16: 8}[int(tag.dtype)]  # SHORT, LONG, LONG8
+        fmt = tif.byteorder + {2: "H", 4: "I", 8: "Q"}[size]
+        offset = tag.valueoffset + index * size
+    data = bytearray(path.read_bytes())
+    data[offset:offset + size] = struct.pack(fmt, value)
+    path.write_bytes(bytes(data))
+
+
+def _segments(path: Path) -> tuple[list[int], list[int]]:
+    with tifffile.TiffFile(path) as tif:
+        page = _raw_page(tif)
+        return [int(v) for v in page.dataoffsets], [int(v) for v in page.databytecounts]
+
+
+def _decode(path: Path, out: Path):
+    result = CliRunner().invoke(cli, ["decode", str(path), "-o", str(out)])
+    assert "Traceback" not in result.output + result.stderr
+    return result
+
+
+def _assert_refused(path: Path, tmp_path: Path, *words: str) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    result = _decode(path, out / "frames.tif")
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert result.exit_code == 1 and len(lines) == 1, result.output + result.stderr
+    for word in words:
+        assert word in lines[0], (word, lines[0])
+    assert not list(out.iterdir()), "a file was left behind"
+
+
+LOSSLESS = {
+    "lossless JPEG tiles, odd tile": (_frame(), dict(tile=(16, 48), **LOSSLESS_JPEG)),
+    "lossless JPEG strips, 14 bit": (_frame(), dict(
+        rowsperstrip=32, compression="jpeg",
+        compressionargs={"lossless": True, "bitspersample": 14})),
+    "lossless JPEG 12 bit": (_frame(high=4096), dict(
+        tile=(32, 32), compression="jpeg",
+        compressionargs={"lossless": True, "bitspersample": 12})),
+    "lossless JPEG 16 bit LinearRaw": (_frame(high=65536), dict(
+        linear=True, tile=(32, 64), **LOSSLESS_JPEG)),
+    "Deflate, predictor 2": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2)),
+    "LZW, predictor 2, strips": (_frame(), dict(rowsperstrip=20, compression="lzw",
+                                                predictor=2)),
+    "float32 LinearRaw, Deflate, float predictor": (_frame(np.float32), dict(
+        linear=True, tile=(32, 32), compression="zlib", predictor=3)),
+    "float32 LinearRaw, LZW, float predictor": (_frame(np.float32), dict(
+        linear=True, rowsperstrip=16, compression="lzw", predictor=3)),
+    "JPEG XL (DNG 1.7), lossless": (_frame(), dict(
+        tile=(32, 64), compression="jpegxl_dng", compressionargs={"lossless": True})),
+    "raw in a SubIFD, JPEG preview on top": (_frame(), dict(
+        subifd=True, tile=(32, 32), **LOSSLESS_JPEG)),
+    "BigTIFF": (_frame(), dict(bigtiff=True, tile=(32, 32), **LOSSLESS_JPEG)),
+    "big-endian, Deflate, predictor 2": (_frame(), dict(byteorder=">", tile=(32, 32),
+                                                        compression="zlib", predictor=2)),
+    "big-endian float32, float predictor": (_frame(np.float32), dict(
+        byteorder=">", linear=True, tile=(32, 32), compression="zlib", predictor=3)),
+}
+
+
+@pytest.mark.parametrize("name", LOSSLESS)
+def test_lossless_variant_decodes_exactly(name, tmp_path):
+    frame, options = LOSSLESS[name]
+    path = tmp_path / "variant.dng"
+    _write_dng(path, frame, **options)
+    with tifffile.TiffFile(path) as tif:  # the variant really is what its name says
+        page = _raw_page(tif)
+        assert page.compression != 1 and page.shape == frame.shape
+    result = _decode(path, tmp_path / "frames.tif")
+    assert result.exit_code == 0, result.output + result.stderr
+    decoded = tifffile.imread(tmp_path / "frames.tif")
+    assert decoded.dtype == frame.dtype
+    np.testing.assert_array_equal(decoded.reshape(frame.shape), frame)
+
+
+def test_big_endian_lossless_jpeg_decodes_exactly(tmp_path):
+    """tifffile will not compress into a big-endian file: the tiles are encoded here."""
+    frame, tile = _frame(high=65536), 32
+    padded = np.zeros((96, 128), np.uint16)
+    padded[:ROWS, :COLS] = frame
+    tiles = (imagecodecs.jpeg_encode(padded[r:r + tile, c:c + tile].copy(), lossless=True)
+             for r in range(0, ROWS, tile) for c in range(0, COLS, tile))
+    _write_dng(tmp_path / "be.dng", tiles, byteorder=">", shape=frame.shape, dtype=np.uint16,
+               tile=(tile, tile), compression=7, bitspersample=16)
+    assert _decode(tmp_path / "be.dng", tmp_path / "frames.tif").exit_code == 0
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"), frame)
+
+
+def _smooth8() -> np.ndarray:
+    rows, cols = np.mgrid[:ROWS, :COLS]
+    return ((rows * 2 + cols) % 256).astype(np.uint8)
+
+
+def test_lossy_jpeg_linear_raw_gives_what_the_file_holds(tmp_path):
+    """A lossy DNG (8-bit LinearRaw, compression 34892): its pixels are the JPEG tiles'."""
+    frame, tile = _smooth8(), 32
+    path = tmp_path / "lossy.dng"
+    _write_dng(path, frame, linear=True, white=255, tile=(tile, tile), compression="jpeg",
+               compressionargs={"level": 90})
+    _patch_raw_tag(path, 259, 34892)
+    offsets, counts = _segments(path)
+    data = path.read_bytes()
+    held = np.zeros((96, 128), np.uint8)
+    across = -(-COLS // tile)
+    for k, (offset, count) in enumerate(zip(offsets, counts, strict=True)):
+        r, c = divmod(k, across)
+        held[r * tile:(r + 1) * tile, c * tile:(c + 1) * tile] = imagecodecs.jpeg8_decode(
+            data[offset:offset + count])
+    held = held[:ROWS, :COLS]
+    assert not np.array_equal(held, frame)  # lossy indeed
+    assert _decode(path, tmp_path / "frames.tif").exit_code == 0
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"), held)
+
+
+def _halve_count(path, k=1):
+    _patch_raw_tag(path, 325 if _is_tiled(path) else 279, _segments(path)[1][k] // 2, index=k)
+
+
+def _is_tiled(path) -> bool:
+    with tifffile.TiffFile(path) as tif:
+        return _raw_page(tif).is_tiled
+
+
+def _zero_count(path, k=1):
+    _patch_raw_tag(path, 325 if _is_tiled(path) else 279, 0, index=k)
+
+
+def _zero_tile(path, k=1):
+    offsets, counts = _segments(path)
+    data = bytearray(path.read_bytes())
+    data[offsets[k]:offsets[k] + counts[k]] = bytes(counts[k])
+    path.write_bytes(bytes(data))
+
+
+DAMAGED = {  # name: (frame, write options, damage, words in the message)
+    "lossless JPEG tile cut short": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
+                                     _halve_count, "JPEG tile 1 stops before its end"),
+    "lossless JPEG strip cut short": (_frame(), dict(rowsperstrip=16, **LOSSLESS_JPEG),
+                                      _halve_count, "JPEG strip 1 stops before its end"),
+    "lossy JPEG tile cut short": (_smooth8(), dict(linear=True, white=255, tile=(32, 32),
+                                                   compression="jpeg"),
+                                  _halve_count, "JPEG tile 1 stops before its end"),
+    "PackBits strip of no bytes": (_frame(), dict(rowsperstrip=16, compression="packbits"),
+                                   _zero_count, "strip 1 has no data"),
+    "JPEG samples wider than BitsPerSample": (
+        _frame(high=65536), dict(tile=(32, 32), compression="jpeg",
+                                 compressionargs={"lossless": True, "bitspersample": 16}),
+        lambda p: _patch_raw_tag(p, 258, 8), "16-bit samples, the header says 8 bits"),
+    "lossless JPEG tile zeroed": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG), _zero_tile,
+                                  "stops before its end"),
+    "Deflate tile zeroed": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2),
+                            _zero_tile, "raw IFD 0 is damaged"),
+    "JPEG XL tile cut short": (_frame(), dict(tile=(32, 32), compression="jpegxl_dng",
+                                              compressionargs={"lossless": True}),
+                               _halve_count, "raw IFD 0 is damaged"),
+}
+
+
+@pytest.mark.parametrize("name", DAMAGED)
+def test_damaged_variant_is_refused(name, tmp_path):
+    frame, options, damage, words = DAMAGED[name]
+    path = tmp_path / "damaged.dng"
+    _write_dng(path, frame, **options)
+    damage(path)
+    _assert_refused(path, tmp_path, "damaged", words)
+
+
+@pytest.mark.parametrize("samples,options", [
+    (2, dict(planarconfig="separate")),
+    (3, dict(planarconfig="contig", tile=(32, 32), **LOSSLESS_JPEG)),
+])
+def test_multi_sample_raw_is_refused(samples, options, tmp_path):
+    frames = np.stack([_frame(seed=s) for s in range(samples)])
+    data = frames if options["planarconfig"] == "separate" else np.moveaxis(frames, 0, -1)
+    path = tmp_path / "samples.dng"
+    _write_dng(path, data, linear=True, **options)  # tifffile refuses a multi-sample CFA page
+    _patch_raw_tag(path, 262, 32803)
+    _assert_refused(path, tmp_path, "one-sample raw", "without demosaicing")
+
+
+def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):
+    """Plain sensor TIFFs (decode) and TIFFs read by the other stages: the same check."""
+    path = tmp_path / "sensor.tif"
+    tifffile.imwrite(path, _frame(), rowsperstrip=16, **LOSSLESS_JPEG)
+    _halve_count(path)
+    _assert_refused(path, tmp_path, "JPEG strip 1 stops before its end")
+    with pytest.raises(InputError, match="JPEG strip 1 stops before its end"):
+        tiffio.read_image(path)
