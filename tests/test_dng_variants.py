@@ -202,12 +202,12 @@ def _zero_tile(path, k=1):
 
 DAMAGED = {  # name: (frame, write options, damage, words in the message)
     "lossless JPEG tile cut short": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
-                                     _halve_count, "JPEG tile 1 stops before its end"),
+                                     _halve_count, "JPEG tile 1 has no end-of-image marker"),
     "lossless JPEG strip cut short": (_frame(), dict(rowsperstrip=16, **LOSSLESS_JPEG),
-                                      _halve_count, "JPEG strip 1 stops before its end"),
+                                      _halve_count, "JPEG strip 1 has no end-of-image marker"),
     "lossy JPEG tile cut short": (_smooth8(), dict(linear=True, white=255, tile=(32, 32),
                                                    compression="jpeg"),
-                                  _halve_count, "JPEG tile 1 stops before its end"),
+                                  _halve_count, "JPEG tile 1 has no end-of-image marker"),
     "PackBits strip of no bytes": (_frame(), dict(rowsperstrip=16, compression="packbits"),
                                    _zero_count, "strip 1 has no data"),
     "JPEG samples wider than BitsPerSample": (
@@ -215,7 +215,7 @@ DAMAGED = {  # name: (frame, write options, damage, words in the message)
                                  compressionargs={"lossless": True, "bitspersample": 16}),
         lambda p: _patch_raw_tag(p, 258, 8), "16-bit samples, the header says 8 bits"),
     "lossless JPEG tile zeroed": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG), _zero_tile,
-                                  "stops before its end"),
+                                  "has no end-of-image marker"),
     "Deflate tile zeroed": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2),
                             _zero_tile, "raw IFD 0 is damaged"),
     "JPEG XL tile cut short": (_frame(), dict(tile=(32, 32), compression="jpegxl_dng",
@@ -251,6 +251,6 @@ def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):
     path = tmp_path / "sensor.tif"
     tifffile.imwrite(path, _frame(), rowsperstrip=16, **LOSSLESS_JPEG)
     _halve_count(path)
-    _assert_refused(path, tmp_path, "JPEG strip 1 stops before its end")
-    with pytest.raises(InputError, match="JPEG strip 1 stops before its end"):
+    _assert_refused(path, tmp_path, "JPEG strip 1 has no end-of-image marker")
+    with pytest.raises(InputError, match="JPEG strip 1 has no end-of-image marker"):
         tiffio.read_image(path)

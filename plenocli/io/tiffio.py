@@ -182,8 +182,9 @@ def check_segments(path, page) -> None:
         segment = handle.read(count)
         scan = segment.rfind(JPEG_START_OF_SCAN)
         if scan < 0 or segment.find(JPEG_END_OF_IMAGE, scan) < 0:
-            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} stops before its end: cut "
-                             "short or a wrong byte count); copy or write the file again")
+            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} has no end-of-image "
+                             "marker: cut short or a wrong byte count); copy or write the file "
+                             "again")
         bits = _jpeg_precision(segment)
         if bits is not None and bits > 8 * page.dtype.itemsize:
             raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} holds {bits}-bit samples, "
