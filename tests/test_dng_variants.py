@@ -200,6 +200,14 @@ def _zero_tile(path, k=1):
     path.write_bytes(bytes(data))
 
 
+def _offset_at_tile_0(path, k=1):
+    _patch_raw_tag(path, 324 if _is_tiled(path) else 273, _segments(path)[0][0], index=k)
+
+
+def _count_into_next(path, k=1):
+    _patch_raw_tag(path, 325 if _is_tiled(path) else 279, _segments(path)[1][k] + 10, index=k)
+
+
 DAMAGED = {  # name: (frame, write options, damage, words in the message)
     "lossless JPEG tile cut short": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
                                      _halve_count, "JPEG tile 1 has no end-of-image marker"),
@@ -218,6 +226,13 @@ DAMAGED = {  # name: (frame, write options, damage, words in the message)
                                   "has no end-of-image marker"),
     "Deflate tile zeroed": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2),
                             _zero_tile, "raw IFD 0 is damaged"),
+    "LZW tile offset at tile 0": (_frame(), dict(tile=(32, 32), compression="lzw", predictor=2),
+                                  _offset_at_tile_0, "two tiles share the bytes"),
+    "PackBits strip offset at strip 0": (_frame(), dict(rowsperstrip=16, compression="packbits"),
+                                         _offset_at_tile_0, "two strips share the bytes"),
+    "float Deflate byte count into the next tile": (
+        _frame(np.float32), dict(linear=True, tile=(32, 32), compression="zlib", predictor=3),
+        _count_into_next, "two tiles share the bytes"),
     "JPEG XL tile cut short": (_frame(), dict(tile=(32, 32), compression="jpegxl_dng",
                                               compressionargs={"lossless": True}),
                                _halve_count, "raw IFD 0 is damaged"),

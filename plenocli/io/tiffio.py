@@ -165,7 +165,8 @@ def check_page(path: Path, page) -> None:
 def check_segments(path, page) -> None:
     """Refuse a page with a tile or strip that would decode to made-up pixels without an error.
 
-    tifffile fills a segment of no bytes with zeros; libjpeg-turbo and the lossless-JPEG decoder
+    tifffile fills a segment of no bytes with zeros and decodes whatever a wrong offset points
+    at (segments of one page never share bytes); libjpeg-turbo and the lossless-JPEG decoder
     fill a cut JPEG stream with made-up values, and tifffile casts JPEG samples of more bits than
     BitsPerSample says into the smaller type. A whole JPEG stream has its end marker after the
     last start-of-scan (byte stuffing keeps it out of the coded data)."""
@@ -174,6 +175,12 @@ def check_segments(path, page) -> None:
     if 0 in counts:
         raise InputError(f"{path}: damaged TIFF ({kind} {counts.index(0)} has no data: byte count "
                          "0); copy or write the file again")
+    spans = sorted(zip((int(o) for o in page.dataoffsets), counts, strict=True))
+    for (start, count), (following, _) in zip(spans, spans[1:], strict=False):
+        if start + count > following:  # LZW, PackBits, ... would decode one tile twice
+            raise InputError(f"{path}: damaged TIFF (two {kind}s share the bytes at "
+                             f"{following}: a wrong offset or byte count); copy or write the "
+                             "file again")
     if int(page.compression) not in JPEG_COMPRESSIONS:
         return
     handle = page.parent.filehandle
