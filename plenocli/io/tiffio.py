@@ -168,8 +168,8 @@ def check_segments(path, page) -> None:
     tifffile fills a segment of no bytes with zeros and decodes whatever a wrong offset points
     at (segments of one page never share bytes); libjpeg-turbo and the lossless-JPEG decoder
     fill a cut JPEG stream with made-up values, and tifffile casts JPEG samples of more bits than
-    BitsPerSample says into the smaller type. A whole JPEG stream has its end marker after the
-    last start-of-scan (byte stuffing keeps it out of the coded data)."""
+    BitsPerSample says into the smaller type. A whole JPEG stream ends with its end marker, after
+    its first start-of-scan (byte stuffing keeps the marker out of the coded data)."""
     kind = "tile" if page.is_tiled else "strip"
     counts = [int(c) for c in page.databytecounts]
     if 0 in counts:
@@ -187,8 +187,8 @@ def check_segments(path, page) -> None:
     for k, (offset, count) in enumerate(zip(page.dataoffsets, counts, strict=True)):
         handle.seek(offset)
         segment = handle.read(count)
-        scan = segment.rfind(JPEG_START_OF_SCAN)
-        if scan < 0 or segment.find(JPEG_END_OF_IMAGE, scan) < 0:
+        scan = segment.find(JPEG_START_OF_SCAN)
+        if scan < 0 or segment.rfind(JPEG_END_OF_IMAGE) < scan:
             raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} has no end-of-image "
                              "marker: cut short or a wrong byte count); copy or write the file "
                              "again")
