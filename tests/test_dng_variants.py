@@ -33,18 +33,21 @@ def _frame(dtype=np.uint16, high=16384, seed=0) -> np.ndarray:
     return rng.integers(0, high, (ROWS, COLS)).astype(dtype)
 
 
-def _dng_tags(cfa: bool, white: int) -> list:
+def _dng_tags(cfa: bool, white: int | None) -> list:
     tags = [(50706, "B", 4, (1, 4, 0, 0), True), (50707, "B", 4, (1, 4, 0, 0), True),
-            (50708, "s", 0, "variants", True), (50717, "I", 1, (white,), True)]
+            (50708, "s", 0, "variants", True)]
+    if white is not None:
+        tags.append((50717, "I", 1, (white,), True))
     if cfa:
         tags += [(33421, "H", 2, (2, 2), True), (33422, "B", 4, (0, 1, 1, 2), True)]
     return tags
 
 
 def _write_dng(path: Path, frame, *, linear: bool = False, subifd: bool = False,
-               byteorder: str = "<", bigtiff: bool = False, white: int = 65535, **options):
+               byteorder: str = "<", bigtiff: bool = False, white: int | None = 65535,
+               extratags=(), **options):
     """A one-frame DNG: CFA, or LinearRaw (written as grey, then its Photometric patched)."""
-    tags = _dng_tags(cfa=not linear, white=white)
+    tags = _dng_tags(cfa=not linear, white=white) + list(extratags)
     with tifffile.TiffWriter(path, byteorder=byteorder, bigtiff=bigtiff) as writer:
         if subifd:  # as converters do: a JPEG preview on top, the raw in its SubIFD
             preview = np.random.default_rng(1).integers(0, 255, (24, 32, 3), dtype=np.uint8)
@@ -269,3 +272,24 @@ def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):
     _assert_refused(path, tmp_path, "JPEG strip 1 has no end-of-image marker")
     with pytest.raises(InputError, match="JPEG strip 1 has no end-of-image marker"):
         tiffio.read_image(path)
+
+
+@pytest.mark.parametrize("entries", [256, 100])
+def test_linearization_table_maps_the_stored_codes(entries, tmp_path):
+    """Lossy and some camera DNGs store codes: the frame is the table's levels (DNG spec), a
+    code beyond the table taking its last entry."""
+    codes = _frame(np.uint8, high=256)
+    table = (np.arange(entries) ** 2 // 4 + 7).astype(np.uint16)
+    _write_dng(tmp_path / "coded.dng", codes, white=16000, tile=(32, 32), **LOSSLESS_JPEG,
+               extratags=[(50712, "H", entries, tuple(int(v) for v in table), True)])
+    assert _decode(tmp_path / "coded.dng", tmp_path / "frames.tif").exit_code == 0
+    truth = np.array([table[min(int(c), entries - 1)] for c in codes.ravel()], np.uint16)
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"),
+                                  truth.reshape(codes.shape))
+
+
+def test_float_raw_without_white_level_asks_for_it(tmp_path):
+    path = tmp_path / "float.dng"
+    _write_dng(path, _frame(np.float32), linear=True, white=None, tile=(32, 32),
+               compression="zlib", predictor=3)
+    _assert_refused(path, tmp_path, "no white level", "--white")

@@ -135,6 +135,9 @@ def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa
 def _check_levels(path, blacks: list, whites: list) -> None:
     """Black levels finite and >= 0, white levels above them (+inf: a float image's)."""
     for black, white in zip(blacks, whites, strict=True):
+        if white != white:  # NaN
+            raise InputError(f"{path}: no white level for these floating-point samples; give it "
+                             "with --white")
         low = np.asarray(black, np.float64)
         if not (np.all(np.isfinite(low)) and np.all(low >= 0)):
             raise InputError(f"{path}: black level {black} must be finite and >= 0 DN "
@@ -241,11 +244,13 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                 except tiffio.READ_ERRORS as err:  # the codecs' own errors too
                     raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
                                             "copy or export the DNG again") from err
+                data = _linearized(path, k, page, data)
                 frames.append(data)
                 blacks.append(_dng_black(page))
                 white = _tag(page, 50717, None)
-                whites.append(float(np.max(white)) if white is not None
-                              else float(np.iinfo(data.dtype).max))
+                if white is None:  # floats have no default: NaN asks for --white
+                    white = np.iinfo(data.dtype).max if data.dtype.kind in "ui" else np.nan
+                whites.append(float(np.max(white)))
                 desc = page.description.strip() if page.description else ""
                 names.append(desc if desc and len(desc) <= 16 and " " not in desc else f"frame{k}")
             first = raws[0]
@@ -274,6 +279,22 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
         "cfa": cfa, "origin": [0, 0], "black_level": blacks, "white_level": whites,
         "active_area": active, "masked_areas": masked, "views": names, "colour": colour,
     }
+
+
+def _linearized(path, k: int, page, data: np.ndarray) -> np.ndarray:
+    """Stored values mapped through the DNG LinearizationTable, as the DNG spec says before
+    anything else (lossy DNGs store 8-bit codes; some cameras compress their raws this way).
+    Stored values beyond the table take its last entry (the DNG SDK's rule)."""
+    table = _tag(page, 50712, None)
+    if table is None:
+        return data
+    table = np.atleast_1d(np.asarray(table))
+    if (data.dtype.kind != "u" or table.size == 0 or table.dtype.kind not in "ui"
+            or table.min() < 0 or table.max() > np.iinfo(np.uint16).max):
+        raise InputError(f"{path}: raw IFD {k} has a LinearizationTable of {table.size} "
+                         f"entries for {data.dtype} samples; plenocli maps unsigned codes "
+                         "through a table of 16-bit levels: convert the DNG without it")
+    return table.astype(np.uint16)[np.minimum(data, table.size - 1)]
 
 
 def _dng_black(page) -> list[float]:
