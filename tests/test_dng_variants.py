@@ -144,16 +144,22 @@ def test_lossless_variant_decodes_exactly(name, tmp_path):
     np.testing.assert_array_equal(decoded.reshape(frame.shape), frame)
 
 
-def test_big_endian_lossless_jpeg_decodes_exactly(tmp_path):
-    """tifffile will not compress into a big-endian file: the tiles are encoded here."""
+@pytest.mark.parametrize("byteorder,coded", [
+    (">", (32, 32)),      # big-endian: tifffile will not compress into one, so encoded here
+    ("<", (32, 16, 2)),   # two components of half width, as Adobe's converter codes CFA tiles
+    ("<", (16, 64)),      # half the rows, twice the width
+])
+def test_lossless_jpeg_tiles_coded_here_decode_exactly(byteorder, coded, tmp_path):
+    """The DNG spec lets a lossless-JPEG tile be coded in any shape of the same sample count."""
     frame, tile = _frame(high=65536), 32
     padded = np.zeros((96, 128), np.uint16)
     padded[:ROWS, :COLS] = frame
-    tiles = (imagecodecs.jpeg_encode(padded[r:r + tile, c:c + tile].copy(), lossless=True)
+    tiles = (imagecodecs.jpeg_encode(padded[r:r + tile, c:c + tile].reshape(coded),
+                                     lossless=True, bitspersample=16)
              for r in range(0, ROWS, tile) for c in range(0, COLS, tile))
-    _write_dng(tmp_path / "be.dng", tiles, byteorder=">", shape=frame.shape, dtype=np.uint16,
-               tile=(tile, tile), compression=7, bitspersample=16)
-    assert _decode(tmp_path / "be.dng", tmp_path / "frames.tif").exit_code == 0
+    _write_dng(tmp_path / "coded.dng", tiles, byteorder=byteorder, shape=frame.shape,
+               dtype=np.uint16, tile=(tile, tile), compression=7, bitspersample=16)
+    assert _decode(tmp_path / "coded.dng", tmp_path / "frames.tif").exit_code == 0
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"), frame)
 
 
