@@ -189,9 +189,11 @@ def check_segments(path, page) -> None:
         segment = handle.read(count)
         scan = segment.find(JPEG_START_OF_SCAN)
         if scan < 0 or segment.rfind(JPEG_END_OF_IMAGE) < scan:
-            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} has no end-of-image "
-                             "marker: cut short or a wrong byte count); copy or write the file "
-                             "again")
+            # a few cameras end whole streams without it (some Leica DNGs): no way to tell
+            raise InputError(f"{path}: JPEG {kind} {k} has no end-of-image marker (cut short, "
+                             "a wrong byte count, or a camera that omits it), so its last rows "
+                             "cannot be trusted; copy the file again, or re-save it with Adobe "
+                             "DNG Converter")
         bits = _jpeg_precision(segment)
         if bits is not None and bits > 8 * page.dtype.itemsize:
             raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} holds {bits}-bit samples, "
