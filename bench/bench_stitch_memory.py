@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from bench.timing import ROOT, export_package
+from bench.timing import ROOT, export_package, run_python
 
 RUNNER = """
 import json, sys, time, tracemalloc
@@ -70,12 +69,10 @@ def _views(args, folder: Path) -> np.ndarray:
 
 
 def _run(code_root: Path, stack_file: Path, out: Path, repeat: int) -> dict:
-    result = subprocess.run(
-        [sys.executable, "-c", RUNNER, str(stack_file),
-         str(ROOT / "configs" / "rigs" / "dualpixel_prism.yaml"), str(out), str(repeat)],
-        env={"PYTHONPATH": str(code_root), "PATH": "/usr/bin:/bin"}, cwd=code_root,
-        capture_output=True, text=True, check=True)
-    return json.loads(result.stdout.strip().splitlines()[-1])
+    printed = run_python(RUNNER, str(stack_file),
+                         str(ROOT / "configs" / "rigs" / "dualpixel_prism.yaml"), str(out),
+                         str(repeat), root=code_root)
+    return json.loads(printed.strip().splitlines()[-1])
 
 
 def main() -> None:
