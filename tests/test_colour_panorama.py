@@ -44,6 +44,10 @@ CAMERA = np.array([[0.80, 0.15, 0.05], [0.10, 0.80, 0.10], [0.05, 0.20, 0.75]]) 
 B_CAST = {"R": 1.10, "G": 1.0, "B": 0.88}  # view B's exposure per colour, off A's (per channel)
 CLIPPED_BOX = (slice(60, 66), slice(250, 256))  # view B pixels made NaN (clipped), B alone
 ORIGINAL_MAKE_CHART = prismcam.make_chart  # the simulator's own chart (the tests patch it)
+# The figures README.md and docs/colour.md claim for this chain (dE2000), and the margin the
+# tests allow on them: 1.5 x, so that a regression to twice a figure fails.
+CLAIMED = {"mean": 0.12, "p95": 0.33, "max": 1.24, "seam_mean": 0.08, "seam_max": 0.40}
+MARGIN = 1.5
 
 
 def _camera_chart(cam, view_pixels, *, seed, scene):
@@ -177,8 +181,9 @@ def test_panorama_colours_match_the_chart_off_the_seams(developed):
     de, _ = _delta_e(linear, boxes)
     print(f"colour panorama off the seams: {len(boxes)} patches, {len(de)} px, dE2000 mean "
           f"{de.mean():.2f}, p95 {np.percentile(de, 95):.2f}, max {de.max():.2f}")
-    assert de.mean() < 2.0
-    assert np.percentile(de, 95) < 4.0
+    assert de.mean() < MARGIN * CLAIMED["mean"]
+    assert np.percentile(de, 95) < MARGIN * CLAIMED["p95"]
+    assert de.max() < MARGIN * CLAIMED["max"]
 
 
 def test_seam_patches_keep_their_colour(developed):
@@ -189,7 +194,8 @@ def test_seam_patches_keep_their_colour(developed):
     assert len(boxes) == 4
     de, _ = _delta_e(linear, boxes, scale)
     print(f"colour panorama on the seam: dE2000 mean {de.mean():.2f}, max {de.max():.2f}")
-    assert de.mean() < 1.0
+    assert de.mean() < MARGIN * CLAIMED["seam_mean"]
+    assert de.max() < MARGIN * CLAIMED["seam_max"]
 
 
 def test_stitch_preview_is_in_the_cameras_colour(chain, developed):
