@@ -35,12 +35,16 @@ def test_stitch_stereo_rig(tmp_path):
 
 
 def test_stitch_quad_rig_and_view_selection(tmp_path):
-    simulate("quad-rig", tmp_path / "rig", view_shape=(160, 200), seed=2)
+    truth = simulate("quad-rig", tmp_path / "rig", view_shape=(160, 200), seed=2)
     out = tmp_path / "pano.tif"
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "-o", str(out),
                                    "--views", "S00,S01,S10,S11", "--layout", "2x2"])
     assert res.exit_code == 0, res.output
-    assert tiffio.read_image(out)[0].shape[1:] > (160, 200)
+    # the canvas spans the four views at their true offsets: the view plus the spread of the
+    # shifts on each axis, within a pixel (whole-pixel canvas)
+    shifts = np.array(truth["shifts_px"])
+    extent = np.array(truth["view_shape"]) + shifts.max(axis=0) - shifts.min(axis=0)
+    np.testing.assert_allclose(tiffio.read_image(out)[0].shape[1:], extent, atol=1.0)
 
 
 def test_stitch_bayer_views_by_name(tmp_path):
