@@ -265,7 +265,8 @@ CASES = [
     ("refocus-grid-not-yaml", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/not_yaml.yaml",
                                "-o", "{o}/r.tif"], 1, ("YAML",)),
     ("refocus-grid-misses-frame", ["refocus", "{i}/nan.tif", "--grid", "{i}/rt/grid.yaml",
-                                   "-o", "{o}/r.tif"], 1, ()),
+                                   "-o", "{o}/r.tif"], 1,
+     ("calibrated on a 160 x 120 image", "is 64 x 64", "same camera and crop")),
     ("refocus-all-nan", ["refocus", "{i}/nan.tif", "--grid", "{i}/grid_noshape.yaml",
                          "-o", "{o}/r.tif"], 1, ("no valid pixel",)),
     # sai: whole micro-images, enough of them
@@ -276,7 +277,7 @@ CASES = [
     ("sai-n2-3x3", ["sai", "{i}/f3.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("at least",)),
     ("sai-n-huge", ["sai", "{i}/f512.tif", "-n", "1000000", "-o", "{o}/v.tif"], 1,
      ("at least",)),
-    ("sai-n0", ["sai", "{i}/f512.tif", "-n", "0", "-o", "{o}/v.tif"], 2, ()),
+    ("sai-n0", ["sai", "{i}/f512.tif", "-n", "0", "-o", "{o}/v.tif"], 2, ("'-n'", "x>=1")),
     ("sai-all-nan", ["sai", "{i}/nan.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("no valid",)),
     # bias: guard, smooth, over-scan
     ("bias-guard-huge", ["bias", "{i}/frames.tif", "--guard", "99999", "-o", "{o}/b.tif"], 1,
@@ -293,7 +294,8 @@ CASES = [
      ("no valid pixel",)),
     ("bias-crop-huge", ["bias", "{i}/frames.tif", "--crop", "99999x99999", "-o", "{o}/b.tif"],
      1, ("crop",)),
-    ("bias-guard-negative", ["bias", "{i}/frames.tif", "--guard=-5", "-o", "{o}/b.tif"], 2, ()),
+    ("bias-guard-negative", ["bias", "{i}/frames.tif", "--guard=-5", "-o", "{o}/b.tif"], 2,
+     ("'--guard'", "x>=0")),
     # decode: levels and sample types
     ("decode-black-nan", ["decode", "{i}/f512.tif", "--black", "nan", "-o", "{o}/d.tif"], 2,
      ("black",)),
@@ -313,7 +315,8 @@ CASES = [
     ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
      ("truncated",)),
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
-    ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1, ()),
+    ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1,
+     ("empty.tif", "not a raw capture")),
     *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
       for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
                           ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
@@ -448,9 +451,9 @@ CASES = [
                                      "{o}/d.jpg"], 1, ("no view S",)),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
-     2, ()),
+     2, ("'--timeout'", "x>0")),
     ("batch-timeout-nan", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout",
-                           "nan"], 2, ()),
+                           "nan"], 2, ("'--timeout'", "not a finite number")),
     ("batch-scheduler-malformed", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
                                    "--scheduler", "nonsense"], 1, ("tcp://HOST:PORT",)),
     ("batch-scheduler-not-there", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
@@ -468,7 +471,7 @@ CASES = [
     ("info-bad-yaml", ["info", "{i}/not_yaml.yaml"], 1, ("YAML",)),
     ("info-truncated", ["info", "{i}/truncated.tif"], 1, ("truncated",)),
     ("info-huge-header", ["info", "{i}/huge.tif"], 1, ("200000",)),
-    ("info-empty", ["info", "{i}/empty.tif"], 1, ()),
+    ("info-empty", ["info", "{i}/empty.tif"], 1, ("empty.tif", "does not know this kind")),
     # every reader: a damaged TIFF is one line
     ("sai-truncated", ["sai", "{i}/truncated.tif", "-o", "{o}/v.tif"], 1, ("truncated",)),
     ("refocus-huge", ["refocus", "{i}/huge.tif", "--grid", "{i}/rt/grid.yaml", "-o",
