@@ -23,7 +23,6 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy import ndimage
 
-from plenocli.errors import InputError
 from plenocli.model.cfa import check_pattern
 from plenocli.model.mixing import MixingField
 
@@ -86,22 +85,22 @@ def crosstalk_ratio(views: np.ndarray, *, intended: int | None = None, tile_px: 
     """
     data = np.asarray(views, dtype=np.float64)
     if data.ndim != 3 or data.shape[0] < 2:
-        raise InputError(f"cross-talk needs a stack of at least 2 views (V, rows, cols), got "
+        raise ValueError(f"cross-talk needs a stack of at least 2 views (V, rows, cols), got "
                          f"shape {data.shape}")
     n_views, rows, cols = data.shape
     if tile_px < 2 or tile_px % 2:
         raise ValueError(f"tile_px must be an even number >= 2, got {tile_px}")
     valid = np.isfinite(data).all(axis=0)
     if not valid.any():
-        raise InputError("no pixel is finite in every view; nothing to measure")
+        raise ValueError("no pixel is finite in every view; nothing to measure")
     clean = np.where(valid, data, 0.0)
     flux = clean.reshape(n_views, -1).sum(axis=1)
     if intended is None:
         intended = int(np.argmax(flux))
     if not 0 <= intended < n_views:
-        raise InputError(f"intended view {intended} out of range for {n_views} views")
+        raise ValueError(f"intended view {intended} out of range for {n_views} views")
     if flux[intended] <= 0:
-        raise InputError(f"the intended view {intended} received no light (flux "
+        raise ValueError(f"the intended view {intended} received no light (flux "
                          f"{flux[intended]:.3g}); is this a white-target capture above black?")
     others = [k for k in range(n_views) if k != intended]
     r_per_view = {k: float(flux[k] / flux[intended]) for k in others}
@@ -215,14 +214,14 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
     """
     n_views = len(views)
     if len(captures) != n_views or sorted(int(k) for k in intended) != list(range(n_views)):
-        raise InputError(f"the mixing needs one masked white per pupil part: {n_views} captures "
+        raise ValueError(f"the mixing needs one masked white per pupil part: {n_views} captures "
                          f"with intended views {list(range(n_views))} in any order, got "
                          f"{len(captures)} with {list(intended)}")
     if tile_px < 2 or tile_px % 2:
         raise ValueError(f"tile_px must be an even number >= 2, got {tile_px}")
     shapes = {np.shape(c) for c in captures}
     if len(shapes) != 1 or len(next(iter(shapes))) != 3 or next(iter(shapes))[0] != n_views:
-        raise InputError(f"the masked whites must all be ({n_views}, rows, cols) views of one "
+        raise ValueError(f"the masked whites must all be ({n_views}, rows, cols) views of one "
                          f"size, got shapes {sorted(shapes)}")
     rows, cols = next(iter(shapes))[1:]
     pattern = np.zeros((2, 2), np.int64) if colour_pattern is None else \
@@ -245,7 +244,7 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
             with np.errstate(divide="ignore", invalid="ignore"):
                 nodes[c, :, j] = np.where(good, flux / main, np.nan)
             if not good.any():
-                raise InputError(f"masked white of view {views[j]}: no tile of colour "
+                raise ValueError(f"masked white of view {views[j]}: no tile of colour "
                                  f"{colours[c]} has light in view {views[j]}; is it the capture "
                                  "with that pupil part open?")
     nodes = _fill_from_nearest(nodes)

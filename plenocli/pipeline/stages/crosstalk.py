@@ -191,9 +191,12 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
         raise InputError("the masked whites must open each pupil part once; intended views were "
                          f"{','.join(names[j] for j in opened)}; pass --intended with one view "
                          "name per input")
-    field = crosstalk_lib.measure_mixing_colours(
-        [w.data for w in whites], intended=opened, views=names, colours=first.colours,
-        tile_px=tile, colour_pattern=first.colour_pattern())
+    try:
+        field = crosstalk_lib.measure_mixing_colours(
+            [w.data for w in whites], intended=opened, views=names, colours=first.colours,
+            tile_px=tile, colour_pattern=first.colour_pattern())
+    except ValueError as err:
+        raise InputError(f"crosstalk --mixing-out: {err}") from err
     from_m = crosstalk_lib.mixing_ratio(field)
     record = stage_record("crosstalk", dict(views=views, intended=intended, tile=tile),
                           {"inputs": inputs})
