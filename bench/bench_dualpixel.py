@@ -22,9 +22,9 @@ import rawpy
 from plenocli.bias import subtract_overscan
 from plenocli.dualpixel import split_views
 from plenocli.flatfield import apply_gain, white_gain
+from plenocli.io.dng import write_dng
 from plenocli.io.raw import decode
-from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 
 def best_of(n, func):
@@ -45,7 +45,7 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "capture.dng"
         raw, truth = dualpixel_capture(seed=0, rows=args.rows, cols=args.cols, top=42, left=136)
-        write_dualpixel_raw(path, raw, truth)
+        write_dng(path, raw, **dng_options(truth))
         _, wtruth = dualpixel_capture(seed=1, rows=args.rows, cols=args.cols, top=42, left=136,
                                       scene="white")
         del raw

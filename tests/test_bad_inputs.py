@@ -22,9 +22,10 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
+from plenocli.io.dng import write_dng
 from plenocli.io.raytrix import calib_from_grid, format_calib
-from plenocli.pipeline.stages.simulate import simulate, write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 
 def _plain_tiff(path: Path, data: np.ndarray) -> None:
@@ -70,13 +71,13 @@ def inputs(tmp_path_factory) -> Path:
     runner = CliRunner()
     # a dual-pixel raw, decoded and bias-corrected
     raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
-    write_dualpixel_raw(d / "dp.dng", raw, truth)
+    write_dng(d / "dp.dng", raw, **dng_options(truth))
     for args in (["decode", d / "dp.dng", "-o", d / "frames.tif"],
                  ["bias", d / "frames.tif", "-o", d / "biased.tif"]):
         result = runner.invoke(cli, [str(a) for a in args])
         assert result.exit_code == 0, result.output
     white = truth["params"]["white_level"]
-    write_dualpixel_raw(d / "clipped.dng", np.full_like(raw, white), truth)
+    write_dng(d / "clipped.dng", np.full_like(raw, white), **dng_options(truth))
     # a focused (Raytrix-like) capture and its grid
     simulate("raytrix-scene", d / "rt", seed=5, rows=120, cols=160)
     grid = yaml.safe_load((d / "rt" / "grid.yaml").read_text())["lens_grid"]
@@ -441,7 +442,13 @@ CASES = [
     ("simulate-raytrix-s-0", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param", "s=0"], 1,
      ("s must be",)),
     ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
-                                     "g_true=-1"], 1, ("g must be",)),
+                                     "g_true=-1"], 1, ("g_true must be > 0",)),
+    ("simulate-noise-negative", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "noise=-5"],
+     1, ("noise must be >= 0", "got -5")),
+    ("simulate-crosstalk-one", ["simulate", "dualpixel-prism", "-o", "{o}/s", "--pixels", "48",
+                                "--param", "crosstalk=1"], 1, ("crosstalk must be in [0, 1)",)),
+    ("simulate-param-unknown", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "nosie=1"],
+     1, ("does not take 'nosie'", "noise")),
     ("bias-crop-below-cfa-cell", ["bias", "{i}/frames.tif", "--crop", "1x1", "-o", "{o}/b.tif"],
      1, ("CFA cell",)),
     ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
@@ -521,6 +528,16 @@ def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
         **step, "input": str(inputs / "frames.tif"), "output": "{out}/b.tif"}}}))
     result = run_bad(inputs, out, ["run", str(config)])
     assert_one_line(result, 1, words)
+
+
+def test_simulate_params_from_yaml_are_checked_like_flags(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"sim": {
+        "stage": "simulate", "kind": "dualpixel", "output": "{out}/s",
+        "param": ["noise=-5"]}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("noise must be >= 0", "got -5"))
 
 
 @pytest.mark.parametrize("args,words", [

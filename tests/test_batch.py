@@ -17,10 +17,10 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.errors import ConfigError, InputError
+from plenocli.io.dng import write_dng
 from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
 from plenocli.pipeline.config import load_config, read_template
-from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 ROOT = Path(__file__).resolve().parents[1]
 N_CAPTURES = 12
@@ -67,13 +67,13 @@ def make_shoot(folder: Path, n: int = N_CAPTURES, *, corrupt: str | None = CORRU
     geo = {**GEOMETRY, **geometry}
     folder.mkdir(parents=True, exist_ok=True)
     raw, truth = dualpixel_capture(seed=1000, scene="white", **geo)
-    write_dualpixel_raw(folder / "white.dng", raw, truth)
+    write_dng(folder / "white.dng", raw, **dng_options(truth))
     captures = []
     for k in range(n):
         path = folder / "captures" / f"shot{k:02d}.dng"
         path.parent.mkdir(exist_ok=True)
         raw, truth = dualpixel_capture(seed=k, **geo)
-        write_dualpixel_raw(path, raw, truth)
+        write_dng(path, raw, **dng_options(truth))
         if path.stem == corrupt:
             data = path.read_bytes()
             path.write_bytes(data[: len(data) // 3])  # truncated mid-frame
@@ -184,7 +184,7 @@ def test_rerun_after_fixing_redoes_only_the_missing_capture(tmp_path):
     assert [r.status for r in report.results] == ["done", "failed", "done"]
     before = mtimes(out)
     raw, truth = dualpixel_capture(seed=1, **GEOMETRY)
-    write_dualpixel_raw(captures[1], raw, truth)  # the photographer copies the file again
+    write_dng(captures[1], raw, **dng_options(truth))  # the photographer copies the file again
     report = run_batch(config, captures, out=out, jobs=2)
     assert [r.status for r in report.results] == ["skipped", "done", "skipped"]
     assert report.results[1].detail == "decode, bias, flat"

@@ -24,8 +24,9 @@ from plenocli.colour.demosaic import mosaic
 from plenocli.colour.metrics import delta_e_2000
 from plenocli.errors import InputError
 from plenocli.io import tiffio
+from plenocli.io.simfiles import write_simulation
 from plenocli.model import colour as colour_model
-from plenocli.pipeline.stages import bias, decode, develop, flat, simulate, stitch
+from plenocli.pipeline.stages import bias, decode, develop, flat, stitch
 from plenocli.stitch.views import fill_nan, fill_nan_channels
 from plenocli.synth import prismcam, prismsets
 from plenocli.synth.chart import colour_chart
@@ -77,7 +78,7 @@ def _simulate(kind_options: dict, folder: Path) -> dict:
     files = [dataclasses.replace(f, options={
         **f.options, "as_shot_neutral": (CAMERA @ np.ones(3)).tolist(),
         "color_matrix": xyz_to_camera.ravel().tolist()}) for f in sim.files]
-    simulate.write_simulation(folder, files, sim.truth, {"stage": "simulate"})
+    write_simulation(folder, files, sim.truth, {"stage": "simulate"})
     return sim.truth
 
 

@@ -8,15 +8,14 @@ import tifffile
 from plenocli.errors import InputError
 from plenocli.io import raw as rawio
 from plenocli.io.dng import write_dng
-from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 
 @pytest.fixture
 def capture(tmp_path):
     raw, truth = dualpixel_capture(seed=3, rows=64, cols=96, top=8, left=32)
     path = tmp_path / "capture.dng"
-    write_dualpixel_raw(path, raw, truth)
+    write_dng(path, raw, **dng_options(truth))
     return path, raw, truth
 
 

@@ -130,12 +130,12 @@ def test_metadata_geometry_must_fit_the_image(tmp_path, meta, words):
 
 @pytest.fixture(scope="module")
 def pristine(tmp_path_factory):
-    from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-    from plenocli.synth.dualpixel import dualpixel_capture
+    from plenocli.io.dng import write_dng
+    from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
     folder = tmp_path_factory.mktemp("pristine")
     raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
-    write_dualpixel_raw(folder / "dp.dng", raw, truth)
+    write_dng(folder / "dp.dng", raw, **dng_options(truth))
     views = np.random.default_rng(0).random((2, 40, 50)).astype(np.float32)
     tiffio.write_image(folder / "p.tif", views, {"views": ["a", "b"],
                                                  "active_area": [0, 0, 40, 50],

@@ -10,10 +10,10 @@ import tifffile
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.io.dng import write_dng
 from plenocli.io.tiffio import read_image
 from plenocli.model.provenance import sha256_file
-from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 ROOT = Path(__file__).resolve().parents[2]
 FIX = ROOT / "fixtures" / "dualpixel"
@@ -116,7 +116,7 @@ def test_missing_input(tmp_path):
 
 def test_white_of_another_size(biased, tmp_path):
     raw, truth = dualpixel_capture(seed=9, rows=96, cols=128, scene="white")
-    write_dualpixel_raw(tmp_path / "small.dng", raw, truth)
+    write_dng(tmp_path / "small.dng", raw, **dng_options(truth))
     invoke("decode", tmp_path / "small.dng", "-o", tmp_path / "small_f.tif")
     invoke("bias", tmp_path / "small_f.tif", "-o", tmp_path / "small_b.tif")
     before = output_files(tmp_path)
@@ -127,7 +127,7 @@ def test_white_of_another_size(biased, tmp_path):
 
 def test_white_of_another_cfa(biased, tmp_path):
     raw, truth = dualpixel_capture(seed=9, scene="white", cfa="GRBG")
-    write_dualpixel_raw(tmp_path / "w.dng", raw, truth)
+    write_dng(tmp_path / "w.dng", raw, **dng_options(truth))
     invoke("decode", tmp_path / "w.dng", "-o", tmp_path / "w_f.tif")
     invoke("bias", tmp_path / "w_f.tif", "-o", tmp_path / "w_b.tif")
     before = output_files(tmp_path)

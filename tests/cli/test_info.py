@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
-from plenocli.pipeline.stages.simulate import write_dualpixel_raw
-from plenocli.synth.dualpixel import dualpixel_capture
+from plenocli.io.dng import write_dng
+from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
 
@@ -21,7 +21,7 @@ def _info(*args):
 
 def test_raw_dng(tmp_path):
     raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
-    write_dualpixel_raw(tmp_path / "c.dng", raw, truth)
+    write_dng(tmp_path / "c.dng", raw, **dng_options(truth))
     result = _info(tmp_path / "c.dng", "--json")
     assert result.exit_code == 0, result.output
     info = json.loads(result.stdout)
@@ -38,7 +38,7 @@ def test_raw_dng(tmp_path):
 
 def test_plenocli_tiff_shows_provenance_and_history(tmp_path):
     raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
-    write_dualpixel_raw(tmp_path / "c.dng", raw, truth)
+    write_dng(tmp_path / "c.dng", raw, **dng_options(truth))
     runner = CliRunner()
     runner.invoke(cli, ["decode", str(tmp_path / "c.dng"), "-o", str(tmp_path / "f.tif")])
     runner.invoke(cli, ["bias", str(tmp_path / "f.tif"), "--smooth", "3",

@@ -118,16 +118,16 @@ def test_help_does_not_import_the_simulator():
 
 
 def test_a_failed_write_leaves_nothing(tmp_path, monkeypatch):
-    from plenocli.pipeline.stages import simulate as stage
+    from plenocli.io import simfiles
 
-    real = stage._write_file
+    real = simfiles.write_file
 
     def failing(path, item, record):
         if item.name == "white.dng":  # the second file of the set
             raise OSError("disk full")
         real(path, item, record)
 
-    monkeypatch.setattr(stage, "_write_file", failing)
+    monkeypatch.setattr(simfiles, "write_file", failing)
     out = tmp_path / "set"
     res = invoke("dualpixel", "-o", out, "--pixels", "32x48")
     assert res.exit_code == 1 and "disk full" in res.output

@@ -1,0 +1,155 @@
+"""The parameters of the simulated kinds, declared once: what each name means and the values it
+may take. ``check_params`` refuses, before any generator runs, a name the kind does not take, a
+value not of its default's type and a value out of its range, whatever the values came from
+(``simulate --param``, a YAML step, a test). A generator still checks what depends on its other
+parameters (e.g. a pitch of at most a quarter of the sensor).
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+MAX_PIXELS = 2 ** 27  # a 134 Mpx sensor: beyond every camera simulated here
+MAX_RAYS = 2 ** 31    # rays traced in all: hours of work, gigabytes of arrays
+INF = math.inf
+
+
+@dataclass(frozen=True)
+class Param:
+    """A parameter's meaning and range: ``low``..``high``, each end closed unless ``open_*``;
+    no bounds for a text or a flag (the generator checks the choices)."""
+
+    meaning: str
+    low: float = -INF
+    high: float = INF
+    open_low: bool = False
+    open_high: bool = False
+
+    def contains(self, value: float) -> bool:
+        above = value > self.low if self.open_low else value >= self.low
+        below = value < self.high if self.open_high else value <= self.high
+        return above and below
+
+    def describe(self) -> str:
+        if self.high == INF:
+            return f"{'>' if self.open_low else '>='} {self.low:g}"
+        return (f"in {'(' if self.open_low else '['}{self.low:g}, {self.high:g}"
+                f"{')' if self.open_high else ']'}")
+
+
+_FRACTION = {"low": 0.0, "high": 1.0, "open_high": True}
+PARAMS: dict[str, Param] = {
+    "seed": Param("random seed", 0, 2 ** 32, open_high=True),
+    "pixels": Param("sensor size, ROWSxCOLS or one number"),  # checked by the generator
+    "rays": Param("rays per pixel", 1),
+    "rows": Param("sensor rows, pixels", 16),
+    "cols": Param("sensor columns, pixels", 16),
+    "size": Param("sensor side, pixels", 16),
+    "view_shape": Param("[ROWS, COLS] of each view, pixels", 32),
+    "noise": Param("read noise, DN, or relative to the mean level", 0),
+    "noise_dn": Param("read noise, DN", 0),
+    "jitter_px": Param("random displacement of the lenses, pixels", 0),
+    "edge_blur_px": Param("blur of the micro-image edges, pixels", 0),
+    "crosstalk": Param("cross-talk ratio r", **_FRACTION),
+    "r": Param("cross-talk ratio r", **_FRACTION),
+    "ghost_r": Param("ghost ratio", **_FRACTION),
+    "slope": Param("change of the mixing across the frame", **_FRACTION),
+    "vignetting": Param("vignetting at the corners, fraction", **_FRACTION),
+    "overlap": Param("overlap of neighbouring views, fraction", **_FRACTION),
+    "pitch_px": Param("micro-lens pitch, pixels", 2),
+    "s": Param("refocus scale s", 0, 1, open_low=True),
+    "g_true": Param("true refocus parameter g", 0, open_low=True),
+    "prism_apex_deg": Param("prism apex angle, degrees", 0, 90, open_high=True),
+    "angle_deg": Param("lattice rotation, degrees", -180, 180),
+    "no_prisms": Param("leave the prisms out"),
+    "cross_mask": Param("cross mask in the stop"),
+    "cfa": Param("Bayer pattern"),
+    "lattice": Param("micro-lens lattice"),
+    "model": Param("view transform model"),
+    "open_halves": Param("open pupil halves"),
+    "open_quarters": Param("open pupil quarters"),
+    "scene": Param("scene"),
+}
+
+
+def check_params(kind: str, generate: Callable[..., object], params: dict) -> None:
+    """ValueError (one line naming the parameter) unless every value of ``params`` is one
+    ``generate`` takes, of its default's type, in its declared range, and the sensor and rays
+    fit a machine."""
+    accepted = inspect.signature(generate).parameters
+    for key, value in params.items():
+        if key not in accepted:
+            raise ValueError(f"simulate {kind} does not take {key!r}; it takes: "
+                             f"{', '.join(accepted)}")
+        _check_type(kind, key, value, accepted[key].default)
+        _check_range(kind, key, value)
+    _check_size(kind, params)
+
+
+def _check_range(kind: str, key: str, value) -> None:
+    param = PARAMS[key]
+    numbers = value if isinstance(value, (list, tuple)) else [value]
+    if param.low == -INF and param.high == INF:
+        return
+    for number in numbers:
+        if isinstance(number, (int, float)) and not isinstance(number, bool) \
+                and not param.contains(number):
+            raise ValueError(f"simulate {kind}: {key} must be {param.describe()} "
+                             f"({param.meaning}), got {value!r}")
+
+
+def _check_type(kind: str, key: str, value, default) -> None:
+    """A value of the type the kind's default has (a whole number where the default is one,
+    a list of as many numbers as the default's), every number finite."""
+    def number(v, whole: bool) -> bool:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            return False
+        return math.isfinite(v) and (isinstance(v, int) or not whole)
+
+    if default is None or default is inspect.Parameter.empty:
+        ok = not isinstance(value, float) or math.isfinite(value)
+    elif isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, (int, float)):
+        ok = number(value, whole=isinstance(default, int))
+    elif isinstance(default, (tuple, list)):
+        ok = (isinstance(value, (tuple, list)) and len(value) == len(default)
+              and all(number(v, whole=isinstance(d, int))
+                      for v, d in zip(value, default, strict=True)))
+    else:
+        ok = isinstance(value, type(default))
+    if not ok:
+        shown_default = list(default) if isinstance(default, tuple) else default
+        raise ValueError(f"simulate {kind}: {key} = {value!r} is not a value like its default "
+                         f"{shown_default!r} (finite numbers; whole where the default is)")
+
+
+def _check_size(kind: str, params: dict) -> None:
+    """Refuse, before any allocation, a sensor or a ray count no machine simulates."""
+    rows, cols = _sensor_shape(params)
+    rays = params["rays"] if isinstance(params.get("rays"), int) else 1
+    if rows * cols > MAX_PIXELS or rows * cols * rays > MAX_RAYS:
+        raise ValueError(f"simulate {kind}: {rows} x {cols} pixels x {rays} rays is beyond what "
+                         f"a simulation holds ({MAX_PIXELS:.3g} pixels, {MAX_RAYS:.3g} rays); "
+                         "simulate a smaller sensor")
+
+
+def _sensor_shape(params: dict) -> tuple[int, int]:
+    """(rows, cols) the parameters ask for, as far as they say (1 for what they leave out)."""
+    pixels = params.get("pixels")
+    if isinstance(pixels, int):
+        return pixels, pixels
+    parts = str(pixels).lower().split("x")
+    if len(parts) == 2 and all(p.strip().isdigit() for p in parts):
+        return int(parts[0]), int(parts[1])
+    if isinstance(params.get("size"), int):
+        return params["size"], params["size"]
+    shape = params.get("view_shape")
+    if isinstance(shape, (list, tuple)) and len(shape) == 2 and all(
+            isinstance(v, int) for v in shape):
+        return shape[0], shape[1]
+    rows, cols = params.get("rows"), params.get("cols")
+    return rows if isinstance(rows, int) else 1, cols if isinstance(cols, int) else 1
