@@ -15,9 +15,9 @@ import numpy as np
 from plenocli import unmix as unmix_lib
 from plenocli.errors import CalibrationError, ConfigError, InputError
 from plenocli.io import tiffio
+from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
-from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
@@ -61,14 +61,14 @@ def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
     return [[names.index(n) for n in group] for group in wanted]
 
 
-def _check_geometry(field, info: dict, meta: dict, area: tuple[int, int, int, int],
-                    mixing: str, inputs: list[str]) -> None:
-    rows, cols = area[2] - area[0], area[3] - area[1]
+def _check_geometry(field, info: dict, framing: Framing, mixing: str,
+                    inputs: list[str]) -> None:
+    rows, cols = framing.shape
     if (rows, cols) != tuple(field.shape):
         raise InputError(f"the views are {cols} x {rows} but {mixing} was measured on "
                          f"{field.shape[1]} x {field.shape[0]}; measure the mixing on masked "
                          "whites processed like these views")
-    cfa = shift_pattern(meta.get("cfa"), area[0], area[1])
+    cfa = framing.cfa
     expected = info.get("cfa") if info["layout"] == "cfa" else None
     if (cfa or None) != (expected or None):
         raise InputError(f"{', '.join(inputs)}: CFA {cfa or 'none'} but {mixing} was measured "
@@ -106,22 +106,21 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     info = mix_meta["mixing"]
     pages, names, meta = _load(inputs)
     groups = _plan(names, info, inputs)
-    area = tuple(int(v) for v in (meta.get("active_area") or (0, 0, *pages.shape[1:])))
-    _check_geometry(field, info, meta, area, mixing, inputs)
+    framing = active_area(meta, pages.shape[1:])
+    _check_geometry(field, info, framing, mixing, inputs)
     cond = _check_condition(field, mixing, regularise)
-    top, left, bottom, right = area
-    cfa = shift_pattern(meta.get("cfa"), top, left)
+    cfa = framing.cfa
     out = pages.copy()
-    gains = np.empty((sum(len(g) for g in groups), bottom - top, right - left), np.float32)
+    gains = np.empty((sum(len(g) for g in groups), *framing.shape), np.float32)
     singular = 0
     for c, group in enumerate(groups):
         if info["layout"] == "cfa":
             pattern = np.array([field.colours.index(ch) for ch in cfa.upper()]).reshape(2, 2)
         else:
             pattern = np.full((2, 2), c)
-        res = unmix_lib.unmix(pages[group, top:bottom, left:right], field,
+        res = unmix_lib.unmix(framing.crop(pages[group]), field,
                               colour_pattern=pattern, regularise=regularise, noise_gain=True)
-        out[group, top:bottom, left:right] = res.views
+        framing.crop(out)[group] = res.views
         gains[c * len(group):(c + 1) * len(group)] = res.noise_gain
         singular += res.singular_pixels
     if singular:
@@ -143,7 +142,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
                                                 "unit independent noise in every input view")
         tiffio.write_image(noise_map, gains, gain_meta, protect=protect)
     if preview:
-        write_png(preview, _preview_views(out[:, top:bottom, left:right], groups, info),
+        write_png(preview, _preview_views(framing.crop(out), groups, info),
                   cfa=cfa if info["layout"] == "cfa" else None, protect=protect,
                   colour=meta.get("colour"))
     log.info("unmix: %s -> %s (%s; noise gain median %.3g, max %.3g; condition number up to "
