@@ -10,6 +10,7 @@ import numpy as np
 from plenocli.io.atomic import write_bytes
 from plenocli.model.cfa import half_size_rgb
 from plenocli.model.colour import camera_to_srgb, gains_from_neutral, normalised_gains
+from plenocli.model.views import ViewNames
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 
@@ -39,14 +40,13 @@ def views_side_by_side(views: np.ndarray, cfa: str | None = None, *, gap: int = 
 def colour_pages(pages: np.ndarray, names: list[str] | None) -> np.ndarray | None:
     """Pages (P, rows, cols) named R, G, B (one colour view) or VIEW.R, VIEW.G, VIEW.B (views
     in page order) as RGB (rows, cols, 3) or (views, rows, cols, 3); None for other pages."""
-    names = list(names or [])
-    if names == ["R", "G", "B"]:
+    if not names or len(names) != len(pages):
+        return None
+    views = ViewNames(tuple(names)).rgb_views()
+    if views is None:
+        return None
+    if views == [""]:
         return np.stack(list(pages), axis=-1)
-    if not names or len(names) != len(pages) or len(names) % 3:
-        return None
-    views = [names[k].rpartition(".")[0] for k in range(0, len(names), 3)]
-    if names != [f"{v}.{c}" for v in views for c in "RGB"] or not all(views):
-        return None
     return np.moveaxis(np.asarray(pages).reshape(len(views), 3, *pages.shape[1:]), 1, -1)
 
 

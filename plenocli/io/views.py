@@ -13,8 +13,7 @@ import numpy as np
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area
-
-CHANNELS = ("R", "G", "B")
+from plenocli.model.views import ViewNames, colour_page
 
 
 @dataclass(frozen=True)
@@ -43,18 +42,17 @@ class ColourViews:
 
 def select_views(data: np.ndarray, meta: dict, views: str | None) -> tuple[np.ndarray, list[str]]:
     """Pages of ``data`` named in ``views`` ("A,B"; names from the metadata, or page numbers)."""
-    names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+    pages = ViewNames.of(meta, data.shape[0])
+    names = list(pages.pages)
     if not views:
         return data, names
     idx = []
     for name in _wanted(views):
-        if name in names:
-            idx.append(names.index(name))
-        elif name.isdigit() and int(name) < data.shape[0]:
-            idx.append(int(name))
-        else:
+        k = pages.index(name)
+        if k is None:
             raise InputError(f"view {name!r} is not in the input (views: {','.join(names)}); "
                              "pass --views with names from that list")
+        idx.append(k)
     check_named_once([names[k] for k in idx])
     return data[idx], [names[k] for k in idx]
 
@@ -64,8 +62,8 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
     data, meta = tiffio.read_image(path)
     framing = active_area(meta, data.shape[1:])
     data, cfa = framing.crop(data), framing.cfa
-    page_names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-    grouped = _channel_views(page_names)
+    pages = ViewNames.of(meta, data.shape[0])
+    grouped = pages.colour_layout()
     if grouped:
         names, channels = grouped
         if views:
@@ -75,8 +73,8 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
                                  f"{','.join(names)}); pass --views with names from that list")
             names = _wanted(views)
             check_named_once(names)
-        index = {n: k for k, n in enumerate(page_names)}
-        stack = np.stack([[data[index[f"{v}.{c}"]] for c in channels] for v in names])
+        index = {n: k for k, n in enumerate(pages.pages)}
+        stack = np.stack([[data[index[colour_page(v, c)]] for c in channels] for v in names])
         return ColourViews(stack.astype(np.float64), names, channels, "channels", None)
     chosen, names = select_views(data, meta, views)
     colours = sorted(set(cfa.upper()), key="RGB".index) if cfa else ["L"]
@@ -119,16 +117,3 @@ def check_named_once(names: list[str]) -> None:
 def _wanted(views: str) -> list[str]:
     return [v.strip() for v in views.split(",") if v.strip()]
 
-
-def _channel_views(names: list[str]) -> tuple[list[str], list[str]] | None:
-    """(views, channels) when the pages are VIEW.R, VIEW.G, VIEW.B for every view, else None."""
-    groups: dict[str, list[str]] = {}
-    for name in names:
-        view, dot, channel = name.rpartition(".")
-        if not dot or channel not in CHANNELS:
-            return None
-        groups.setdefault(view, []).append(channel)
-    channels = next(iter(groups.values()))
-    if len(groups) < 2 or any(c != channels for c in groups.values()):
-        return None
-    return list(groups), channels

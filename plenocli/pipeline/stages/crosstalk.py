@@ -16,16 +16,16 @@ from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
 from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.provenance import json_safe, stage_record
+from plenocli.model.views import ViewNames, view_of
 from plenocli.progress import log, shown
 
 
 def _intended_index(spec: str | None, names: list[str], path: str) -> int | None:
     if spec is None or spec == "auto":
         return None
-    if spec in names:
-        return names.index(spec)
-    if spec.isdigit() and int(spec) < len(names):
-        return int(spec)
+    index = ViewNames(tuple(names)).index(spec)
+    if index is not None:
+        return index
     raise InputError(f"{path}: intended view {spec!r} is not one of {','.join(names)}; pass "
                      "--intended with a view name (or 'auto' for the brightest view)")
 
@@ -97,7 +97,7 @@ def pupil_parts(path: str, views: str | None) -> str | None:
             raise ConfigError(f"--views {views}: S is the sum A + B, not a pupil part of its "
                               "own; leave it out (--views A,B)")
         return views
-    names = {n.rpartition(".")[0] or n for n in tiffio.read_meta(path).get("views") or []}
+    names = {view_of(n) for n in tiffio.read_meta(path).get("views") or []}
     return "A,B" if {"A", "B", "S"} <= names else None
 
 

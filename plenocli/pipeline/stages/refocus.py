@@ -12,6 +12,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
+from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
 from plenocli.progress import log, shown
 
 
@@ -37,7 +38,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
-    pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    pages = list(ViewNames.of(meta, data.shape[0]).pages)
     sweep = len(g_values) > 1
     period = s * framing.grid.pitch_px
     out_pages, names, scores = _refocus_pages(
@@ -82,9 +83,9 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
             image, _ = rf.refocus(framing.crop(page), framing.grid, s=s, g=g_value, cfa=cfa,
                                   **options)
             channels = image if cfa else image[np.newaxis]
-            labels = list(rf.CHANNELS) if cfa else [name]
+            labels = list(CHANNELS) if cfa else [name]
             if cfa and len(pages) > 1:
-                labels = [f"{name}.{c}" for c in rf.CHANNELS]
+                labels = [colour_page(name, c) for c in CHANNELS]
             for chan, label in zip(channels, labels, strict=True):
                 if not np.isfinite(chan).any():
                     raise InputError(
@@ -93,7 +94,7 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
                         "--mask-width or --radius leave no pixel of the "
                         f"{framing.grid.pitch_px:.3g} px micro-images; check them")
                 per_g.append(chan)
-                names.append(f"{label}@g{g_value:g}" if sweep else label)
+                names.append(sweep_page(label, g_value) if sweep else label)
         score = rf.sharpness(np.stack(per_g), lens_period_px=period)
         scores.append({"g": g_value, "sharpness": score})
         log.info("refocus: g = %g  sharpness %.5g", g_value, score)
@@ -108,7 +109,7 @@ def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
     per = len(stack) // len(g_values)
     k = g_values.index(best) if best is not None else 0
     chunk = stack[k * per:(k + 1) * per]
-    rgb = rgb or [n.split("@")[0] for n in names[:per]] == list(rf.CHANNELS)
+    rgb = rgb or [split_sweep(n)[0] for n in names[:per]] == list(CHANNELS)
     if rgb:  # pages R, G, B, or VIEW.R, VIEW.G, VIEW.B per view
         views = np.moveaxis(chunk.reshape(-1, 3, *chunk.shape[1:]), 1, -1)
         return views[0] if len(views) == 1 else views

@@ -19,6 +19,7 @@ from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
+from plenocli.model.views import ViewNames, colour_page
 from plenocli.progress import log, shown
 
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
@@ -30,7 +31,7 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
     for path in inputs:
         data, meta = tiffio.read_image(path)
         first = first if first is not None else meta
-        own = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
+        own = list(ViewNames.of(meta, data.shape[0]).pages)
         if len(inputs) > 1 and data.shape[0] == 1:
             own = [Path(path).stem]
         if pages and data.shape[1:] != pages[0].shape[1:]:
@@ -49,7 +50,7 @@ def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
     """Page indices to solve together: one list (in the mixing's view order) per colour plane
     (channels layout) or a single list (cfa / mono)."""
     views = info["views"]
-    wanted = ([[f"{v}.{c}" for v in views] for c in info["colours"]]
+    wanted = ([[colour_page(v, c) for v in views] for c in info["colours"]]
               if info["layout"] == "channels" else [views])
     for group in wanted:
         missing = [n for n in group if n not in names]
