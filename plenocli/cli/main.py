@@ -63,4 +63,11 @@ def cli():
     """Raw-processing pipeline for plenoptic captures.
 
     Each command is one stage; `plenocli run CONFIG.yaml` chains them.
+
+    \b
+    Getting started, on a synthetic dual-pixel capture with its ground truth:
+      plenocli simulate dualpixel -o sim
+      plenocli decode sim/capture.dng -o sim/frames.tif
+      plenocli bias sim/frames.tif -o sim/views.tif --preview sim/views.png
+    then `plenocli COMMAND --help` for any stage (README.md walks through them all).
     """
