@@ -9,6 +9,17 @@ Methods (measured in docs/colour.md; the default is chosen there):
                 algorithm on OpenCV float32 filters (``plenocli.colour.menon``, 50 x faster,
                 equal to the reference within float32 rounding: checked by the tests)
 ``bilinear``    bilinear interpolation (``colour-demosaicing``): the fast option
+``rcd``         Ratio Corrected Demosaicing (RawTherapee's and darktable's default), in numba
+                (``plenocli.colour.rcd``)
+
+White balance comes first. Colour-difference and ratio demosaics assume that red, green and blue
+of a grey surface are equal; in camera RGB they are not (a daylight Canon raw records red and
+blue at about 0.45 and 0.8 of green), and interpolating across an edge then leaves zipper and
+colour fringes. :func:`demosaic` therefore multiplies the mosaic by the white-balance gains,
+demosaics, and divides the gains back out (camera RGB, what callers always got) unless asked for
+the balanced result. Without gains it balances by the mosaic's own grey-world estimate: any
+roughly neutral balance serves the interpolation, and dividing it out again leaves no trace of
+it in the colours.
 
 NaN pixels (clipped or otherwise unknown) are filled from their valid neighbours of the same
 colour before demosaicing, and afterwards every output pixel whose value can depend on a filled
@@ -25,16 +36,18 @@ import cv2
 import numpy as np
 
 from plenocli.colour.menon import menon2007
+from plenocli.colour.rcd import rcd
+from plenocli.model.colour import normalised_gains
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
-METHODS = ("opencv-ea", "opencv-vng", "malvar2004", "menon2007", "bilinear")
-DEFAULT_METHOD = "menon2007"  # best PSNR and dE2000 measured (docs/colour.md)
+METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
+DEFAULT_METHOD = "rcd"  # best PSNR and dE2000 on natural photographs (docs/colour.md)
 BAND_ROWS = 512  # rows demosaiced at a time: bounds the methods' scratch memory
 
 # How far (pixels, Chebyshev) an input pixel can reach into the output, per method: the masks of
 # NaN inputs are dilated by this much (tests/test_colour_demosaic.py checks each value).
 SUPPORT_RADIUS = {"opencv-ea": 2, "opencv-vng": 2, "malvar2004": 2, "menon2007": 7,
-                  "bilinear": 1}
+                  "bilinear": 1, "rcd": 10}
 
 _OPENCV_CODES = {
     ("opencv-ea", p): getattr(cv2, f"COLOR_Bayer{p}2RGB_EA") for p in BAYER_PATTERNS
@@ -66,23 +79,29 @@ def mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
     return out
 
 
-def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD) -> np.ndarray:
-    """Full-resolution RGB of a Bayer frame.
+def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains=None,
+             balanced: bool = False) -> np.ndarray:
+    """Full-resolution RGB of a Bayer frame, demosaiced white-balanced.
 
     Parameters
     ----------
     frame : ndarray, (rows, cols)
-        Linear mosaic (any unit, e.g. DN above black); NaN marks unknown pixels.
+        Linear mosaic above black (any unit, e.g. DN); NaN marks unknown (e.g. clipped) pixels.
     cfa : str
         2 x 2 pattern at pixel (0, 0): RGGB, BGGR, GRBG or GBRG.
     method : str
         One of :data:`METHODS`.
+    gains : sequence of 3 floats, optional
+        White-balance multipliers R, G, B (as shot, ``--wb``, ``--wb-from``); default: the
+        mosaic's grey-world estimate (:func:`grey_world_gains`).
+    balanced : bool
+        Return the white-balanced RGB (times the gains) instead of camera RGB.
 
     Returns
     -------
     ndarray float32, (rows, cols, 3)
-        RGB in the unit of ``frame``; NaN (all channels) wherever a NaN input pixel lies within
-        the method's support radius.
+        Camera RGB in the unit of ``frame`` (or balanced, see ``balanced``); NaN (all channels)
+        wherever a NaN input pixel lies within the method's support radius.
     """
     pattern = check_pattern(cfa)
     if method not in METHODS:
@@ -96,24 +115,58 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD) -> np
         if unknown.all():
             raise ValueError("frame has no finite pixel to demosaic")
         data = fill_unknown(data, unknown)
+    gains = grey_world_gains(data, pattern) if gains is None else normalised_gains(gains)
+    tile = np.array([gains["RGB".index(c)] for c in pattern], np.float32).reshape(2, 2)
     rgb = np.empty((*data.shape, 3), np.float32)
     radius = SUPPORT_RADIUS[method]
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
-    low, high = float(data.min()), float(data.max())
+    low, high = _balanced_range(data, tile)
+    unbalance = np.float32(1.0) / gains.astype(np.float32)
     for start in range(0, data.shape[0], BAND_ROWS):
         stop = min(start + BAND_ROWS, data.shape[0])
         top, bottom = max(start - margin, 0), min(stop + margin, data.shape[0])
-        band = data[top:bottom]
+        band = data[top:bottom].copy()  # top is even: the band starts on the CFA's phase
+        for k in range(4):
+            band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
         if method.startswith("opencv"):
             out = _demosaic_opencv(band, pattern, method, low, high)
+        elif method == "rcd":
+            out = rcd(band, pattern, scale=high)
         else:
             out = _demosaic_colour(band, pattern, method)
         rgb[start:stop] = out[start - top: start - top + stop - start]
+        if not balanced:
+            rgb[start:stop] *= unbalance
     if has_unknown:
         kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
         reach = cv2.dilate(unknown.view(np.uint8), kernel).view(bool)
         rgb[reach] = np.nan
     return rgb
+
+
+def grey_world_gains(frame: np.ndarray, cfa: str) -> np.ndarray:
+    """Gains (R, G, B; green 1) that make the mean of each colour of a mosaic equal to green's
+    (every fourth 2 x 2 cell, finite positive means only; 1 for a colour without one)."""
+    pattern = check_pattern(cfa)
+    step = 8 if min(frame.shape) >= 64 else 2
+    means = np.zeros(3)
+    for k, colour in enumerate(pattern):
+        plane = np.asarray(frame)[k // 2::step, k % 2::step]
+        value = float(np.mean(plane[np.isfinite(plane)])) if np.isfinite(plane).any() else 0.0
+        means["RGB".index(colour)] += value / pattern.count(colour)
+    if means[1] <= 0 or not np.all(np.isfinite(means)):
+        return np.ones(3)
+    return np.where(means > 0, means[1] / np.where(means > 0, means, 1.0), 1.0)
+
+
+def _balanced_range(data: np.ndarray, tile: np.ndarray) -> tuple[float, float]:
+    """The smallest and largest value of the balanced mosaic (without making it)."""
+    low, high = np.inf, -np.inf
+    for k in range(4):
+        plane = data[k // 2::2, k % 2::2]
+        gain = float(tile[k // 2, k % 2])
+        low, high = min(low, float(plane.min()) * gain), max(high, float(plane.max()) * gain)
+    return low, high
 
 
 def fill_unknown(frame: np.ndarray, unknown: np.ndarray) -> np.ndarray:
