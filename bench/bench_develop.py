@@ -55,7 +55,7 @@ def accuracy(rows: int, cols: int) -> None:
 
 def develop_view(mosaic: np.ndarray, gains, to_srgb) -> np.ndarray:
     view = dev.ColourView("S", (0,), "RGGB")
-    scene = dev.scene_rgb(dev.camera_rgb(mosaic[np.newaxis], view), gains=gains,
+    scene = dev.scene_rgb(dev.camera_rgb(mosaic[np.newaxis], view, gains=gains), gains=gains,
                           camera_to_srgb=to_srgb, in_place=True)
     scale = dev.exposure_scale(scene)
     return dev.output_encoded(scene, "srgb", scale, in_place=True)

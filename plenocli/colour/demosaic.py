@@ -121,7 +121,7 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     radius = SUPPORT_RADIUS[method]
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
     low, high = _balanced_range(data, tile)
-    unbalance = np.float32(1.0) / gains.astype(np.float32)
+    unbalance = np.ones(3, np.float32) if balanced else np.float32(1.0) / gains.astype(np.float32)
     for start in range(0, data.shape[0], BAND_ROWS):
         stop = min(start + BAND_ROWS, data.shape[0])
         top, bottom = max(start - margin, 0), min(stop + margin, data.shape[0])
@@ -130,12 +130,12 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
             band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
         if method.startswith("opencv"):
             out = _demosaic_opencv(band, pattern, method, low, high)
-        elif method == "rcd":
-            out = rcd(band, pattern, scale=high)
+        elif method == "rcd":  # divides the gains out itself (one pass less)
+            out = rcd(band, pattern, scale=high, channel_scale=unbalance)
         else:
             out = _demosaic_colour(band, pattern, method)
         rgb[start:stop] = out[start - top: start - top + stop - start]
-        if not balanced:
+        if method != "rcd":
             rgb[start:stop] *= unbalance
     if has_unknown:
         kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)

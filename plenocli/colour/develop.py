@@ -13,6 +13,8 @@ A views file holds colour in one of three ways (its metadata says which):
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,11 +93,16 @@ def _per_band(rgb: np.ndarray, matrix: np.ndarray, *, in_place: bool,
               encode_space: str | None = None) -> np.ndarray:
     out = rgb if in_place else np.empty(rgb.shape, np.float32)
     m = np.asarray(matrix, np.float32).T
-    for start in range(0, rgb.shape[0], BAND_ROWS):
+
+    def one_band(start: int) -> None:
         band = np.asarray(rgb[start:start + BAND_ROWS], np.float32) @ m
         if encode_space is not None:
             band = encode(band, encode_space)
         out[start:start + BAND_ROWS] = band
+
+    # numpy releases the GIL in these loops: bands on every core, each a few MB of temporaries
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        list(pool.map(one_band, range(0, rgb.shape[0], BAND_ROWS)))
     return out
 
 
