@@ -30,12 +30,16 @@ neighbours.
 
 from __future__ import annotations
 
+import os
+import threading
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from plenocli.colour.menon import menon2007
+from plenocli.colour.rcd import Workspace as RcdWorkspace
 from plenocli.colour.rcd import rcd
 from plenocli.model.colour import normalised_gains
 
@@ -122,21 +126,32 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
     low, high = _balanced_range(data, tile)
     unbalance = np.ones(3, np.float32) if balanced else np.float32(1.0) / gains.astype(np.float32)
-    for start in range(0, data.shape[0], BAND_ROWS):
+    local = threading.local()
+
+    def one_band(start: int) -> None:
         stop = min(start + BAND_ROWS, data.shape[0])
         top, bottom = max(start - margin, 0), min(stop + margin, data.shape[0])
         band = data[top:bottom].copy()  # top is even: the band starts on the CFA's phase
         for k in range(4):
             band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
+        if method == "rcd":  # writes straight into rgb, the gains divided out (no extra pass)
+            if not hasattr(local, "workspace"):
+                local.workspace = RcdWorkspace(min(BAND_ROWS + 2 * margin, data.shape[0]),
+                                               data.shape[1])
+            rcd(band, pattern, scale=high, channel_scale=unbalance, out=rgb[start:stop],
+                first_row=start - top, workspace=local.workspace)
+            return
         if method.startswith("opencv"):
             out = _demosaic_opencv(band, pattern, method, low, high)
-        elif method == "rcd":  # divides the gains out itself (one pass less)
-            out = rcd(band, pattern, scale=high, channel_scale=unbalance)
         else:
             out = _demosaic_colour(band, pattern, method)
         rgb[start:stop] = out[start - top: start - top + stop - start]
-        if method != "rcd":
-            rgb[start:stop] *= unbalance
+        rgb[start:stop] *= unbalance
+
+    # numba (nogil) and OpenCV release the GIL: bands on every core, each with its own scratch
+    workers = os.cpu_count() or 1 if method in ("rcd", "opencv-ea", "opencv-vng") else 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(one_band, range(0, data.shape[0], BAND_ROWS)))
     if has_unknown:
         kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
         reach = cv2.dilate(unknown.view(np.uint8), kernel).view(bool)

@@ -31,117 +31,139 @@ _EPSSQ = np.float32(1e-10)
 _HALF, _QUARTER, _ONE, _TWO, _THREE, _SIX = (np.float32(v) for v in (0.5, 0.25, 1, 2, 3, 6))
 
 
+class Workspace:
+    """Scratch arrays for mosaics of up to ``rows`` x ``cols``, reused band after band: fresh
+    memory costs a page fault at first touch, as much time as the algorithm itself."""
+
+    def __init__(self, rows: int, cols: int) -> None:
+        shape = (rows + 2 * PAD, cols + 2 * PAD)
+        self.cfa, self.lpf, self.vh_dir, self.pq_dir, self.a, self.b = (
+            np.empty(shape, np.float32) for _ in range(6))
+        self.planes = np.empty((3, *shape), np.float32)
+
+    def fits(self, rows: int, cols: int) -> bool:
+        return rows + 2 * PAD <= self.cfa.shape[0] and cols + 2 * PAD == self.cfa.shape[1]
+
+
 def rcd(cfa: np.ndarray, pattern: str, *, scale: float | None = None,
-        channel_scale=(1.0, 1.0, 1.0)) -> np.ndarray:
-    """RGB (rows, cols, 3) float32 of a white-balanced Bayer mosaic ``cfa`` (rows, cols),
-    each channel multiplied by ``channel_scale`` (e.g. the inverse white-balance gains).
+        channel_scale=(1.0, 1.0, 1.0), out: np.ndarray | None = None, first_row: int = 0,
+        workspace: Workspace | None = None) -> np.ndarray:
+    """RGB float32 of a white-balanced Bayer mosaic ``cfa`` (rows, cols), each channel
+    multiplied by ``channel_scale`` (e.g. the inverse white-balance gains).
 
     ``scale``: the value taken as 1 inside the algorithm (its small constants assume data in
-    [0, 1]); the frame's maximum by default. Banded callers pass the whole frame's.
+    [0, 1]); the frame's maximum by default. Banded callers pass the whole frame's, an ``out``
+    (n, cols, 3) that receives rows ``first_row`` to ``first_row + n`` of the result, and a
+    :class:`Workspace` per thread. Returns ``out`` (default: all rows, (rows, cols, 3)).
     """
-    data = np.asarray(cfa, np.float32)
+    data = np.ascontiguousarray(cfa, np.float32)
+    rows, cols = data.shape
     top = float(np.max(data)) if scale is None else float(scale)
     top = top if top > 0 else 1.0
     colours = np.array([["RGB".index(pattern[2 * r + c]) for c in range(2)] for r in range(2)],
                        np.int64)
-    padded = np.pad(data * np.float32(1.0 / top), PAD, mode="reflect")
-    planes = _rcd(padded, colours)
+    if workspace is None or not workspace.fits(rows, cols):
+        workspace = Workspace(rows, cols)
+    if out is None:
+        out = np.empty((rows, cols, 3), np.float32)
+    if not 0 <= first_row <= rows - out.shape[0] or out.shape[1:] != (cols, 3):
+        raise ValueError(f"out {out.shape} from row {first_row} does not fit {data.shape}")
+    n = rows + 2 * PAD
+    w = workspace
+    cfa_p, planes = w.cfa[:n], w.planes[:, :n]
+    _prepare(data, np.float32(1.0 / top), colours, cfa_p, planes)
+    _vh_dir(cfa_p, w.a[:n], w.b[:n], w.vh_dir[:n])
+    _lowpass(cfa_p, colours, w.lpf[:n])
+    _green(cfa_p, w.lpf[:n], w.vh_dir[:n], colours, planes)
+    _pq_dir(cfa_p, colours, w.a[:n], w.b[:n], w.pq_dir[:n])
+    _red_blue_at_red_blue(w.pq_dir[:n], colours, planes)
+    _red_blue_at_green(w.vh_dir[:n], colours, planes)
     factors = np.asarray(channel_scale, np.float32) * np.float32(top)
-    return _interleave(planes, PAD, factors)
-
-
-def _rcd(cfa: np.ndarray, colours: np.ndarray) -> np.ndarray:
-    """The four steps on a padded mosaic scaled to [0, 1] (negative noise clipped to 0, as the
-    published algorithm's unsigned input); (3, rows, cols)."""
-    out = _known(cfa, colours)
-    vh_dir = _vh_dir(cfa)
-    _green(cfa, _lowpass(cfa, colours), vh_dir, colours, out)
-    pq_dir = _pq_dir(cfa, colours)
-    _red_blue_at_red_blue(pq_dir, colours, out)
-    _red_blue_at_green(vh_dir, colours, out)
+    _interleave(planes, PAD + first_row, PAD, factors, out)
     return out
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
-def _interleave(planes, pad, factors):
-    _, rows, cols = planes.shape
-    out = np.empty((rows - 2 * pad, cols - 2 * pad, 3), np.float32)
-    for r in numba.prange(rows - 2 * pad):
-        for c in range(cols - 2 * pad):
-            for k in range(3):
-                out[r, c, k] = planes[k, r + pad, c + pad] * factors[k]
-    return out
-
-
-@numba.njit(cache=True, parallel=True, fastmath=True)
-def _known(cfa, colours):
-    rows, cols = cfa.shape
-    out = np.empty((3, rows, cols), np.float32)
-    for r in numba.prange(rows):
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _interleave(planes, row0, col0, factors, out):
+    rows, cols, _ = out.shape
+    for r in range(rows):
         for c in range(cols):
-            v = max(cfa[r, c], np.float32(0.0))
+            for k in range(3):
+                out[r, c, k] = planes[k, r + row0, c + col0] * factors[k]
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _prepare(data, inv_scale, colours, cfa, planes):
+    """The mosaic scaled, negative noise clipped to 0 (the published algorithm works on
+    unsigned data) and mirrored by PAD pixels (reflect-101: keeps the CFA phase), and the known
+    samples in their colour planes (the others 0)."""
+    rows, cols = data.shape
+    for r in range(cfa.shape[0]):
+        i = _reflect(r - PAD, rows)
+        for c in range(cfa.shape[1]):
+            j = _reflect(c - PAD, cols)
+            v = max(data[i, j] * inv_scale, np.float32(0.0))
             cfa[r, c] = v
             here = colours[r & 1, c & 1]
             for k in range(3):
-                out[k, r, c] = v if k == here else np.float32(0.0)
-    return out
+                planes[k, r, c] = v if k == here else np.float32(0.0)
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
-def _lowpass(cfa, colours):
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _reflect(i, n):
+    """Index ``i`` mirrored into [0, n) without repeating the edge (numpy's "reflect")."""
+    if n == 1:
+        return 0
+    while i < 0 or i >= n:
+        i = -i if i < 0 else 2 * (n - 1) - i
+    return i
+
+
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _lowpass(cfa, colours, lpf):
     rows, cols = cfa.shape
-    lpf = np.zeros((rows, cols), np.float32)
-    for r in numba.prange(1, rows - 1):
+    for r in range(1, rows - 1):
         for c in range(1 + (colours[r & 1, 1] == 1), cols - 1, 2):  # red and blue columns
             lpf[r, c] = (cfa[r, c]
                          + _HALF * (cfa[r - 1, c] + cfa[r + 1, c] + cfa[r, c - 1] + cfa[r, c + 1])
                          + _QUARTER * (cfa[r - 1, c - 1] + cfa[r - 1, c + 1]
                                    + cfa[r + 1, c - 1] + cfa[r + 1, c + 1]))
-    return lpf
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
-def _vh_dir(cfa):
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _vh_dir(cfa, v, h, out):
     """Vertical/horizontal discrimination ``V / (V + H)``: the squared 7-tap high-pass along
     columns (V) and rows (H), each summed over the pixel and its two neighbours on that axis."""
     rows, cols = cfa.shape
-    v = np.zeros((rows, cols), np.float32)
-    h = np.zeros((rows, cols), np.float32)
-    for r in numba.prange(3, rows - 3):
+    for r in range(3, rows - 3):
         for c in range(3, cols - 3):
             v[r, c] = _hpf2(cfa, r, c, 1, 0)
             h[r, c] = _hpf2(cfa, r, c, 0, 1)
-    out = np.full((rows, cols), np.float32(0.5))
-    for r in numba.prange(4, rows - 4):
+    for r in range(4, rows - 4):
         for c in range(4, cols - 4):
             sv = max(_EPSSQ, v[r - 1, c] + v[r, c] + v[r + 1, c])
             sh = max(_EPSSQ, h[r, c - 1] + h[r, c] + h[r, c + 1])
             out[r, c] = sv / (sv + sh)
-    return out
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
-def _pq_dir(cfa, colours):
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def _pq_dir(cfa, colours, p, q, out):
     """Diagonal discrimination ``P / (P + Q)``, built like :func:`_vh_dir` along the two
     diagonals (P: down-right, Q: down-left), at the red and blue pixels (the only ones that
     use it; their diagonal neighbours are red and blue too)."""
     rows, cols = cfa.shape
-    p = np.zeros((rows, cols), np.float32)
-    q = np.zeros((rows, cols), np.float32)
-    for r in numba.prange(3, rows - 3):
+    for r in range(3, rows - 3):
         for c in range(3 + (colours[r & 1, 1] == 1), cols - 3, 2):
             p[r, c] = _hpf2(cfa, r, c, 1, 1)
             q[r, c] = _hpf2(cfa, r, c, 1, -1)
-    out = np.full((rows, cols), np.float32(0.5))
-    for r in numba.prange(4, rows - 4):
+    for r in range(4, rows - 4):
         for c in range(4 + (colours[r & 1, 0] == 1), cols - 4, 2):
             sp = max(_EPSSQ, p[r - 1, c - 1] + p[r, c] + p[r + 1, c + 1])
             sq = max(_EPSSQ, q[r - 1, c + 1] + q[r, c] + q[r + 1, c - 1])
             out[r, c] = sp / (sp + sq)
-    return out
 
 
-@numba.njit(cache=True, fastmath=True, inline="always")
+@numba.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _hpf2(x, r, c, dr, dc):
     h = ((x[r - 3 * dr, c - 3 * dc] - x[r - dr, c - dc] - x[r + dr, c + dc]
           + x[r + 3 * dr, c + 3 * dc])
@@ -149,7 +171,7 @@ def _hpf2(x, r, c, dr, dc):
     return h * h
 
 
-@numba.njit(cache=True, fastmath=True, inline="always")
+@numba.njit(cache=True, fastmath=True, error_model="numpy", inline="always")
 def _clearer(d, r, c):
     """The pixel's discrimination, or its diagonal neighbours' mean where that is further
     from 0.5 (a more decided direction)."""
@@ -158,10 +180,10 @@ def _clearer(d, r, c):
     return around if abs(_HALF - centre) < abs(_HALF - around) else centre
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _green(cfa, lpf, vh_dir, colours, out):
     rows, cols = cfa.shape
-    for r in numba.prange(5, rows - 5):
+    for r in range(5, rows - 5):
         first = 5 + (colours[r & 1, 1] == 1)  # the first red or blue column from 5
         for c in range(first, cols - 5, 2):
             x = cfa
@@ -184,11 +206,11 @@ def _green(cfa, lpf, vh_dir, colours, out):
             out[1, r, c] = max(np.float32(0.0), disc * h_est + (_ONE - disc) * v_est)
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _red_blue_at_red_blue(pq_dir, colours, out):
     rows, cols = pq_dir.shape
     g = out[1]
-    for r in numba.prange(7, rows - 7):
+    for r in range(7, rows - 7):
         first = 7 + (colours[r & 1, 1] == 1)
         x = out[2 - colours[r & 1, first & 1]]  # blue on red rows, red on blue rows
         for c in range(first, cols - 7, 2):
@@ -210,11 +232,11 @@ def _red_blue_at_red_blue(pq_dir, colours, out):
             x[r, c] = max(np.float32(0.0), g[r, c] + (_ONE - disc) * p_est + disc * q_est)
 
 
-@numba.njit(cache=True, parallel=True, fastmath=True)
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
 def _red_blue_at_green(vh_dir, colours, out):
     rows, cols = vh_dir.shape
     g = out[1]
-    for r in numba.prange(10, rows - 10):
+    for r in range(10, rows - 10):
         for c in range(10 + (colours[r & 1, 0] != 1), cols - 10, 2):  # the green columns
             disc = _clearer(vh_dir, r, c)
             for k in (0, 2):
