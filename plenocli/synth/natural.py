@@ -67,8 +67,8 @@ def natural_capture(photo: np.ndarray, *, seed: int,
     if image.ndim != 3 or image.shape[-1] != 3 or image.dtype != np.uint8:
         raise ValueError(f"photo must be (rows, cols, 3) uint8 sRGB, got {image.shape} "
                          f"{image.dtype}")
-    if not 0 < peak <= 1:
-        raise ValueError(f"peak must be in (0, 1], got {peak}")
+    if not 0 < peak < 100:  # above 1: overexposed, the brightest parts clip at ``white``
+        raise ValueError(f"peak must be positive (1: the brightest pixel at white), got {peak}")
     rows, cols = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
     truth = srgb_decode(image[:rows, :cols] / 255.0)
     if low_pass:  # the camera's optical low-pass filter (most Bayer cameras, the 5D IV too)
