@@ -102,6 +102,52 @@ def photographs(tmp: Path) -> None:
                   f"{e.delta_e_p95:5.2f}{mark}")
 
 
+def edge_crop(path: Path, *, side: int = 40, zoom: int = 6) -> None:
+    """A PNG of one crop of the coffee photograph, side by side: the scene, plenocli before
+    (menon2007 demosaicing camera RGB, white balance after), plenocli now (the default, balanced
+    first), LibRaw AHD. The crop is the window where "before" errs most (the cup's rim)."""
+    from PIL import Image
+
+    from plenocli.io.photo import encode
+
+    cap = natural_capture(skimage.data.coffee(), seed=1)
+    mosaic = cap.raw.astype(np.float32) - cap.black
+    gains = cap.as_shot_neutral[1] / cap.as_shot_neutral
+    to_srgb = camera_to_srgb(cap.xyz_to_camera).astype(np.float32).T
+    scale = cap.dn_per_unit * cap.as_shot_neutral[1]
+
+    def developed(method, demosaic_gains):
+        camera = dm.demosaic(mosaic, cap.cfa, method=method, gains=demosaic_gains)
+        return camera * gains.astype(np.float32) @ to_srgb / scale
+
+    before = developed("menon2007", (1, 1, 1))
+    after = developed(dm.DEFAULT_METHOD, gains)
+    with tempfile.TemporaryDirectory() as tmp:
+        dng = Path(tmp) / "coffee.dng"
+        write_dng(dng, cap.raw, cfa=cap.cfa, black_levels=[cap.black], white_level=cap.white,
+                  active_area=[0, 0, *cap.raw.shape], as_shot_neutral=cap.as_shot_neutral,
+                  color_matrix=cap.xyz_to_camera.ravel())
+        with rawpy.imread(str(dng)) as raw:
+            rgb = raw.postprocess(use_camera_wb=True, output_color=rawpy.ColorSpace.sRGB,
+                                  gamma=(1, 1), no_auto_bright=True, output_bps=16,
+                                  user_flip=0).astype(np.float32)
+    libraw = rgb * float((rgb * cap.truth).sum() / (rgb**2).sum())
+    err = np.abs(before - cap.truth).sum(axis=-1)
+    windows = err[:err.shape[0] // side * side, :err.shape[1] // side * side]
+    windows = windows.reshape(err.shape[0] // side, side, -1, side).sum(axis=(1, 3))
+    r, c = (side * v for v in np.unravel_index(np.argmax(windows), windows.shape))
+    panels = [encode(x[r:r + side, c:c + side], "srgb") for x in
+              (cap.truth, before, after, libraw)]
+    gap = np.ones((side, 2, 3), np.float32)
+    strip = np.concatenate([p for panel in panels for p in (panel, gap)][:-1], axis=1)
+    big = np.repeat(np.repeat(strip, zoom, axis=0), zoom, axis=1)
+    Image.fromarray(np.round(big * 255).astype(np.uint8)).save(path)
+    for label, x in (("before", before), ("now", after), ("LibRaw AHD", libraw)):
+        e = colour_error(x[r:r + side, c:c + side], cap.truth[r:r + side, c:c + side], border=0)
+        print(f"  crop rows {r}-{r + side}, cols {c}-{c + side}: {label:10s} "
+              f"{e.psnr_db:6.2f} dB | dE2000 {e.delta_e_mean:5.2f}")
+
+
 def _cli(*args) -> None:
     result = CliRunner().invoke(cli, [str(a) for a in args] + ["-q"])
     if result.exit_code != 0:
@@ -168,7 +214,11 @@ def main() -> None:
     parser.add_argument("--chart-rows", type=int, default=768)
     parser.add_argument("--skip-speed", action="store_true")
     parser.add_argument("--skip-charts", action="store_true")
+    parser.add_argument("--crop", type=Path, default=None,
+                        help="write the edge crop (scene | before | now | LibRaw AHD) as PNG")
     args = parser.parse_args()
+    if args.crop:
+        edge_crop(args.crop)
     with tempfile.TemporaryDirectory() as tmp:
         photographs(Path(tmp))
     if not args.skip_charts:
