@@ -81,7 +81,7 @@ def photographs(tmp: Path) -> None:
                   as_shot_neutral=cap.as_shot_neutral, color_matrix=cap.xyz_to_camera.ravel())
         _cli("decode", dng, "-o", tmp / "frames.tif")
         _cli("bias", tmp / "frames.tif", "-o", tmp / "biased.tif")
-        rows = {}
+        rows = {"before": _before(cap)}
         for method in dm.METHODS:
             _cli("develop", tmp / "biased.tif", "-o", tmp / "photo.tif", "--linear",
                  tmp / "linear.tif", "--method", method)
@@ -102,6 +102,16 @@ def photographs(tmp: Path) -> None:
                   f"{e.delta_e_p95:5.2f}{mark}")
 
 
+def _before(cap) -> np.ndarray:
+    """What develop made before white balance moved ahead of demosaicing: menon2007 on camera
+    RGB, then the gains and the matrix (in-process; decode and bias only subtract the black)."""
+    mosaic = cap.raw.astype(np.float32) - cap.black
+    gains = cap.as_shot_neutral[1] / cap.as_shot_neutral
+    camera = dm.demosaic(mosaic, cap.cfa, method="menon2007", gains=(1, 1, 1))
+    to_srgb = camera_to_srgb(cap.xyz_to_camera).astype(np.float32).T
+    return camera * gains.astype(np.float32) @ to_srgb / (cap.dn_per_unit * cap.as_shot_neutral[1])
+
+
 def edge_crop(path: Path, *, side: int = 40, zoom: int = 6) -> None:
     """A PNG of one crop of the coffee photograph, side by side: the scene, plenocli before
     (menon2007 demosaicing camera RGB, white balance after), plenocli now (the default, balanced
@@ -116,12 +126,8 @@ def edge_crop(path: Path, *, side: int = 40, zoom: int = 6) -> None:
     to_srgb = camera_to_srgb(cap.xyz_to_camera).astype(np.float32).T
     scale = cap.dn_per_unit * cap.as_shot_neutral[1]
 
-    def developed(method, demosaic_gains):
-        camera = dm.demosaic(mosaic, cap.cfa, method=method, gains=demosaic_gains)
-        return camera * gains.astype(np.float32) @ to_srgb / scale
-
-    before = developed("menon2007", (1, 1, 1))
-    after = developed(dm.DEFAULT_METHOD, gains)
+    before = _before(cap)
+    after = dm.demosaic(mosaic, cap.cfa, gains=gains) * gains.astype(np.float32) @ to_srgb / scale
     with tempfile.TemporaryDirectory() as tmp:
         dng = Path(tmp) / "coffee.dng"
         write_dng(dng, cap.raw, cfa=cap.cfa, black_levels=[cap.black], white_level=cap.white,
