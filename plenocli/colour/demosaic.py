@@ -113,8 +113,9 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     data = np.asarray(frame, np.float32)
     if data.ndim != 2 or data.shape[0] < 4 or data.shape[1] < 4:
         raise ValueError(f"frame must be a 2-D mosaic of at least 4 x 4 pixels, got {data.shape}")
-    unknown = ~np.isfinite(data)
-    has_unknown = bool(unknown.any())
+    # one pass without a mask for the usual frame with nothing unknown (float64: no overflow)
+    has_unknown = not np.isfinite(np.sum(data, dtype=np.float64))
+    unknown = ~np.isfinite(data) if has_unknown else None
     if has_unknown:
         if unknown.all():
             raise ValueError("frame has no finite pixel to demosaic")
@@ -124,23 +125,24 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     rgb = np.empty((*data.shape, 3), np.float32)
     radius = SUPPORT_RADIUS[method]
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
-    low, high = _balanced_range(data, tile)
+    low, high = (_balanced_range(data, tile) if method.startswith("opencv")
+                 else (0.0, float(np.max(data)) * float(tile.max())))
     unbalance = np.ones(3, np.float32) if balanced else np.float32(1.0) / gains.astype(np.float32)
     local = threading.local()
 
     def one_band(start: int) -> None:
         stop = min(start + BAND_ROWS, data.shape[0])
         top, bottom = max(start - margin, 0), min(stop + margin, data.shape[0])
-        band = data[top:bottom].copy()  # top is even: the band starts on the CFA's phase
-        for k in range(4):
-            band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
-        if method == "rcd":  # writes straight into rgb, the gains divided out (no extra pass)
+        if method == "rcd":  # balances and writes straight into rgb, gains divided out
             if not hasattr(local, "workspace"):
                 local.workspace = RcdWorkspace(min(BAND_ROWS + 2 * margin, data.shape[0]),
                                                data.shape[1])
-            rcd(band, pattern, scale=high, channel_scale=unbalance, out=rgb[start:stop],
-                first_row=start - top, workspace=local.workspace)
+            rcd(data[top:bottom], pattern, scale=high, cfa_gains=tile, channel_scale=unbalance,
+                out=rgb[start:stop], first_row=start - top, workspace=local.workspace)
             return
+        band = data[top:bottom].copy()  # top is even: the band starts on the CFA's phase
+        for k in range(4):
+            band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
         if method.startswith("opencv"):
             out = _demosaic_opencv(band, pattern, method, low, high)
         else:

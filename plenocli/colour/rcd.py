@@ -45,11 +45,13 @@ class Workspace:
         return rows + 2 * PAD <= self.cfa.shape[0] and cols + 2 * PAD == self.cfa.shape[1]
 
 
-def rcd(cfa: np.ndarray, pattern: str, *, scale: float | None = None,
+def rcd(cfa: np.ndarray, pattern: str, *, scale: float | None = None, cfa_gains=None,
         channel_scale=(1.0, 1.0, 1.0), out: np.ndarray | None = None, first_row: int = 0,
         workspace: Workspace | None = None) -> np.ndarray:
     """RGB float32 of a white-balanced Bayer mosaic ``cfa`` (rows, cols), each channel
-    multiplied by ``channel_scale`` (e.g. the inverse white-balance gains).
+    multiplied by ``channel_scale`` (e.g. the inverse white-balance gains). ``cfa_gains``
+    (2 x 2, per pixel of the pattern) balances a mosaic on the way in (``scale`` is then the
+    balanced mosaic's).
 
     ``scale``: the value taken as 1 inside the algorithm (its small constants assume data in
     [0, 1]); the frame's maximum by default. Banded callers pass the whole frame's, an ``out``
@@ -60,6 +62,7 @@ def rcd(cfa: np.ndarray, pattern: str, *, scale: float | None = None,
     rows, cols = data.shape
     top = float(np.max(data)) if scale is None else float(scale)
     top = top if top > 0 else 1.0
+    gains = np.ones((2, 2), np.float32) if cfa_gains is None else np.asarray(cfa_gains, np.float32)
     colours = np.array([["RGB".index(pattern[2 * r + c]) for c in range(2)] for r in range(2)],
                        np.int64)
     if workspace is None or not workspace.fits(rows, cols):
@@ -71,7 +74,7 @@ def rcd(cfa: np.ndarray, pattern: str, *, scale: float | None = None,
     n = rows + 2 * PAD
     w = workspace
     cfa_p, planes = w.cfa[:n], w.planes[:, :n]
-    _prepare(data, np.float32(1.0 / top), colours, cfa_p, planes)
+    _prepare(data, gains * np.float32(1.0 / top), colours, cfa_p, planes)
     _vh_dir(cfa_p, w.a[:n], w.b[:n], w.vh_dir[:n])
     _lowpass(cfa_p, colours, w.lpf[:n])
     _green(cfa_p, w.lpf[:n], w.vh_dir[:n], colours, planes)
@@ -93,16 +96,16 @@ def _interleave(planes, row0, col0, factors, out):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
-def _prepare(data, inv_scale, colours, cfa, planes):
-    """The mosaic scaled, negative noise clipped to 0 (the published algorithm works on
-    unsigned data) and mirrored by PAD pixels (reflect-101: keeps the CFA phase), and the known
-    samples in their colour planes (the others 0)."""
+def _prepare(data, factors, colours, cfa, planes):
+    """The mosaic times ``factors`` (2 x 2, by CFA phase), negative noise clipped to 0 (the
+    published algorithm works on unsigned data) and mirrored by PAD pixels (reflect-101: keeps
+    the CFA phase), and the known samples in their colour planes (the others 0)."""
     rows, cols = data.shape
     for r in range(cfa.shape[0]):
         i = _reflect(r - PAD, rows)
         for c in range(cfa.shape[1]):
             j = _reflect(c - PAD, cols)
-            v = max(data[i, j] * inv_scale, np.float32(0.0))
+            v = max(data[i, j] * factors[i & 1, j & 1], np.float32(0.0))
             cfa[r, c] = v
             here = colours[r & 1, c & 1]
             for k in range(3):
