@@ -138,15 +138,18 @@ def _vh_dir(cfa, v, h, out):
     """Vertical/horizontal discrimination ``V / (V + H)``: the squared 7-tap high-pass along
     columns (V) and rows (H), each summed over the pixel and its two neighbours on that axis."""
     rows, cols = cfa.shape
-    for r in range(3, rows - 3):
+    for r in range(3, rows - 3):  # one output row per loop: simple loops that vectorise
+        vr, hr = v[r], h[r]
         for c in range(3, cols - 3):
-            v[r, c] = _hpf2(cfa, r, c, 1, 0)
-            h[r, c] = _hpf2(cfa, r, c, 0, 1)
+            vr[c] = _hpf2(cfa, r, c, 1, 0)
+        for c in range(3, cols - 3):
+            hr[c] = _hpf2(cfa, r, c, 0, 1)
     for r in range(4, rows - 4):
+        above, here, below, hr, o = v[r - 1], v[r], v[r + 1], h[r], out[r]
         for c in range(4, cols - 4):
-            sv = max(_EPSSQ, v[r - 1, c] + v[r, c] + v[r + 1, c])
-            sh = max(_EPSSQ, h[r, c - 1] + h[r, c] + h[r, c + 1])
-            out[r, c] = sv / (sv + sh)
+            sv = max(_EPSSQ, above[c] + here[c] + below[c])
+            sh = max(_EPSSQ, hr[c - 1] + hr[c] + hr[c + 1])
+            o[c] = sv / (sv + sh)
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
