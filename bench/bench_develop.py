@@ -160,10 +160,12 @@ def _cli(*args) -> None:
         raise RuntimeError(result.output)
 
 
-def develop_view(mosaic: np.ndarray, gains, to_srgb) -> np.ndarray:
+def develop_view(mosaic: np.ndarray, gains, to_srgb, *, method: str = dm.DEFAULT_METHOD,
+                 demosaic_gains="as-shot") -> np.ndarray:
     view = dev.ColourView("S", (0,), "RGGB")
-    scene = dev.scene_rgb(dev.camera_rgb(mosaic[np.newaxis], view, gains=gains), gains=gains,
-                          camera_to_srgb=to_srgb, in_place=True)
+    camera = dev.camera_rgb(mosaic[np.newaxis], view, method=method,
+                            gains=gains if demosaic_gains == "as-shot" else demosaic_gains)
+    scene = dev.scene_rgb(camera, gains=gains, camera_to_srgb=to_srgb, in_place=True)
     scale = dev.exposure_scale(scene)
     return dev.output_encoded(scene, "srgb", scale, in_place=True)
 
@@ -192,6 +194,8 @@ def speed(rows: int, cols: int, repeat: int) -> None:
     del raw
     gains, to_srgb = neutral[1] / neutral, camera_to_srgb(xyz_to_camera)
     ours = min(_timed(lambda: develop_view(mosaic, gains, to_srgb)) for _ in range(repeat))
+    before = min(_timed(lambda: develop_view(mosaic, gains, to_srgb, method="menon2007",
+                                             demosaic_gains=(1, 1, 1))) for _ in range(repeat))
     tracemalloc.start()
     out = develop_view(mosaic, gains, to_srgb)
     _, peak = tracemalloc.get_traced_memory()
@@ -201,6 +205,7 @@ def speed(rows: int, cols: int, repeat: int) -> None:
     print(f"  rawpy.postprocess (baseline)     {base:6.2f} s")
     print(f"  plenocli demosaic + colour       {ours:6.2f} s   ratio {ours / base:.2f} "
           "(target <= 1.0)")
+    print(f"  before (menon2007 on camera RGB) {before:6.2f} s   ratio {before / base:.2f}")
     print(f"  peak memory {peak / 2**20:7.0f} MiB = {peak / rgb_bytes:.2f} x the float32 RGB "
           f"output ({rgb_bytes / 2**20:.0f} MiB; target <= 3)")
     del out
