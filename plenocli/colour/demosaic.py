@@ -150,8 +150,10 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         rgb[start:stop] = out[start - top: start - top + stop - start]
         rgb[start:stop] *= unbalance
 
-    # numba (nogil) and OpenCV release the GIL: bands on every core, each with its own scratch
-    workers = os.cpu_count() or 1 if method in ("rcd", "opencv-ea", "opencv-vng") else 1
+    # numba (nogil) and OpenCV release the GIL: bands on every core, each with its own scratch;
+    # colour-demosaicing's functions run one band at a time (their warning filters are global)
+    threaded = method in ("rcd", "menon2007", "opencv-ea", "opencv-vng")
+    workers = (os.cpu_count() or 1) if threaded else 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
         list(pool.map(one_band, range(0, data.shape[0], BAND_ROWS)))
     if has_unknown:
