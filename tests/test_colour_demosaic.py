@@ -60,12 +60,13 @@ def test_nan_pixels_stay_masked_within_the_radius_only(method):
     assert np.array_equal(np.isnan(out).all(axis=-1), expected)  # all channels or none
 
 
-def test_bands_give_the_same_result_as_one_pass(monkeypatch):
+@pytest.mark.parametrize("method", ["menon2007", "rcd"])
+def test_bands_give_the_same_result_as_one_pass(monkeypatch, method):
     rng = np.random.default_rng(5)
     frame = rng.random((100, 64)).astype(np.float32)
-    whole = dm.demosaic(frame, "GBRG", method="menon2007")
-    monkeypatch.setattr(dm, "BAND_ROWS", 22)
-    np.testing.assert_allclose(dm.demosaic(frame, "GBRG", method="menon2007"), whole,
+    whole = dm.demosaic(frame, "GBRG", method=method)
+    monkeypatch.setattr(dm, "BAND_ROWS", 22)  # five bands, on several threads for rcd
+    np.testing.assert_allclose(dm.demosaic(frame, "GBRG", method=method), whole,
                                rtol=0, atol=1e-6)
 
 
