@@ -34,7 +34,7 @@ def test_support_radius_bounds_the_reach_of_one_pixel(method):
     rng = np.random.default_rng(3)
     base = (0.2 + 0.5 * rng.random((48, 48))).astype(np.float32)
     base[0, 0], base[0, 1] = 1.0, 0.0  # fixed range: OpenCV's integer scaling stays the same
-    # given gains: the default grey-world estimate is a mean over the whole frame
+    # given gains: the default grey-edge estimate is a mean over the whole frame
     ref = dm.demosaic(base, "RGGB", method=method, gains=(1, 1, 1))
     radius = dm.SUPPORT_RADIUS[method]
     for r, c in ((24, 24), (24, 25), (25, 24), (25, 25)):

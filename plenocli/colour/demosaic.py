@@ -17,7 +17,7 @@ of a grey surface are equal; in camera RGB they are not (a daylight Canon raw re
 blue at about 0.45 and 0.8 of green), and interpolating across an edge then leaves zipper and
 colour fringes. :func:`demosaic` therefore multiplies the mosaic by the white-balance gains,
 demosaics, and divides the gains back out (camera RGB, what callers always got) unless asked for
-the balanced result. Without gains it balances by the mosaic's own grey-world estimate: any
+the balanced result. Without gains it balances by the mosaic's own grey-edge estimate: any
 roughly neutral balance serves the interpolation, and dividing it out again leaves no trace of
 it in the colours.
 
@@ -97,7 +97,7 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         One of :data:`METHODS`.
     gains : sequence of 3 floats, optional
         White-balance multipliers R, G, B (as shot, ``--wb``, ``--wb-from``); default: the
-        mosaic's grey-world estimate (:func:`grey_world_gains`).
+        mosaic's grey-edge estimate (:func:`grey_edge_gains`).
     balanced : bool
         Return the white-balanced RGB (times the gains) instead of camera RGB.
 
@@ -120,7 +120,7 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         if unknown.all():
             raise ValueError("frame has no finite pixel to demosaic")
         data = fill_unknown(data, unknown)
-    gains = grey_world_gains(data, pattern) if gains is None else normalised_gains(gains)
+    gains = grey_edge_gains(data, pattern) if gains is None else normalised_gains(gains)
     tile = np.array([gains["RGB".index(c)] for c in pattern], np.float32).reshape(2, 2)
     rgb = np.empty((*data.shape, 3), np.float32)
     radius = SUPPORT_RADIUS[method]
@@ -163,19 +163,27 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     return rgb
 
 
-def grey_world_gains(frame: np.ndarray, cfa: str) -> np.ndarray:
-    """Gains (R, G, B; green 1) that make the mean of each colour of a mosaic equal to green's
-    (every fourth 2 x 2 cell, finite positive means only; 1 for a colour without one)."""
+def grey_edge_gains(frame: np.ndarray, cfa: str) -> np.ndarray:
+    """Gains (R, G, B; green 1) that make the mean absolute gradient of each colour of a mosaic
+    equal to green's: the grey-edge estimate (van de Weijer, Gevers & Gijsenij 2007; edges of
+    natural scenes average to grey far more reliably than their colours do). Gradients between
+    neighbours of the same colour, on every fourth row of each colour plane; 1 for a colour
+    without any."""
     pattern = check_pattern(cfa)
-    step = 8 if min(frame.shape) >= 64 else 2
-    means = np.zeros(3)
+    edges = np.zeros(3)
     for k, colour in enumerate(pattern):
-        plane = np.asarray(frame)[k // 2::step, k % 2::step]
-        value = float(np.mean(plane[np.isfinite(plane)])) if np.isfinite(plane).any() else 0.0
-        means["RGB".index(colour)] += value / pattern.count(colour)
-    if means[1] <= 0 or not np.all(np.isfinite(means)):
+        plane = np.asarray(frame, np.float32)[k // 2::2, k % 2::2]
+        rows = plane.shape[0] // 4 * 4 or plane.shape[0]
+        across = np.abs(np.diff(plane[:rows:4], axis=1))
+        down = np.abs(plane[1:rows:4] - plane[0:rows - 1:4]) if rows > 1 else across[:0]
+        values = np.concatenate([across.ravel(), down.ravel()])
+        values = values[np.isfinite(values)]
+        edges["RGB".index(colour)] += (values.mean() if values.size else 0.0) / pattern.count(
+            colour)
+    if edges[1] <= 0 or not np.all(np.isfinite(edges)):
         return np.ones(3)
-    return np.where(means > 0, means[1] / np.where(means > 0, means, 1.0), 1.0)
+    gains = np.where(edges > 0, edges[1] / np.where(edges > 0, edges, 1.0), 1.0)
+    return np.clip(gains, 0.1, 10.0)  # a flat plane says nothing: no light source is beyond
 
 
 def _balanced_range(data: np.ndarray, tile: np.ndarray) -> tuple[float, float]:
