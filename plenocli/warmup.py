@@ -36,7 +36,14 @@ def warm_calibrate() -> None:
     calibrate(image)
 
 
-WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate}
+def warm_develop() -> None:
+    """The RCD demosaic kernels (develop's and stitch's default), on a float32 mosaic."""
+    from plenocli.colour.demosaic import demosaic
+
+    demosaic(np.ones((64, 64), np.float32), "RGGB", gains=(2.0, 1.0, 1.5))
+
+
+WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop}
 
 
 def main() -> None:

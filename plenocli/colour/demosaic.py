@@ -9,6 +9,17 @@ Methods (measured in docs/colour.md; the default is chosen there):
                 algorithm on OpenCV float32 filters (``plenocli.colour.menon``, 50 x faster,
                 equal to the reference within float32 rounding: checked by the tests)
 ``bilinear``    bilinear interpolation (``colour-demosaicing``): the fast option
+``rcd``         Ratio Corrected Demosaicing (RawTherapee's and darktable's default), in numba
+                (``plenocli.colour.rcd``)
+
+White balance comes first. Colour-difference and ratio demosaics assume that red, green and blue
+of a grey surface are equal; in camera RGB they are not (a daylight Canon raw records red and
+blue at about 0.45 and 0.8 of green), and interpolating across an edge then leaves zipper and
+colour fringes. :func:`demosaic` therefore multiplies the mosaic by the white-balance gains,
+demosaics, and divides the gains back out (camera RGB, what callers always got) unless asked for
+the balanced result. Without gains it balances by the mosaic's own grey-edge estimate: any
+roughly neutral balance serves the interpolation, and dividing it out again leaves no trace of
+it in the colours.
 
 NaN pixels (clipped or otherwise unknown) are filled from their valid neighbours of the same
 colour before demosaicing, and afterwards every output pixel whose value can depend on a filled
@@ -19,22 +30,28 @@ neighbours.
 
 from __future__ import annotations
 
+import os
+import threading
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from plenocli.colour.menon import menon2007
+from plenocli.colour.rcd import Workspace as RcdWorkspace
+from plenocli.colour.rcd import rcd
+from plenocli.model.colour import normalised_gains
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
-METHODS = ("opencv-ea", "opencv-vng", "malvar2004", "menon2007", "bilinear")
-DEFAULT_METHOD = "menon2007"  # best PSNR and dE2000 measured (docs/colour.md)
+METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
+DEFAULT_METHOD = "rcd"  # best PSNR and dE2000 on natural photographs (docs/colour.md)
 BAND_ROWS = 512  # rows demosaiced at a time: bounds the methods' scratch memory
 
 # How far (pixels, Chebyshev) an input pixel can reach into the output, per method: the masks of
 # NaN inputs are dilated by this much (tests/test_colour_demosaic.py checks each value).
 SUPPORT_RADIUS = {"opencv-ea": 2, "opencv-vng": 2, "malvar2004": 2, "menon2007": 7,
-                  "bilinear": 1}
+                  "bilinear": 1, "rcd": 10}
 
 _OPENCV_CODES = {
     ("opencv-ea", p): getattr(cv2, f"COLOR_Bayer{p}2RGB_EA") for p in BAYER_PATTERNS
@@ -66,23 +83,29 @@ def mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
     return out
 
 
-def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD) -> np.ndarray:
-    """Full-resolution RGB of a Bayer frame.
+def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains=None,
+             balanced: bool = False) -> np.ndarray:
+    """Full-resolution RGB of a Bayer frame, demosaiced white-balanced.
 
     Parameters
     ----------
     frame : ndarray, (rows, cols)
-        Linear mosaic (any unit, e.g. DN above black); NaN marks unknown pixels.
+        Linear mosaic above black (any unit, e.g. DN); NaN marks unknown (e.g. clipped) pixels.
     cfa : str
         2 x 2 pattern at pixel (0, 0): RGGB, BGGR, GRBG or GBRG.
     method : str
         One of :data:`METHODS`.
+    gains : sequence of 3 floats, optional
+        White-balance multipliers R, G, B (as shot, ``--wb``, ``--wb-from``); default: the
+        mosaic's grey-edge estimate (:func:`grey_edge_gains`).
+    balanced : bool
+        Return the white-balanced RGB (times the gains) instead of camera RGB.
 
     Returns
     -------
     ndarray float32, (rows, cols, 3)
-        RGB in the unit of ``frame``; NaN (all channels) wherever a NaN input pixel lies within
-        the method's support radius.
+        Camera RGB in the unit of ``frame`` (or balanced, see ``balanced``); NaN (all channels)
+        wherever a NaN input pixel lies within the method's support radius.
     """
     pattern = check_pattern(cfa)
     if method not in METHODS:
@@ -90,30 +113,87 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD) -> np
     data = np.asarray(frame, np.float32)
     if data.ndim != 2 or data.shape[0] < 4 or data.shape[1] < 4:
         raise ValueError(f"frame must be a 2-D mosaic of at least 4 x 4 pixels, got {data.shape}")
-    unknown = ~np.isfinite(data)
-    has_unknown = bool(unknown.any())
+    # one pass without a mask for the usual frame with nothing unknown (float64: no overflow)
+    has_unknown = not np.isfinite(np.sum(data, dtype=np.float64))
+    unknown = ~np.isfinite(data) if has_unknown else None
     if has_unknown:
         if unknown.all():
             raise ValueError("frame has no finite pixel to demosaic")
         data = fill_unknown(data, unknown)
+    gains = grey_edge_gains(data, pattern) if gains is None else normalised_gains(gains)
+    tile = np.array([gains["RGB".index(c)] for c in pattern], np.float32).reshape(2, 2)
     rgb = np.empty((*data.shape, 3), np.float32)
     radius = SUPPORT_RADIUS[method]
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
-    low, high = float(data.min()), float(data.max())
-    for start in range(0, data.shape[0], BAND_ROWS):
+    low, high = (_balanced_range(data, tile) if method.startswith("opencv")
+                 else (0.0, float(np.max(data)) * float(tile.max())))
+    unbalance = np.ones(3, np.float32) if balanced else np.float32(1.0) / gains.astype(np.float32)
+    local = threading.local()
+
+    def one_band(start: int) -> None:
         stop = min(start + BAND_ROWS, data.shape[0])
         top, bottom = max(start - margin, 0), min(stop + margin, data.shape[0])
-        band = data[top:bottom]
+        if method == "rcd":  # balances and writes straight into rgb, gains divided out
+            if not hasattr(local, "workspace"):
+                local.workspace = RcdWorkspace(min(BAND_ROWS + 2 * margin, data.shape[0]),
+                                               data.shape[1])
+            rcd(data[top:bottom], pattern, scale=high, cfa_gains=tile, channel_scale=unbalance,
+                out=rgb[start:stop], first_row=start - top, workspace=local.workspace)
+            return
+        band = data[top:bottom].copy()  # top is even: the band starts on the CFA's phase
+        for k in range(4):
+            band[k // 2::2, k % 2::2] *= tile[k // 2, k % 2]
         if method.startswith("opencv"):
             out = _demosaic_opencv(band, pattern, method, low, high)
         else:
             out = _demosaic_colour(band, pattern, method)
         rgb[start:stop] = out[start - top: start - top + stop - start]
+        rgb[start:stop] *= unbalance
+
+    # numba (nogil) and OpenCV release the GIL: bands on every core, each with its own scratch;
+    # colour-demosaicing's functions run one band at a time (their warning filters are global)
+    threaded = method in ("rcd", "menon2007", "opencv-ea", "opencv-vng")
+    workers = (os.cpu_count() or 1) if threaded else 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(one_band, range(0, data.shape[0], BAND_ROWS)))
     if has_unknown:
         kernel = np.ones((2 * radius + 1, 2 * radius + 1), np.uint8)
         reach = cv2.dilate(unknown.view(np.uint8), kernel).view(bool)
         rgb[reach] = np.nan
     return rgb
+
+
+def grey_edge_gains(frame: np.ndarray, cfa: str) -> np.ndarray:
+    """Gains (R, G, B; green 1) that make the mean absolute gradient of each colour of a mosaic
+    equal to green's: the grey-edge estimate (van de Weijer, Gevers & Gijsenij 2007; edges of
+    natural scenes average to grey far more reliably than their colours do). Gradients between
+    neighbours of the same colour, on every fourth row of each colour plane; 1 for a colour
+    without any."""
+    pattern = check_pattern(cfa)
+    edges = np.zeros(3)
+    for k, colour in enumerate(pattern):
+        plane = np.asarray(frame, np.float32)[k // 2::2, k % 2::2]
+        rows = plane.shape[0] // 4 * 4 or plane.shape[0]
+        across = np.abs(np.diff(plane[:rows:4], axis=1))
+        down = np.abs(plane[1:rows:4] - plane[0:rows - 1:4]) if rows > 1 else across[:0]
+        values = np.concatenate([across.ravel(), down.ravel()])
+        values = values[np.isfinite(values)]
+        edges["RGB".index(colour)] += (values.mean() if values.size else 0.0) / pattern.count(
+            colour)
+    if edges[1] <= 0 or not np.all(np.isfinite(edges)):
+        return np.ones(3)
+    gains = np.where(edges > 0, edges[1] / np.where(edges > 0, edges, 1.0), 1.0)
+    return np.clip(gains, 0.1, 10.0)  # a flat plane says nothing: no light source is beyond
+
+
+def _balanced_range(data: np.ndarray, tile: np.ndarray) -> tuple[float, float]:
+    """The smallest and largest value of the balanced mosaic (without making it)."""
+    low, high = np.inf, -np.inf
+    for k in range(4):
+        plane = data[k // 2::2, k % 2::2]
+        gain = float(tile[k // 2, k % 2])
+        low, high = min(low, float(plane.min()) * gain), max(high, float(plane.max()) * gain)
+    return low, high
 
 
 def fill_unknown(frame: np.ndarray, unknown: np.ndarray) -> np.ndarray:

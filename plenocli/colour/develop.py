@@ -1,6 +1,6 @@
-"""Developing views into colour images: which pages form a colour view, then demosaic, white
-balance and the camera matrix (scene-referred), then scaling and a display space
-(output-referred).
+"""Developing views into colour images: which pages form a colour view, then white balance and
+demosaic (the mosaic is balanced before it is interpolated), the camera matrix
+(scene-referred), then scaling and a display space (output-referred).
 
 A views file holds colour in one of three ways (its metadata says which):
 
@@ -13,6 +13,8 @@ A views file holds colour in one of three ways (its metadata says which):
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,12 +68,14 @@ def colour_views(names: list[str], *, cfa: str | None = None,
                      "pages): a monochrome capture cannot be developed in colour")
 
 
-def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD
-               ) -> np.ndarray:
-    """Camera RGB (rows, cols, 3) float32 of one colour view (demosaiced when it is Bayer)."""
+def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD,
+               gains=None) -> np.ndarray:
+    """Camera RGB (rows, cols, 3) float32 of one colour view; a Bayer view is demosaiced
+    white-balanced by ``gains`` (the ones the photograph is developed with; None: the mosaic's
+    own estimate), see :func:`plenocli.colour.demosaic.demosaic`."""
     if view.cfa is None:
         return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
-    return demosaic(pages[view.pages[0]], view.cfa, method=method)
+    return demosaic(pages[view.pages[0]], view.cfa, method=method, gains=gains)
 
 
 def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,
@@ -89,11 +93,16 @@ def _per_band(rgb: np.ndarray, matrix: np.ndarray, *, in_place: bool,
               encode_space: str | None = None) -> np.ndarray:
     out = rgb if in_place else np.empty(rgb.shape, np.float32)
     m = np.asarray(matrix, np.float32).T
-    for start in range(0, rgb.shape[0], BAND_ROWS):
+
+    def one_band(start: int) -> None:
         band = np.asarray(rgb[start:start + BAND_ROWS], np.float32) @ m
         if encode_space is not None:
             band = encode(band, encode_space)
         out[start:start + BAND_ROWS] = band
+
+    # numpy releases the GIL in these loops: bands on every core, each a few MB of temporaries
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        list(pool.map(one_band, range(0, rgb.shape[0], BAND_ROWS)))
     return out
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from plenocli import dualpixel
 from plenocli.colour import balance
 from plenocli.colour import develop as dev
-from plenocli.colour.demosaic import METHODS
+from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import photo as export
 from plenocli.io import tiffio
@@ -23,7 +23,7 @@ from plenocli.progress import log, shown
 PREVIEW_SIDE = 1024
 
 
-def run(input: str, output: str, *, view: str | None = None, method: str = "menon2007",
+def run(input: str, output: str, *, view: str | None = None, method: str = DEFAULT_METHOD,
         wb: str = "as-shot", wb_from: str | None = None, matrix: str = "as-shot",
         space: str = "srgb", exposure: float = 0.0, quality: int = 95,
         recover_highlights: str | None = None, linear: str | None = None,
@@ -50,9 +50,9 @@ def run(input: str, output: str, *, view: str | None = None, method: str = "meno
     gains, gains_from = _gains(wb, wb_from, meta, chosen, input)
     to_srgb = _camera_matrix(matrix, meta, input)
     try:
-        scene = dev.scene_rgb(dev.camera_rgb(data, chosen, method=method), gains=gains,
-                              camera_to_srgb=to_srgb, in_place=True)
+        camera = dev.camera_rgb(data, chosen, method=method, gains=gains)
         del data
+        scene = dev.scene_rgb(camera, gains=gains, camera_to_srgb=to_srgb, in_place=True)
         scale = dev.exposure_scale(scene, exposure_ev=exposure)
         blown = dev.blown_highlights(scene, whole_frame=not {"stitch", "refocus"} & meta.keys())
         encoded = dev.output_encoded(scene, space, scale, in_place=not linear)
