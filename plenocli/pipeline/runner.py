@@ -1,24 +1,21 @@
 """The make-style runner: run the steps of a config in order, skipping up-to-date ones.
 
-A step is up to date when all its outputs exist, are newer than all its inputs, the parameters
-recorded in its first output's provenance equal the step's fully resolved parameters now
-(defaults included, so removing a key from a config reruns the step when its default differs),
-and no step before it in this run was (or would be) rerun to make one of its inputs.
+A step is up to date when all its outputs exist, each has a record (written with it, see
+:mod:`plenocli.pipeline.records`) saying it was made by this stage with the step's fully
+resolved parameters now (defaults included, so removing a key from a config reruns the step
+when its default differs) from its inputs as they are now, the output itself unchanged since;
+and no step before it in this run was (or would be) rerun to make one of its inputs. An output
+without a readable record (made by another program, or by an older plenocli) reruns its step.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
-from plenocli.io.tiffio import read_meta
-from plenocli.model.provenance import json_safe
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
 
@@ -81,39 +78,7 @@ def _stale(step: Step, will_make: set[Path]) -> str | None:
     missing = [p for p in outputs if not p.exists()]
     if missing:
         return f"{missing[0].name} missing"
-    inputs = step.input_paths()
-    for p in inputs:
+    for p in step.input_paths():
         if p.resolve() in will_make:
             return f"{p.name} is being remade"
-    newest_input = max((p.stat().st_mtime for p in inputs if p.exists()), default=0.0)
-    oldest_output = min((p.stat().st_mtime for p in outputs), default=0.0)
-    if newest_input > oldest_output:
-        return "an input is newer than the outputs"
-    recorded = _recorded_parameters(outputs[0]) if outputs else None
-    if recorded is None:
-        return None
-    paths = (*step.stage.inputs, *step.stage.outputs)
-    current = json_safe({k: v for k, v in step.params.items() if k not in paths})
-    for key, value in current.items():
-        if key not in recorded:
-            return f"parameter {key} not recorded in {outputs[0].name}"
-        if recorded[key] != value:
-            return f"parameter {key} changed ({recorded[key]!r} -> {value!r})"
-    return None
-
-
-def _recorded_parameters(path: Path) -> dict | None:
-    """Parameters from an output's provenance (TIFF metadata, or YAML/JSON 'provenance')."""
-    suffix = path.suffix.lower()
-    try:
-        if suffix in (".tif", ".tiff"):
-            record = read_meta(path).get("provenance")
-        elif suffix in (".yaml", ".yml"):
-            record = (yaml.safe_load(path.read_text()) or {}).get("provenance")
-        elif suffix == ".json":
-            record = json.loads(path.read_text()).get("provenance")
-        else:
-            return None
-    except (OSError, ValueError, yaml.YAMLError, AttributeError):
-        return None
-    return record.get("parameters") if isinstance(record, dict) else None
+    return step.stage.why_stale(step.params)
