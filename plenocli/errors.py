@@ -44,6 +44,9 @@ def os_error_message(err: OSError) -> str:
     """One line for an operating-system error: the path and the cause, and what to do."""
     path = err.filename if err.filename is not None else ""
     cause = _OS_HINTS.get(err.errno) or err.strerror or str(err) or type(err).__name__
+    if err.errno in (errno.EACCES, errno.EPERM) and path and os.path.isfile(path):
+        # an existing file: outputs are always new files (temporaries), so it was being read
+        cause = "permission denied; it cannot be read: ask for read access or copy it"
     return f"{path}: {cause}" if path else cause
 
 

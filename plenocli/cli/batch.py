@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Run a pipeline template over many captures, in parallel.")
-@click.argument("config", type=click.Path(dir_okay=False))
+@click.argument("config", type=options.InputFile())
 @click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,

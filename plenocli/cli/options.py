@@ -35,6 +35,20 @@ class OutputFile(click.Path):
         return value
 
 
+class InputFile(click.Path):
+    """A file a command reads. A folder is a usage error (exit 2), like any value of the wrong
+    kind; whether the file is there and can be read is the reader's to say (exit 1 with the
+    reason), as for a file that turns out to be damaged."""
+
+    def __init__(self):
+        super().__init__(dir_okay=False, readable=False)
+
+    def convert(self, value, param, ctx):
+        if str(value) == "":
+            self.fail("the file name is empty", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def output_option(*suffixes: str):
     """The -o/--output option of a command whose output is a file of one of ``suffixes``
     (any file name when none is given: the command checks it)."""
@@ -46,7 +60,7 @@ def output_option(*suffixes: str):
 output_opt = output_option(*TIFF)
 preview_opt = click.option("--preview", type=OutputFile(".png"), default=None,
                            help="Also write a PNG preview here.")
-input_arg = click.argument("input", type=click.Path(dir_okay=False))
+input_arg = click.argument("input", type=InputFile())
 
 
 class RowsCols(click.ParamType):

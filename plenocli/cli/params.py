@@ -36,7 +36,7 @@ def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
     A list for a one-value option is the comma-separated word the shell would take
     (``g: [2, 3]`` is ``--g=2,3``); the option's type then accepts or refuses it. Raises
     ConfigError for a value no shell word could carry (a mapping, a nested list, a non-boolean
-    for a flag).
+    for a flag, a list for one file path).
     """
     params = stage_parameters(command)
     options: list[str] = []
@@ -52,6 +52,9 @@ def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
         many = param.multiple if isinstance(param, click.Option) else param.nargs != 1
         items = list(value) if isinstance(value, (list, tuple)) else [value]
         if len(items) != 1 and not many:
+            if isinstance(param.type, click.Path):  # a comma is part of a file name
+                raise ConfigError(f"{_label(param)}: expected one file path, got a list "
+                                  f"{items!r}")
             if isinstance(param, click.Argument) or param.is_flag or not items:
                 raise ConfigError(f"{_label(param)}: expected one value, got a list {items!r}")
             items = [",".join(_word(param, v) for v in items)]

@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Run a pipeline config (make-style).")
-@click.argument("config", type=click.Path(dir_okay=False))
+@click.argument("config", type=options.InputFile())
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="List what would run, run nothing.")
 @click.option("--set", "overrides", multiple=True, metavar="STEP.PARAM=VALUE",

@@ -124,7 +124,7 @@ class Template:
                                   f"{', '.join('{' + m + '}' for m in sorted(missing))}; "
                                   f"give {what}")
             steps.append(_make_step(self.path, base, name, _fill(body, values), stages))
-        _check_outputs_distinct(self.path, steps)
+        _check_files(self.path, steps)
         return steps
 
 
@@ -235,10 +235,12 @@ def _check_per_capture_outputs(template: Template) -> None:
                         f"{{out}}/{{name}}/{Path(str(item)).name}")
 
 
-def _check_outputs_distinct(path: Path, steps: list[Step]) -> None:
-    """Before any step runs: no two steps write one file, no step writes its own input."""
-    writer: dict[str, str] = {}
-    for step in steps:
+def _check_files(path: Path, steps: list[Step]) -> None:
+    """Before any step runs: no two steps write one file, no step writes its own input, and no
+    step reads what a later step writes (steps out of order, or a cycle: the runner would read
+    a stale file, make would drop the cycle)."""
+    writer: dict[str, int] = {}
+    for k, step in enumerate(steps):
         try:
             check_distinct(step.output_paths(), step.input_paths())
         except InputError as err:
@@ -246,9 +248,18 @@ def _check_outputs_distinct(path: Path, steps: list[Step]) -> None:
         for out in step.output_paths():
             key = os.path.abspath(out)
             if key in writer:
-                raise ConfigError(f"{path}: steps {writer[key]!r} and {step.name!r} both write "
-                                  f"{out}; give each step its own output path")
-            writer[key] = step.name
+                raise ConfigError(f"{path}: steps {steps[writer[key]].name!r} and {step.name!r} "
+                                  f"both write {out}; give each step its own output path")
+            writer[key] = k
+    for k, step in enumerate(steps):
+        for p in step.input_paths():
+            full = Path(os.path.abspath(p))
+            later = [writer[str(f)] for f in (full, *full.parents) if writer.get(str(f), -1) > k]
+            if later:
+                other = steps[later[0]].name
+                raise ConfigError(f"{path}: step {step.name!r} reads {p}, which step {other!r} "
+                                  f"writes after it; put {other!r} before {step.name!r} (steps "
+                                  "that read each other's outputs cannot run)")
 
 
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
@@ -260,8 +271,8 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if step not in steps:
             raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
-        try:
-            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else None
+        try:  # an empty value is the empty word, as --smooth= in the shell
+            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else ""
         except yaml.YAMLError as err:
             raise ConfigError(f"--set {item!r}: the value is not valid YAML "
                               f"({yaml_problem(err)}); quote it") from err
@@ -281,6 +292,9 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
             options = [k.replace("_", "-") for k in valid]
             raise ConfigError(f"{path}: step {name!r}: unknown key {key!r} for stage "
                               f"{stage_name}{closest(str(key).replace('_', '-'), options)}")
+        if value is None:  # the shell has no word for "no value": null would mean the default
+            raise ConfigError(f"{path}: step {name!r}: {key} has no value (null or empty); "
+                              "give one, or leave the key out for the default")
         if norm in stage.inputs or norm in stage.outputs:
             value = _resolve(base, value)
         given[norm] = value
@@ -296,8 +310,8 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
 
 
 def _resolve(base: Path, value):
-    if value is None:
-        return None
+    if value is None or value == "":
+        return value  # refused by the command as the shell's empty word is
     if isinstance(value, (list, tuple)):
         return [_resolve(base, v) for v in value]
     return str((base / str(value)).resolve()) if not Path(str(value)).is_absolute() else str(value)

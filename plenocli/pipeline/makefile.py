@@ -17,6 +17,7 @@ from pathlib import Path
 
 from plenocli.errors import ConfigError
 from plenocli.pipeline.config import Step
+from plenocli.pipeline.runner import check_inputs
 
 _UNSAFE = re.compile(r"[^\w.+,@=~/-]")  # spaces, :, $, #, quotes, globs: not in make names
 
@@ -29,11 +30,13 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
     run make from there); others stay absolute. ``command``: the plenocli invocation that made
     the fragment, recorded in its header.
     """
+    check_inputs(list(steps))  # what plenocli run refuses, make is not given either
     root = Path(base or Path.cwd()).resolve()
     config_path = _name(Path(config), root)
     seen: set[tuple[str, ...]] = set()
     rules: list[str] = []
     finals: list[str] = []
+    folders: set[Path] = set()  # folder outputs: a file read in one depends on the folder
     for step in steps:
         outputs = tuple(_name(p, root) for p in step.output_paths())
         if not outputs:
@@ -42,7 +45,10 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
             continue
         seen.add(outputs)
         finals.extend(outputs)
-        prerequisites = [_name(p, root) for p in step.input_paths()] + [config_path]
+        prerequisites = [_name(_target(p, folders), root) for p in step.input_paths()]
+        prerequisites.append(config_path)
+        folders.update(Path(os.path.abspath(p))
+                       for p in step.stage.paths(step.params, step.stage.folder_outputs))
         separator = "&:" if len(outputs) > 1 else ":"
         rules.append(f"# step {step.name}\n{' '.join(outputs)} {separator} "
                      f"{' '.join(dict.fromkeys(prerequisites))}\n\t{_recipe(step, root)}\n")
@@ -74,6 +80,12 @@ def _recipe(step: Step, root: Path) -> str:
         values[key] = value
     words = argv_for(step.stage.command, values)
     return " ".join(["$(PLENOCLI)", step.stage.name, *(_quote(w) for w in words)])
+
+
+def _target(path: Path, folders: set[Path]) -> Path:
+    """The make target that provides ``path``: the folder output holding it, or itself."""
+    full = Path(os.path.abspath(path))
+    return next((parent for parent in full.parents if parent in folders), full)
 
 
 def _quote(value) -> str:

@@ -34,6 +34,7 @@ def plan(steps: list[Step], *, force: bool = False,
     ``upstream``: files that steps outside ``steps`` will (re)make before these run, e.g. the
     outputs of a batch's shared steps.
     """
+    check_inputs(steps, upstream)
     decisions: list[Decision] = []
     will_make: set[Path] = {Path(p).resolve() for p in upstream}
     for step in steps:
@@ -41,11 +42,25 @@ def plan(steps: list[Step], *, force: bool = False,
         if reason:
             will_make.update(p.resolve() for p in step.output_paths())
         decisions.append(Decision(step, bool(reason), reason or "up to date"))
+    return decisions
+
+
+def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
+    """Every input of every step exists or is made by an earlier step (or is in ``upstream``):
+    what ``run`` and ``--print-make`` both check before any work (ConfigError)."""
+    made: set[Path] = {Path(p).resolve() for p in upstream}
+    for step in steps:
         for p in step.input_paths():
-            if not p.exists() and p.resolve() not in will_make:
+            if not p.exists() and not _within(p, made):
                 raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
                                   "step makes it")
-    return decisions
+        made.update(p.resolve() for p in step.output_paths())
+
+
+def _within(path: Path, made: set[Path]) -> bool:
+    """Whether ``path`` is one of ``made`` or inside one of them (a folder output)."""
+    resolved = path.resolve()
+    return resolved in made or any(parent in made for parent in resolved.parents)
 
 
 def run_pipeline(steps: list[Step], *, force: bool = False,
@@ -79,6 +94,6 @@ def _stale(step: Step, will_make: set[Path]) -> str | None:
     if missing:
         return f"{missing[0].name} missing"
     for p in step.input_paths():
-        if p.resolve() in will_make:
+        if _within(p, will_make):
             return f"{p.name} is being remade"
     return step.stage.why_stale(step.params)
