@@ -20,8 +20,10 @@ class CalibrationError(PlenocliError):
     """A calibration (lens grid, white image) cannot be estimated or does not fit the data."""
 
 
-class Terminated(BaseException):
-    """SIGTERM arrived: unwind like Ctrl-C (temporaries removed), then exit 143."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: unwind like Ctrl-C (every ``except KeyboardInterrupt`` cleans up, and
+    temporaries are removed), then exit 143. Raised by the command edge's one SIGTERM handler
+    (``cli/options``) and by a batch worker's."""
 
 
 _OS_HINTS = {

@@ -37,28 +37,17 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     """
     import logging
     import os
-    import sys
 
     from plenocli.errors import PlenocliError
-    from plenocli.pipeline.batch import (
-        Terminated,
-        expand_inputs,
-        format_summary,
-        run_batch,
-        sigterm_stops,
-    )
+    from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
     from plenocli.progress import log
 
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    try:
-        with sigterm_stops():
-            report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
-                               force=force, dry_run=dry_run, jobs=jobs or 1,
-                               scheduler=scheduler, timeout=timeout)
-    except Terminated:
-        click.echo("plenocli: terminated; no partial output was kept", err=True)
-        sys.exit(143)
+    # SIGTERM and Ctrl-C: the edge (options.stage_command) stops the workers and says so
+    report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
+                       force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler,
+                       timeout=timeout)
     if log.isEnabledFor(logging.INFO):  # -q keeps only the failures
         click.echo(format_summary(report), err=True)
     for failure in report.failed:

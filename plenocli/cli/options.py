@@ -142,10 +142,10 @@ def stage_command(func):
             if debug:
                 raise
             raise click.ClickException(" ".join(str(err).split())) from err  # one line
-        except (KeyboardInterrupt, Terminated) as err:
-            what = "interrupted" if isinstance(err, KeyboardInterrupt) else "terminated"
+        except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM as Terminated
+            what = "terminated" if isinstance(err, Terminated) else "interrupted"
             click.echo(f"plenocli: {what}; no partial output was kept", err=True)
-            sys.exit(130 if isinstance(err, KeyboardInterrupt) else 143)
+            sys.exit(143 if isinstance(err, Terminated) else 130)
         except MemoryError as err:
             if debug:
                 raise
