@@ -9,7 +9,7 @@ from plenocli.cli import options
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes on this machine [default: number of CPUs].")
-@click.option("--out", type=click.Path(file_okay=False), default=None,
+@click.option("--out", type=options.OutputFolder(), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="Say what would run, run nothing.")

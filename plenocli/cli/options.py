@@ -49,6 +49,19 @@ class InputFile(click.Path):
         return super().convert(value, param, ctx)
 
 
+class OutputFolder(click.Path):
+    """A folder a command writes into (made when missing); an empty name would be the current
+    folder, which no one means."""
+
+    def __init__(self):
+        super().__init__(file_okay=False)
+
+    def convert(self, value, param, ctx):
+        if str(value) == "":
+            self.fail("the folder name is empty", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def output_option(*suffixes: str):
     """The -o/--output option of a command whose output is a file of one of ``suffixes``
     (any file name when none is given: the command checks it)."""

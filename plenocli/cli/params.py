@@ -95,6 +95,9 @@ def _word(param: click.Parameter, value: Any) -> str:
         raise ConfigError(f"{_label(param)}: expected a plain value, got {value!r}")
     if isinstance(value, bool):
         return "true" if value else "false"
+    if "\0" in str(value):
+        raise ConfigError(f"{_label(param)}: {value!r} holds a NUL character, which no shell "
+                          "word (and no file name) can")
     return str(value)
 
 

@@ -187,6 +187,7 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     captures = [str(Path(c).resolve()) for c in captures]
     out = None if out is None else str(Path(out).resolve())
     template.steps(capture=captures[0], out=out)  # config errors once, not once per capture
+    template.check_captures_apart(captures, out=out)
 
     shared = _run_shared(template, out=out, force=force, dry_run=dry_run)
     upstream = [str(p) for d in shared if d.run for p in d.step.output_paths()]

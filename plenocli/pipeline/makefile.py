@@ -19,12 +19,12 @@ from plenocli.errors import ConfigError
 from plenocli.pipeline.config import Step
 from plenocli.pipeline.runner import check_inputs
 
-_UNSAFE = re.compile(r"[^\w.+,@=~/-]")  # spaces, :, $, #, quotes, globs: not in make names
+_UNSAFE = re.compile(r"[^\w.+,@~/-]")  # spaces, :, =, $, #, quotes, globs: not in make names
 
 
 def make_fragment(steps: Sequence[Step], config: str | Path, *,
                   base: str | Path | None = None, command: str = "") -> str:
-    """Make rules for ``steps`` (in order; a step already written, e.g. a shared one, is skipped).
+    """Make rules for ``steps``, in order (a file written by two of them is refused).
 
     ``base``: paths inside this folder are written relative to it (default: the current folder;
     run make from there); others stay absolute. ``command``: the plenocli invocation that made
@@ -33,7 +33,7 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
     check_inputs(list(steps))  # what plenocli run refuses, make is not given either
     root = Path(base or Path.cwd()).resolve()
     config_path = _name(Path(config), root)
-    seen: set[tuple[str, ...]] = set()
+    writer: dict[str, str] = {}
     rules: list[str] = []
     finals: list[str] = []
     folders: set[Path] = set()  # folder outputs: a file read in one depends on the folder
@@ -41,9 +41,11 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
         outputs = tuple(_name(p, root) for p in step.output_paths())
         if not outputs:
             raise ConfigError(f"step {step.name!r} writes no file, so make cannot track it")
-        if outputs in seen:
-            continue
-        seen.add(outputs)
+        for name in outputs:
+            if name in writer:
+                raise ConfigError(f"steps {writer[name]!r} and {step.name!r} both write {name}; "
+                                  "give each its own output path")
+            writer[name] = step.name
         finals.extend(outputs)
         prerequisites = [_name(_target(p, folders), root) for p in step.input_paths()]
         prerequisites.append(config_path)
@@ -100,7 +102,7 @@ def _name(path: Path, root: Path) -> str:
         text = str(resolved.relative_to(root))
     except ValueError:
         text = str(resolved)
-    bad = _UNSAFE.search(text)
+    bad = _UNSAFE.search(text) or re.match("~", text)  # make reads ~NAME/ as a home folder
     if bad:
         raise ConfigError(f"path {text!r} has {bad.group()!r}, which make or the shell would "
                           "misread; rename the file or folder, or use plenocli batch instead")

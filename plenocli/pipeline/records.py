@@ -26,8 +26,8 @@ SUFFIX = ".plenocli.json"
 
 
 def record_path(output: str | os.PathLike) -> Path:
-    """Where the record of ``output`` lives."""
-    output = Path(output)
+    """Where the record of ``output`` lives (``.`` or ``dir/..`` named by the folder's name)."""
+    output = Path(os.path.abspath(output))
     return output.parent / f".{short_name(output.name)}{SUFFIX}"
 
 
