@@ -105,7 +105,8 @@ def test_print_make_inputs_need_a_template(tmp_path):
     assert result.exit_code == 2 and "not a batch template" in result.output
 
 
-TEMPLATE = ("out: o\nsteps:\n  decode_white: {stage: decode, input: {W}, output: \"{out}/wf.tif\"}\n"
+TEMPLATE = ("out: o\nsteps:\n"
+            "  decode_white: {stage: decode, input: {W}, output: \"{out}/wf.tif\"}\n"
             "  decode: {input: \"{capture}\", output: \"{out}/{name}.tif\"}\n")
 
 
