@@ -2,8 +2,8 @@
 
 Every stage run (from the shell, a config, a batch or make) writes, landing together with its
 outputs, one JSON record per output: ``.NAME.plenocli.json`` beside NAME (beside the folder, for
-a folder output). A record holds the stage, its fully resolved parameters (file paths as real
-absolute paths), the size and modification time of every input when the run started, and those
+a folder output). A record holds the stage, its fully resolved parameters (file paths made
+absolute), the size and modification time of every input when the run started, and those
 of the output as written. Whatever the output's format (TIFF, JPEG, PNG, a folder), the record
 can be read, so the make-style runner trusts an output only when its record is there and
 matches: a changed parameter, another input file, an input changed in any way since (newer or
@@ -40,22 +40,29 @@ def file_state(path: str | os.PathLike) -> list[int] | None:
     return [st.st_size, st.st_mtime_ns]
 
 
+def real(path: str | os.PathLike) -> str:
+    """An absolute path with its folders' links resolved, not its own: renaming an output onto
+    a link replaces the link, so the name is what a record must follow."""
+    full = os.path.abspath(path)
+    return os.path.join(os.path.realpath(os.path.dirname(full)), os.path.basename(full))
+
+
 def input_states(paths: Iterable[str | os.PathLike]) -> dict[str, list[int] | None]:
-    """The state of each input by real path, taken before a stage reads them (a change while
-    it runs then shows as a change later)."""
-    return {os.path.realpath(p): file_state(p) for p in paths}
+    """The state of each input by path, taken before a stage reads them (a change while it
+    runs then shows as a change later)."""
+    return {real(p): file_state(p) for p in paths}
 
 
 def comparable(params: dict[str, Any], paths: Iterable[str]) -> dict[str, Any]:
     """Parameters as a record holds them: JSON values, the parameters named in ``paths`` as
-    real absolute paths (a relative path from the shell and the config's absolute one agree)."""
+    absolute paths (:func:`real`: a relative path from the shell and the config's agree)."""
     roles = set(paths)
     values = {}
     for key, value in params.items():
         if key in roles and isinstance(value, (list, tuple)):
-            value = [os.path.realpath(v) for v in value]
+            value = [real(v) for v in value]
         elif key in roles and value is not None:
-            value = os.path.realpath(value)
+            value = real(value)
         values[key] = value
     return json.loads(json.dumps(json_safe(values), default=str))
 
@@ -68,7 +75,7 @@ def write_records(stage: str, params: dict[str, Any], path_keys: Iterable[str],
     parameters = comparable(params, path_keys)
     for output in outputs:
         target = os.path.abspath(output)
-        files = {os.path.realpath(dest): file_state(tmp) for tmp, dest in landed
+        files = {real(dest): file_state(tmp) for tmp, dest in landed
                  if os.path.abspath(dest) == target
                  or os.path.abspath(dest).startswith(target + os.sep)}
         if not files:
