@@ -76,14 +76,13 @@ class Stage:
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
         _check_listed_once(params, self.inputs)
-        inputs = self.paths(params, self.inputs)
-        check_outputs(self.paths(params, files), inputs,
+        check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
+        inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
         states = records.input_states(inputs)
 
         def record(landed):
-            records.write_records(self.name, params, (*self.inputs, *self.outputs),
-                                  self.paths(params, self.outputs), states, landed)
+            records.write_records(self.name, params, inputs, outputs, states, landed)
 
         token = RESOLVED.set(dict(params))
         try:
@@ -92,11 +91,15 @@ class Stage:
         finally:
             RESOLVED.reset(token)
 
+    def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
+        """The file paths of each parameter named in ``roles`` ([] when not given)."""
+        return {name: self.paths(params, (name,)) for name in roles}
+
     def why_stale(self, params: dict[str, Any]) -> str | None:
         """Why the step's existing outputs cannot stand for a run with ``params`` now (their
         records, :mod:`plenocli.pipeline.records`); None when they can."""
-        return records.why_stale(self.name, params, (*self.inputs, *self.outputs),
-                                 self.paths(params, self.outputs))
+        return records.why_stale(self.name, params, self.by_role(params, self.inputs),
+                                 self.by_role(params, self.outputs))
 
 
 def _check_listed_once(params: dict[str, Any], roles: tuple[str, ...]) -> None:
