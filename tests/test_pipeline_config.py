@@ -123,3 +123,22 @@ def test_a_capture_that_would_overwrite_a_shared_output_is_refused(tmp_path):
     one_line_error(result, "would write", "wf.tif")
     template = read_template(config)
     template.check_captures_apart([str(captures[0])])  # the first alone is fine
+
+
+def test_a_step_writing_into_another_steps_output_folder_is_refused(tmp_path):
+    lens = ROOT / "configs" / "lenses" / "paper_table2.yaml"
+    config = write(tmp_path, "steps:\n  simulate:\n    kind: dualpixel\n    pixels: 32x48\n"
+                             f"    output: sim\n  optics:\n    input: {lens}\n"
+                             "    json: sim/truth.json\n")  # would replace the simulated truth
+    with pytest.raises(ConfigError, match="inside the folder that step 'simulate' fills"):
+        load_config(config)
+
+
+def test_a_step_writing_over_its_config_is_refused(tmp_path):
+    lens = ROOT / "configs" / "lenses" / "paper_table2.yaml"
+    config = tmp_path / "c.json"  # JSON is YAML
+    config.write_text(f'{{"steps": {{"optics": {{"input": "{lens}", "json": "c.json"}}}}}}')
+    before = config.read_bytes()
+    result = invoke("run", config)
+    one_line_error(result, "would write over this config")
+    assert config.read_bytes() == before

@@ -274,10 +274,11 @@ def _check_per_capture_outputs(template: Template) -> None:
 
 
 def _check_files(path: Path, steps: list[Step]) -> None:
-    """Before any step runs: no two steps write one file, no step writes its own input, and no
-    step reads what a later step writes (steps out of order, or a cycle: the runner would read
-    a stale file, make would drop the cycle)."""
+    """Before any step runs: no two steps write one file (or into a folder another fills), no
+    step writes its own input or the config, and no step reads what a later step writes (steps
+    out of order, or a cycle: the runner would read a stale file, make would drop the cycle)."""
     writer: dict[str, int] = {}
+    config = os.path.realpath(path)
     for k, step in enumerate(steps):
         try:
             check_distinct(step.output_paths(), step.input_paths())
@@ -285,10 +286,20 @@ def _check_files(path: Path, steps: list[Step]) -> None:
             raise ConfigError(f"{path}: step {step.name!r}: {err}") from err
         for out in step.output_paths():
             key = os.path.abspath(out)
+            if os.path.realpath(out) == config:
+                raise ConfigError(f"{path}: step {step.name!r} would write over this config "
+                                  f"({out}); choose another output path")
             if key in writer:
                 raise ConfigError(f"{path}: steps {steps[writer[key]].name!r} and {step.name!r} "
                                   f"both write {out}; give each step its own output path")
             writer[key] = k
+    folders = {os.path.abspath(f): k for k, step in enumerate(steps)
+               for f in step.stage.paths(step.params, step.stage.folder_outputs)}
+    for key, k in writer.items():
+        inside = [folders[str(f)] for f in Path(key).parents if folders.get(str(f), k) != k]
+        if inside:
+            raise ConfigError(f"{path}: step {steps[k].name!r} writes {key} inside the folder "
+                              f"that step {steps[inside[0]].name!r} fills; write it elsewhere")
     for k, step in enumerate(steps):
         for p in step.input_paths():
             full = Path(os.path.abspath(p))
