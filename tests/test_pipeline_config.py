@@ -142,3 +142,15 @@ def test_a_step_writing_over_its_config_is_refused(tmp_path):
     result = invoke("run", config)
     one_line_error(result, "would write over this config")
     assert config.read_bytes() == before
+
+
+@pytest.mark.parametrize("capture", ["..dng", "...dng"])
+def test_a_capture_whose_name_leaves_the_output_folder_is_refused(tmp_path, capture):
+    config = write(tmp_path, "out: o\nsteps:\n"
+                             "  decode: {input: \"{capture}\", output: \"{out}/{name}/f.tif\"}\n")
+    shutil.copy(CAPTURE, tmp_path / capture)
+    (tmp_path / "f.tif").write_bytes(b"the user's file, where ...dng would write")
+    result = invoke("batch", config, "--inputs", tmp_path / capture, "-j", "1")
+    one_line_error(result, "cannot name a folder")
+    assert (tmp_path / "f.tif").read_bytes().startswith(b"the user's file")
+    assert not (tmp_path / "o").exists()

@@ -127,7 +127,11 @@ class Template:
         """What the placeholders stand for."""
         values = {}
         if capture is not None:
-            values = {"capture": str(Path(capture).resolve()), "name": Path(capture).stem}
+            name = Path(capture).stem
+            if name in ("", ".", ".."):  # {out}/{name}/x would leave {out}, onto another file
+                raise InputError(f"capture {capture}: its name {name!r} cannot name a folder; "
+                                 "rename the file")
+            values = {"capture": str(Path(capture).resolve()), "name": name}
         base = self.path.resolve().parent
         root = out if out is not None else (str(base / self.out) if self.out else None)
         if root is not None:
