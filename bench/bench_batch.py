@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -51,9 +52,9 @@ def main() -> None:
             # the shared steps' outputs (white image, gain: the top level of the warm-up folder)
             # are copied in, so both runs time only the per-capture work
             out.mkdir(exist_ok=True)
-            for shared in (folder / "warm").iterdir():
+            for shared in (folder / "warm").iterdir():  # with their records, times kept
                 if shared.is_file():
-                    (out / shared.name).write_bytes(shared.read_bytes())
+                    shutil.copy2(shared, out / shared.name)
             os.sync()  # the files just written are flushed first, not during the timed run
             load = os.getloadavg()[0]
             # each run is the whole command in a fresh process, as a user runs it

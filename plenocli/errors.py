@@ -20,8 +20,10 @@ class CalibrationError(PlenocliError):
     """A calibration (lens grid, white image) cannot be estimated or does not fit the data."""
 
 
-class Terminated(BaseException):
-    """SIGTERM arrived: unwind like Ctrl-C (temporaries removed), then exit 143."""
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: unwind like Ctrl-C (every ``except KeyboardInterrupt`` cleans up, and
+    temporaries are removed), then exit 143. Raised by the command edge's one SIGTERM handler
+    (``cli/options``) and by a batch worker's."""
 
 
 _OS_HINTS = {
@@ -44,6 +46,9 @@ def os_error_message(err: OSError) -> str:
     """One line for an operating-system error: the path and the cause, and what to do."""
     path = err.filename if err.filename is not None else ""
     cause = _OS_HINTS.get(err.errno) or err.strerror or str(err) or type(err).__name__
+    if err.errno in (errno.EACCES, errno.EPERM) and path and os.path.isfile(path):
+        # an existing file: outputs are always new files (temporaries), so it was being read
+        cause = "permission denied; it cannot be read: ask for read access or copy it"
     return f"{path}: {cause}" if path else cause
 
 

@@ -642,3 +642,143 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     config.write_text(text)
     result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
     assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))
+
+
+# ---- issue 21, class 8: unreadable inputs, lists for one path, empty values, cycles, long names
+
+def _deny_reading(monkeypatch, path: Path) -> None:
+    """Make ``path`` unreadable, even for root (who ignores permission bits): os.access says so
+    and opening it fails with EACCES, as for a file of another user."""
+    import builtins
+    import errno
+    import io
+    import os
+
+    target = os.path.realpath(path)
+    real_access, real_open = os.access, builtins.open
+
+    def access(p, mode, *args, **kwargs):
+        if os.path.realpath(p) == target and mode & os.R_OK:
+            return False
+        return real_access(p, mode, *args, **kwargs)
+
+    def opener(file, *args, **kwargs):
+        if isinstance(file, (str, bytes, os.PathLike)) and os.path.realpath(file) == target:
+            raise PermissionError(errno.EACCES, "Permission denied", str(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(builtins, "open", opener)
+    monkeypatch.setattr(io, "open", opener)
+
+
+@pytest.mark.parametrize("args", [
+    ["bias", "{f}", "-o", "{o}/b.tif"],
+    ["flat", "{i}/biased.tif", "--white", "{f}", "-o", "{o}/v.tif"],
+    ["info", "{f}"],
+    ["run", "{c}"],
+], ids=["argument", "option", "info", "run-config"])
+def test_an_unreadable_input_is_an_input_error_not_a_usage_error(args, inputs, tmp_path,
+                                                                 monkeypatch):
+    secret = tmp_path / "secret.tif"
+    secret.write_bytes((inputs / "biased.tif").read_bytes())
+    config = tmp_path / "secret.tif"  # run reads it as its config
+    out = tmp_path / "out"
+    out.mkdir()
+    _deny_reading(monkeypatch, secret)
+    argv = [a.format(i=inputs, o=out, f=secret, c=config) for a in args]
+    result = CliRunner().invoke(cli, argv)
+    assert_one_line(result, 1, ("secret.tif", "ermission denied"))
+    assert not list(out.iterdir())
+
+
+def test_every_input_path_is_left_to_its_reader_to_check():
+    import click
+
+    from plenocli.cli.main import COMMANDS
+    from plenocli.pipeline.registry import get_stages
+
+    stages = get_stages()
+    for name in COMMANDS:
+        command = cli.get_command(None, name)
+        writes = stages[name].outputs if name in stages else ("out",)
+        for param in command.params:
+            if isinstance(param.type, click.Path) and param.name not in writes:
+                assert not param.type.readable, f"{name} {param.name}: click checks readability"
+
+
+@pytest.mark.parametrize("value", ["[a.tif, b.tif]", "[]"])
+def test_a_list_for_one_output_path_is_refused(value, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace('output: "{out}/b.tif"',
+                                                        f"output: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("--output", "one file path"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
+@pytest.mark.parametrize("how,words", [
+    (["--set", "bias.smooth="], ("--smooth", "''")),
+    (["--set", "bias.smooth=~"], ("smooth", "no value")),
+    (["--set", "bias.smooth=null"], ("smooth", "no value")),
+    (["--set", "bias.input="], ("INPUT", "empty")),
+    ("smooth: null", ("smooth", "no value")),
+    ("smooth:", ("smooth", "no value")),
+], ids=["set-empty", "set-tilde", "set-null", "set-empty-path", "yaml-null", "yaml-empty"])
+def test_an_empty_or_null_value_is_refused_not_taken_for_the_default(how, words, inputs,
+                                                                     tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    extra = f"    {how}\n" if isinstance(how, str) else "    smooth: 3\n"
+    config.write_text(_config_text(inputs, out, extra_bias=extra))
+    flags = how if isinstance(how, list) else []
+    for mode in (["--dry-run"], ["--print-make"], []):
+        result = run_bad(inputs, out, ["run", str(config), *flags, *mode])
+        assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("steps", [
+    "  a:\n    stage: bias\n    input: \"{out}/y.tif\"\n    output: \"{out}/x.tif\"\n"
+    "  b:\n    stage: bias\n    input: \"{out}/x.tif\"\n    output: \"{out}/y.tif\"\n",
+    "  a:\n    stage: bias\n    input: \"{out}/b.tif\"\n    output: \"{out}/x.tif\"\n",
+], ids=["cycle", "out-of-order"])
+def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    text = _config_text(inputs, out).replace("steps:\n", "steps:\n" + steps)
+    config.write_text(text)
+    for mode in ([], ["--print-make"], ["--dry-run"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, ("writes after it",))
+        assert not result.stdout
+
+
+def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"{inputs}/dp.dng", "nowhere.dng"))
+    for mode in ([], ["--print-make"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, ("nowhere.dng does not exist",))
+
+
+def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path):
+    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.records import read_record, record_path
+    from plenocli.pipeline.runner import plan
+
+    name = "b" * 251 + ".tif"
+    result = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                      str(tmp_path / name), "-q"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / name).is_file() and read_record(tmp_path / name) is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name,
+                                                                 record_path(name).name])
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  bias:\n    input: {inputs / 'frames.tif'}\n"
+                      f"    output: {name}\n")
+    assert [d.run for d in plan(load_config(config))] == [False]
+    too_long = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                        str(tmp_path / ("c" * 252 + ".tif"))])
+    assert_one_line(too_long, 1, ("too long",))

@@ -481,3 +481,22 @@ def test_captures_within_the_time_limit_are_done(shoot, tmp_path):
     report = run_batch(config, fine, out=tmp_path / "out", jobs=1, timeout=120)
     assert [r.status for r in report.results] == ["done", "done"]
     assert not list((tmp_path / "out").rglob("*.part"))
+
+
+def test_one_terminated_and_one_sigterm_handler_for_every_command():
+    """SIGTERM is turned into one exception, by one handler at the command edge (a batch
+    included); only a batch worker process has its own (issue 18)."""
+    import re
+
+    from plenocli.errors import Terminated
+
+    package = ROOT / "plenocli"
+    sources = {p: p.read_text() for p in package.rglob("*.py")}
+    classes = [p for p, text in sources.items() if re.search(r"^class Terminated\b", text, re.M)]
+    handlers = sorted(f"{p.relative_to(package).as_posix()}:{m}" for p, text in sources.items()
+                      for m in re.findall(r"def (\w+)\(signum, frame\)", text))
+    assert classes == [package / "errors.py"]
+    assert handlers == ["cli/options.py:handler",           # the edge of every command
+                        "pipeline/batch.py:_on_alarm",      # a worker's time limit
+                        "pipeline/batch.py:_on_sigterm"]    # a worker's SIGTERM
+    assert issubclass(Terminated, KeyboardInterrupt)  # every Ctrl-C clean-up applies

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -16,7 +18,7 @@ distributed = pytest.importorskip("distributed")
 @pytest.fixture(scope="module")
 def cluster():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as local:
+                                  host="127.0.0.1", dashboard_address=None) as local:
         yield local
 
 
@@ -49,3 +51,23 @@ def test_unreachable_scheduler_is_one_line(tmp_path, monkeypatch):
                                       "--scheduler", "tcp://127.0.0.1:9"])
     assert result.exit_code == 1
     assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in result.stderr
+
+
+def test_relative_paths_are_resolved_where_the_batch_runs(tmp_path, cluster, monkeypatch):
+    """Workers run in their own folder: the config, captures and --out given relative to the
+    batch's folder must reach them as absolute paths (issue 21, class 9)."""
+    config, captures = make_shoot(tmp_path / "project", 3, corrupt=None)
+    local = run_batch(config, captures, out=tmp_path / "local", jobs=1)
+    assert [r.status for r in local.results] == ["done"] * 3
+    monkeypatch.chdir(tmp_path / "project")
+    with distributed.Client(cluster, set_as_default=False) as client:
+        folders = set(client.run(os.getcwd).values())
+    assert folders and str(tmp_path / "project") not in folders
+    args = ["batch", "batch.yaml", "--inputs", "captures/*.dng", "--out", "../dask",
+            "--scheduler", cluster.scheduler_address]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    for c in captures:
+        for name in ("frames.tif", "biased.tif", "views.tif"):
+            np.testing.assert_array_equal(pixels(tmp_path / "dask" / c.stem / name),
+                                          pixels(tmp_path / "local" / c.stem / name))

@@ -46,6 +46,10 @@ def test_make_builds_the_batch_outputs_then_does_nothing(tmp_path, monkeypatch):
             np.testing.assert_array_equal(pixels(tmp_path / "mk" / c.stem / name),
                                           pixels(tmp_path / "batch" / c.stem / name))
     assert _make(tmp_path, "-q").returncode == 0  # everything up to date
+    # the recipes wrote the runner's records: plenocli batch agrees that nothing is to do
+    again = run_batch(config, captures, out=tmp_path / "mk", jobs=1)
+    assert [r.status for r in again.results] == ["skipped"] * 4
+    assert [d.run for d in again.shared] == [False] * len(again.shared)
     again = _make(tmp_path)
     assert "Nothing to be done" in again.stdout and "-m plenocli" not in again.stdout
     # touching one capture rebuilds that capture only

@@ -4,12 +4,12 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Run a pipeline template over many captures, in parallel.")
-@click.argument("config", type=click.Path(dir_okay=False))
+@click.argument("config", type=options.InputFile())
 @click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes on this machine [default: number of CPUs].")
-@click.option("--out", type=click.Path(file_okay=False), default=None,
+@click.option("--out", type=options.OutputFolder(), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="Say what would run, run nothing.")
@@ -37,28 +37,17 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     """
     import logging
     import os
-    import sys
 
     from plenocli.errors import PlenocliError
-    from plenocli.pipeline.batch import (
-        Terminated,
-        expand_inputs,
-        format_summary,
-        run_batch,
-        sigterm_stops,
-    )
+    from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
     from plenocli.progress import log
 
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    try:
-        with sigterm_stops():
-            report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
-                               force=force, dry_run=dry_run, jobs=jobs or 1,
-                               scheduler=scheduler, timeout=timeout)
-    except Terminated:
-        click.echo("plenocli: terminated; no partial output was kept", err=True)
-        sys.exit(143)
+    # SIGTERM and Ctrl-C: the edge (options.stage_command) stops the workers and says so
+    report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
+                       force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler,
+                       timeout=timeout)
     if log.isEnabledFor(logging.INFO):  # -q keeps only the failures
         click.echo(format_summary(report), err=True)
     for failure in report.failed:

@@ -12,12 +12,12 @@ from plenocli.cli import options
 @click.option("--pitch", type=options.FiniteFloat(min=4.0, max=200.0), default=None,
               help="Approximate lens pitch in px (e.g. from the datasheet): only lattices "
               "within 15 % are considered.")
-@click.option("--start", type=click.Path(dir_okay=False), default=None,
+@click.option("--start", type=options.InputFile(), default=None,
               help="Refine this grid (plenocli YAML or Raytrix XML) instead of searching; the "
               "report says how far the result moved.")
 @click.option("--xml", type=options.OutputFile(".xml"), default=None,
               help="Also write the grid as Raytrix RayCalibData XML (with lens types).")
-@click.option("--compare", type=click.Path(dir_okay=False), default=None,
+@click.option("--compare", type=options.InputFile(), default=None,
               help="Report the distance to another grid (YAML or RayCalibData XML).")
 @options.preview_opt
 @options.stage_command

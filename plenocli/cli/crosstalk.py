@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Measure sub-aperture cross-talk from masked white captures.")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, type=options.InputFile())
 @options.output_option(".json")
 @click.option("--views", default=None,
               help="Views to compare, by name or page number, e.g. A,B (leaves out the sum view "
@@ -18,7 +18,7 @@ from plenocli.cli import options
 @click.option("--mask-widths", default=None,
               help="Raytrix sweep: mask widths m (px), e.g. 0,1,2,3; INPUT is then a frames TIFF "
                    "and --grid is needed (uses plenocli refocus).")
-@click.option("--grid", type=click.Path(dir_okay=False), default=None,
+@click.option("--grid", type=options.InputFile(), default=None,
               help="Lens grid YAML (only with --mask-widths).")
 @click.option("--s", "s", type=options.FiniteFloat(min=0, min_open=True),
               default=0.2, show_default=True,

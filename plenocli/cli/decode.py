@@ -16,7 +16,7 @@ from plenocli.cli import options
               default=None, help="White (clipping) level in DN.")
 @click.option("--cfa", type=click.Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
               default=None, help="Bayer pattern at pixel (0, 0), e.g. RGGB.")
-@click.option("--calib", type=click.Path(dir_okay=False), default=None,
+@click.option("--calib", type=options.InputFile(), default=None,
               help="Raytrix RayCalibData XML (with --camera raytrix); stored in the metadata.")
 @options.preview_opt
 @options.stage_command

@@ -40,7 +40,7 @@ class WhiteBalance(click.ParamType):
               show_default=True, help="Demosaicing method (docs/colour.md compares them).")
 @click.option("--wb", type=WhiteBalance(), default="as-shot", show_default=True,
               help="White balance: the raw's as-shot gains, or R,G,B multipliers.")
-@click.option("--wb-from", type=click.Path(dir_okay=False), default=None,
+@click.option("--wb-from", type=options.InputFile(), default=None,
               help="White balance measured on a white image (bias-corrected views TIFF).")
 @click.option("--matrix", type=click.Choice(["as-shot", "none"]), default="as-shot",
               show_default=True,
@@ -52,7 +52,7 @@ class WhiteBalance(click.ParamType):
               help="Exposure (EV) on top of the automatic white point (99th percentile = 1).")
 @click.option("--quality", type=click.IntRange(1, 100), default=95, show_default=True,
               help="JPEG quality.")
-@click.option("--recover-highlights", type=click.Path(dir_okay=False), default=None,
+@click.option("--recover-highlights", type=options.InputFile(), default=None,
               help="Dual-pixel: rebuild S (and B) from A where only S clipped, with the A/S "
                    "split of this white image (views A, B, S, processed like INPUT).")
 @click.option("--linear", type=options.OutputFile(*options.TIFF), default=None,

@@ -6,9 +6,9 @@ from plenocli.cli import options
 @click.command(short_help="Correct vignetting with a gain from a white image.")
 @options.input_arg
 @options.output_opt
-@click.option("--white", type=click.Path(dir_okay=False), default=None,
+@click.option("--white", type=options.InputFile(), default=None,
               help="Bias-corrected white image (same sensor, crop and views).")
-@click.option("--gain", type=click.Path(dir_okay=False), default=None,
+@click.option("--gain", type=options.InputFile(), default=None,
               help="A gain map saved earlier with --save-gain (instead of --white).")
 @click.option("--median", type=click.IntRange(min=1), default=5, show_default=True,
               help="Median filter size (pixels of one colour plane, odd).")

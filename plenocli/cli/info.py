@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Show what a raw, plenocli TIFF, lens grid or XML file holds.")
-@click.argument("file", type=click.Path(dir_okay=False))
+@click.argument("file", type=options.InputFile())
 @click.option("--json", "as_json", is_flag=True, help="Print JSON (for scripts).")
 @options.stage_command
 def info(file, as_json):

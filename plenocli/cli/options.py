@@ -35,6 +35,33 @@ class OutputFile(click.Path):
         return value
 
 
+class InputFile(click.Path):
+    """A file a command reads. A folder is a usage error (exit 2), like any value of the wrong
+    kind; whether the file is there and can be read is the reader's to say (exit 1 with the
+    reason), as for a file that turns out to be damaged."""
+
+    def __init__(self):
+        super().__init__(dir_okay=False, readable=False)
+
+    def convert(self, value, param, ctx):
+        if str(value) == "":
+            self.fail("the file name is empty", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+class OutputFolder(click.Path):
+    """A folder a command writes into (made when missing); an empty name would be the current
+    folder, which no one means."""
+
+    def __init__(self):
+        super().__init__(file_okay=False)
+
+    def convert(self, value, param, ctx):
+        if str(value) == "":
+            self.fail("the folder name is empty", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def output_option(*suffixes: str):
     """The -o/--output option of a command whose output is a file of one of ``suffixes``
     (any file name when none is given: the command checks it)."""
@@ -46,7 +73,7 @@ def output_option(*suffixes: str):
 output_opt = output_option(*TIFF)
 preview_opt = click.option("--preview", type=OutputFile(".png"), default=None,
                            help="Also write a PNG preview here.")
-input_arg = click.argument("input", type=click.Path(dir_okay=False))
+input_arg = click.argument("input", type=InputFile())
 
 
 class RowsCols(click.ParamType):
@@ -128,10 +155,10 @@ def stage_command(func):
             if debug:
                 raise
             raise click.ClickException(" ".join(str(err).split())) from err  # one line
-        except (KeyboardInterrupt, Terminated) as err:
-            what = "interrupted" if isinstance(err, KeyboardInterrupt) else "terminated"
+        except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM as Terminated
+            what = "terminated" if isinstance(err, Terminated) else "interrupted"
             click.echo(f"plenocli: {what}; no partial output was kept", err=True)
-            sys.exit(130 if isinstance(err, KeyboardInterrupt) else 143)
+            sys.exit(143 if isinstance(err, Terminated) else 130)
         except MemoryError as err:
             if debug:
                 raise

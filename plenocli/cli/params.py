@@ -36,7 +36,7 @@ def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
     A list for a one-value option is the comma-separated word the shell would take
     (``g: [2, 3]`` is ``--g=2,3``); the option's type then accepts or refuses it. Raises
     ConfigError for a value no shell word could carry (a mapping, a nested list, a non-boolean
-    for a flag).
+    for a flag, a list for one file path).
     """
     params = stage_parameters(command)
     options: list[str] = []
@@ -52,6 +52,9 @@ def argv_for(command: click.Command, values: Mapping[str, Any]) -> list[str]:
         many = param.multiple if isinstance(param, click.Option) else param.nargs != 1
         items = list(value) if isinstance(value, (list, tuple)) else [value]
         if len(items) != 1 and not many:
+            if isinstance(param.type, click.Path):  # a comma is part of a file name
+                raise ConfigError(f"{_label(param)}: expected one file path, got a list "
+                                  f"{items!r}")
             if isinstance(param, click.Argument) or param.is_flag or not items:
                 raise ConfigError(f"{_label(param)}: expected one value, got a list {items!r}")
             items = [",".join(_word(param, v) for v in items)]
@@ -92,6 +95,9 @@ def _word(param: click.Parameter, value: Any) -> str:
         raise ConfigError(f"{_label(param)}: expected a plain value, got {value!r}")
     if isinstance(value, bool):
         return "true" if value else "false"
+    if "\0" in str(value):
+        raise ConfigError(f"{_label(param)}: {value!r} holds a NUL character, which no shell "
+                          "word (and no file name) can")
     return str(value)
 
 

@@ -21,7 +21,7 @@ class GValues(click.ParamType):
 @click.command(short_help="Refocus a focused-plenoptic capture (Lanczos splatting, Eq. 3).")
 @options.input_arg
 @options.output_opt
-@click.option("--grid", required=True, type=click.Path(dir_okay=False),
+@click.option("--grid", required=True, type=options.InputFile(),
               help="Lens grid (plenocli YAML from `plenocli calibrate`).")
 @click.option("--s", "s", type=options.FiniteFloat(min=0, min_open=True),
               default=0.2, show_default=True,

@@ -4,12 +4,12 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Run a pipeline config (make-style).")
-@click.argument("config", type=click.Path(dir_okay=False))
+@click.argument("config", type=options.InputFile())
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="List what would run, run nothing.")
 @click.option("--set", "overrides", multiple=True, metavar="STEP.PARAM=VALUE",
               help="Override a step parameter (repeatable), e.g. --set bias.smooth=9.")
-@click.option("--out", type=click.Path(file_okay=False), default=None,
+@click.option("--out", type=options.OutputFolder(), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--print-make", is_flag=True,
               help="Print the pipeline as a Makefile fragment (stdout) instead of running it.")
@@ -17,8 +17,9 @@ from plenocli.cli import options
               help="With --print-make and a batch template: the captures to write rules for.")
 @options.stage_command
 def run(config, force, dry_run, overrides, out, print_make, patterns):
-    """Run the steps of CONFIG in order; a step whose outputs are newer than its inputs and
-    whose parameters are unchanged is skipped.
+    """Run the steps of CONFIG in order; a step is skipped when the record kept beside each of
+    its outputs (.NAME.plenocli.json) shows it was made with the same parameters from the
+    inputs as they are now, and the output is unchanged since.
 
     With --print-make, print make rules instead (targets = outputs, prerequisites = inputs and
     CONFIG, recipe = the plenocli command); paths are relative to the current folder.
@@ -40,10 +41,14 @@ def run(config, force, dry_run, overrides, out, print_make, patterns):
         from plenocli.pipeline.makefile import make_fragment
 
         template = read_template(config, overrides)
+        if patterns and not template.per_capture_steps():
+            raise click.UsageError(f"--inputs: {config} is not a batch template (no step uses "
+                                   "{capture} or {name}); leave --inputs out")
         if patterns:
             from plenocli.pipeline.batch import expand_inputs
 
-            captures = expand_inputs(patterns)
+            captures = [str(c) for c in expand_inputs(patterns)]
+            template.check_captures_apart(captures, out=out)
             steps = template.steps(out=out, only="shared")
             for capture in captures:
                 steps += template.steps(capture=capture, out=out, only="per-capture")

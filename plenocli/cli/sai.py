@@ -8,7 +8,7 @@ from plenocli.cli import options
 @options.output_opt
 @click.option("-n", "n", type=click.IntRange(min=1), default=2, show_default=True,
               help="Pixels per micro-image side (2 for a quad-pixel sensor).")
-@click.option("--grid", type=click.Path(dir_okay=False), default=None,
+@click.option("--grid", type=options.InputFile(), default=None,
               help="Square lens grid with a non-integer pitch: approximate SAIs (S-hat), "
                    "nearest pixel to each sub-aperture centre.")
 @click.option("--cfa-layout", type=click.Choice(["pixel", "micro-image"]),

@@ -7,7 +7,7 @@ from plenocli.synth import KIND_NAMES
 @click.command(short_help="Write synthetic captures with ground truth.",
                epilog="KIND is one of: " + ", ".join(KIND_NAMES) + ".")
 @click.argument("kind", metavar="KIND", type=click.Choice(KIND_NAMES))
-@click.option("-o", "--output", required=True, type=click.Path(file_okay=False),
+@click.option("-o", "--output", required=True, type=options.OutputFolder(),
               help="Folder for the capture files and truth.json.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
               help="Random seed.")

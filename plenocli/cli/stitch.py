@@ -4,7 +4,7 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Stitch 2 or 4 views into an extended-FOV panorama.")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, type=options.InputFile())
 @options.output_opt
 @click.option("--views", default=None,
               help="Views to stitch, by name or page number, comma separated (e.g. A,B).")
@@ -17,7 +17,7 @@ from plenocli.cli import options
               show_default=True,
               help="Known radial distortion K1 removed first (r_d = r_u (1 + K1 r_u^2), r in "
                    "half-diagonals).")
-@click.option("--rig", type=click.Path(dir_okay=False), default=None,
+@click.option("--rig", type=options.InputFile(), default=None,
               help="Prism rig YAML (focal_mm, sensor_mm, prism_n, prism_apex_deg, views): cancel "
                    "the prisms' distortion and search near the predicted overlap "
                    "(configs/rigs/).")
@@ -28,7 +28,7 @@ from plenocli.cli import options
               type=options.FiniteFloat(min=0, max=1, min_open=True, max_open=True),
               default=0.1, show_default=True,
               help="Tolerance on --overlap (fraction of the view).")
-@click.option("--transform-in", type=click.Path(dir_okay=False), default=None,
+@click.option("--transform-in", type=options.InputFile(), default=None,
               help="Reapply a transform saved with --transform-out instead of registering.")
 @click.option("--transform-out", type=options.OutputFile(".json"), default=None,
               help="Save the transform (JSON) to reapply to later captures of the same rig.")

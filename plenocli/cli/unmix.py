@@ -4,9 +4,9 @@ from plenocli.cli import options
 
 
 @click.command(short_help="Remove sub-aperture cross-talk (ghosts) with a measured mixing.")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, type=options.InputFile())
 @options.output_opt
-@click.option("--mixing", required=True, type=click.Path(dir_okay=False),
+@click.option("--mixing", required=True, type=options.InputFile(),
               help="Mixing file from plenocli crosstalk --mixing-out (masked whites of this rig, "
                    "processed like these views).")
 @click.option("--regularise", type=options.FiniteFloat(min=0.0, max=1.0), default=0.0,

@@ -4,7 +4,9 @@ Every file is written to a temporary beside its destination and renamed only on 
 :func:`outputs_together` (what every stage runs in), the renames wait until the whole stage has
 succeeded, so a command's outputs land together or not at all. Temporaries are named
 ``.NAME.HOST-PID.XXXX.part``: one left by a killed run (its process gone) is removed the next time
-anything writes NAME.
+anything writes NAME. A NAME longer than :data:`LONG_NAME` bytes is shortened there to its start
+and a hash (:func:`short_name`), so that any name a file system with the common 255-byte limit
+takes has a temporary it takes too.
 """
 
 from __future__ import annotations
@@ -12,10 +14,12 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import errno
+import glob
+import hashlib
 import os
 import socket
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,23 +37,44 @@ class _Pending:
 
 _PENDING: contextvars.ContextVar[_Pending | None] = contextvars.ContextVar(
     "plenocli_pending_outputs", default=None)
-_HOST = socket.gethostname().replace(".", "_").replace("-", "_") or "host"
+_HOST = (socket.gethostname().replace(".", "_").replace("-", "_") or "host")[:64]
+LONG_NAME = 120  # bytes; longer names are shortened in temporaries and side files
+NAME_MAX = 255   # the common file-name limit, when the file system does not say
+
+
+def short_name(name: str) -> str:
+    """``name``, or for a name over LONG_NAME bytes its start and a hash of the whole: the
+    part of a temporary's or side file's name that says whose it is (stable for one name)."""
+    raw = name.encode()
+    if len(raw) <= LONG_NAME:
+        return name
+    digest = hashlib.sha256(raw).hexdigest()[:16]
+    return raw[:LONG_NAME - 17].decode(errors="ignore") + "~" + digest
 
 
 @contextlib.contextmanager
-def outputs_together() -> Iterator[None]:
+def outputs_together(
+        before_landing: Callable[[list[tuple[Path, Path]]], None] | None = None,
+) -> Iterator[None]:
     """Hold back the renames of every atomic write in the block until the block succeeds.
 
     On any exception (or Ctrl-C) inside the block every temporary is removed and no destination
-    is touched. Inside another such block it joins the outer one.
+    is touched. Inside another such block it joins the outer one. ``before_landing`` is called
+    with the (temporary, destination) pairs once the block succeeded and before any rename;
+    what it writes atomically lands with them (a record of the outputs, say).
     """
-    if _PENDING.get() is not None:
+    outer = _PENDING.get()
+    if outer is not None:
         yield
+        if before_landing is not None:
+            before_landing(list(outer.files))
         return
     pending = _Pending()
     token = _PENDING.set(pending)
     try:
         yield
+        if before_landing is not None:
+            before_landing(list(pending.files))
     except BaseException:
         _discard(pending.files)
         _remove_empty(pending.folders)
@@ -90,7 +115,7 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         pending.folders.extend(_missing_folders(dest.parent))
     dest.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(dest)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.{_HOST}-{os.getpid()}.",
+    fd, tmp_name = tempfile.mkstemp(prefix=f"{_temporary_prefix(dest)}{os.getpid()}.",
                                     suffix=".part", dir=dest.parent)
     os.close(fd)
     tmp = Path(tmp_name)
@@ -157,14 +182,19 @@ def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None
 def remove_stale_temporaries(dest: Path) -> None:
     """Remove temporaries of ``dest`` left on this host by processes that no longer run."""
     with contextlib.suppress(OSError):
-        for part in dest.parent.glob(f".{dest.name}.{_HOST}-*.part"):
-            pid = part.name[len(f".{dest.name}.{_HOST}-"):].split(".", 1)[0]
+        prefix = _temporary_prefix(dest)
+        for part in dest.parent.glob(f"{glob.escape(prefix)}*.part"):
+            pid = part.name[len(prefix):].split(".", 1)[0]
             if pid.isdigit() and not process_alive(int(pid)):
                 part.unlink(missing_ok=True)
 
 
+def _temporary_prefix(dest: Path) -> str:
+    return f".{short_name(dest.name)}.{_HOST}-"
+
+
 def _check_folder(out: Path) -> None:
-    name_max = 255
+    name_max = NAME_MAX
     folder = out.parent
     while not folder.exists():
         if folder.is_symlink() or folder == folder.parent:
@@ -174,11 +204,11 @@ def _check_folder(out: Path) -> None:
         raise InputError(f"cannot write {out}: {folder} is a file, not a folder")
     with contextlib.suppress(OSError, ValueError):
         name_max = os.pathconf(folder, "PC_NAME_MAX")
-    room = len(f"..{_HOST}-{os.getpid()}.xxxxxxxx.part")  # the temporary's prefix and suffix
-    too_long = [p for p in out.parent.parts if len(p.encode()) > name_max]
-    if too_long or len(out.name.encode()) + room > name_max:
-        raise InputError(f"cannot write {out}: a name in it is too long for this file system "
-                         f"takes ({name_max} bytes with a temporary's {room}); shorten it")
+    temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
+    names = [*out.parent.parts, out.name, temporary]
+    if any(len(p.encode()) > name_max for p in names):
+        raise InputError(f"cannot write {out}: a name in it is longer than this file system "
+                         f"takes ({name_max} bytes); shorten it")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"cannot write {out}: folder {folder} is not writable "
                          "(permission or a read-only file system); choose another folder")

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from multiprocessing import connection
 from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError, PlenocliError
+from plenocli.errors import ConfigError, InputError, PlenocliError, Terminated
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
@@ -48,10 +48,6 @@ CRASHED = ("the worker process died while processing it (a crash in a decoder, o
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
 GRACE_SECONDS = 10.0  # after a stop request, how long a worker may take to clean up
 EXIT_OVERRAN = 128 + signal.SIGALRM  # a worker stopped by its watchdog past the time limit
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM: stops like Ctrl-C (every ``except KeyboardInterrupt`` cleans up), exit 143."""
 
 
 class CaptureTimeout(BaseException):
@@ -186,20 +182,23 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
                           'input "{capture}"')
     if not captures:
         raise InputError("no captures given; pass --inputs 'FOLDER/*.dng'")
+    # where this process runs: a Dask worker runs in its own folder, perhaps on another machine
+    config = str(Path(config).resolve())
     captures = [str(Path(c).resolve()) for c in captures]
     out = None if out is None else str(Path(out).resolve())
     template.steps(capture=captures[0], out=out)  # config errors once, not once per capture
+    template.check_captures_apart(captures, out=out)
 
     shared = _run_shared(template, out=out, force=force, dry_run=dry_run)
     upstream = [str(p) for d in shared if d.run for p in d.step.output_paths()]
     kwargs = dict(overrides=list(overrides), out=out, force=force, dry_run=dry_run,
                   upstream=upstream)
     if scheduler:
-        results = _dask_results(scheduler, str(config), captures, kwargs)
+        results = _dask_results(scheduler, config, captures, kwargs)
     elif (jobs == 1 or len(captures) == 1) and timeout is None:
-        results = (run_capture(str(config), c, **kwargs) for c in captures)
+        results = (run_capture(config, c, **kwargs) for c in captures)
     else:
-        results = _pool_results(min(jobs, len(captures)), str(config), captures, kwargs,
+        results = _pool_results(min(jobs, len(captures)), config, captures, kwargs,
                                 timeout)
     by_capture = _collect(results, len(captures))
     return BatchReport(shared, [by_capture[c] for c in captures])
@@ -267,7 +266,7 @@ def _watchdog(batch_pid: int, parent_pid: int) -> None:
 
 def _on_sigterm(signum, frame) -> None:
     if _busy:
-        raise KeyboardInterrupt  # atomic_path deletes its .part file on the way up
+        raise Terminated  # atomic_path deletes its .part file on the way up
     os._exit(128 + signum)
 
 
@@ -295,23 +294,6 @@ def _worker_task(config: str, capture: str, kwargs: dict,
         signal.setitimer(signal.ITIMER_REAL, 0)
         _busy = False
         _hard_stop = float("inf")
-
-
-@contextlib.contextmanager
-def sigterm_stops() -> Iterator[None]:
-    """While the batch runs, SIGTERM raises :class:`Terminated` (a KeyboardInterrupt), so the
-    workers are stopped and temporary files removed as for Ctrl-C."""
-    def stop(signum, frame):
-        raise Terminated
-
-    if threading.current_thread() is not threading.main_thread():
-        yield  # only the main thread may handle signals (e.g. plenocli called from a thread)
-        return
-    previous = signal.signal(signal.SIGTERM, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 @contextlib.contextmanager

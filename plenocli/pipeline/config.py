@@ -105,12 +105,7 @@ class Template:
             raise ValueError(f"only must be all, shared or per-capture, got {only!r}")
         base = self.path.resolve().parent
         per_capture = self.per_capture_steps()
-        values = {}
-        if capture is not None:
-            values = {"capture": str(Path(capture).resolve()), "name": Path(capture).stem}
-        root = out if out is not None else (str(base / self.out) if self.out else None)
-        if root is not None:
-            values["out"] = str(Path(root).resolve())
+        values = self._values(capture, out)
         stages = get_stages()
         steps = []
         for name, body in self.raw_steps.items():
@@ -124,8 +119,51 @@ class Template:
                                   f"{', '.join('{' + m + '}' for m in sorted(missing))}; "
                                   f"give {what}")
             steps.append(_make_step(self.path, base, name, _fill(body, values), stages))
-        _check_outputs_distinct(self.path, steps)
+        _check_files(self.path, steps)
         return steps
+
+
+    def _values(self, capture: str | Path | None, out: str | Path | None) -> dict[str, str]:
+        """What the placeholders stand for."""
+        values = {}
+        if capture is not None:
+            name = Path(capture).stem
+            if name in ("", ".", ".."):  # {out}/{name}/x would leave {out}, onto another file
+                raise InputError(f"capture {capture}: its name {name!r} cannot name a folder; "
+                                 "rename the file")
+            values = {"capture": str(Path(capture).resolve()), "name": name}
+        base = self.path.resolve().parent
+        root = out if out is not None else (str(base / self.out) if self.out else None)
+        if root is not None:
+            values["out"] = str(Path(root).resolve())
+        return values
+
+    def check_captures_apart(self, captures: list[str], *, out: str | None = None) -> None:
+        """Before a batch: no capture's step writes a shared step's file or a capture (a
+        capture named like a shared output would overwrite it for every capture after it).
+        Only the output paths are filled in per capture: fast for thousands of captures."""
+        taken = {os.path.abspath(c): "a capture" for c in captures}
+        for step in self.steps(out=out, only="shared"):
+            taken.update({os.path.abspath(p): f"an input of shared step {step.name!r}"
+                          for p in step.input_paths()})
+            taken.update({os.path.abspath(p): f"the output of shared step {step.name!r}"
+                          for p in step.output_paths()})
+        base, stages = self.path.resolve().parent, get_stages()
+        outputs = {}
+        for name in self.per_capture_steps():
+            stage = stages.get(self.raw_steps[name].get("stage", name))
+            roles = stage.outputs if stage is not None else ()  # unknown: said by steps()
+            outputs[name] = [v for k, v in self.raw_steps[name].items()
+                             if str(k).replace("-", "_") in roles]
+        for capture in captures:
+            values = self._values(capture, out)
+            for name, items in outputs.items():
+                for path in _flat(_resolve(base, _fill(items, values))):
+                    what = taken.get(os.path.abspath(path))
+                    if what:
+                        raise ConfigError(f"capture {capture}: step {name!r} would write {path}, "
+                                          f"{what}; give {self.path} per-capture outputs apart, "
+                                          "e.g. under {out}/{name}/")
 
 
 def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
@@ -145,6 +183,8 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
         if key not in TOP_KEYS:
             raise ConfigError(f"{p}: unknown top-level key {key!r}{closest(key, TOP_KEYS)}")
     for name, body in doc["steps"].items():
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{p}: step name {name!r} must be text (quote it), e.g. 'bias2'")
         if not (body is None or isinstance(body, dict)):
             raise ConfigError(f"{p}: step {name!r} must be a mapping of parameters "
                               f"(e.g. input: ..., output: ...), got {body!r}")
@@ -169,6 +209,8 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     def construct_mapping(self, node, deep=False):
         seen = set()
         for key_node, _ in node.value:
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                continue  # '<<: *base': the base's keys may be given again (YAML's merge)
             key = self.construct_object(key_node, deep=True)
             if not isinstance(key, (str, int, float, bool)):
                 continue  # an unhashable key: the base loader reports it
@@ -235,20 +277,42 @@ def _check_per_capture_outputs(template: Template) -> None:
                         f"{{out}}/{{name}}/{Path(str(item)).name}")
 
 
-def _check_outputs_distinct(path: Path, steps: list[Step]) -> None:
-    """Before any step runs: no two steps write one file, no step writes its own input."""
-    writer: dict[str, str] = {}
-    for step in steps:
+def _check_files(path: Path, steps: list[Step]) -> None:
+    """Before any step runs: no two steps write one file (or into a folder another fills), no
+    step writes its own input or the config, and no step reads what a later step writes (steps
+    out of order, or a cycle: the runner would read a stale file, make would drop the cycle)."""
+    writer: dict[str, int] = {}
+    config = os.path.realpath(path)
+    for k, step in enumerate(steps):
         try:
             check_distinct(step.output_paths(), step.input_paths())
         except InputError as err:
             raise ConfigError(f"{path}: step {step.name!r}: {err}") from err
         for out in step.output_paths():
             key = os.path.abspath(out)
+            if os.path.realpath(out) == config:
+                raise ConfigError(f"{path}: step {step.name!r} would write over this config "
+                                  f"({out}); choose another output path")
             if key in writer:
-                raise ConfigError(f"{path}: steps {writer[key]!r} and {step.name!r} both write "
-                                  f"{out}; give each step its own output path")
-            writer[key] = step.name
+                raise ConfigError(f"{path}: steps {steps[writer[key]].name!r} and {step.name!r} "
+                                  f"both write {out}; give each step its own output path")
+            writer[key] = k
+    folders = {os.path.abspath(f): k for k, step in enumerate(steps)
+               for f in step.stage.paths(step.params, step.stage.folder_outputs)}
+    for key, k in writer.items():
+        inside = [folders[str(f)] for f in Path(key).parents if folders.get(str(f), k) != k]
+        if inside:
+            raise ConfigError(f"{path}: step {steps[k].name!r} writes {key} inside the folder "
+                              f"that step {steps[inside[0]].name!r} fills; write it elsewhere")
+    for k, step in enumerate(steps):
+        for p in step.input_paths():
+            full = Path(os.path.abspath(p))
+            later = [writer[str(f)] for f in (full, *full.parents) if writer.get(str(f), -1) > k]
+            if later:
+                other = steps[later[0]].name
+                raise ConfigError(f"{path}: step {step.name!r} reads {p}, which step {other!r} "
+                                  f"writes after it; put {other!r} before {step.name!r} (steps "
+                                  "that read each other's outputs cannot run)")
 
 
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
@@ -260,8 +324,11 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if step not in steps:
             raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
-        try:
-            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else None
+        if param == "stage":
+            raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
+                              f"{path} to change it")
+        try:  # an empty value is the empty word, as --smooth= in the shell
+            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else ""
         except yaml.YAMLError as err:
             raise ConfigError(f"--set {item!r}: the value is not valid YAML "
                               f"({yaml_problem(err)}); quote it") from err
@@ -281,6 +348,9 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
             options = [k.replace("_", "-") for k in valid]
             raise ConfigError(f"{path}: step {name!r}: unknown key {key!r} for stage "
                               f"{stage_name}{closest(str(key).replace('_', '-'), options)}")
+        if value is None:  # the shell has no word for "no value": null would mean the default
+            raise ConfigError(f"{path}: step {name!r}: {key} has no value (null or empty); "
+                              "give one, or leave the key out for the default")
         if norm in stage.inputs or norm in stage.outputs:
             value = _resolve(base, value)
         given[norm] = value
@@ -295,9 +365,16 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
     return Step(name, stage, params, tuple(given))
 
 
+def _flat(value) -> list:
+    """The strings in a value that may be a list (of lists)."""
+    if isinstance(value, (list, tuple)):
+        return [v for item in value for v in _flat(item)]
+    return [] if value is None else [value]
+
+
 def _resolve(base: Path, value):
-    if value is None:
-        return None
+    if value is None or value == "" or "\0" in str(value):
+        return value  # refused by the command as the shell's word would be
     if isinstance(value, (list, tuple)):
         return [_resolve(base, v) for v in value]
     return str((base / str(value)).resolve()) if not Path(str(value)).is_absolute() else str(value)

@@ -17,32 +17,40 @@ from pathlib import Path
 
 from plenocli.errors import ConfigError
 from plenocli.pipeline.config import Step
+from plenocli.pipeline.runner import check_inputs
 
-_UNSAFE = re.compile(r"[^\w.+,@=~/-]")  # spaces, :, $, #, quotes, globs: not in make names
+_UNSAFE = re.compile(r"[^\w.+,@~/-]")  # spaces, :, =, $, #, quotes, globs: not in make names
 
 
 def make_fragment(steps: Sequence[Step], config: str | Path, *,
                   base: str | Path | None = None, command: str = "") -> str:
-    """Make rules for ``steps`` (in order; a step already written, e.g. a shared one, is skipped).
+    """Make rules for ``steps``, in order (a file written by two of them is refused).
 
     ``base``: paths inside this folder are written relative to it (default: the current folder;
     run make from there); others stay absolute. ``command``: the plenocli invocation that made
     the fragment, recorded in its header.
     """
+    check_inputs(list(steps))  # what plenocli run refuses, make is not given either
     root = Path(base or Path.cwd()).resolve()
     config_path = _name(Path(config), root)
-    seen: set[tuple[str, ...]] = set()
+    writer: dict[str, str] = {}
     rules: list[str] = []
     finals: list[str] = []
+    folders: set[Path] = set()  # folder outputs: a file read in one depends on the folder
     for step in steps:
         outputs = tuple(_name(p, root) for p in step.output_paths())
         if not outputs:
             raise ConfigError(f"step {step.name!r} writes no file, so make cannot track it")
-        if outputs in seen:
-            continue
-        seen.add(outputs)
+        for name in outputs:
+            if name in writer:
+                raise ConfigError(f"steps {writer[name]!r} and {step.name!r} both write {name}; "
+                                  "give each its own output path")
+            writer[name] = step.name
         finals.extend(outputs)
-        prerequisites = [_name(p, root) for p in step.input_paths()] + [config_path]
+        prerequisites = [_name(_target(p, folders), root) for p in step.input_paths()]
+        prerequisites.append(config_path)
+        folders.update(Path(os.path.abspath(p))
+                       for p in step.stage.paths(step.params, step.stage.folder_outputs))
         separator = "&:" if len(outputs) > 1 else ":"
         rules.append(f"# step {step.name}\n{' '.join(outputs)} {separator} "
                      f"{' '.join(dict.fromkeys(prerequisites))}\n\t{_recipe(step, root)}\n")
@@ -76,6 +84,12 @@ def _recipe(step: Step, root: Path) -> str:
     return " ".join(["$(PLENOCLI)", step.stage.name, *(_quote(w) for w in words)])
 
 
+def _target(path: Path, folders: set[Path]) -> Path:
+    """The make target that provides ``path``: the folder output holding it, or itself."""
+    full = Path(os.path.abspath(path))
+    return next((parent for parent in full.parents if parent in folders), full)
+
+
 def _quote(value) -> str:
     """A shell word, with '$' doubled for make."""
     return shlex.quote(str(value)).replace("$", "$$")
@@ -88,7 +102,7 @@ def _name(path: Path, root: Path) -> str:
         text = str(resolved.relative_to(root))
     except ValueError:
         text = str(resolved)
-    bad = _UNSAFE.search(text)
+    bad = _UNSAFE.search(text) or re.match("~", text)  # make reads ~NAME/ as a home folder
     if bad:
         raise ConfigError(f"path {text!r} has {bad.group()!r}, which make or the shell would "
                           "misread; rename the file or folder, or use plenocli batch instead")

@@ -22,6 +22,7 @@ from typing import Any
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
 from plenocli.model.provenance import RESOLVED
+from plenocli.pipeline import records
 
 
 @dataclass(frozen=True)
@@ -71,18 +72,34 @@ class Stage:
 
         Outputs must be distinct from each other and from the inputs, in writable folders;
         every file the stage writes inside the block is renamed into place only when the whole
-        stage succeeded (nothing is left behind otherwise).
+        stage succeeded (nothing is left behind otherwise), each output with its record.
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
         _check_listed_once(params, self.inputs)
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
+        inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
+        states = records.input_states(inputs)
+
+        def record(landed):
+            records.write_records(self.name, params, inputs, outputs, states, landed)
+
         token = RESOLVED.set(dict(params))
         try:
-            with outputs_together():
+            with outputs_together(before_landing=record):
                 yield
         finally:
             RESOLVED.reset(token)
+
+    def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
+        """The file paths of each parameter named in ``roles`` ([] when not given)."""
+        return {name: self.paths(params, (name,)) for name in roles}
+
+    def why_stale(self, params: dict[str, Any]) -> str | None:
+        """Why the step's existing outputs cannot stand for a run with ``params`` now (their
+        records, :mod:`plenocli.pipeline.records`); None when they can."""
+        return records.why_stale(self.name, params, self.by_role(params, self.inputs),
+                                 self.by_role(params, self.outputs))
 
 
 def _check_listed_once(params: dict[str, Any], roles: tuple[str, ...]) -> None:

@@ -1,24 +1,21 @@
 """The make-style runner: run the steps of a config in order, skipping up-to-date ones.
 
-A step is up to date when all its outputs exist, are newer than all its inputs, the parameters
-recorded in its first output's provenance equal the step's fully resolved parameters now
-(defaults included, so removing a key from a config reruns the step when its default differs),
-and no step before it in this run was (or would be) rerun to make one of its inputs.
+A step is up to date when all its outputs exist, each has a record (written with it, see
+:mod:`plenocli.pipeline.records`) saying it was made by this stage with the step's fully
+resolved parameters now (defaults included, so removing a key from a config reruns the step
+when its default differs) from its inputs as they are now, the output itself unchanged since;
+and no step before it in this run was (or would be) rerun to make one of its inputs. An output
+without a readable record (made by another program, or by an older plenocli) reruns its step.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
-from plenocli.io.tiffio import read_meta
-from plenocli.model.provenance import json_safe
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
 
@@ -37,6 +34,7 @@ def plan(steps: list[Step], *, force: bool = False,
     ``upstream``: files that steps outside ``steps`` will (re)make before these run, e.g. the
     outputs of a batch's shared steps.
     """
+    check_inputs(steps, upstream)
     decisions: list[Decision] = []
     will_make: set[Path] = {Path(p).resolve() for p in upstream}
     for step in steps:
@@ -44,11 +42,25 @@ def plan(steps: list[Step], *, force: bool = False,
         if reason:
             will_make.update(p.resolve() for p in step.output_paths())
         decisions.append(Decision(step, bool(reason), reason or "up to date"))
+    return decisions
+
+
+def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
+    """Every input of every step exists or is made by an earlier step (or is in ``upstream``):
+    what ``run`` and ``--print-make`` both check before any work (ConfigError)."""
+    made: set[Path] = {Path(p).resolve() for p in upstream}
+    for step in steps:
         for p in step.input_paths():
-            if not p.exists() and p.resolve() not in will_make:
+            if not p.exists() and not _within(p, made):
                 raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
                                   "step makes it")
-    return decisions
+        made.update(p.resolve() for p in step.output_paths())
+
+
+def _within(path: Path, made: set[Path]) -> bool:
+    """Whether ``path`` is one of ``made`` or inside one of them (a folder output)."""
+    resolved = path.resolve()
+    return resolved in made or any(parent in made for parent in resolved.parents)
 
 
 def run_pipeline(steps: list[Step], *, force: bool = False,
@@ -78,42 +90,12 @@ def run_pipeline(steps: list[Step], *, force: bool = False,
 
 def _stale(step: Step, will_make: set[Path]) -> str | None:
     outputs = step.output_paths()
+    if not outputs:
+        return "it writes no file"  # nothing to vouch for: it only reports, every time
     missing = [p for p in outputs if not p.exists()]
     if missing:
         return f"{missing[0].name} missing"
-    inputs = step.input_paths()
-    for p in inputs:
-        if p.resolve() in will_make:
+    for p in step.input_paths():
+        if _within(p, will_make):
             return f"{p.name} is being remade"
-    newest_input = max((p.stat().st_mtime for p in inputs if p.exists()), default=0.0)
-    oldest_output = min((p.stat().st_mtime for p in outputs), default=0.0)
-    if newest_input > oldest_output:
-        return "an input is newer than the outputs"
-    recorded = _recorded_parameters(outputs[0]) if outputs else None
-    if recorded is None:
-        return None
-    paths = (*step.stage.inputs, *step.stage.outputs)
-    current = json_safe({k: v for k, v in step.params.items() if k not in paths})
-    for key, value in current.items():
-        if key not in recorded:
-            return f"parameter {key} not recorded in {outputs[0].name}"
-        if recorded[key] != value:
-            return f"parameter {key} changed ({recorded[key]!r} -> {value!r})"
-    return None
-
-
-def _recorded_parameters(path: Path) -> dict | None:
-    """Parameters from an output's provenance (TIFF metadata, or YAML/JSON 'provenance')."""
-    suffix = path.suffix.lower()
-    try:
-        if suffix in (".tif", ".tiff"):
-            record = read_meta(path).get("provenance")
-        elif suffix in (".yaml", ".yml"):
-            record = (yaml.safe_load(path.read_text()) or {}).get("provenance")
-        elif suffix == ".json":
-            record = json.loads(path.read_text()).get("provenance")
-        else:
-            return None
-    except (OSError, ValueError, yaml.YAMLError, AttributeError):
-        return None
-    return record.get("parameters") if isinstance(record, dict) else None
+    return step.stage.why_stale(step.params)

@@ -1,0 +1,130 @@
+"""Output records: how each output of a stage run was made, in a small side file beside it.
+
+Every stage run (from the shell, a config, a batch or make) writes, landing together with its
+outputs, one JSON record per output: ``.NAME.plenocli.json`` beside NAME (beside the folder, for
+a folder output). A record holds the stage, the output's role (``output``, ``preview``, ...),
+the stage's fully resolved parameters other than file paths, the size and modification time of
+each input by role when the run started, and those of the output as written. Whatever the
+output's format (TIFF, JPEG, PNG, a folder), the record can be read, so the make-style runner
+trusts an output only when its record is there and matches: a changed parameter, another input
+file or an input changed in any way since (newer or older), an output edited or replaced by
+another program, or an output given another role makes the step run again.
+
+Paths themselves are not recorded: a project folder moved or copied with its times kept (``mv``,
+``cp -p``, ``rsync -a``) stays up to date, since what identifies an input is its role, size and
+time, and a record travels with its output.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from plenocli import __version__
+from plenocli.io.atomic import short_name, write_text
+from plenocli.model.provenance import json_safe
+
+SUFFIX = ".plenocli.json"
+Roles = dict[str, list[Path]]  # a stage's file parameters by role, each a list of paths
+
+
+def record_path(output: str | os.PathLike) -> Path:
+    """Where the record of ``output`` lives (``.`` or ``dir/..`` named by the folder's name)."""
+    output = Path(os.path.abspath(output))
+    return output.parent / f".{short_name(output.name)}{SUFFIX}"
+
+
+def file_state(path: str | os.PathLike) -> list[int] | None:
+    """[size, mtime in ns] of a file (None when it is not there)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return [st.st_size, st.st_mtime_ns]
+
+
+def input_states(inputs: Roles) -> dict[str, list]:
+    """The state of each input by role, taken before a stage reads them (a change while it
+    runs then shows as a change later)."""
+    return {role: [file_state(p) for p in paths] for role, paths in inputs.items() if paths}
+
+
+def values(params: dict[str, Any], paths: Roles) -> dict[str, Any]:
+    """The parameters that are not file paths, as JSON values (what a record compares)."""
+    kept = {k: v for k, v in params.items() if k not in paths}
+    return json.loads(json.dumps(json_safe(kept), default=str))
+
+
+def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Roles,
+                  states: dict[str, list], landed: list[tuple[Path, Path]]) -> None:
+    """Write the record of every output this run wrote: a file among the ``landed``
+    (temporary, destination) pairs, or a folder holding some of them. ``states``: the inputs'
+    :func:`input_states` when the run started."""
+    recorded = values(params, {**inputs, **outputs})
+    for role, paths in outputs.items():
+        for output in paths:
+            target = os.path.abspath(output)
+            files = {}
+            for tmp, dest in landed:
+                full = os.path.abspath(dest)
+                if full == target or full.startswith(target + os.sep):
+                    files[os.path.relpath(full, target)] = file_state(tmp)
+            if not files:
+                continue
+            doc = {"software": "plenocli", "version": __version__, "stage": stage,
+                   "role": role, "parameters": recorded, "inputs": states, "output": files}
+            write_text(record_path(output), json.dumps(doc, indent=1, allow_nan=False) + "\n")
+
+
+def read_record(output: str | os.PathLike) -> dict | None:
+    """The record of ``output``, or None when there is none or it cannot be read."""
+    try:
+        doc = json.loads(record_path(output).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    shape = {"stage": str, "role": str, "parameters": dict, "inputs": dict, "output": dict}
+    if not isinstance(doc, dict) or any(not isinstance(doc.get(k), t) for k, t in shape.items()):
+        return None
+    return doc
+
+
+def why_stale(stage: str, params: dict[str, Any], inputs: Roles,
+              outputs: Roles) -> str | None:
+    """Why the existing ``outputs`` cannot stand for a run of ``stage`` with ``params`` and
+    ``inputs`` now (None when every one has a record that matches)."""
+    current = values(params, {**inputs, **outputs})
+    states = input_states(inputs)
+    for role, paths in outputs.items():
+        for output in paths:
+            reason = _mismatch(stage, role, Path(output), current, states, inputs)
+            if reason:
+                return reason
+    return None
+
+
+def _mismatch(stage: str, role: str, output: Path, current: dict, states: dict,
+              inputs: Roles) -> str | None:
+    name = output.name
+    record = read_record(output)
+    if record is None:
+        return f"no record of how {name} was made"
+    if (record["stage"], record["role"]) != (stage, role):
+        return f"{name} was made as {record['stage']} {record['role']}"
+    recorded = record["parameters"]
+    for key in dict.fromkeys([*current, *recorded]):
+        if recorded.get(key) != current.get(key):
+            return f"parameter {key} changed ({recorded.get(key)!r} -> {current.get(key)!r})"
+    for rel, state in record["output"].items():
+        if file_state(output / rel if rel != "." else output) != state:
+            return f"{name} changed since it was made"
+    for key in dict.fromkeys([*states, *record["inputs"]]):
+        now, then = states.get(key, []), record["inputs"].get(key, [])
+        if now != then:
+            changed = [p.name for p, a, b in zip(inputs.get(key, []), now, then, strict=False)
+                       if a != b]
+            if changed and len(now) == len(then):
+                return f"{changed[0]} is not the {key} file {name} was made from (size or time)"
+            return f"the {key} files are not those {name} was made from"
+    return None
