@@ -155,11 +155,33 @@ def check_page(path: Path, page) -> None:
         size = Path(path).stat().st_size
         end = max(int(o) + int(c) for o, c in zip(page.dataoffsets, page.databytecounts,
                                                    strict=True))
-        short = (compression == COMPRESSION_NONE
-                 and sum(int(c) for c in page.databytecounts) < page.nbytes)
-        if end > size or short:
+        if end > size:
             raise InputError(f"{path}: truncated TIFF (the header places pixel data up to byte "
                              f"{end}, the file has {size} bytes); copy or write it again")
+        if compression == COMPRESSION_NONE:
+            _check_uncompressed_size(path, page)
+
+
+def _check_uncompressed_size(path, page) -> None:
+    """Uncompressed pixel data must be exactly what the size and BitsPerSample say (rows
+    packed to whole bytes; a last strip may be written whole): fewer bytes is a cut file, more
+    a header whose BitsPerSample or size is wrong (the pixels would be read misaligned)."""
+    per_pixel = 1 if int(page.planarconfig) == 2 else int(page.samplesperpixel)
+    planes = int(page.samplesperpixel) if int(page.planarconfig) == 2 else 1
+    bits = int(page.bitspersample)
+    if page.is_tiled:
+        tile = int(page.tilelength) * -(-int(page.tilewidth) * per_pixel * bits // 8)
+        allowed = {len(page.databytecounts) * tile}
+    else:
+        rows, row_bytes = int(page.imagelength), -(-int(page.imagewidth) * per_pixel * bits // 8)
+        strip = min(int(page.rowsperstrip), rows)
+        allowed = {planes * rows * row_bytes, planes * -(-rows // strip) * strip * row_bytes}
+    held = sum(int(c) for c in page.databytecounts)
+    if held not in allowed:
+        what = "truncated" if held < min(allowed) else "damaged"
+        raise InputError(f"{path}: {what} TIFF (uncompressed pixel data of {held} bytes where "
+                         f"its size and {bits} bits per sample need {min(allowed)}); copy or "
+                         "write it again")
 
 
 def check_segments(path, page) -> None:
@@ -194,22 +216,47 @@ def check_segments(path, page) -> None:
                              "a wrong byte count, or a camera that omits it), so its last rows "
                              "cannot be trusted; copy the file again, or re-save it with Adobe "
                              "DNG Converter")
-        bits = _jpeg_precision(segment)
-        if bits is not None and bits > 8 * page.dtype.itemsize:
+        frame = _jpeg_frame(segment)
+        if frame is None:
+            continue
+        bits, samples = frame
+        if bits > 8 * page.dtype.itemsize:
             raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} holds {bits}-bit samples, "
                              f"the header says {page.bitspersample} bits per sample); copy or "
                              "write the file again")
+        if samples not in _segment_samples(page, k):
+            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} codes {samples} samples, "
+                             f"the header's {kind} size holds {max(_segment_samples(page, k))}:"
+                             " a wrong tile size or RowsPerStrip); copy or write the file again")
 
 
-def _jpeg_precision(stream: bytes) -> int | None:
-    """Bits per sample in a JPEG stream's frame header (SOFn); None if there is none."""
+def _segment_samples(page, k: int) -> tuple[int, ...]:
+    """The sample counts a JPEG segment of ``page`` may code (DNG lets a lossless-JPEG tile
+    code them in any shape): a whole tile, or a strip's rows (the last one cut or whole)."""
+    planar = int(page.planarconfig) == 2
+    per_pixel = 1 if planar else int(page.samplesperpixel)
+    if page.is_tiled:
+        return (int(page.tilelength) * int(page.tilewidth) * per_pixel,)
+    rows, per_row = int(page.imagelength), int(page.imagewidth) * per_pixel
+    strip = min(int(page.rowsperstrip), rows)
+    first_row = (k % -(-rows // strip)) * strip
+    return (strip * per_row, min(strip, rows - first_row) * per_row)
+
+
+def _jpeg_frame(stream: bytes) -> tuple[int, int] | None:
+    """(bits per sample, rows x cols x components) of a JPEG stream's frame header (SOFn);
+    None if there is none."""
     pos = 2  # after the start-of-image marker
     while pos + 5 <= len(stream) and stream[pos] == 0xFF:
         marker = stream[pos + 1]
         if marker == 0xFF:  # fill byte
             pos += 1
         elif marker in JPEG_FRAME_MARKERS:
-            return stream[pos + 4]
+            head = stream[pos + 4:pos + 10]
+            if len(head) < 6:
+                return None
+            rows, cols = int.from_bytes(head[1:3], "big"), int.from_bytes(head[3:5], "big")
+            return head[0], rows * cols * head[5]
         elif marker == JPEG_START_OF_SCAN[1]:
             return None
         else:
@@ -248,7 +295,25 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
+    check_no_infinity(p, data, meta.get("views"))
     return data, meta
+
+
+def check_no_infinity(path, data: np.ndarray, names=None, rows: int = 64) -> None:
+    """Refuse a float image holding +-Inf. In plenocli NaN marks a clipped or unknown pixel and
+    every stage skips it; an infinite value is never light, and passed on it spoils every sum it
+    enters (a developed photograph's exposure, an unmixed view). Checked band by band: no
+    full-size temporary."""
+    if data.dtype.kind != "f":
+        return
+    for k, page in enumerate(data.reshape(-1, *data.shape[-2:])):
+        if any(np.isinf(page[r:r + rows]).any() for r in range(0, page.shape[0], rows)):
+            where = np.argwhere(np.isinf(page))
+            name = names[k] if names and k < len(names) else k
+            raise InputError(f"{path}: view {name} holds {len(where)} infinite pixels (first at "
+                             f"row {where[0][0]}, col {where[0][1]}); plenocli reads NaN as a "
+                             "clipped or unknown pixel but never +-Inf: write NaN there, or "
+                             "make the file again")
 
 
 def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
