@@ -622,3 +622,53 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     config.write_text(text)
     result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
     assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))
+
+
+# ------------------- non-finite pixels: NaN is a clipped or unknown pixel, +-Inf is refused
+# wherever a stage reads views (tiffio.read_image), naming the view
+
+@pytest.fixture(scope="module")
+def infinite(tmp_path_factory, inputs) -> Path:
+    from plenocli.io.mixingfile import write_mixing
+    from plenocli.model.mixing import MixingField
+
+    d = tmp_path_factory.mktemp("infinite")
+    rng = np.random.default_rng(7)
+    clean = (100 + 50 * rng.random((2, 64, 64))).astype(np.float32)
+    bad = clean.copy()
+    bad[1, 5, 7] = np.inf
+    levels = {"black_level": [[0.0] * 4] * 2, "white_level": [1e4] * 2}
+    _plenocli_tiff(d / "clean.tif", clean, views=["A", "B"], cfa="RGGB", **levels)
+    _plenocli_tiff(d / "views.tif", bad, views=["A", "B"], cfa="RGGB", **levels)
+    _plenocli_tiff(d / "mono.tif", bad, views=["A", "B"], **levels)
+    _plenocli_tiff(d / "frame.tif", np.where(np.isinf(bad[1]), -np.inf, bad[0]))
+    _plain_tiff(d / "sensor.tif", bad[1])
+    nodes = np.array([[1.0, 0.2], [0.1, 1.0]])[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
+    field = MixingField(nodes, np.array([16.0, 48.0]), np.array([16.0, 48.0]), (64, 64),
+                        ("A", "B"), ("L",))
+    write_mixing(d / "mixing.tif", field, layout="mono", cfa=None, meta={})
+    frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
+    frames = frames.astype(np.float32)
+    frames[0, 10, 10] = np.inf
+    tifffile.imwrite(d / "rt_frames.tif", frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
+    return d
+
+
+@pytest.mark.parametrize("args", [
+    ["flat", "{d}/views.tif", "--white", "{d}/clean.tif", "-o", "{o}/x.tif"],
+    ["flat", "{d}/clean.tif", "--white", "{d}/views.tif", "-o", "{o}/x.tif"],
+    ["sai", "{d}/frame.tif", "-n", "2", "-o", "{o}/x.tif"],
+    ["refocus", "{d}/rt_frames.tif", "--grid", "{i}/rt/grid.yaml", "-o", "{o}/x.tif"],
+    ["crosstalk", "{d}/views.tif", "-o", "{o}/x.json"],
+    ["unmix", "{d}/mono.tif", "--mixing", "{d}/mixing.tif", "-o", "{o}/x.tif"],
+    ["stitch", "{d}/mono.tif", "-o", "{o}/x.tif"],
+    ["develop", "{d}/views.tif", "--view", "B", "--wb", "1,1,1", "--matrix", "none", "-o",
+     "{o}/x.jpg"],
+    ["calibrate", "{d}/frame.tif", "-o", "{o}/x.yaml"],
+    ["decode", "{d}/sensor.tif", "-o", "{o}/x.tif"],
+], ids=lambda a: a[0] + ("-white" if "{d}/clean.tif" == a[1] else ""))
+def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, inputs, infinite,
+                                                                      tmp_path):
+    result = run_bad(inputs, tmp_path / "out", [a.replace("{d}", str(infinite)) for a in args])
+    assert_one_line(result, 1, ("infinite",))

@@ -96,6 +96,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
                        white=white)
     _check_levels(path, meta["black_level"], meta["white_level"])
+    tiffio.check_no_infinity(path, frames, meta.get("views"))
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
     meta["camera"] = kind
