@@ -672,3 +672,54 @@ def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, input
                                                                       tmp_path):
     result = run_bad(inputs, tmp_path / "out", [a.replace("{d}", str(infinite)) for a in args])
     assert_one_line(result, 1, ("infinite",))
+
+
+# ------------------- camera metadata that is not what its field must be: dropped with a warning
+# where it is read (io/rawmeta via tiffio.read_image and decode), never an internal error
+
+@pytest.mark.parametrize("change,code,words", [
+    ({"colour": {"as_shot_wb": [0, 1, 1]}}, 1, ("as-shot white balance [0, 1, 1]", "--wb")),
+    ({"colour": {"as_shot_wb": [float("nan"), 1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": [-1, 1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": [1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": "abc"}}, 1, ("as-shot white balance 'abc'",)),
+    ({"colour": [1, 2]}, 1, ("colour metadata [1, 2] is not a mapping",)),
+    ({"exif": {"ISO": 10 ** 7}}, 0, ("EXIF ISO 10000000",)),
+    ({"exif": {"ISO": -5}}, 0, ("EXIF ISO -5",)),
+    ({"exif": {"DateTimeOriginal": "2024:01:01 12:00:0\u00e9"}}, 0, ("DateTimeOriginal",)),
+    ({"exif": {"Make": "Canon\u00e9"}}, 0, ("EXIF Make",)),
+    ({"exif": {"FNumber": float("inf")}}, 0, ("EXIF FNumber inf",)),
+    ({"exif": {"ExposureTime": "1/100"}}, 0, ("EXIF ExposureTime",)),
+    ({"exif": [1, 2]}, 0, ("EXIF metadata [1, 2] is not a mapping",)),
+], ids=lambda v: json.dumps(v, ensure_ascii=True)[:40] if isinstance(v, dict) else str(v))
+@pytest.mark.parametrize("suffix", [".jpg", ".tif"])
+def test_bad_camera_metadata_is_dropped_with_a_warning(change, code, words, suffix, inputs,
+                                                       tmp_path, caplog):
+    frames, meta = tiffio.read_image(inputs / "biased.tif")
+    good = {"colour": {"as_shot_wb": [2.0, 1.0, 1.5], "xyz_to_camera": np.eye(3).tolist()},
+            "exif": {"Model": "Test", "ISO": 100}}
+    edited = {**meta, **good, **change}
+    path = tmp_path / "edited.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **edited}))
+    out = tmp_path / "out"
+    out.mkdir()
+    result = CliRunner().invoke(cli, ["develop", str(path), "--view", "S", "-o",
+                                      str(out / f"x{suffix}")])
+    assert "internal error" not in result.stderr and "Traceback" not in result.output
+    assert result.exit_code == code, result.stderr
+    said = result.stderr + caplog.text  # the log goes to the handler of the first configure()
+    assert all(w in said for w in words), said
+    assert [p.name for p in out.iterdir()] == ([] if code else [f"x{suffix}"])
+
+
+def test_a_dng_with_a_zero_as_shot_neutral_decodes_without_a_white_balance(tmp_path, caplog):
+    from plenocli.io.dng import write_dng
+
+    raw = np.full((1, 16, 16), 1000, np.uint16)
+    write_dng(tmp_path / "x.dng", raw, cfa="RGGB", black_levels=[0], white_level=4095,
+              active_area=[0, 0, 16, 16], as_shot_neutral=[0.5, 1.0, 0.0])
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "x.dng"), "-o",
+                                      str(tmp_path / "f.tif")])
+    assert result.exit_code == 0 and "as-shot white balance" in result.stderr + caplog.text
+    assert tiffio.read_meta(tmp_path / "f.tif")["colour"]["as_shot_wb"] is None

@@ -14,6 +14,7 @@ Frames keep their over-scan (masked) areas; ``active_area`` and ``masked_areas``
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
@@ -23,6 +24,7 @@ import tifffile
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
+from plenocli.progress import log
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
 PHOTOMETRIC_CFA = 32803
@@ -100,9 +102,16 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
     meta["camera"] = kind
+    warn = functools.partial(_warn, path)
     if kind in ("canon-dp", "dng"):
-        meta["exif"] = rawmeta.camera_exif(path)
+        meta["exif"] = rawmeta.clean_exif(rawmeta.camera_exif(path), warn)
+    if meta.get("colour") is not None:
+        meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+def _warn(path, message: str) -> None:
+    log.warning("%s: %s", path, message)
 
 
 def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa, black,

@@ -33,6 +33,7 @@ from plenocli import __version__
 from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import atomic_path
 from plenocli.model.cfa import is_bayer
+from plenocli.progress import log
 
 FORMAT_KEY = "plenocli_format"
 FORMAT_VERSION = 1
@@ -296,7 +297,25 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
     check_no_infinity(p, data, meta.get("views"))
-    return data, meta
+    return data, _camera_metadata(p, meta)
+
+
+def _camera_metadata(path: Path, meta: dict) -> dict:
+    """``meta`` with its camera colour and EXIF fields checked (rawmeta): a field that is not
+    what it must be is dropped with a warning, so no stage trips on it."""
+    if meta.get("colour") is None and meta.get("exif") is None:
+        return meta
+    from plenocli.io import rawmeta
+
+    def warn(message: str) -> None:
+        log.warning("%s: %s", path, message)
+
+    meta = dict(meta)
+    if "colour" in meta:
+        meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
+    if "exif" in meta:
+        meta["exif"] = rawmeta.clean_exif(meta["exif"], warn)
+    return meta
 
 
 def check_no_infinity(path, data: np.ndarray, names=None, rows: int = 64) -> None:
