@@ -316,7 +316,7 @@ CASES = [
     ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1, ()),
     *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
       for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
-                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
+                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("infinite",)),
                           ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
                           ("huge.png", ("more than",))]],
     ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
@@ -723,3 +723,36 @@ def test_a_dng_with_a_zero_as_shot_neutral_decodes_without_a_white_balance(tmp_p
                                       str(tmp_path / "f.tif")])
     assert result.exit_code == 0 and "as-shot white balance" in result.stderr + caplog.text
     assert tiffio.read_meta(tmp_path / "f.tif")["colour"]["as_shot_wb"] is None
+
+
+# ------------------- side files checked against what they describe: lens rows of a grid
+
+def _lying_grid(path: Path, source: Path, change) -> None:
+    from plenocli.model.lensgrid import LensGrid
+
+    doc = yaml.safe_load(source.read_text())
+    grid = LensGrid.from_dict(doc["lens_grid"])
+    indices, centres = grid.lens_centres()  # the lattice's lenses, listed as calibrate does
+    rows = np.hstack([indices, centres])
+    doc["lens_grid"]["lenses"] = {"rows": change(grid, rows).tolist()}
+    path.write_text(yaml.safe_dump(doc))
+
+
+def _outside(grid, rows):
+    i, j = rows[:, 0].max() + 3, rows[:, 1].max() + 3   # three lenses beyond the image
+    return np.vstack([rows, [i, j, *grid.lattice_xy(i, j)]])
+
+
+@pytest.mark.parametrize("name,change,words", [
+    ("shifted", lambda g, r: r + [0, 0, 0.6 * g.pitch_px, 0], ("from its lattice place",)),
+    ("indices-off-by-one", lambda g, r: r + [1, 0, 0, 0], ("from its lattice place",)),
+    ("outside", _outside, ("outside the",)),
+])
+@pytest.mark.parametrize("stage", ["refocus", "sai"])
+def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words, stage, inputs,
+                                                            tmp_path):
+    grid = tmp_path / "grid.yaml"
+    _lying_grid(grid, inputs / "rt" / "grid.yaml", change)
+    args = [stage, str(inputs / "rt" / "frames.tif"), "--grid", str(grid), "-o", "{o}/x.tif"]
+    result = run_bad(inputs, tmp_path / "out", args + (["-n", "2"] if stage == "sai" else []))
+    assert_one_line(result, 1, words)
