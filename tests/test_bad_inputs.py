@@ -756,3 +756,45 @@ def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words
     args = [stage, str(inputs / "rt" / "frames.tif"), "--grid", str(grid), "-o", "{o}/x.tif"]
     result = run_bad(inputs, tmp_path / "out", args + (["-n", "2"] if stage == "sai" else []))
     assert_one_line(result, 1, words)
+
+
+# ------------------- side files checked against what they describe: mixing files
+
+def _mixing_variant(path: Path, change: str) -> None:
+    from plenocli.io.mixingfile import write_mixing
+    from plenocli.model.mixing import MixingField
+
+    m = np.array([[1.0, 0.2], [0.1, 1.0]])
+    rows = cols = np.array([16.0, 48.0])
+    views = ("A", "B")
+    if change == "scaled-1e30":
+        m = m * 1e30
+    elif change == "diagonal-negative":
+        m = m * [[-1, 1], [1, 1]]
+    elif change == "diagonal-zero":
+        m = m * [[0, 1], [1, 1]]
+    elif change == "negative-share":
+        m = m - [[0, 0.7], [0, 0]]
+    elif change == "nodes-outside":
+        rows = np.array([16.0, 4800.0])
+    elif change == "names-not-text":
+        views = (1, 2)
+    nodes = m[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
+    field = MixingField(nodes, rows, cols, (64, 64), views, ("L",))
+    write_mixing(path, field, layout="mono", cfa=None, meta={})
+
+
+@pytest.mark.parametrize("change,words", [
+    ("scaled-1e30", ("1e+30", "diagonal")), ("diagonal-negative", ("diagonal",)),
+    ("diagonal-zero", ("diagonal",)), ("negative-share", ("negative light",)),
+    ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
+])
+def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    _plenocli_tiff(side / "views.tif", clean, views=["A", "B"])
+    _mixing_variant(side / "mixing.tif", change)
+    args = ["unmix", str(side / "views.tif"), "--mixing", str(side / "mixing.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
