@@ -798,3 +798,27 @@ def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp
     args = ["unmix", str(side / "views.tif"), "--mixing", str(side / "mixing.tif"), "-o",
             "{o}/x.tif"]
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+# ------------------- side files checked against what they describe: saved gain maps
+
+@pytest.mark.parametrize("change,words", [
+    (lambda g: g * 1e30, ("outside (0, 20]",)),
+    (lambda g: g * 0.5, ("smallest gain is 0.5",)),
+    (lambda g: -g, ("outside",)),
+    (lambda g: g * 1.3, ("not 1 as reference max",)),
+])
+def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    made = CliRunner().invoke(cli, ["flat", str(inputs / "biased.tif"), "--white",
+                                    str(inputs / "biased.tif"), "--save-gain",
+                                    str(side / "gain.tif"), "-o", str(side / "flat.tif")])
+    assert made.exit_code == 0, made.stderr
+    gains, meta = tiffio.read_image(side / "gain.tif")
+    tifffile.imwrite(side / "gain.tif", change(gains).astype(np.float32),
+                     photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
+    args = ["flat", str(inputs / "biased.tif"), "--gain", str(side / "gain.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
