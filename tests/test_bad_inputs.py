@@ -822,3 +822,15 @@ def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
     args = ["flat", str(inputs / "biased.tif"), "--gain", str(side / "gain.tif"), "-o",
             "{o}/x.tif"]
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+@pytest.mark.parametrize("names", [[1, 2], ["", "B"], [None, "B"], [["A"], "B"]])
+@pytest.mark.parametrize("stage", ["stitch", "crosstalk", "develop"])
+def test_view_names_that_are_not_text_are_refused(names, stage, inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    _plenocli_tiff(side / "views.tif", clean, views=names, cfa="RGGB")
+    out = "{o}/x.json" if stage == "crosstalk" else "{o}/x.tif"
+    result = run_bad(inputs, tmp_path / "out", [stage, str(side / "views.tif"), "-o", out])
+    assert_one_line(result, 1, ("non-empty text",))

@@ -342,6 +342,7 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     if names is not None and (not isinstance(names, list) or len(names) != shape[0]):
         raise InputError(f"{path}: metadata names {names!r} for {shape[0]} pages; the file was "
                          "edited or damaged: write it again")
+    check_view_names(path, names)
     if names is not None and len(set(map(str, names))) != len(names):
         twice = next(n for n in names if names.count(n) > 1)
         raise InputError(f"{path}: metadata names view {twice!r} twice; the file was edited or "
@@ -359,6 +360,14 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
                                    and all(isinstance(v, int) for v in origin)):
         raise InputError(f"{path}: origin {origin!r} is not two whole numbers [row, col]")
+
+
+def check_view_names(path, names) -> None:
+    """View names, when given, are a list of non-empty text."""
+    if names is not None and not (isinstance(names, list)
+                                  and all(isinstance(n, str) and n.strip() for n in names)):
+        raise InputError(f"{path}: metadata names {names!r}: view names must be non-empty "
+                         "text; the file was edited or damaged: write it again")
 
 
 def check_levels(path, meta: dict, views: int) -> None:
@@ -423,7 +432,9 @@ def read_meta(path: str | os.PathLike) -> dict:
             description = tif.pages[0].description if tif.pages else ""
     except (*READ_ERRORS, InputError):
         return {}
-    return plenocli_meta(path, description)
+    meta = plenocli_meta(path, description)
+    check_view_names(path, meta.get("views"))
+    return meta
 
 
 def plenocli_meta(path, description: str | None) -> dict:
