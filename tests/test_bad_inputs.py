@@ -834,3 +834,15 @@ def test_view_names_that_are_not_text_are_refused(names, stage, inputs, infinite
     out = "{o}/x.json" if stage == "crosstalk" else "{o}/x.tif"
     result = run_bad(inputs, tmp_path / "out", [stage, str(side / "views.tif"), "-o", out])
     assert_one_line(result, 1, ("non-empty text",))
+
+
+@pytest.mark.parametrize("change,words", [
+    ({"origin": [-8, 0]}, ("origin",)), ({"white_level": [100, 100]}, ("not above its black",)),
+])
+def test_frames_metadata_that_cannot_be_true_is_refused(change, words, inputs, tmp_path):
+    frames, meta = tiffio.read_image(inputs / "frames.tif")
+    path = tmp_path / "edited.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
+    result = run_bad(inputs, tmp_path / "out", ["bias", str(path), "-o", "{o}/b.tif"])
+    assert_one_line(result, 1, words)

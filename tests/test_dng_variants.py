@@ -408,3 +408,20 @@ def test_packed_12_bit_uncompressed_raw_decodes_exactly(tmp_path):
     result = _decode(path, tmp_path / "frames.tif")
     assert result.exit_code == 0, result.stderr
     np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"), frame)
+
+
+def test_frames_of_another_cfa_or_area_are_not_stacked(tmp_path):
+    """Every raw IFD's layout is read: frame 1 with another CFA phase would be processed with
+    frame 0's."""
+    from plenocli.io.dng import write_dng
+
+    path = tmp_path / "two.dng"
+    frames = np.stack([_frame(), _frame(seed=1)])
+    write_dng(path, frames, cfa="RGGB", black_levels=[0, 0], white_level=16383,
+              active_area=[0, 0, ROWS, COLS])
+    with tifffile.TiffFile(path) as tif:
+        offset = tif.pages[1].tags[33422].valueoffset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + 4] = bytes([1, 0, 2, 1])  # GRBG
+    path.write_bytes(bytes(data))
+    _assert_refused(path, tmp_path, "raw IFD 1 has another CFA pattern")

@@ -248,15 +248,20 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                 whites.append(white)
                 desc = page.description.strip() if page.description else ""
                 names.append(desc if desc and len(desc) <= 16 and " " not in desc else f"frame{k}")
-            first = raws[0]
             shape = frames[0].shape
             if any(f.shape != shape for f in frames):
                 raise InputError(f"{path}: raw IFDs of different sizes "
                                  f"{sorted({f.shape for f in frames})}; cannot stack them")
-            cfa = (dngtags.cfa_pattern(path, 0, first)
-                   if first.photometric == PHOTOMETRIC_CFA else None)
-            active, masked = dngtags.areas(path, 0, first, shape)
-            colour = rawmeta.dng_colour(first, tif.pages[0])
+            layouts = [((dngtags.cfa_pattern(path, k, page)
+                         if page.photometric == PHOTOMETRIC_CFA else None),
+                        dngtags.areas(path, k, page, shape)) for k, page in enumerate(raws)]
+            if any(layout != layouts[0] for layout in layouts):
+                k = next(k for k, layout in enumerate(layouts) if layout != layouts[0])
+                raise InputError(f"{path}: raw IFD {k} has another CFA pattern or active/masked "
+                                 f"area than raw IFD 0 ({layouts[k]} vs {layouts[0]}); plenocli "
+                                 "stacks frames of one sensor layout")
+            cfa, (active, masked) = layouts[0]
+            colour = rawmeta.dng_colour(raws[0], tif.pages[0])
     except tiffio.READ_ERRORS as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     if len(set(names)) != len(names):

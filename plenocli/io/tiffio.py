@@ -358,8 +358,10 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
                              "was edited or damaged: decode the capture again")
     origin = meta.get("origin")
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
-                                   and all(isinstance(v, int) for v in origin)):
-        raise InputError(f"{path}: origin {origin!r} is not two whole numbers [row, col]")
+                                   and all(isinstance(v, int) and not isinstance(v, bool)
+                                           and v >= 0 for v in origin)):
+        raise InputError(f"{path}: origin {origin!r} is not two whole numbers >= 0 [row, col] "
+                         "(sensor coordinates)")
 
 
 def check_view_names(path, names) -> None:
@@ -389,6 +391,11 @@ def check_levels(path, meta: dict, views: int) -> None:
             and all(_number(w) and w == w for w in whites)):  # w == w: not NaN
         raise InputError(f"{path}: white_level {whites!r} is not one level per view "
                          f"({views} views); the file was edited or damaged")
+    if blacks is not None and whites is not None:
+        for k, (black, white) in enumerate(zip(blacks, whites, strict=True)):
+            if not white > max(black):
+                raise InputError(f"{path}: view {k}: white level {white:g} is not above its "
+                                 f"black level {max(black):g}; the file was edited or damaged")
     for key, kind in (("provenance", dict), ("history", list)):
         if meta.get(key) is not None and not isinstance(meta[key], kind):
             raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
