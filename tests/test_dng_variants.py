@@ -322,10 +322,21 @@ def _float_with(value):
 LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the message)
     "tiles of 65536 x 65536": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
                                lambda p: (_patch_raw_tag(p, 322, 65536),
-                                          _patch_raw_tag(p, 323, 65536)), "TileWidth 65536"),
+                                          _patch_raw_tag(p, 323, 65536)), "tiles of 65536"),
     "JPEG tiles coded at another size": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
-                                         lambda p: _patch_raw_tag(p, 322, 64),
+                                         lambda p: _patch_raw_tag(p, 322, 33),
                                          "codes 1024 samples"),
+    "tiles of another width, as many": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                                        lambda p: _patch_raw_tag(p, 322, 33),
+                                        "decodes to 2048 bytes"),
+    "image width that needs fewer tiles": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                                           lambda p: _patch_raw_tag(p, 256, 1), "12 tiles"),
+    "strip width changed": (_frame(), dict(rowsperstrip=16, compression="lzw"),
+                            lambda p: _patch_raw_tag(p, 256, 93), "decodes to"),
+    "strip in the header": (_frame(), {}, lambda p: _patch_raw_tag(p, 273, 2),
+                            "lies in the file's header"),
+    "tile length 0": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                      lambda p: _patch_raw_tag(p, 323, 0), "tile size of 32 x 0"),
     "CFAPattern colour 5 (yellow)": (_frame(), {}, lambda p: _patch_raw_bytes(
         p, 33422, bytes([0, 5, 1, 2])), "CFAPattern [0, 5, 1, 2]"),
     "CFAPattern colour 3 (cyan)": (_frame(), {}, lambda p: _patch_raw_bytes(
