@@ -838,6 +838,10 @@ def test_view_names_that_are_not_text_are_refused(names, stage, inputs, infinite
 
 @pytest.mark.parametrize("change,words", [
     ({"origin": [-8, 0]}, ("origin",)), ({"white_level": [100, 100]}, ("not above its black",)),
+    ({"white_level": [15000.0, 1e30]}, ("beyond what its uint16",)),
+    ({"masked_areas": -1}, ("masked area list -1",)),
+    ({"masked_areas": [None] * 4}, ("masked area None",)),
+    ({"view_colours": float("nan")}, ("view_colours",)), ({"views": None}, ("names None",)),
 ])
 def test_frames_metadata_that_cannot_be_true_is_refused(change, words, inputs, tmp_path):
     frames, meta = tiffio.read_image(inputs / "frames.tif")

@@ -158,6 +158,11 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
+    whites = meta.get("white_level")
+    if whites and data.dtype.kind in "ui" and max(whites) > np.iinfo(data.dtype).max:
+        raise InputError(f"{p}: white level {max(whites):g} is beyond what its {data.dtype} "
+                         "samples can reach, so clipped pixels would pass as light; the file was "
+                         "edited or damaged: decode the capture again")
     check_no_infinity(p, data, meta.get("views"))
     return data, _camera_metadata(p, meta)
 
@@ -201,7 +206,8 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     """The geometry in ``meta`` must fit (views, rows, cols) ``shape``: view names one per page,
     ``active_area`` and each masked area inside the image, ``origin`` two whole numbers."""
     names = meta.get("views")
-    if names is not None and (not isinstance(names, list) or len(names) != shape[0]):
+    if (names is None and "views" in meta) or (
+            names is not None and (not isinstance(names, list) or len(names) != shape[0])):
         raise InputError(f"{path}: metadata names {names!r} for {shape[0]} pages; the file was "
                          "edited or damaged: write it again")
     check_view_names(path, names)
@@ -209,10 +215,14 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
         twice = next(n for n in names if names.count(n) > 1)
         raise InputError(f"{path}: metadata names view {twice!r} twice; the file was edited or "
                          "damaged: write it again")
+    masked = meta.get("masked_areas")
+    if masked is not None and not isinstance(masked, list):
+        raise InputError(f"{path}: masked area list {masked!r} is not a list of [top, left, "
+                         "bottom, right] rectangles; the file was edited or damaged")
     areas = [("active_area", meta.get("active_area"))]
-    areas += [("masked area", a) for a in (meta.get("masked_areas") or [])]
+    areas += [("masked area", a) for a in (masked or [])]
     for what, area in areas:
-        if area is None:
+        if area is None and what == "active_area":
             continue
         if not _inside(area, shape[-2:]):
             raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
@@ -258,6 +268,11 @@ def check_levels(path, meta: dict, views: int) -> None:
             if not white > max(black):
                 raise InputError(f"{path}: view {k}: white level {white:g} is not above its "
                                  f"black level {max(black):g}; the file was edited or damaged")
+    colours = meta.get("view_colours")
+    if colours is not None and not (isinstance(colours, list) and len(colours) == views and all(
+            c is None or (isinstance(c, str) and is_bayer(c)) for c in colours)):
+        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern (or null) "
+                         f"per view ({views} views); the file was edited or damaged")
     for key, kind in (("provenance", dict), ("history", list)):
         if meta.get(key) is not None and not isinstance(meta[key], kind):
             raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
