@@ -850,3 +850,22 @@ def test_frames_metadata_that_cannot_be_true_is_refused(change, words, inputs, t
                      description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
     result = run_bad(inputs, tmp_path / "out", ["bias", str(path), "-o", "{o}/b.tif"])
     assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("change,words", [
+    ({"tcp": float("nan")}, ("tcp",)),
+    ({"lens_border": -3.0}, ("lens_border",)),
+    ({"lens_types": [{"id": 0, "offset": [0.0, 0.0], "depth_range": [4.0, 1.0]}]},
+     ("depth_range",)),
+    ({"lens_types": [{"id": 1, "offset": [0.0, 0.0], "depth_range": [1.0, 3.0]}] * 2},
+     ("lens_type ids",)),
+    ({"sub_grid_base": [float("inf"), 0.0]}, ("sub_grid_base",)),
+])
+def test_raytrix_fields_beside_the_lattice_are_checked(change, words, inputs, tmp_path):
+    from plenocli.io.raytrix import read_calib
+
+    calib = {**read_calib(inputs / "rt" / "calib.xml"), **change}
+    (tmp_path / "calib.xml").write_text(format_calib(calib))
+    args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "calib.xml"),
+            "-o", "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
