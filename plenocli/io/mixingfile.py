@@ -93,9 +93,11 @@ def _check_names(info: dict) -> None:
     if not isinstance(colours, list) or (colours != expected if expected else not (
             colours and set(colours) <= {"R", "G", "B"} and len(set(colours)) == len(colours))):
         raise ValueError(f"colours {colours!r} do not fit layout {info.get('layout')!r}")
-    if info.get("layout") == "cfa" and not (isinstance(info.get("cfa"), str)
-                                            and is_bayer(info["cfa"])):
-        raise ValueError(f"cfa {info.get('cfa')!r} is not a Bayer pattern")
+    cfa = info.get("cfa")
+    if (info.get("layout") == "cfa") != (cfa is not None) or not (
+            cfa is None or (isinstance(cfa, str) and is_bayer(cfa))):
+        raise ValueError(f"cfa {cfa!r} does not fit layout {info.get('layout')!r} (a Bayer "
+                         "pattern for cfa, null otherwise)")
 
 
 def _frame_shape(values) -> tuple[int, int]:
