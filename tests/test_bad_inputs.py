@@ -869,3 +869,15 @@ def test_raytrix_fields_beside_the_lattice_are_checked(change, words, inputs, tm
     args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "calib.xml"),
             "-o", "{o}/x.tif"]
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+def test_a_result_that_overflows_to_infinity_is_not_written(inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, meta = tiffio.read_image(infinite / "clean.tif")
+    clean[1, 10, 10] = 3.4e38  # finite, but any gain > 1 overflows float32
+    _plenocli_tiff(side / "views.tif", clean, **{k: meta[k] for k in
+                                                ("views", "cfa", "black_level", "white_level")})
+    args = ["flat", str(side / "views.tif"), "--white", str(infinite / "clean.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("overflowed", "view B"))

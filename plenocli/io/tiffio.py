@@ -79,6 +79,13 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                                  "NaN or infinite: every input pixel clipped, masked or outside "
                                  "the grid); nothing was written: check the inputs with "
                                  "plenocli info")
+        found = _first_infinite(data)
+        if found:  # +-Inf is never written either: an overflow, not light
+            k, count, row, col = found
+            raise InputError(f"{path}: view {names[k]} of the result holds {count} infinite "
+                             f"pixels (first at row {row}, col {col}): it overflowed float32, "
+                             "the inputs hold values far beyond any sensor level; nothing was "
+                             "written")
     description = json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
     with atomic_path(path, protect=protect) as tmp:
         with tifffile.TiffWriter(tmp) as tw:
@@ -185,21 +192,29 @@ def _camera_metadata(path: Path, meta: dict) -> dict:
     return meta
 
 
-def check_no_infinity(path, data: np.ndarray, names=None, rows: int = 64) -> None:
+def check_no_infinity(path, data: np.ndarray, names=None) -> None:
     """Refuse a float image holding +-Inf. In plenocli NaN marks a clipped or unknown pixel and
     every stage skips it; an infinite value is never light, and passed on it spoils every sum it
-    enters (a developed photograph's exposure, an unmixed view). Checked band by band: no
-    full-size temporary."""
+    enters (a developed photograph's exposure, an unmixed view)."""
+    found = _first_infinite(data)
+    if found:
+        k, count, row, col = found
+        name = names[k] if names and k < len(names) else k
+        raise InputError(f"{path}: view {name} holds {count} infinite pixels (first at row "
+                         f"{row}, col {col}); plenocli reads NaN as a clipped or unknown pixel "
+                         "but never +-Inf: write NaN there, or make the file again")
+
+
+def _first_infinite(data: np.ndarray, rows: int = 64) -> tuple[int, int, int, int] | None:
+    """(page, how many, row, col) of the first page holding +-Inf, or None. Band by band: no
+    full-size temporary for the common, finite case."""
     if data.dtype.kind != "f":
-        return
+        return None
     for k, page in enumerate(data.reshape(-1, *data.shape[-2:])):
         if any(np.isinf(page[r:r + rows]).any() for r in range(0, page.shape[0], rows)):
             where = np.argwhere(np.isinf(page))
-            name = names[k] if names and k < len(names) else k
-            raise InputError(f"{path}: view {name} holds {len(where)} infinite pixels (first at "
-                             f"row {where[0][0]}, col {where[0][1]}); plenocli reads NaN as a "
-                             "clipped or unknown pixel but never +-Inf: write NaN there, or "
-                             "make the file again")
+            return k, len(where), int(where[0][0]), int(where[0][1])
+    return None
 
 
 def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
