@@ -301,6 +301,7 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
+                    tiffio.check_light_levels(p, page)
                 data = tif.asarray()
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "

@@ -34,6 +34,7 @@ from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import atomic_path
 from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used via tiffio)
     MAX_PAGE_PIXELS,
+    check_light_levels,
     check_page,
     check_real_dtype,
     check_segments,
@@ -155,6 +156,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             series = tif.series[0] if len(tif.series) == 1 else None
             for page in tif.pages:
                 check_segments(p, page)
+                check_light_levels(p, page)
             if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:

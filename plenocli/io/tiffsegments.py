@@ -25,6 +25,7 @@ JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}  # SOF0..
 # Byte codecs whose output size tifffile pads or crops to the segment's (LZW, Deflate, PackBits,
 # LZMA, Zstandard): the decoded size of a segment is checked against the header's.
 BYTE_CODECS = frozenset({5, 8, 32946, 32773, 34925, 50000})
+NOT_LEVELS = {0: "MinIsWhite (inverted)", 3: "palette (colour-index)"}  # Photometric values
 
 
 def check_page(path: Path, page) -> None:
@@ -229,3 +230,12 @@ def _packed_rows(page, samples: int) -> int:
     per_row = int(page.imagewidth) * (1 if int(page.planarconfig) == 2
                                       else int(page.samplesperpixel))
     return samples // per_row * -(-per_row * int(page.bitspersample) // 8)
+
+
+def check_light_levels(path, page) -> None:
+    """A page whose samples are not light levels (inverted grey, palette indices) is refused:
+    plenocli would take them for light."""
+    kind = NOT_LEVELS.get(int(page.photometric))
+    if kind is not None:
+        raise InputError(f"{path}: a {kind} TIFF holds no light levels; save the image as a "
+                         "grey (MinIsBlack) or RGB TIFF")
