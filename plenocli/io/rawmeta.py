@@ -50,6 +50,7 @@ def camera_exif(path) -> dict:
         with tifffile.TiffFile(path) as tif:
             tags = tif.pages[0].tags
             exif = tags["ExifTag"].value if "ExifTag" in tags else {}
+            exif = exif if isinstance(exif, dict) else {}  # a damaged EXIF IFD: none
             for name in ("Make", "Model"):
                 if name in tags:
                     out[name] = str(tags[name].value).strip("\0 ")
