@@ -436,3 +436,42 @@ def test_frames_of_another_cfa_or_area_are_not_stacked(tmp_path):
     data[offset:offset + 4] = bytes([1, 0, 2, 1])  # GRBG
     path.write_bytes(bytes(data))
     _assert_refused(path, tmp_path, "raw IFD 1 has another CFA pattern")
+
+
+def _two_frames(path: Path) -> None:
+    from plenocli.io.dng import write_dng
+
+    write_dng(path, np.stack([_frame(), _frame(seed=1)]), cfa="RGGB", black_levels=[0, 0],
+              white_level=16383, active_area=[0, 0, ROWS, COLS])
+
+
+def _patch_page_tag(path: Path, page: int, code: int, value: int) -> None:
+    with tifffile.TiffFile(path) as tif:
+        tag = tif.pages[page].tags[code]
+        fmt = tif.byteorder + {3: "H", 4: "I"}[int(tag.dtype)]
+        offset = tag.valueoffset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + struct.calcsize(fmt)] = struct.pack(fmt, value)
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("page,code,value,words", [
+    (0, 262, 1, "IFD 0 has NewSubFileType 0 and Photometric 1"),   # main image, not raw
+    (0, 254, 1, "raw of full size flagged as a reduced preview"),
+    (1, 254, 0xFFFFFFFF, "NewSubFileType 4294967295"),
+])
+def test_a_frame_dropped_by_its_ifd_flags_is_refused(page, code, value, words, tmp_path):
+    """Two frames whose header damage would silently give one."""
+    path = tmp_path / "two.dng"
+    _two_frames(path)
+    _patch_page_tag(path, page, code, value)
+    _assert_refused(path, tmp_path, words)
+
+
+def test_frames_that_share_bytes_are_refused(tmp_path):
+    path = tmp_path / "two.dng"
+    _two_frames(path)
+    with tifffile.TiffFile(path) as tif:
+        start = int(tif.pages[0].dataoffsets[0])
+    _patch_page_tag(path, 0, 273, start + 4)  # frame 0 read 4 bytes late: into frame 1
+    _assert_refused(path, tmp_path, "share the bytes")

@@ -20,6 +20,8 @@ ACTIVE_AREA, MASKED_AREAS = 50829, 50830
 PLANE_COLOURS = {0: "R", 1: "G", 2: "B"}  # CFAPlaneColor / CFAPattern codes (3.. are C, M, Y..)
 RATIONAL_TYPES = (5, 10)  # RATIONAL, SRATIONAL: numerator, denominator pairs
 SHORT = 3
+PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW = 32803, 34892
+MAIN_IMAGE, REDUCED = 0, 1  # NewSubFileType: the full-resolution image, a preview
 # Tiles are a few hundred pixels (DNG converters write 256); a side larger than the image
 # (rounded up to the 16 TIFF asks for) is allowed up to this, beyond it the decoder would
 # allocate for pixels that do not exist.
@@ -52,6 +54,41 @@ def numbers(path, k: int, page, code: int, name: str) -> np.ndarray | None:
         raise InputError(f"{path}: raw IFD {k}: {name} {values.tolist()} is not finite; the DNG "
                          "is damaged: copy or convert it again")
     return values
+
+
+def raw_pages(path, pages: list) -> list:
+    """The raw IFDs (NewSubFileType 0, CFA or LinearRaw) of a DNG's IFDs and SubIFDs. A main
+    image that is not raw, a raw IFD flagged with NewSubFileType bits DNG does not define for
+    it, or raw IFDs that share bytes (a wrong offset reads another frame) are damage."""
+    raws = []
+    for k, page in enumerate(pages):
+        kind, raw = int(page.subfiletype), int(page.photometric) in (PHOTOMETRIC_CFA,
+                                                                     PHOTOMETRIC_LINEAR_RAW)
+        if (kind == MAIN_IMAGE and not raw) or (raw and kind not in (MAIN_IMAGE, REDUCED)):
+            raise InputError(f"{path}: IFD {k} has NewSubFileType {kind} and Photometric "
+                             f"{int(page.photometric)}; a DNG's full-resolution images are CFA "
+                             "or LinearRaw raws: the DNG is damaged")
+        if raw and kind == MAIN_IMAGE:
+            raws.append(page)
+    if not raws:
+        raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
+    full = {tuple(page.shape) for page in raws}
+    for k, page in enumerate(pages):
+        if int(page.subfiletype) == REDUCED and tuple(page.shape) in full and int(
+                page.photometric) in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW):
+            raise InputError(f"{path}: IFD {k} is a raw of full size flagged as a reduced "
+                             "preview (NewSubFileType 1); the DNG is damaged")
+    spans = sorted((int(o), int(o) + int(c), k) for k, page in enumerate(raws)
+                   for o, c in zip(page.dataoffsets, page.databytecounts, strict=True))
+    spans += [(page.offset, page.offset + 2 + 12 * len(page.tags), k)
+              for k, page in enumerate(raws)]  # each IFD's entries (classic TIFF sizes)
+    spans.sort()
+    for (_, end, k), (start, _, m) in zip(spans, spans[1:], strict=False):
+        if end > start and k != m:
+            raise InputError(f"{path}: raw IFDs {min(k, m)} and {max(k, m)} share the bytes at "
+                             f"{start} (a wrong offset or byte count); the DNG is damaged: "
+                             "copy or convert it again")
+    return raws
 
 
 def check_layout(path, k: int, page) -> None:

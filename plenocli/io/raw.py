@@ -235,11 +235,7 @@ def _tag(page, code, default=None):
 def _decode_dng(path) -> tuple[np.ndarray, dict]:
     try:
         with tiffio.open_tiff(path) as tif:
-            raws = [pg for pg in _raw_pages(tif)
-                    if pg.photometric in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
-                    and not (int(pg.subfiletype) & 1)]
-            if not raws:
-                raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
+            raws = dngtags.raw_pages(path, list(_raw_pages(tif)))
             frames, blacks, whites, names = [], [], [], []
             for k, page in enumerate(raws):
                 data, black, white = _dng_frame(path, k, page)
