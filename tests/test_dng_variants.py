@@ -280,7 +280,7 @@ def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):
         tiffio.read_image(path)
 
 
-@pytest.mark.parametrize("entries", [256, 100])
+@pytest.mark.parametrize("entries", [256, 100, 65536])
 def test_linearization_table_maps_the_stored_codes(entries, tmp_path):
     """Lossy and some camera DNGs store codes: the frame is the table's levels (DNG spec), a
     code beyond the table taking its last entry."""

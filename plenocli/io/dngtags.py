@@ -198,7 +198,8 @@ def linearized(path, k: int, page, data: np.ndarray) -> tuple[np.ndarray, bool]:
                          f"(TIFF type {int(tag.dtype)}) for {data.dtype} samples; the DNG spec "
                          "asks for 1 to 65536 SHORT levels mapping unsigned codes: the DNG is "
                          "damaged, or convert it without the table")
-    return table.astype(np.uint16)[np.minimum(data, table.size - 1)], True
+    last = min(table.size - 1, int(np.iinfo(data.dtype).max))  # a table past the samples' range
+    return table.astype(np.uint16)[np.minimum(data, data.dtype.type(last))], True
 
 
 def check_samples(path, k: int, data: np.ndarray) -> None:
