@@ -132,6 +132,35 @@ def white_gains(whites: np.ndarray, *, names=None, cfa: str | None = None,
     return gains
 
 
+def check_gains(gains: np.ndarray, *, cfa: str | None, reference: str, floor: float,
+                names=None) -> None:
+    """ValueError unless ``gains`` (views, rows, cols) is what ``white_gains`` makes with these
+    options: NaN (masked) or finite gains in (0, 1 / floor], and per view and colour plane a
+    gain of exactly 1 where the white was brightest (``reference="max"``) or gains on both
+    sides of 1 (``"percentile"``). A gain file edited, scaled or made for other options would
+    otherwise change every corrected pixel."""
+    if reference not in REFERENCES or not 0 <= floor < 1:
+        raise ValueError(f"the gain was made with reference {reference!r} and floor {floor!r}, "
+                         "which flat does not make")
+    step = 2 if cfa else 1
+    top = np.float32(1 / floor) if floor else np.inf
+    for k, view in enumerate(np.asarray(gains)):
+        name = names[k] if names is not None and k < len(names) else k
+        for r, c in positions(cfa):
+            plane = view[r::step, c::step]
+            finite = plane[np.isfinite(plane)]
+            if finite.size == 0:
+                raise ValueError(f"view {name}: the gain has no valid pixel")
+            low, high = float(finite.min()), float(finite.max())
+            if low <= 0 or high > top * (1 + 1e-6):
+                raise ValueError(f"view {name}: gains from {low:.4g} to {high:.4g}, outside "
+                                 f"(0, {float(top):.4g}] that floor {floor:g} allows")
+            if (abs(low - 1) > 1e-5 if reference == "max" else not low <= 1 <= high):
+                raise ValueError(f"view {name}: the smallest gain is {low:.6g}, not 1 as "
+                                 f"reference {reference} gives (where the white is "
+                                 "brightest): the gain was scaled or edited")
+
+
 def apply_gain(frame: np.ndarray, gain: np.ndarray) -> np.ndarray:
     """``frame * gain`` as float32 (any shape, e.g. a stack of views and their gains); NaN
     where the gain is masked."""

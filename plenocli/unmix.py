@@ -287,6 +287,8 @@ def unmix(views: np.ndarray, mixing: MixingField, *, colour_pattern=None,
     if obs.dtype not in (np.float32, np.float64):
         obs = obs.astype(np.float32)
     nodes = np.ascontiguousarray(mixing.nodes, np.float64)
+    if not np.isfinite(nodes).all():  # a NaN node would spread NaN over its whole tile
+        raise ValueError("the mixing field holds non-finite values")
     r0, r1, wr = _axis_weights(np.asarray(mixing.node_rows, np.float64), obs.shape[1])
     c0, c1, wc = _axis_weights(np.asarray(mixing.node_cols, np.float64), obs.shape[2])
     out = np.empty(obs.shape, np.float32)

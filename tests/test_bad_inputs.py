@@ -320,7 +320,7 @@ CASES = [
      ("empty.tif", "not a raw capture")),
     *[(f"decode-{name}", ["decode", f"{{i}}/{name}", "-o", "{o}/d.tif"], 1, words)
       for name, words in [("trunc.png", ("unreadable",)), ("trunc.bmp", ("unreadable",)),
-                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("no valid",)),
+                          ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("infinite",)),
                           ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
                           ("huge.png", ("more than",))]],
     ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
@@ -782,3 +782,276 @@ def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path
     too_long = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
                                         str(tmp_path / ("c" * 252 + ".tif"))])
     assert_one_line(too_long, 1, ("too long",))
+
+# ------------------- non-finite pixels: NaN is a clipped or unknown pixel, +-Inf is refused
+# wherever a stage reads views (tiffio.read_image), naming the view
+
+@pytest.fixture(scope="module")
+def infinite(tmp_path_factory, inputs) -> Path:
+    from plenocli.io.mixingfile import write_mixing
+    from plenocli.model.mixing import MixingField
+
+    d = tmp_path_factory.mktemp("infinite")
+    rng = np.random.default_rng(7)
+    clean = (100 + 50 * rng.random((2, 64, 64))).astype(np.float32)
+    bad = clean.copy()
+    bad[1, 5, 7] = np.inf
+    levels = {"black_level": [[0.0] * 4] * 2, "white_level": [1e4] * 2}
+    _plenocli_tiff(d / "clean.tif", clean, views=["A", "B"], cfa="RGGB", **levels)
+    _plenocli_tiff(d / "views.tif", bad, views=["A", "B"], cfa="RGGB", **levels)
+    _plenocli_tiff(d / "mono.tif", bad, views=["A", "B"], **levels)
+    _plenocli_tiff(d / "frame.tif", np.where(np.isinf(bad[1]), -np.inf, bad[0]))
+    _plain_tiff(d / "sensor.tif", bad[1])
+    nodes = np.array([[1.0, 0.2], [0.1, 1.0]])[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
+    field = MixingField(nodes, np.array([16.0, 48.0]), np.array([16.0, 48.0]), (64, 64),
+                        ("A", "B"), ("L",))
+    write_mixing(d / "mixing.tif", field, layout="mono", cfa=None, meta={})
+    frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
+    frames = frames.astype(np.float32)
+    frames[0, 10, 10] = np.inf
+    tifffile.imwrite(d / "rt_frames.tif", frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
+    return d
+
+
+@pytest.mark.parametrize("args", [
+    ["flat", "{d}/views.tif", "--white", "{d}/clean.tif", "-o", "{o}/x.tif"],
+    ["flat", "{d}/clean.tif", "--white", "{d}/views.tif", "-o", "{o}/x.tif"],
+    ["sai", "{d}/frame.tif", "-n", "2", "-o", "{o}/x.tif"],
+    ["refocus", "{d}/rt_frames.tif", "--grid", "{i}/rt/grid.yaml", "-o", "{o}/x.tif"],
+    ["crosstalk", "{d}/views.tif", "-o", "{o}/x.json"],
+    ["unmix", "{d}/mono.tif", "--mixing", "{d}/mixing.tif", "-o", "{o}/x.tif"],
+    ["stitch", "{d}/mono.tif", "-o", "{o}/x.tif"],
+    ["develop", "{d}/views.tif", "--view", "B", "--wb", "1,1,1", "--matrix", "none", "-o",
+     "{o}/x.jpg"],
+    ["calibrate", "{d}/frame.tif", "-o", "{o}/x.yaml"],
+    ["decode", "{d}/sensor.tif", "-o", "{o}/x.tif"],
+], ids=lambda a: a[0] + ("-white" if "{d}/clean.tif" == a[1] else ""))
+def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, inputs, infinite,
+                                                                      tmp_path):
+    result = run_bad(inputs, tmp_path / "out", [a.replace("{d}", str(infinite)) for a in args])
+    assert_one_line(result, 1, ("infinite",))
+
+
+# ------------------- camera metadata that is not what its field must be: dropped with a warning
+# where it is read (io/rawmeta via tiffio.read_image and decode), never an internal error
+
+@pytest.mark.parametrize("change,code,words", [
+    ({"colour": {"as_shot_wb": [0, 1, 1]}}, 1, ("as-shot white balance [0, 1, 1]", "--wb")),
+    ({"colour": {"as_shot_wb": [float("nan"), 1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": [-1, 1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": [1, 1]}}, 1, ("as-shot white balance",)),
+    ({"colour": {"as_shot_wb": "abc"}}, 1, ("as-shot white balance 'abc'",)),
+    ({"colour": [1, 2]}, 1, ("colour metadata [1, 2] is not a mapping",)),
+    ({"exif": {"ISO": 10 ** 7}}, 0, ("EXIF ISO 10000000",)),
+    ({"exif": {"ISO": -5}}, 0, ("EXIF ISO -5",)),
+    ({"exif": {"DateTimeOriginal": "2024:01:01 12:00:0\u00e9"}}, 0, ("DateTimeOriginal",)),
+    ({"exif": {"Make": "Canon\u00e9"}}, 0, ("EXIF Make",)),
+    ({"exif": {"FNumber": float("inf")}}, 0, ("EXIF FNumber inf",)),
+    ({"exif": {"ExposureTime": "1/100"}}, 0, ("EXIF ExposureTime",)),
+    ({"exif": [1, 2]}, 0, ("EXIF metadata [1, 2] is not a mapping",)),
+], ids=lambda v: json.dumps(v, ensure_ascii=True)[:40] if isinstance(v, dict) else str(v))
+@pytest.mark.parametrize("suffix", [".jpg", ".tif"])
+def test_bad_camera_metadata_is_dropped_with_a_warning(change, code, words, suffix, inputs,
+                                                       tmp_path, caplog):
+    frames, meta = tiffio.read_image(inputs / "biased.tif")
+    good = {"colour": {"as_shot_wb": [2.0, 1.0, 1.5], "xyz_to_camera": np.eye(3).tolist()},
+            "exif": {"Model": "Test", "ISO": 100}}
+    edited = {**meta, **good, **change}
+    path = tmp_path / "edited.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **edited}))
+    out = tmp_path / "out"
+    out.mkdir()
+    result = CliRunner().invoke(cli, ["develop", str(path), "--view", "S", "-o",
+                                      str(out / f"x{suffix}")])
+    assert "internal error" not in result.stderr and "Traceback" not in result.output
+    assert result.exit_code == code, result.stderr
+    said = result.stderr + caplog.text  # the log goes to the handler of the first configure()
+    assert all(w in said for w in words), said
+    assert [p.name for p in out.iterdir()] == ([] if code else [f"x{suffix}"])
+
+
+def test_a_dng_with_a_zero_as_shot_neutral_decodes_without_a_white_balance(tmp_path, caplog):
+    from plenocli.io.dng import write_dng
+
+    raw = np.full((1, 16, 16), 1000, np.uint16)
+    write_dng(tmp_path / "x.dng", raw, cfa="RGGB", black_levels=[0], white_level=4095,
+              active_area=[0, 0, 16, 16], as_shot_neutral=[0.5, 1.0, 0.0])
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "x.dng"), "-o",
+                                      str(tmp_path / "f.tif")])
+    assert result.exit_code == 0 and "as-shot white balance" in result.stderr + caplog.text
+    assert tiffio.read_meta(tmp_path / "f.tif")["colour"]["as_shot_wb"] is None
+
+
+# ------------------- side files checked against what they describe: lens rows of a grid
+
+def _lying_grid(path: Path, source: Path, change) -> None:
+    from plenocli.model.lensgrid import LensGrid
+
+    doc = yaml.safe_load(source.read_text())
+    grid = LensGrid.from_dict(doc["lens_grid"])
+    indices, centres = grid.lens_centres()  # the lattice's lenses, listed as calibrate does
+    rows = np.hstack([indices, centres])
+    doc["lens_grid"]["lenses"] = {"rows": change(grid, rows).tolist()}
+    path.write_text(yaml.safe_dump(doc))
+
+
+def _outside(grid, rows):
+    i, j = rows[:, 0].max() + 3, rows[:, 1].max() + 3   # three lenses beyond the image
+    return np.vstack([rows, [i, j, *grid.lattice_xy(i, j)]])
+
+
+@pytest.mark.parametrize("name,change,words", [
+    ("shifted", lambda g, r: r + [0, 0, 0.6 * g.pitch_px, 0], ("from its lattice place",)),
+    ("indices-off-by-one", lambda g, r: r + [1, 0, 0, 0], ("from its lattice place",)),
+    ("outside", _outside, ("outside the",)),
+])
+@pytest.mark.parametrize("stage", ["refocus", "sai"])
+def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words, stage, inputs,
+                                                            tmp_path):
+    grid = tmp_path / "grid.yaml"
+    _lying_grid(grid, inputs / "rt" / "grid.yaml", change)
+    args = [stage, str(inputs / "rt" / "frames.tif"), "--grid", str(grid), "-o", "{o}/x.tif"]
+    result = run_bad(inputs, tmp_path / "out", args + (["-n", "2"] if stage == "sai" else []))
+    assert_one_line(result, 1, words)
+
+
+# ------------------- side files checked against what they describe: mixing files
+
+def _mixing_variant(path: Path, change: str) -> None:
+    from plenocli.io.mixingfile import write_mixing
+    from plenocli.model.mixing import MixingField
+
+    m = np.array([[1.0, 0.2], [0.1, 1.0]])
+    rows = cols = np.array([16.0, 48.0])
+    views = ("A", "B")
+    if change == "scaled-1e30":
+        m = m * 1e30
+    elif change == "diagonal-negative":
+        m = m * [[-1, 1], [1, 1]]
+    elif change == "diagonal-zero":
+        m = m * [[0, 1], [1, 1]]
+    elif change == "negative-share":
+        m = m - [[0, 0.7], [0, 0]]
+    elif change == "nodes-outside":
+        rows = np.array([16.0, 4800.0])
+    elif change == "names-not-text":
+        views = (1, 2)
+    nodes = m[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
+    field = MixingField(nodes, rows, cols, (64, 64), views, ("L",))
+    write_mixing(path, field, layout="mono", cfa=None, meta={})
+
+
+@pytest.mark.parametrize("change,words", [
+    ("scaled-1e30", ("1e+30", "diagonal")), ("diagonal-negative", ("diagonal",)),
+    ("diagonal-zero", ("diagonal",)), ("negative-share", ("negative light",)),
+    ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
+])
+def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    _plenocli_tiff(side / "views.tif", clean, views=["A", "B"])
+    _mixing_variant(side / "mixing.tif", change)
+    args = ["unmix", str(side / "views.tif"), "--mixing", str(side / "mixing.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+# ------------------- side files checked against what they describe: saved gain maps
+
+@pytest.mark.parametrize("change,words", [
+    (lambda g: g * 1e30, ("outside (0, 20]",)),
+    (lambda g: g * 0.5, ("smallest gain is 0.5",)),
+    (lambda g: -g, ("outside",)),
+    (lambda g: g * 1.3, ("not 1 as reference max",)),
+])
+def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    made = CliRunner().invoke(cli, ["flat", str(inputs / "biased.tif"), "--white",
+                                    str(inputs / "biased.tif"), "--save-gain",
+                                    str(side / "gain.tif"), "-o", str(side / "flat.tif")])
+    assert made.exit_code == 0, made.stderr
+    gains, meta = tiffio.read_image(side / "gain.tif")
+    tifffile.imwrite(side / "gain.tif", change(gains).astype(np.float32),
+                     photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
+    args = ["flat", str(inputs / "biased.tif"), "--gain", str(side / "gain.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+@pytest.mark.parametrize("names", [[1, 2], ["", "B"], [None, "B"], [["A"], "B"]])
+@pytest.mark.parametrize("stage", ["stitch", "crosstalk", "develop"])
+def test_view_names_that_are_not_text_are_refused(names, stage, inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    _plenocli_tiff(side / "views.tif", clean, views=names, cfa="RGGB")
+    out = "{o}/x.json" if stage == "crosstalk" else "{o}/x.tif"
+    result = run_bad(inputs, tmp_path / "out", [stage, str(side / "views.tif"), "-o", out])
+    assert_one_line(result, 1, ("non-empty text",))
+
+
+@pytest.mark.parametrize("change,words", [
+    ({"origin": [-8, 0]}, ("origin",)), ({"white_level": [100, 100]}, ("not above its black",)),
+    ({"white_level": [15000.0, 1e30]}, ("beyond what its uint16",)),
+    ({"masked_areas": -1}, ("masked area list -1",)),
+    ({"masked_areas": [None] * 4}, ("masked area None",)),
+    ({"view_colours": float("nan")}, ("view_colours",)), ({"views": None}, ("names None",)),
+])
+def test_frames_metadata_that_cannot_be_true_is_refused(change, words, inputs, tmp_path):
+    frames, meta = tiffio.read_image(inputs / "frames.tif")
+    path = tmp_path / "edited.tif"
+    tifffile.imwrite(path, frames, photometric="minisblack", metadata=None,
+                     description=json.dumps({tiffio.FORMAT_KEY: 1, **meta, **change}))
+    result = run_bad(inputs, tmp_path / "out", ["bias", str(path), "-o", "{o}/b.tif"])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("change,words", [
+    ({"tcp": float("nan")}, ("tcp",)),
+    ({"lens_border": -3.0}, ("lens_border",)),
+    ({"lens_types": [{"id": 0, "offset": [0.0, 0.0], "depth_range": [4.0, 1.0]}]},
+     ("depth_range",)),
+    ({"lens_types": [{"id": 1, "offset": [0.0, 0.0], "depth_range": [1.0, 3.0]}] * 2},
+     ("lens_type ids",)),
+    ({"sub_grid_base": [float("inf"), 0.0]}, ("sub_grid_base",)),
+])
+def test_raytrix_fields_beside_the_lattice_are_checked(change, words, inputs, tmp_path):
+    from plenocli.io.raytrix import read_calib
+
+    calib = {**read_calib(inputs / "rt" / "calib.xml"), **change}
+    (tmp_path / "calib.xml").write_text(format_calib(calib))
+    args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "calib.xml"),
+            "-o", "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+def test_a_result_that_overflows_to_infinity_is_not_written(inputs, infinite, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    clean, meta = tiffio.read_image(infinite / "clean.tif")
+    clean[1, 10, 10] = 3.4e38  # finite, but any gain > 1 overflows float32
+    _plenocli_tiff(side / "views.tif", clean, **{k: meta[k] for k in
+                                                ("views", "cfa", "black_level", "white_level")})
+    args = ["flat", str(side / "views.tif"), "--white", str(infinite / "clean.tif"), "-o",
+            "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("overflowed", "view B"))
+
+
+@pytest.mark.parametrize("photometric", ["palette", "miniswhite"])
+@pytest.mark.parametrize("stage", ["decode", "sai"])
+def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, stage, inputs,
+                                                                  tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    grey = np.random.default_rng(4).integers(0, 255, (32, 48)).astype(np.uint8)
+    extra = {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}
+    tifffile.imwrite(side / "x.tif", grey, photometric=photometric,
+                     **(extra if photometric == "palette" else {}))
+    args = [stage, str(side / "x.tif"), "-o", "{o}/x.tif"] + (["-n", "2"] if stage == "sai"
+                                                              else [])
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("holds no light levels",))

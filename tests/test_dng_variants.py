@@ -280,7 +280,7 @@ def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):
         tiffio.read_image(path)
 
 
-@pytest.mark.parametrize("entries", [256, 100])
+@pytest.mark.parametrize("entries", [256, 100, 65536])
 def test_linearization_table_maps_the_stored_codes(entries, tmp_path):
     """Lossy and some camera DNGs store codes: the frame is the table's levels (DNG spec), a
     code beyond the table taking its last entry."""
@@ -299,3 +299,179 @@ def test_float_raw_without_white_level_asks_for_it(tmp_path):
     _write_dng(path, _frame(np.float32), linear=True, white=None, tile=(32, 32),
                compression="zlib", predictor=3)
     _assert_refused(path, tmp_path, "no white level", "--white")
+
+
+def _patch_raw_bytes(path: Path, code: int, values: bytes) -> None:
+    with tifffile.TiffFile(path) as tif:
+        offset = _raw_page(tif).tags[code].valueoffset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + len(values)] = values
+    path.write_bytes(bytes(data))
+
+
+def _with_tags(*tags):
+    return dict(tile=(32, 32), compression="zlib", extratags=list(tags))
+
+
+def _float_with(value):
+    frame = _frame(np.float32)
+    frame[3, 4] = value
+    return frame
+
+
+LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the message)
+    "tiles of 65536 x 65536": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
+                               lambda p: (_patch_raw_tag(p, 322, 65536),
+                                          _patch_raw_tag(p, 323, 65536)), "tiles of 65536"),
+    "JPEG tiles coded at another size": (_frame(), dict(tile=(32, 32), **LOSSLESS_JPEG),
+                                         lambda p: _patch_raw_tag(p, 322, 33),
+                                         "codes 1024 samples"),
+    "tiles of another width, as many": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                                        lambda p: _patch_raw_tag(p, 322, 33),
+                                        "decodes to 2048 bytes"),
+    "image width that needs fewer tiles": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                                           lambda p: _patch_raw_tag(p, 256, 1), "12 tiles"),
+    "strip width changed": (_frame(), dict(rowsperstrip=16, compression="lzw"),
+                            lambda p: _patch_raw_tag(p, 256, 93), "decodes to"),
+    "strip in the header": (_frame(), {}, lambda p: _patch_raw_tag(p, 273, 2),
+                            "lies in the file's header"),
+    "tile length 0": (_frame(), dict(tile=(32, 32), compression="zlib"),
+                      lambda p: _patch_raw_tag(p, 323, 0), "tile size of 32 x 0"),
+    "CFAPattern colour 5 (yellow)": (_frame(), {}, lambda p: _patch_raw_bytes(
+        p, 33422, bytes([0, 5, 1, 2])), "CFAPattern [0, 5, 1, 2]"),
+    "CFAPattern colour 3 (cyan)": (_frame(), {}, lambda p: _patch_raw_bytes(
+        p, 33422, bytes([0, 3, 1, 2])), "other than red, green or blue"),
+    "CFAPattern not Bayer": (_frame(), {}, lambda p: _patch_raw_bytes(
+        p, 33422, bytes([0, 0, 1, 2])), "RRGB is not a Bayer"),
+    "CFA repeat 0 x 0": (_frame(), {}, lambda p: (_patch_raw_tag(p, 33421, 0, 0),
+                                                  _patch_raw_tag(p, 33421, 0, 1)),
+                         "CFARepeatPatternDim 0 x 0"),
+    "CFA repeat 6 x 6 (X-Trans)": (_frame(), {}, lambda p: (_patch_raw_tag(p, 33421, 6, 0),
+                                                            _patch_raw_tag(p, 33421, 6, 1)),
+                                   "CFARepeatPatternDim 6 x 6"),
+    "BlackLevel 0/0": (_frame(), _with_tags((50714, "2I", 1, (0, 0), True)), None,
+                       "BlackLevel holds 0/0"),
+    "BlackLevel repeat 3 x 3": (_frame(), _with_tags((50713, "H", 2, (3, 3), True),
+                                                     (50714, "H", 9, (10,) * 9, True)), None,
+                                "BlackLevelRepeatDim [3, 3]"),
+    "BlackLevel count short of its repeat": (_frame(), _with_tags(
+        (50713, "H", 2, (2, 2), True), (50714, "H", 2, (10, 10), True)), None,
+        "BlackLevel has 2 values"),
+    "BlackLevelDeltaH not applied": (_frame(), _with_tags(
+        (50715, "d", COLS, (100.0,) * COLS, True)), None, "BlackLevelDeltaH"),
+    "WhiteLevel beyond the samples": (_frame(), dict(white=10 ** 9), None, "WhiteLevel"),
+    "LinearizationTable of LONG levels past 16 bits": (
+        _frame(np.uint8, high=256), _with_tags((50712, "I", 256, tuple(range(0, 256000, 1000)),
+                                                True)), None, "LinearizationTable"),
+    "LinearizationTable of doubles": (
+        _frame(np.uint8, high=256), _with_tags((50712, "d", 4, (1.0, 2.0, 3.0, 4.0), True)),
+        None, "LinearizationTable"),
+    "uncompressed 16-bit samples labelled 12-bit": (_frame(), {},
+                                                   lambda p: _patch_raw_tag(p, 258, 12),
+                                                   "12 bits per sample"),
+    "float samples NaN": (_float_with(np.nan), dict(linear=True, white=1, tile=(32, 32),
+                                                    compression="zlib", predictor=3),
+                          None, "1 NaN or infinite samples"),
+    "float samples Inf": (_float_with(-np.inf), dict(linear=True, white=1, tile=(32, 32),
+                                                     compression="zlib", predictor=3),
+                          None, "1 NaN or infinite samples"),
+}
+
+
+@pytest.mark.parametrize("name", LYING_HEADERS)
+def test_a_header_field_that_breaks_the_rules_is_named(name, tmp_path):
+    frame, options, damage, words = LYING_HEADERS[name]
+    path = tmp_path / "lying.dng"
+    _write_dng(path, frame, **options)
+    if damage is not None:
+        damage(path)
+    _assert_refused(path, tmp_path, words)
+
+
+def test_rational_black_levels_over_a_2x2_repeat_are_divided_out(tmp_path):
+    """DNG converters write BlackLevel as RATIONALs: four levels, not numerator/denominator
+    pairs taken for levels."""
+    levels = (1024, 1025, 1026.5, 1027)
+    rationals = tuple(v for level in levels for v in (int(level * 2), 2))
+    path = tmp_path / "black.dng"
+    _write_dng(path, _frame(), **_with_tags((50713, "H", 2, (2, 2), True),
+                                            (50714, "2I", 4, rationals, True)))
+    assert _decode(path, tmp_path / "frames.tif").exit_code == 0
+    assert tiffio.read_meta(tmp_path / "frames.tif")["black_level"] == [list(levels)]
+
+
+def test_packed_12_bit_uncompressed_raw_decodes_exactly(tmp_path):
+    """Uncompressed 12-bit raws pack two samples in three bytes; the byte count checks
+    account for it."""
+    frame = _frame(high=4096)
+    path = tmp_path / "packed.dng"
+    _write_dng(path, np.zeros_like(frame), white=4095, rowsperstrip=ROWS)
+    packed = bytearray()
+    for row in frame.astype(np.uint32):
+        bits = "".join(f"{v:012b}" for v in row) + "0" * (-12 * COLS % 8)
+        packed += int(bits, 2).to_bytes(len(bits) // 8, "big")
+    offset = _segments(path)[0][0]
+    data = bytearray(path.read_bytes())
+    data[offset:offset + len(packed)] = packed
+    path.write_bytes(bytes(data[:offset + len(packed)]) + bytes(data[offset + ROWS * COLS * 2:]))
+    _patch_raw_tag(path, 258, 12)
+    _patch_raw_tag(path, 279, len(packed))
+    result = _decode(path, tmp_path / "frames.tif")
+    assert result.exit_code == 0, result.stderr
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "frames.tif"), frame)
+
+
+def test_frames_of_another_cfa_or_area_are_not_stacked(tmp_path):
+    """Every raw IFD's layout is read: frame 1 with another CFA phase would be processed with
+    frame 0's."""
+    from plenocli.io.dng import write_dng
+
+    path = tmp_path / "two.dng"
+    frames = np.stack([_frame(), _frame(seed=1)])
+    write_dng(path, frames, cfa="RGGB", black_levels=[0, 0], white_level=16383,
+              active_area=[0, 0, ROWS, COLS])
+    with tifffile.TiffFile(path) as tif:
+        offset = tif.pages[1].tags[33422].valueoffset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + 4] = bytes([1, 0, 2, 1])  # GRBG
+    path.write_bytes(bytes(data))
+    _assert_refused(path, tmp_path, "raw IFD 1 has another CFA pattern")
+
+
+def _two_frames(path: Path) -> None:
+    from plenocli.io.dng import write_dng
+
+    write_dng(path, np.stack([_frame(), _frame(seed=1)]), cfa="RGGB", black_levels=[0, 0],
+              white_level=16383, active_area=[0, 0, ROWS, COLS])
+
+
+def _patch_page_tag(path: Path, page: int, code: int, value: int) -> None:
+    with tifffile.TiffFile(path) as tif:
+        tag = tif.pages[page].tags[code]
+        fmt = tif.byteorder + {3: "H", 4: "I"}[int(tag.dtype)]
+        offset = tag.valueoffset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + struct.calcsize(fmt)] = struct.pack(fmt, value)
+    path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("page,code,value,words", [
+    (0, 262, 1, "IFD 0 has NewSubFileType 0 and Photometric 1"),   # main image, not raw
+    (0, 254, 1, "raw of full size flagged as a reduced preview"),
+    (1, 254, 0xFFFFFFFF, "NewSubFileType 4294967295"),
+])
+def test_a_frame_dropped_by_its_ifd_flags_is_refused(page, code, value, words, tmp_path):
+    """Two frames whose header damage would silently give one."""
+    path = tmp_path / "two.dng"
+    _two_frames(path)
+    _patch_page_tag(path, page, code, value)
+    _assert_refused(path, tmp_path, words)
+
+
+def test_frames_that_share_bytes_are_refused(tmp_path):
+    path = tmp_path / "two.dng"
+    _two_frames(path)
+    with tifffile.TiffFile(path) as tif:
+        start = int(tif.pages[0].dataoffsets[0])
+    _patch_page_tag(path, 0, 273, start + 4)  # frame 0 read 4 bytes late: into frame 1
+    _assert_refused(path, tmp_path, "share the bytes")

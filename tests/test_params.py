@@ -120,12 +120,3 @@ def test_dry_run_says_which_parameter_changed(project, caplog):
     assert result.exit_code == 0, result.output
     said = result.output + caplog.text  # the log goes to the handler of the first configure()
     assert re.search(r"would run\s+flat .*parameter median changed \(\d+ -> 7\)", said)
-
-
-def test_numba_cache_moves_out_of_a_read_only_install(tmp_path, monkeypatch):
-    from plenocli import numba_cache_dir
-
-    assert numba_cache_dir(str(tmp_path), {}) is None  # writable: numba's default place
-    monkeypatch.setattr("os.access", lambda path, mode: False)
-    assert numba_cache_dir(str(tmp_path), {"XDG_CACHE_HOME": "/c"}) == "/c/plenocli/numba"
-    assert numba_cache_dir(str(tmp_path), {"NUMBA_CACHE_DIR": "/x"}) is None

@@ -172,5 +172,5 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
         data = bytearray((tmp_path / "packed.dng").read_bytes())
         data[start + 100:start + 2100] = bytes(2000)   # inside the first tile
         (tmp_path / "damaged.dng").write_bytes(bytes(data))
-        with pytest.raises(InputError, match="raw IFD 0 is damaged"):
+        with pytest.raises(InputError, match="damaged"):
             rawio.decode(tmp_path / "damaged.dng")

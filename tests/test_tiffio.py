@@ -6,7 +6,7 @@ import tifffile
 from PIL import Image
 
 from plenocli.errors import InputError
-from plenocli.io import tiffio
+from plenocli.io import tiffio, tiffsegments
 from plenocli.io.atomic import atomic_path
 from plenocli.model.provenance import sha256_file, stage_record
 
@@ -108,7 +108,7 @@ def test_truncation_is_found_in_the_header_before_reading(tmp_path):
 
 def test_a_header_claiming_a_huge_image_is_refused_before_allocating(tmp_path, monkeypatch):
     tifffile.imwrite(tmp_path / "a.tif", np.zeros((64, 64), np.uint16))
-    monkeypatch.setattr(tiffio, "MAX_PAGE_PIXELS", 64 * 64 - 1)
+    monkeypatch.setattr(tiffsegments, "MAX_PAGE_PIXELS", 64 * 64 - 1)
     with pytest.raises(InputError, match="64 x 64 samples"):
         tiffio.read_image(tmp_path / "a.tif")
 

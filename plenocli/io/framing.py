@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.io.gridfile import read_grid
+from plenocli.io.gridfile import check_lens_rows, read_grid
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.lensgrid import LensGrid
 
@@ -83,7 +83,9 @@ def load_grid(path: str | os.PathLike, meta: dict, shape: tuple[int, int]) -> Le
     sensor image the camera software calibrated), at that area's sensor origin.
     """
     if Path(path).suffix.lower() != ".xml":
-        return read_grid(path)
+        grid = read_grid(path)
+        check_lens_rows(path, grid)
+        return grid
     region = active_area(meta, shape)
     return replace(read_grid(path, image_shape=region.shape), sensor_origin=region.sensor_origin)
 

@@ -122,3 +122,30 @@ def read_grid(path: str | os.PathLike, *,
     except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
         raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "
                          "make one with plenocli calibrate") from err
+
+
+def check_lens_rows(path, grid: LensGrid) -> None:
+    """The listed lenses must be the lattice's: each centre nearer its own lattice place (i, j)
+    than any other (within half a pitch; calibrated centres stray by tenths of a pixel), and
+    inside the image the grid was calibrated on (a lens one pitch outside holds none of it)."""
+    if grid.centres_xy is None or not len(grid.centres_xy):
+        return
+    indices, centres = np.asarray(grid.indices), np.asarray(grid.centres_xy, np.float64)
+    stray = np.hypot(*(centres - grid.lattice_xy(indices[:, 0], indices[:, 1])).T)
+    worst = int(np.argmax(stray))
+    if stray[worst] >= grid.pitch_px / 2:
+        i, j = indices[worst]
+        raise InputError(f"{path}: lens ({i}, {j}) is listed at ({centres[worst][0]:.1f}, "
+                         f"{centres[worst][1]:.1f}), {stray[worst]:.1f} px from its lattice "
+                         f"place (pitch {grid.pitch_px:g} px): the lens rows do not belong to "
+                         "this lattice; calibrate again")
+    if grid.image_shape is not None:
+        rows, cols = grid.image_shape
+        margin = grid.pitch_px
+        outside = ((centres[:, 0] < -margin) | (centres[:, 0] > cols - 1 + margin)
+                   | (centres[:, 1] < -margin) | (centres[:, 1] > rows - 1 + margin))
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise InputError(f"{path}: lens {tuple(int(v) for v in indices[k])} is listed at "
+                             f"({centres[k][0]:.1f}, {centres[k][1]:.1f}), outside the "
+                             f"{cols} x {rows} image the grid describes; calibrate again")

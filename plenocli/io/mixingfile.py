@@ -23,9 +23,14 @@ import numpy as np
 
 from plenocli.errors import InputError
 from plenocli.io import tiffio
+from plenocli.model.cfa import is_bayer
 from plenocli.model.mixing import MixingField
 
 LAYOUTS = ("cfa", "channels", "mono")
+# measure_mixing writes M_jj = flux / flux = 1 exactly (float32); shares of light are >= 0 up to
+# the noise of a tile's flux ratio, far below this
+DIAGONAL_TOLERANCE = 1e-4
+NEGATIVE_SHARE = 0.05
 
 
 def page_names(mixing: MixingField) -> list[str]:
@@ -49,22 +54,89 @@ def write_mixing(path: str | os.PathLike, mixing: MixingField, *, layout: str,
 
 
 def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
-    """The field and the file's full metadata (``meta["mixing"]`` as described above)."""
+    """The field and the file's full metadata (``meta["mixing"]`` as described above), checked
+    against what it claims (see :func:`check_mixing`)."""
     pages, meta = tiffio.read_image(path)
     info = meta.get("mixing")
     if not isinstance(info, dict):
         raise InputError(f"{path}: not a mixing file (no 'mixing' in its metadata); make one "
                          "with plenocli crosstalk --mixing-out")
     try:
+        _check_names(info)
         views, colours = tuple(info["views"]), tuple(info["colours"])
         n_v, n_c = len(views), len(colours)
         nodes = np.asarray(pages, np.float64).reshape(n_c, n_v, n_v, *pages.shape[1:])
         field = MixingField(nodes, np.asarray(info["node_rows"], np.float64),
                             np.asarray(info["node_cols"], np.float64),
-                            tuple(int(v) for v in info["frame_shape"]), views, colours)
+                            _frame_shape(info["frame_shape"]), views, colours)
         if info["layout"] not in LAYOUTS:
             raise ValueError(f"layout {info['layout']!r}")
     except (KeyError, ValueError, TypeError) as err:
         raise InputError(f"{path}: damaged mixing file ({err}); measure it again with "
                          "plenocli crosstalk --mixing-out") from err
+    if meta.get("views") != page_names(field):
+        raise InputError(f"{path}: its pages are not named for views {','.join(views)} and "
+                         f"colours {','.join(colours)} (M[k<-j].colour); the file was edited or "
+                         "damaged: measure it again with plenocli crosstalk --mixing-out")
+    check_mixing(path, field, info)
     return field, meta
+
+
+def _check_names(info: dict) -> None:
+    """Views: distinct non-empty names; colours: R, G, B (cfa / channels) or L (mono)."""
+    views, colours = info["views"], info["colours"]
+    if not (isinstance(views, list) and len(views) >= 2
+            and all(isinstance(v, str) and v.strip() for v in views)
+            and len(set(views)) == len(views)):
+        raise ValueError(f"views {views!r} are not two or more distinct names")
+    expected = {"cfa": ["R", "G", "B"], "mono": ["L"]}.get(info.get("layout"))
+    if not isinstance(colours, list) or (colours != expected if expected else not (
+            colours and set(colours) <= {"R", "G", "B"} and len(set(colours)) == len(colours))):
+        raise ValueError(f"colours {colours!r} do not fit layout {info.get('layout')!r}")
+    cfa = info.get("cfa")
+    if (info.get("layout") == "cfa") != (cfa is not None) or not (
+            cfa is None or (isinstance(cfa, str) and is_bayer(cfa))):
+        raise ValueError(f"cfa {cfa!r} does not fit layout {info.get('layout')!r} (a Bayer "
+                         "pattern for cfa, null otherwise)")
+
+
+def _frame_shape(values) -> tuple[int, int]:
+    if not (isinstance(values, list) and len(values) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in values)):
+        raise ValueError(f"frame_shape {values!r} is not two positive whole numbers")
+    return values[0], values[1]
+
+
+def check_mixing(path, field: MixingField, info: dict) -> None:
+    """What a measured field is (crosstalk.measure_mixing): finite, M_jj = 1 exactly (each
+    masked white's flux divided by its intended view's), no negative share of light beyond
+    noise, nodes at tile centres inside the frame."""
+    nodes = np.asarray(field.nodes, np.float64)
+    if not np.isfinite(nodes).all():
+        raise InputError(f"{path}: the mixing field has non-finite values; measure it again "
+                         "with plenocli crosstalk --mixing-out")
+    diagonal = np.einsum("ckkab->ckab", nodes)
+    off = np.abs(diagonal - 1)
+    if off.max() > DIAGONAL_TOLERANCE:
+        c, k, a, b = np.unravel_index(int(np.argmax(off)), off.shape)
+        raise InputError(f"{path}: M[{field.views[k]}<-{field.views[k]}] of colour "
+                         f"{field.colours[c]} is {diagonal[c, k, a, b]:.6g} at node ({a}, {b}); "
+                         "a measured mixing has 1 on its diagonal (each view's own light): "
+                         "the file was scaled or edited: measure it again")
+    share = nodes.min()
+    if share < -NEGATIVE_SHARE:
+        raise InputError(f"{path}: the mixing field holds a share of light of {share:.3g}; a "
+                         "view cannot record negative light from another pupil part "
+                         "(whites measured above a wrong black?): measure it again")
+    rows, cols = field.shape
+    for name, axis, size in (("node_rows", field.node_rows, rows),
+                             ("node_cols", field.node_cols, cols)):
+        axis = np.asarray(axis, np.float64)
+        if not (np.isfinite(axis).all() and axis.min() >= 0 and axis.max() <= size - 1):
+            raise InputError(f"{path}: {name} {_short(axis)} lie outside the {cols} x {rows} "
+                             "frame the mixing was measured on (nodes are tile centres); the "
+                             "file was edited or damaged: measure it again")
+
+
+def _short(axis: np.ndarray) -> str:
+    return f"[{axis.min():g} .. {axis.max():g}]" if axis.size else "[]"

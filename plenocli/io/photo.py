@@ -15,6 +15,7 @@ from fractions import Fraction
 import numpy as np
 
 from plenocli.io.icc import profile_bytes
+from plenocli.io.rawmeta import clean_exif
 from plenocli.model.colour import OUTPUT_SPACES
 
 FORMATS = {".tif": "tiff", ".tiff": "tiff", ".jpg": "jpeg", ".jpeg": "jpeg", ".png": "png"}
@@ -58,7 +59,8 @@ def image_bytes(encoded: np.ndarray, fmt: str, *, space: str, exif: dict | None,
                          "or display-p3 for JPEG/PNG")
     icc = profile_bytes(space)
     text = json.dumps(description, allow_nan=False)
-    exif = {k: v for k, v in (exif or {}).items() if k in EXIF_TAGS and v not in (None, "")}
+    # read through rawmeta.clean_exif already (warned there); again here for any caller
+    exif = clean_exif(exif, warn=lambda message: None)
     if fmt == "tiff":
         return _tiff_bytes(encoded, icc, exif, text)
     from PIL import Image

@@ -14,6 +14,7 @@ Frames keep their over-scan (masked) areas; ``active_area`` and ``masked_areas``
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
@@ -21,11 +22,11 @@ import numpy as np
 import tifffile
 
 from plenocli.errors import InputError, not_a_file
-from plenocli.io import rawmeta, tiffio
+from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
+from plenocli.progress import log
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
-CFA_LETTERS = "RGBG"  # DNG CFAPattern codes 0, 1, 2 (3 would be a second green)
 PHOTOMETRIC_CFA = 32803
 PHOTOMETRIC_LINEAR_RAW = 34892
 
@@ -97,12 +98,20 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
                        white=white)
     _check_levels(path, meta["black_level"], meta["white_level"])
+    tiffio.check_no_infinity(path, frames, meta.get("views"))
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
     meta["camera"] = kind
+    warn = functools.partial(_warn, path)
     if kind in ("canon-dp", "dng"):
-        meta["exif"] = rawmeta.camera_exif(path)
+        meta["exif"] = rawmeta.clean_exif(rawmeta.camera_exif(path), warn)
+    if meta.get("colour") is not None:
+        meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+def _warn(path, message: str) -> None:
+    log.warning("%s: %s", path, message)
 
 
 def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa, black,
@@ -226,51 +235,29 @@ def _tag(page, code, default=None):
 def _decode_dng(path) -> tuple[np.ndarray, dict]:
     try:
         with tiffio.open_tiff(path) as tif:
-            raws = [pg for pg in _raw_pages(tif)
-                    if pg.photometric in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
-                    and not (int(pg.subfiletype) & 1)]
-            if not raws:
-                raise InputError(f"{path}: a DNG without a raw image (no CFA or LinearRaw IFD)")
+            raws = dngtags.raw_pages(path, list(_raw_pages(tif)))
             frames, blacks, whites, names = [], [], [], []
             for k, page in enumerate(raws):
-                tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
-                if len(page.shape) != 2:  # from the header: refused before decoding
-                    raise InputError(f"{path}: raw IFD {k} has shape {page.shape}; plenocli reads "
-                                     "one-sample raw (CFA or mono) DNGs: convert the capture "
-                                     "to DNG without demosaicing")
-                tiffio.check_segments(path, page)
-                try:
-                    data = page.asarray()
-                except tiffio.READ_ERRORS as err:  # the codecs' own errors too
-                    raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
-                                            "copy or export the DNG again") from err
-                data = _linearized(path, k, page, data)
+                data, black, white = _dng_frame(path, k, page)
                 frames.append(data)
-                blacks.append(_dng_black(page))
-                white = _tag(page, 50717, None)
-                if white is None:  # floats have no default: NaN asks for --white
-                    white = np.iinfo(data.dtype).max if data.dtype.kind in "ui" else np.nan
-                whites.append(float(np.max(white)))
+                blacks.append(black)
+                whites.append(white)
                 desc = page.description.strip() if page.description else ""
                 names.append(desc if desc and len(desc) <= 16 and " " not in desc else f"frame{k}")
-            first = raws[0]
             shape = frames[0].shape
             if any(f.shape != shape for f in frames):
                 raise InputError(f"{path}: raw IFDs of different sizes "
                                  f"{sorted({f.shape for f in frames})}; cannot stack them")
-            cfa = None
-            if first.photometric == PHOTOMETRIC_CFA:
-                dims = tuple(_tag(first, 33421, (2, 2)))
-                codes = _tag(first, 33422, None)
-                if dims == (2, 2) and codes is not None:
-                    codes = bytes(codes) if not isinstance(codes, (bytes, tuple, list)) else codes
-                    cfa = "".join(CFA_LETTERS[int(c)] for c in codes)
-            active = _tag(first, 50829, None)
-            active = [int(v) for v in active] if active is not None else [0, 0, *shape]
-            masked_flat = _tag(first, 50830, None)
-            masked_flat = [int(v) for v in masked_flat] if masked_flat is not None else []
-            masked = [masked_flat[i:i + 4] for i in range(0, len(masked_flat), 4)]
-            colour = rawmeta.dng_colour(first, tif.pages[0])
+            layouts = [((dngtags.cfa_pattern(path, k, page)
+                         if page.photometric == PHOTOMETRIC_CFA else None),
+                        dngtags.areas(path, k, page, shape)) for k, page in enumerate(raws)]
+            if any(layout != layouts[0] for layout in layouts):
+                k = next(k for k, layout in enumerate(layouts) if layout != layouts[0])
+                raise InputError(f"{path}: raw IFD {k} has another CFA pattern or active/masked "
+                                 f"area than raw IFD 0 ({layouts[k]} vs {layouts[0]}); plenocli "
+                                 "stacks frames of one sensor layout")
+            cfa, (active, masked) = layouts[0]
+            colour = rawmeta.dng_colour(raws[0], tif.pages[0])
     except tiffio.READ_ERRORS as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     if len(set(names)) != len(names):
@@ -281,32 +268,25 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
     }
 
 
-def _linearized(path, k: int, page, data: np.ndarray) -> np.ndarray:
-    """Stored values mapped through the DNG LinearizationTable, as the DNG spec says before
-    anything else (lossy DNGs store 8-bit codes; some cameras compress their raws this way).
-    Stored values beyond the table take its last entry (the DNG SDK's rule)."""
-    table = _tag(page, 50712, None)
-    if table is None:
-        return data
-    table = np.atleast_1d(np.asarray(table))
-    if (data.dtype.kind != "u" or table.size == 0 or table.dtype.kind not in "ui"
-            or table.min() < 0 or table.max() > np.iinfo(np.uint16).max):
-        raise InputError(f"{path}: raw IFD {k} has a LinearizationTable of {table.size} "
-                         f"entries for {data.dtype} samples; plenocli maps unsigned codes "
-                         "through a table of 16-bit levels: convert the DNG without it")
-    return table.astype(np.uint16)[np.minimum(data, table.size - 1)]
-
-
-def _dng_black(page) -> list[float]:
-    """DNG BlackLevel per 2 x 2 position (the tag repeats over BlackLevelRepeatDim)."""
-    values = _tag(page, 50714, None)
-    if values is None:
-        return [0.0] * 4
-    values = np.atleast_1d(np.asarray(values, dtype=np.float64)).ravel()
-    dims = tuple(_tag(page, 50713, (1, 1)))
-    if dims == (2, 2) and values.size >= 4:
-        return [float(v) for v in values[:4]]
-    return [float(values[0])] * 4
+def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
+    """One raw IFD: its header checked before any pixel is read (io/dngtags), its samples
+    decoded and linearised, its black levels per 2 x 2 position and its white level."""
+    tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
+    if len(page.shape) != 2:  # from the header: refused before decoding
+        raise InputError(f"{path}: raw IFD {k} has shape {page.shape}; plenocli reads "
+                         "one-sample raw (CFA or mono) DNGs: convert the capture "
+                         "to DNG without demosaicing")
+    dngtags.check_layout(path, k, page)
+    black = dngtags.black_levels(path, k, page)
+    tiffio.check_segments(path, page)
+    try:
+        data = page.asarray()
+    except tiffio.READ_ERRORS as err:  # the codecs' own errors too
+        raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
+                                "copy or export the DNG again") from err
+    dngtags.check_samples(path, k, data)
+    data, mapped = dngtags.linearized(path, k, page, data)
+    return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
 
 
 def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
@@ -317,6 +297,7 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
+                    tiffio.check_light_levels(p, page)
                 data = tif.asarray()
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "

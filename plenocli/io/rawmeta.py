@@ -1,10 +1,27 @@
 """Colour and EXIF metadata of raw captures, for ``plenocli develop``: as-shot white balance,
-the XYZ -> camera matrix, and the camera's EXIF tags (make, model, exposure, lens, date)."""
+the XYZ -> camera matrix, and the camera's EXIF tags (make, model, exposure, lens, date).
+
+Whatever a raw's header or a file's metadata holds goes through :func:`clean_colour` and
+:func:`clean_exif` where it is read: a value that is not what its field must be is dropped with
+a warning naming it (a photograph without an ISO is still right; one with a made-up white
+balance is not, so develop then asks for ``--wb``)."""
 
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 import tifffile
+
+# EXIF fields carried to the photograph and what each must be. Text is ASCII (EXIF's type) and
+# short (a JPEG's EXIF block holds 64 KiB);
+# rationals are written with denominators up to 1e5, so they must lie in [1e-5, 1e6].
+EXIF_TEXT = {"Make": 255, "Model": 255, "LensModel": 255}
+EXIF_RATIONAL = ("ExposureTime", "FNumber", "FocalLength")
+RATIONAL_RANGE = (1e-5, 1e6)
+ISO_RANGE = (1, 65535)  # EXIF ISOSpeedRatings is a SHORT
+EXIF_DATE = re.compile(r"\d{4}:\d{2}:\d{2} \d{2}:\d{2}:\d{2}")
 
 
 def _tag(page, code, default=None):
@@ -21,7 +38,7 @@ def rawpy_colour(raw, desc: str) -> dict:
         return {"as_shot_wb": None, "xyz_to_camera": None}
     wb = [float(wb_all[i]) for i in index]
     matrix = np.asarray(matrix_all, np.float64)[index]
-    return {"as_shot_wb": wb if min(wb) > 0 else None,
+    return {"as_shot_wb": wb if any(wb) else None,  # LibRaw's zeros: no as-shot balance
             "xyz_to_camera": matrix.tolist() if np.any(matrix) else None}
 
 
@@ -33,6 +50,7 @@ def camera_exif(path) -> dict:
         with tifffile.TiffFile(path) as tif:
             tags = tif.pages[0].tags
             exif = tags["ExifTag"].value if "ExifTag" in tags else {}
+            exif = exif if isinstance(exif, dict) else {}  # a damaged EXIF IFD: none
             for name in ("Make", "Model"):
                 if name in tags:
                     out[name] = str(tags[name].value).strip("\0 ")
@@ -53,7 +71,7 @@ def camera_exif(path) -> dict:
         if isinstance(value, bytes):
             value = value.decode("ascii", "replace").strip("\0 ")
         if value not in (None, ""):
-            out[name] = int(value) if name == "ISO" else str(value)
+            out[name] = value
     return out
 
 
@@ -71,8 +89,9 @@ def dng_colour(raw_page, main_page) -> dict:
     """DNG AsShotNeutral (as R, G, B gains) and the ColorMatrix for D65 (or the last one)."""
     neutral = dng_numbers(_tag(raw_page, 50728, _tag(main_page, 50728, None)), 3)
     wb = None
-    if neutral is not None and len(neutral) == 3 and min(float(v) for v in neutral) > 0:
-        wb = [float(neutral[1]) / float(v) for v in neutral]
+    if neutral is not None:  # checked by clean_colour: a zero or negative neutral is dropped
+        with np.errstate(divide="ignore", invalid="ignore"):
+            wb = (np.float64(neutral[1]) / np.asarray(neutral, np.float64)).tolist()
     matrix = None
     for code, illuminant in ((50721, 50778), (50722, 50779)):  # ColorMatrix1, 2
         values = dng_numbers(_tag(raw_page, code, _tag(main_page, code, None)), 9)
@@ -81,3 +100,86 @@ def dng_colour(raw_page, main_page) -> dict:
             if _tag(raw_page, illuminant, _tag(main_page, illuminant, 0)) == 21:  # D65
                 break
     return {"as_shot_wb": wb, "xyz_to_camera": matrix}
+
+
+def _finite_numbers(value, count: int) -> list[float] | None:
+    if not isinstance(value, (list, tuple)) or len(value) != count:
+        return None
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        return None
+    numbers = [float(v) for v in value]
+    return numbers if all(math.isfinite(v) for v in numbers) else None
+
+
+def clean_colour(colour, warn) -> dict | None:
+    """``colour`` metadata with the fields that are what they must be: ``as_shot_wb`` three
+    finite positive gains (R, G, B), ``xyz_to_camera`` a finite 3 x 3 matrix. ``warn(message)``
+    is called for each field dropped."""
+    if colour is None:
+        return None
+    if not isinstance(colour, dict):
+        warn(f"colour metadata {_shown(colour)} is not a mapping; dropped")
+        return None
+    out = dict(colour)
+    wb = colour.get("as_shot_wb")
+    if wb is not None:
+        gains = _finite_numbers(wb, 3)
+        if gains is None or min(gains) <= 0:
+            warn(f"as-shot white balance {_shown(wb)} is not three positive gains R,G,B; "
+                 "dropped (give develop --wb)")
+            out["as_shot_wb"] = None
+    matrix = colour.get("xyz_to_camera")
+    if matrix is not None:
+        rows = matrix if isinstance(matrix, (list, tuple)) and len(matrix) == 3 else None
+        if rows is None or any(_finite_numbers(r, 3) is None for r in rows):
+            warn(f"camera colour matrix {_shown(matrix)} is not a finite 3 x 3 matrix; dropped "
+                 "(develop --matrix none)")
+            out["xyz_to_camera"] = None
+    return out
+
+
+def clean_exif(exif, warn) -> dict:
+    """The EXIF fields plenocli carries (see EXIF_TEXT, EXIF_RATIONAL, ISO, DateTimeOriginal)
+    that are valid for their tag; ``warn(message)`` for each one dropped. Unknown keys are
+    dropped silently (they are not carried)."""
+    if exif is None:
+        return {}
+    if not isinstance(exif, dict):
+        warn(f"EXIF metadata {_shown(exif)} is not a mapping; dropped")
+        return {}
+    out = {}
+    for name, value in exif.items():
+        reason = _exif_problem(name, value)
+        if reason is None:
+            out[name] = value
+        elif reason:
+            warn(f"EXIF {name} {_shown(value)} {reason}; dropped")
+    return out
+
+
+def _exif_problem(name: str, value) -> str | None:
+    """Why ``value`` cannot be EXIF ``name`` ("" for a field plenocli does not carry), or
+    None when it can."""
+    if name in EXIF_TEXT or name == "DateTimeOriginal":
+        longest = EXIF_TEXT.get(name, 19)
+        if not (isinstance(value, str) and value.isascii() and value.isprintable()
+                and 0 < len(value) <= longest):
+            return f"is not printable ASCII text of at most {longest} characters"
+        if name == "DateTimeOriginal" and not EXIF_DATE.fullmatch(value):
+            return "is not an EXIF date (YYYY:MM:DD HH:MM:SS)"
+        return None
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if name == "ISO":
+        low, high = ISO_RANGE
+        ok = number and math.isfinite(value) and value == int(value) and low <= value <= high
+        return None if ok else f"is not a whole ISO speed in [{low}, {high}]"
+    if name in EXIF_RATIONAL:
+        low, high = RATIONAL_RANGE
+        ok = number and math.isfinite(value) and low <= value <= high
+        return None if ok else f"is not a number in [{low:g}, {high:g}]"
+    return ""
+
+
+def _shown(value, limit: int = 40) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."

@@ -145,6 +145,34 @@ def check_calib(calib: dict) -> None:
     if abs(float(bx[0] * by[1] - bx[1] * by[0])) < 0.1 * nx * ny:  # sin(angle) < 0.1
         raise ValueError(f"lens_base_x {list(bx)} and lens_base_y {list(by)} are (nearly) "
                          "parallel: they span no lattice")
+    _check_other_fields(calib)
+
+
+def _check_other_fields(calib: dict) -> None:
+    """The fields beside the lattice (kept in the metadata for later stages): finite, a
+    non-negative border, a positive total covering plane, lens types of distinct ids 0..2 with
+    depth ranges min < max."""
+    distortion = calib.get("distortion") or {}
+    fields = {"lens_border": calib.get("lens_border"), "tcp": calib.get("tcp"),
+              "sub_grid_base": calib.get("sub_grid_base"),
+              "distortion parameters": distortion.get("parameters"),
+              "distortion offset": distortion.get("offset")}
+    for k, lens_type in enumerate(calib.get("lens_types") or []):
+        fields[f"lens_type {k} offset"] = lens_type["offset"]
+        fields[f"lens_type {k} depth_range"] = lens_type["depth_range"]
+    for name, value in fields.items():
+        if value is not None and not np.all(np.isfinite(np.asarray(value, float))):
+            raise ValueError(f"{name} {value} must hold finite numbers")
+    if calib.get("lens_border", 0) < 0 or (calib.get("tcp") is not None and calib["tcp"] <= 0):
+        raise ValueError(f"lens_border {calib.get('lens_border')} must be >= 0 px and tcp "
+                         f"{calib.get('tcp')} > 0")
+    ids = [t["id"] for t in calib.get("lens_types") or []]
+    if len(set(ids)) != len(ids) or not set(ids) <= {0, 1, 2}:
+        raise ValueError(f"lens_type ids {ids} must be distinct, from 0 to 2")
+    for t in calib.get("lens_types") or []:
+        low, high = t["depth_range"]
+        if not low < high:
+            raise ValueError(f"lens_type {t['id']} depth_range [{low}, {high}] must have min < max")
 
 
 def read_calib(path: str | os.PathLike) -> dict:

@@ -32,18 +32,18 @@ import tifffile
 from plenocli import __version__
 from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import atomic_path
+from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used via tiffio)
+    MAX_PAGE_PIXELS,
+    check_light_levels,
+    check_page,
+    check_real_dtype,
+    check_segments,
+)
 from plenocli.model.cfa import is_bayer
+from plenocli.progress import log
 
 FORMAT_KEY = "plenocli_format"
 FORMAT_VERSION = 1
-# Sizes read from a header are checked before anything is allocated: 2^30 pixels (1 Gpx) per
-# page is 30 times a full-frame raw; a larger claim is damage, not a sensor.
-MAX_PAGE_PIXELS = 2 ** 30
-COMPRESSION_NONE = 1
-# JPEG (lossless in raw DNGs, baseline in other TIFFs) and DNG 1.4's lossy JPEG.
-JPEG_COMPRESSIONS = (7, 34892)
-JPEG_START_OF_SCAN, JPEG_END_OF_IMAGE = b"\xff\xda", b"\xff\xd9"
-JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}  # SOF0..SOF15
 # What reading a damaged file raises, from tifffile or the codec of a compressed page (zlib,
 # imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
 READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
@@ -80,6 +80,13 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                                  "NaN or infinite: every input pixel clipped, masked or outside "
                                  "the grid); nothing was written: check the inputs with "
                                  "plenocli info")
+        found = _first_infinite(data)
+        if found:  # +-Inf is never written either: an overflow, not light
+            k, count, row, col = found
+            raise InputError(f"{path}: view {names[k]} of the result holds {count} infinite "
+                             f"pixels (first at row {row}, col {col}): it overflowed float32, "
+                             "the inputs hold values far beyond any sensor level; nothing was "
+                             "written")
     description = json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
     with atomic_path(path, protect=protect) as tmp:
         with tifffile.TiffWriter(tmp) as tw:
@@ -136,95 +143,6 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
         logger.propagate = propagate
 
 
-def check_page(path: Path, page) -> None:
-    """Refuse a page whose header claims more than MAX_PAGE_PIXELS, a sample type that is not a
-    real number (complex, bool), or uncompressed pixel data beyond the end of the file."""
-    try:
-        shape = tuple(int(v) for v in page.shape)
-        compression = int(page.compression)
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{path}: damaged TIFF (a malformed tag: {err}); copy or write it "
-                         "again") from err
-    pixels = int(np.prod(shape, dtype=np.float64))
-    if pixels > MAX_PAGE_PIXELS:
-        raise InputError(f"{path}: the TIFF header claims an image of {' x '.join(map(str, shape))}"
-                         f" samples, more than plenocli reads ({MAX_PAGE_PIXELS} per page); the "
-                         "file is damaged or not a sensor image")
-    check_real_dtype(path, page.dtype)
-    if page.databytecounts:
-        size = Path(path).stat().st_size
-        end = max(int(o) + int(c) for o, c in zip(page.dataoffsets, page.databytecounts,
-                                                   strict=True))
-        short = (compression == COMPRESSION_NONE
-                 and sum(int(c) for c in page.databytecounts) < page.nbytes)
-        if end > size or short:
-            raise InputError(f"{path}: truncated TIFF (the header places pixel data up to byte "
-                             f"{end}, the file has {size} bytes); copy or write it again")
-
-
-def check_segments(path, page) -> None:
-    """Refuse a page with a tile or strip that would decode to made-up pixels without an error.
-
-    tifffile fills a segment of no bytes with zeros and decodes whatever a wrong offset points
-    at (segments of one page never share bytes); libjpeg-turbo and the lossless-JPEG decoder
-    fill a cut JPEG stream with made-up values, and tifffile casts JPEG samples of more bits than
-    BitsPerSample says into the smaller type. A whole JPEG stream ends with its end marker, after
-    its first start-of-scan (byte stuffing keeps the marker out of the coded data)."""
-    kind = "tile" if page.is_tiled else "strip"
-    counts = [int(c) for c in page.databytecounts]
-    if 0 in counts:
-        raise InputError(f"{path}: damaged TIFF ({kind} {counts.index(0)} has no data: byte count "
-                         "0); copy or write the file again")
-    spans = sorted(zip((int(o) for o in page.dataoffsets), counts, strict=True))
-    for (start, count), (following, _) in zip(spans, spans[1:], strict=False):
-        if start + count > following:  # LZW, PackBits, ... would decode one tile twice
-            raise InputError(f"{path}: damaged TIFF (two {kind}s share the bytes at "
-                             f"{following}: a wrong offset or byte count); copy or write the "
-                             "file again")
-    if int(page.compression) not in JPEG_COMPRESSIONS:
-        return
-    handle = page.parent.filehandle
-    for k, (offset, count) in enumerate(zip(page.dataoffsets, counts, strict=True)):
-        handle.seek(offset)
-        segment = handle.read(count)
-        scan = segment.find(JPEG_START_OF_SCAN)
-        if scan < 0 or segment.rfind(JPEG_END_OF_IMAGE) < scan:
-            # a few cameras end whole streams without it (some Leica DNGs): no way to tell
-            raise InputError(f"{path}: JPEG {kind} {k} has no end-of-image marker (cut short, "
-                             "a wrong byte count, or a camera that omits it), so its last rows "
-                             "cannot be trusted; copy the file again, or re-save it with Adobe "
-                             "DNG Converter")
-        bits = _jpeg_precision(segment)
-        if bits is not None and bits > 8 * page.dtype.itemsize:
-            raise InputError(f"{path}: damaged TIFF (JPEG {kind} {k} holds {bits}-bit samples, "
-                             f"the header says {page.bitspersample} bits per sample); copy or "
-                             "write the file again")
-
-
-def _jpeg_precision(stream: bytes) -> int | None:
-    """Bits per sample in a JPEG stream's frame header (SOFn); None if there is none."""
-    pos = 2  # after the start-of-image marker
-    while pos + 5 <= len(stream) and stream[pos] == 0xFF:
-        marker = stream[pos + 1]
-        if marker == 0xFF:  # fill byte
-            pos += 1
-        elif marker in JPEG_FRAME_MARKERS:
-            return stream[pos + 4]
-        elif marker == JPEG_START_OF_SCAN[1]:
-            return None
-        else:
-            pos += 2 + int.from_bytes(stream[pos + 2:pos + 4], "big")
-    return None
-
-
-def check_real_dtype(path, dtype) -> None:
-    """Sensor and plenocli images hold real numbers: unsigned or 16+ bit integers, or floats."""
-    dtype = np.dtype(dtype) if dtype is not None else None
-    if dtype is None or dtype.kind not in "uif" or (dtype.kind == "i" and dtype.itemsize < 2):
-        raise InputError(f"{path}: samples of type {dtype} are not real-valued sensor data "
-                         "(expected unsigned integers, 16/32-bit integers or floats)")
-
-
 def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     """Read a TIFF as (views, rows, cols) and its plenocli metadata ({} for a foreign TIFF)."""
     p = Path(path)
@@ -238,6 +156,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             series = tif.series[0] if len(tif.series) == 1 else None
             for page in tif.pages:
                 check_segments(p, page)
+                check_light_levels(p, page)
             if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
@@ -248,24 +167,79 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
-    return data, meta
+    whites = meta.get("white_level")
+    if whites and data.dtype.kind in "ui" and max(whites) > np.iinfo(data.dtype).max:
+        raise InputError(f"{p}: white level {max(whites):g} is beyond what its {data.dtype} "
+                         "samples can reach, so clipped pixels would pass as light; the file was "
+                         "edited or damaged: decode the capture again")
+    check_no_infinity(p, data, meta.get("views"))
+    return data, _camera_metadata(p, meta)
+
+
+def _camera_metadata(path: Path, meta: dict) -> dict:
+    """``meta`` with its camera colour and EXIF fields checked (rawmeta): a field that is not
+    what it must be is dropped with a warning, so no stage trips on it."""
+    if meta.get("colour") is None and meta.get("exif") is None:
+        return meta
+    from plenocli.io import rawmeta
+
+    def warn(message: str) -> None:
+        log.warning("%s: %s", path, message)
+
+    meta = dict(meta)
+    if "colour" in meta:
+        meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
+    if "exif" in meta:
+        meta["exif"] = rawmeta.clean_exif(meta["exif"], warn)
+    return meta
+
+
+def check_no_infinity(path, data: np.ndarray, names=None) -> None:
+    """Refuse a float image holding +-Inf. In plenocli NaN marks a clipped or unknown pixel and
+    every stage skips it; an infinite value is never light, and passed on it spoils every sum it
+    enters (a developed photograph's exposure, an unmixed view)."""
+    found = _first_infinite(data)
+    if found:
+        k, count, row, col = found
+        name = names[k] if names and k < len(names) else k
+        raise InputError(f"{path}: view {name} holds {count} infinite pixels (first at row "
+                         f"{row}, col {col}); plenocli reads NaN as a clipped or unknown pixel "
+                         "but never +-Inf: write NaN there, or make the file again")
+
+
+def _first_infinite(data: np.ndarray, rows: int = 64) -> tuple[int, int, int, int] | None:
+    """(page, how many, row, col) of the first page holding +-Inf, or None. Band by band: no
+    full-size temporary for the common, finite case."""
+    if data.dtype.kind != "f":
+        return None
+    for k, page in enumerate(data.reshape(-1, *data.shape[-2:])):
+        if any(np.isinf(page[r:r + rows]).any() for r in range(0, page.shape[0], rows)):
+            where = np.argwhere(np.isinf(page))
+            return k, len(where), int(where[0][0]), int(where[0][1])
+    return None
 
 
 def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     """The geometry in ``meta`` must fit (views, rows, cols) ``shape``: view names one per page,
     ``active_area`` and each masked area inside the image, ``origin`` two whole numbers."""
     names = meta.get("views")
-    if names is not None and (not isinstance(names, list) or len(names) != shape[0]):
+    if (names is None and "views" in meta) or (
+            names is not None and (not isinstance(names, list) or len(names) != shape[0])):
         raise InputError(f"{path}: metadata names {names!r} for {shape[0]} pages; the file was "
                          "edited or damaged: write it again")
+    check_view_names(path, names)
     if names is not None and len(set(map(str, names))) != len(names):
         twice = next(n for n in names if names.count(n) > 1)
         raise InputError(f"{path}: metadata names view {twice!r} twice; the file was edited or "
                          "damaged: write it again")
+    masked = meta.get("masked_areas")
+    if masked is not None and not isinstance(masked, list):
+        raise InputError(f"{path}: masked area list {masked!r} is not a list of [top, left, "
+                         "bottom, right] rectangles; the file was edited or damaged")
     areas = [("active_area", meta.get("active_area"))]
-    areas += [("masked area", a) for a in (meta.get("masked_areas") or [])]
+    areas += [("masked area", a) for a in (masked or [])]
     for what, area in areas:
-        if area is None:
+        if area is None and what == "active_area":
             continue
         if not _inside(area, shape[-2:]):
             raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
@@ -273,8 +247,18 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
                              "was edited or damaged: decode the capture again")
     origin = meta.get("origin")
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
-                                   and all(isinstance(v, int) for v in origin)):
-        raise InputError(f"{path}: origin {origin!r} is not two whole numbers [row, col]")
+                                   and all(isinstance(v, int) and not isinstance(v, bool)
+                                           and v >= 0 for v in origin)):
+        raise InputError(f"{path}: origin {origin!r} is not two whole numbers >= 0 [row, col] "
+                         "(sensor coordinates)")
+
+
+def check_view_names(path, names) -> None:
+    """View names, when given, are a list of non-empty text."""
+    if names is not None and not (isinstance(names, list)
+                                  and all(isinstance(n, str) and n.strip() for n in names)):
+        raise InputError(f"{path}: metadata names {names!r}: view names must be non-empty "
+                         "text; the file was edited or damaged: write it again")
 
 
 def check_levels(path, meta: dict, views: int) -> None:
@@ -296,6 +280,16 @@ def check_levels(path, meta: dict, views: int) -> None:
             and all(_number(w) and w == w for w in whites)):  # w == w: not NaN
         raise InputError(f"{path}: white_level {whites!r} is not one level per view "
                          f"({views} views); the file was edited or damaged")
+    if blacks is not None and whites is not None:
+        for k, (black, white) in enumerate(zip(blacks, whites, strict=True)):
+            if not white > max(black):
+                raise InputError(f"{path}: view {k}: white level {white:g} is not above its "
+                                 f"black level {max(black):g}; the file was edited or damaged")
+    colours = meta.get("view_colours")
+    if colours is not None and not (isinstance(colours, list) and len(colours) == views and all(
+            c is None or (isinstance(c, str) and is_bayer(c)) for c in colours)):
+        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern (or null) "
+                         f"per view ({views} views); the file was edited or damaged")
     for key, kind in (("provenance", dict), ("history", list)):
         if meta.get(key) is not None and not isinstance(meta[key], kind):
             raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
@@ -339,7 +333,9 @@ def read_meta(path: str | os.PathLike) -> dict:
             description = tif.pages[0].description if tif.pages else ""
     except (*READ_ERRORS, InputError):
         return {}
-    return plenocli_meta(path, description)
+    meta = plenocli_meta(path, description)
+    check_view_names(path, meta.get("views"))
+    return meta
 
 
 def plenocli_meta(path, description: str | None) -> dict:

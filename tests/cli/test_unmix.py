@@ -126,7 +126,8 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
     elif case == "names":
         views = _bad_views(tmp, names=("L", "R"))
     elif case == "view_count":
-        nodes = np.tile(np.eye(4)[None, :, :, None, None], (1, 1, 1, 2, 2)) + 0.1
+        m = np.eye(4) + 0.1 * (1 - np.eye(4))  # M_jj = 1, as measured
+        nodes = np.tile(m[None, :, :, None, None], (1, 1, 1, 2, 2))
         mixing = _mixing_file(tmp, nodes, views=("A", "B", "c", "d"))
     elif case == "singular":
         views = _bad_views(tmp, cfa=None)

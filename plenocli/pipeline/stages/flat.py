@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.flatfield import apply_gain, white_gains
+from plenocli.flatfield import apply_gain, check_gains, white_gains
 from plenocli.io import tiffio
 from plenocli.io.preview import colour_pages, write_png
 from plenocli.model.provenance import stage_record
@@ -34,9 +34,17 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         except ValueError as err:
             raise InputError(f"{white}: {err}") from err
     else:
-        if ref_meta.get("provenance", {}).get("stage") != "flat-gain":
+        record = ref_meta.get("provenance", {})
+        if record.get("stage") != "flat-gain":
             raise InputError(f"{gain}: not a gain map; make one with plenocli flat --save-gain")
         gains = ref.astype(np.float32, copy=False)
+        made = record.get("parameters") if isinstance(record.get("parameters"), dict) else {}
+        try:
+            check_gains(gains, cfa=meta.get("cfa"), reference=made.get("reference"),
+                        floor=made.get("floor"), names=ref_meta.get("views"))
+        except (ValueError, TypeError) as err:
+            raise InputError(f"{gain}: {err}; make the gain again with plenocli flat "
+                             "--save-gain") from err
     corrected = apply_gain(views, gains)
     params = dict(median=median, reference=reference, percentile=percentile, floor=floor)
     inputs = {"input": input, "white": white, "gain": gain}
