@@ -1,0 +1,121 @@
+"""Which lattice the calibration vouches for, by which judge, and what hints may do.
+
+Two judges look at the image independently (``verify``: the border autocorrelation at far lags
+of a central crop; ``fold``: the whole central region folded onto the lattice). The border
+judge decides when it can; when it cannot (smeared borders: compression, blur, Galilean
+overlap), the fold judge may decide, provided the border judge does not contradict it (the
+fold's lattice must have a positive border contrast, above its detuned control and above
+every unrelated lattice the border judge looked at).
+
+A hint (``--pitch``, ``--start``) only adds lattices for the judges to look at. It never
+decides: every lattice the image alone proposes stays in the judgement, and the answer must
+agree with the hint (pitch within 15 %; a start's kind, pitch within 15 % and angle within
+5 deg) or the calibration is refused, saying what the image shows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocli.calibration.candidates import Lattice
+from plenocli.calibration.fold import Folds, FoldVerdict, fold_judge
+from plenocli.calibration.search import find_lattice, hypotheses, judged, refined, view_for
+from plenocli.calibration.verify import NULL_RATIO, Verdict, control_contrast, doubt, nested
+from plenocli.errors import CalibrationError
+from plenocli.model.lensgrid import LensGrid
+
+HINT_RANGE = 1.15               # a pitch hint admits lattices within 15 %
+START_ANGLE_RAD = np.radians(5.0)  # a start's rotation admits lattices within 5 deg
+FOLD_CANDIDATES = 5             # border hypotheses the fold judge looks at (best contrast)
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The lattice vouched for, the judge that decided ("border" or "fold") and both
+    judges' findings (the fold judge's only when it was asked)."""
+
+    lattice: Lattice
+    judge: str
+    border: Verdict
+    fold: FoldVerdict | None = None
+
+    def to_dict(self) -> dict:
+        return {"judge": self.judge, **self.border.to_dict(),
+                "fold": self.fold.to_dict() if self.fold else None}
+
+    def describe(self) -> str:
+        """Which judge decided and how close the rivals came."""
+        if self.judge == "border":
+            rival = self.border.rivals[0] if self.border.rivals else None
+            return (f"border judge: contrast {self.border.contrast:.3f}, control "
+                    f"{self.border.control:.3f}" + (f", best rival {rival[0].describe()} "
+                                                    f"at {rival[1]:.3f}" if rival else ""))
+        fold = self.fold
+        rival = fold.rivals[0] if fold.rivals else None
+        return (f"fold judge (borders too weak: contrast {self.border.contrast:.3f}): "
+                f"sharpness {fold.sharpness:.4f}, control {fold.control:.4f}"
+                + (f", best rival {rival[0].describe()} at {rival[1]:.4f}" if rival else ""))
+
+
+def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = None,
+           start: LensGrid | None = None) -> Decision:
+    """The lattice of ``image`` (its views built by ``search.views``), or CalibrationError
+    saying why none can be vouched for, or how the image contradicts a hint."""
+    free = find_lattice(all_views, hypotheses(all_views, pitch_hint=None))
+    own = None if start is None else Lattice(start.lattice, start.pitch_px, start.angle_rad)
+    extra: list[tuple[Lattice, float]] = []
+    if pitch_hint is not None and doubt(free):
+        extra += find_lattice(all_views, hypotheses(all_views, pitch_hint=pitch_hint)).considered
+    if own is not None and doubt(free):
+        extra.append(refined(own, all_views))
+    verdict = judged([*free.considered, *extra], all_views) if extra else free
+    reason = doubt(verdict)
+    decision = Decision(verdict.lattice, "border", verdict)
+    if reason:
+        decision = _fold_decision(image, verdict, extra, all_views, reason)
+    _check_hints(decision, pitch_hint, own)
+    return decision
+
+
+def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> Decision:
+    """The fold judge's decision where the border judge has none, or CalibrationError."""
+    ranked = sorted((t for t in verdict.considered if np.isfinite(t[1])), key=lambda t: -t[1])
+    candidates = [lat for lat, _ in [*ranked[:FOLD_CANDIDATES], *extra]]
+    if not candidates:
+        raise CalibrationError(reason)
+    fold = fold_judge(candidates, Folds(image, candidates[0].pitch_px))
+    if fold.lattice is None:
+        raise CalibrationError(f"{reason}; nor does the fold judge find one ({fold.reason})")
+    acf = view_for(fold.lattice, all_views).acf
+    contrast = acf.contrast(fold.lattice)
+    control = control_contrast(fold.lattice, acf)
+    others = [c for lat, c in verdict.considered if nested(fold.lattice, lat) is None
+              and not lat.same_as(fold.lattice, rel=0.01, angle=0.01)]
+    if not (contrast > 0 and contrast >= NULL_RATIO * control
+            and contrast > max(others, default=-np.inf)):
+        raise CalibrationError(
+            f"{reason}; the fold judge finds {fold.lattice.describe()} (sharpness "
+            f"{fold.sharpness:.4f}) but the micro-image borders do not confirm it (contrast "
+            f"{contrast:.3f}, control {control:.3f})")
+    border = Verdict(fold.lattice, contrast, verdict.rivals, control,
+                     considered=verdict.considered)
+    return Decision(fold.lattice, "fold", border, fold)
+
+
+def _check_hints(decision: Decision, pitch_hint: float | None, own: Lattice | None) -> None:
+    """Refuse an answer that a hint contradicts, saying what the image shows."""
+    found = decision.lattice
+    shows = f"the image shows a {found.describe()} lattice ({decision.describe()})"
+    if pitch_hint is not None and not 1 / HINT_RANGE <= found.pitch_px / pitch_hint <= HINT_RANGE:
+        raise CalibrationError(f"--pitch {pitch_hint:g} contradicts the image: {shows}; pass "
+                               f"--pitch {found.pitch_px:.1f} or drop --pitch")
+    if own is None:
+        return
+    step = np.pi / 3 if found.kind == "hex" else np.pi / 2
+    turn = abs((found.angle_rad - own.angle_rad + step / 2) % step - step / 2)
+    if (found.kind != own.kind or not 1 / HINT_RANGE <= found.pitch_px / own.pitch_px
+            <= HINT_RANGE or turn > START_ANGLE_RAD):
+        raise CalibrationError(f"the start grid ({own.describe()}) does not fit this image: "
+                               f"{shows}; check the --start file or calibrate without it")
