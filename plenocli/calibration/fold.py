@@ -80,13 +80,17 @@ class Folds:
         order = np.argsort(np.hypot(x, y), kind="stable")
         self.x, self.y = x[order].astype(np.float64), y[order].astype(np.float64)
         self.values = flat.ravel()[pick][order].astype(np.float64)
+        self.distance = np.hypot(self.x, self.y)
+        centred = self.values - self.values.mean()   # running sums of the centred values
+        self.sums = np.concatenate([[0.0], np.cumsum(centred)])
+        self.squares = np.concatenate([[0.0], np.cumsum(centred * centred)])
         self.radius = float(np.hypot(side_r, side_c)) / 2
         self.offset = (c0 + (side_c - 1) / 2, r0 + (side_r - 1) / 2)   # region middle, px
 
     def _count(self, crop: float) -> int:
         if crop >= 1.0:
             return len(self.values)
-        return int(np.searchsorted(np.hypot(self.x, self.y), crop * self.radius))
+        return int(np.searchsorted(self.distance, crop * self.radius))
 
     def cell(self, lattice: Lattice, crop: float = 1.0) -> tuple[np.ndarray, float]:
         """The folded cell (BINS x BINS, lattice (0, 0) at the region's middle) of the samples
@@ -95,10 +99,11 @@ class Folds:
         count = self._count(crop)
         inv = np.linalg.inv(lattice.basis().T)
         cell = _fold_samples(self.x[:count], self.y[:count], self.values[:count], inv, BINS)
-        spread = float(np.var(self.values[:count]))
-        if not spread > 0 or np.isnan(cell).mean() > 0.1:
+        if count < 2 or np.isnan(cell).mean() > 0.1:
             return cell, 0.0
-        return cell, float(np.nanvar(cell)) / spread
+        mean = self.sums[count] / count   # the samples' variance from running sums
+        spread = self.squares[count] / count - mean * mean
+        return cell, float(np.nanvar(cell)) / spread if spread > 0 else 0.0
 
     def sharpness(self, lattice: Lattice, crop: float = 1.0) -> float:
         return self.cell(lattice, crop)[1]
@@ -114,9 +119,12 @@ def _fold_samples(x, y, values, inv, bins):  # pragma: no cover - compiled
     lattices of a few hundred thousand samples)."""
     total = np.zeros(bins * bins)
     count = np.zeros(bins * bins)
+    a00, a01, a10, a11 = inv[0, 0], inv[0, 1], inv[1, 0], inv[1, 1]
     for k in range(x.shape[0]):
-        u = int(np.floor((inv[0, 0] * x[k] + inv[0, 1] * y[k]) * bins)) % bins
-        v = int(np.floor((inv[1, 0] * x[k] + inv[1, 1] * y[k]) * bins)) % bins
+        a = a00 * x[k] + a01 * y[k]
+        b = a10 * x[k] + a11 * y[k]
+        u = min(int((a - np.floor(a)) * bins), bins - 1)
+        v = min(int((b - np.floor(b)) * bins), bins - 1)
         total[u * bins + v] += values[k]
         count[u * bins + v] += 1.0
     out = np.full(bins * bins, np.nan)
