@@ -35,7 +35,6 @@ from plenocli.calibration.centres import (
     lens_centre,
     refine_centres,
 )
-from plenocli.calibration.decide import Decision, decide
 from plenocli.calibration.fit import (
     LatticeFit,
     compare_grids,
@@ -44,6 +43,7 @@ from plenocli.calibration.fit import (
     regional_lattice,
 )
 from plenocli.calibration.flatten import flatten
+from plenocli.calibration.judges import Decision, decide
 from plenocli.calibration.lenstypes import classify
 from plenocli.calibration.search import BorderLattice, border_lattice, views
 from plenocli.calibration.verify import Verdict
@@ -110,15 +110,25 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     all_views = views(image, cfa)
     try:
         decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
+        return _grid(image, cfa, decision, all_views, lattice, pitch_hint)
     except CalibrationError as err:
-        if "contradicts" in str(err) or "does not fit" in str(err):
-            raise
-        if start is not None:
-            raise CalibrationError(
-                f"the image does not confirm the start grid ({start.lattice} "
-                f"{start.pitch_px:.2f} px): {err}; check the --start file or calibrate "
-                "without it") from err
-        raise CalibrationError(f"{err}; {_what_to_do(image.shape, pitch_hint)}") from err
+        raise _refusal(err, image.shape, pitch_hint, start) from err
+
+
+def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationError:
+    """A refusal that says what to do (a hint the image contradicts already says it)."""
+    if any(s in str(err) for s in ("contradicts", "does not fit", "pass ")):
+        return err
+    if start is not None:
+        return CalibrationError(f"the image does not confirm the start grid ({start.lattice} "
+                                f"{start.pitch_px:.2f} px): {err}; check the --start file or "
+                                "calibrate without it")
+    return CalibrationError(f"{err}; {_what_to_do(shape, pitch_hint)}")
+
+
+def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
+          ) -> tuple[LensGrid, CalibrationReport]:
+    """Centres, lattice and lens types on the lattice a judge decided (steps 4 and 5)."""
     verdict = decision.border
     found = decision.lattice
     if lattice != "auto" and found.kind != lattice:

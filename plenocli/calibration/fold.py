@@ -71,12 +71,23 @@ class Folds:
         rows, cols = image.shape
         side_r, side_c = min(rows, FOLD_PX), min(cols, FOLD_PX)
         r0, c0 = (rows - side_r) // 2, (cols - side_c) // 2
-        flat = flatten(image[r0:r0 + side_r, c0:c0 + side_c], scale_px=max(2 * pitch_px, 16.0))
-        rng = np.random.default_rng(0)
-        pick = rng.choice(flat.size, size=min(SAMPLES, flat.size), replace=False)
+        self._sample(flatten(image[r0:r0 + side_r, c0:c0 + side_c],
+                             scale_px=max(2 * pitch_px, 16.0)), 1)
+
+    @classmethod
+    def of_view(cls, flat: np.ndarray, factor: int) -> Folds:
+        """The samples of a view's flattened crop (decimated by ``factor``), in full-image
+        px: enough to tell a lattice from its relatives, not to refine it."""
+        out = object.__new__(cls)
+        out._sample(flat, factor)
+        return out
+
+    def _sample(self, flat: np.ndarray, factor: int) -> None:
+        side_r, side_c = flat.shape
+        pick = np.random.default_rng(0).integers(0, flat.size, size=min(SAMPLES, flat.size))
         y, x = np.divmod(pick, side_c)
-        x = x - (side_c - 1) / 2
-        y = y - (side_r - 1) / 2
+        x = (x - (side_c - 1) / 2) * factor
+        y = (y - (side_r - 1) / 2) * factor
         order = np.argsort(np.hypot(x, y), kind="stable")
         self.x, self.y = x[order].astype(np.float64), y[order].astype(np.float64)
         self.values = flat.ravel()[pick][order].astype(np.float64)
@@ -84,8 +95,7 @@ class Folds:
         centred = self.values - self.values.mean()   # running sums of the centred values
         self.sums = np.concatenate([[0.0], np.cumsum(centred)])
         self.squares = np.concatenate([[0.0], np.cumsum(centred * centred)])
-        self.radius = float(np.hypot(side_r, side_c)) / 2
-        self.offset = (c0 + (side_c - 1) / 2, r0 + (side_r - 1) / 2)   # region middle, px
+        self.radius = float(np.hypot(side_r, side_c)) * factor / 2
 
     def _count(self, crop: float) -> int:
         if crop >= 1.0:
@@ -134,7 +144,8 @@ def _fold_samples(x, y, values, inv, bins):  # pragma: no cover - compiled
     return out.reshape(bins, bins)
 
 
-REFINE_STAGES = ((8.0, 20), (20.0, 15), (None, 15))   # (radius in pitches, evaluations)
+# (radius in pitches, first step in pitches at that radius, evaluations)
+REFINE_STAGES = ((8.0, 0.25, 20), (20.0, 0.1, 15), (None, 0.05, 20))
 
 
 def refine_fold(lattice: Lattice, folds: Folds) -> tuple[Lattice, float]:
@@ -142,9 +153,9 @@ def refine_fold(lattice: Lattice, folds: Folds) -> tuple[Lattice, float]:
     angle) over the central 8 pitches (a wide basin), then 20, then the whole region (a
     sharp one)."""
     current = lattice
-    for reach, evaluations in REFINE_STAGES:
+    for reach, step, evaluations in REFINE_STAGES:
         crop = 1.0 if reach is None else min(1.0, reach * current.pitch_px / folds.radius)
-        span = 0.25 * current.pitch_px / (crop * folds.radius)
+        span = step * current.pitch_px / (crop * folds.radius)
 
         def cost(p, base=current, crop=crop):
             return -folds.sharpness(Lattice(base.kind, base.pitch_px * np.exp(p[0]),
@@ -176,7 +187,7 @@ def _cosets(kind: str, index: int) -> list[tuple[int, int]]:
             3: [(n // 3, n // 3), (2 * n // 3, 2 * n // 3)], 2: [(n // 2, n // 2)]}[index]
 
 
-def _nested_pairs(lattice: Lattice) -> list[tuple[Lattice, Lattice, int]]:
+def nested_pairs(lattice: Lattice) -> list[tuple[Lattice, Lattice, int]]:
     """(coarse, fine, index) for the lattice and each of its nearest finer and coarser
     relatives."""
     root, turn, index = (np.sqrt(3), np.pi / 6, 3) if lattice.kind == "hex" else \
@@ -224,7 +235,7 @@ def fold_judge(candidates: list[Lattice], folds: Folds) -> FoldVerdict:
     best, sharp = max(refined, key=lambda t: t[1])
     for _ in range(4):
         moved = False
-        for coarse, fine, index in _nested_pairs(best):
+        for coarse, fine, index in nested_pairs(best):
             truth = settle_fold(coarse, fine, index, folds)
             if truth is None:
                 return FoldVerdict(None, sharp, reason=(

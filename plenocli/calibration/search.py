@@ -38,6 +38,7 @@ class View:
     acf: Autocorrelation
     suggested: tuple[Lattice, ...]
     borders: dict = field(default_factory=dict, compare=False, repr=False)   # border_lattice's
+    flat: np.ndarray | None = field(default=None, compare=False, repr=False)  # the crop, flat
 
 
 def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
@@ -71,7 +72,7 @@ def _view(image: np.ndarray, cfa: str | None, factor: int, coarser: int | None) 
                  for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
                  for lat in lattices_of_peak(g, factor)]
     suggested += [lat for v in acf_peaks(acf.acf) for lat in lattices_of_lag(v, factor)]
-    return View(factor, acf, tuple(suggested))
+    return View(factor, acf, tuple(suggested), flat=flat)
 
 
 def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:

@@ -20,8 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from plenocli.calibration.candidates import Lattice
-from plenocli.calibration.fold import Folds, FoldVerdict, fold_judge
-from plenocli.calibration.search import find_lattice, hypotheses, judged, refined, view_for
+from plenocli.calibration.fold import Folds, FoldVerdict, fold_judge, nested_pairs, settle_fold
+from plenocli.calibration.search import (
+    border_lattice,
+    find_lattice,
+    hypotheses,
+    judged,
+    refined,
+    view_for,
+)
 from plenocli.calibration.verify import NULL_RATIO, Verdict, control_contrast, doubt, nested
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LensGrid
@@ -54,7 +61,7 @@ class Decision:
                                                     f"at {rival[1]:.3f}" if rival else ""))
         fold = self.fold
         rival = fold.rivals[0] if fold.rivals else None
-        return (f"fold judge (borders too weak: contrast {self.border.contrast:.3f}): "
+        return (f"fold judge (border contrast only {self.border.contrast:.3f}): "
                 f"sharpness {fold.sharpness:.4f}, control {fold.control:.4f}"
                 + (f", best rival {rival[0].describe()} at {rival[1]:.4f}" if rival else ""))
 
@@ -75,14 +82,40 @@ def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = Non
     decision = Decision(verdict.lattice, "border", verdict)
     if reason:
         decision = _fold_decision(image, verdict, extra, all_views, reason)
+    else:   # the fold judge checks the border judge's choice among nested relatives
+        decision = cross_checked(image, decision, all_views) or decision
     _check_hints(decision, pitch_hint, own)
     return decision
+
+
+def cross_checked(image: np.ndarray, decision: Decision, all_views: dict) -> Decision | None:
+    """None when the fold judge does not contradict the border judge's lattice among its
+    nested relatives (x2, /2, x sqrt(3) or sqrt(2) turned); else the fold judge's decision
+    between them (confirmed as where the border judge has none), or CalibrationError. A
+    scene periodic on a relative can mislead the border judge; the fold of the view that
+    judged the lattice suffices to tell relatives apart."""
+    chosen = decision.lattice
+    precise = border_lattice(chosen, all_views)   # where the calibration will put it
+    if np.isfinite(precise.pitch_err_px) and precise.lattice.same_as(chosen, rel=0.05,
+                                                                     angle=0.05):
+        chosen = precise.lattice
+    view = view_for(chosen, all_views)
+    folds = Folds.of_view(view.flat, view.factor)
+    for coarse, fine, index in nested_pairs(chosen):
+        truth = settle_fold(coarse, fine, index, folds)
+        if truth is None or truth.same_as(chosen, rel=0.01, angle=0.01):
+            continue
+        reason = (f"the border judge chose {chosen.describe()}, the fold judge "
+                  f"{truth.describe()}")
+        contrast = view_for(truth, all_views).acf.contrast(truth)
+        return _fold_decision(image, decision.border, [(truth, contrast)], all_views, reason)
+    return None
 
 
 def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> Decision:
     """The fold judge's decision where the border judge has none, or CalibrationError."""
     ranked = sorted((t for t in verdict.considered if np.isfinite(t[1])), key=lambda t: -t[1])
-    candidates = [lat for lat, _ in [*ranked[:FOLD_CANDIDATES], *extra]]
+    candidates = [lat for lat, _ in [*extra, *ranked[:FOLD_CANDIDATES]]]
     if not candidates:
         raise CalibrationError(reason)
     fold = fold_judge(candidates, Folds(image, candidates[0].pitch_px))
@@ -91,8 +124,7 @@ def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> De
     acf = view_for(fold.lattice, all_views).acf
     contrast = acf.contrast(fold.lattice)
     control = control_contrast(fold.lattice, acf)
-    others = [c for lat, c in verdict.considered if nested(fold.lattice, lat) is None
-              and not lat.same_as(fold.lattice, rel=0.01, angle=0.01)]
+    others = [c for lat, c in verdict.considered if not _related(fold.lattice, lat, all_views)]
     if not (contrast > 0 and contrast >= NULL_RATIO * control
             and contrast > max(others, default=-np.inf)):
         raise CalibrationError(
@@ -102,6 +134,16 @@ def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> De
     border = Verdict(fold.lattice, contrast, verdict.rivals, control,
                      considered=verdict.considered)
     return Decision(fold.lattice, "fold", border, fold)
+
+
+def _related(lattice: Lattice, other: Lattice, all_views) -> bool:
+    """Whether ``other``, or where its far border peaks put it, is ``lattice`` or nested with
+    it."""
+    precise = border_lattice(other, all_views)
+    for lat in (other, precise.lattice) if np.isfinite(precise.pitch_err_px) else (other,):
+        if lat.same_as(lattice, rel=0.01, angle=0.01) or nested(lattice, lat) is not None:
+            return True
+    return False
 
 
 def _check_hints(decision: Decision, pitch_hint: float | None, own: Lattice | None) -> None:
