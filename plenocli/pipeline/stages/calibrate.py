@@ -103,7 +103,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
                            protect=protect)
     fit = report.fit
     centres = (f"residual RMS {fit.residual_rms_px:.4f} px" if fit.centres_refined else
-               f"a scene: centres from the border lattice (pitch +-{fit.pitch_se_px:.4f} px); "
+               f"a scene: centres from the lattice of {report.lattice_from} (pitch "
+               f"+-{fit.pitch_se_px:.4f} px); "
                f"the content moves the micro-images' own centres by {fit.residual_rms_px:.2f} "
                "px RMS")
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
