@@ -121,7 +121,9 @@ def main() -> None:
     if args.baseline:
         _against(args.baseline)
     frames = {"origami 4 Mpx": realdata / "origami" / "frame0.png",
-              "boys2 12 Mpx": realdata / "boys2_galilean" / "frame0.png"}
+              "boys2 12 Mpx": realdata / "boys2_galilean" / "frame0.png",
+              # borders smeared: the fold judge decides, the regions pin the pitch
+              "fujita2 QP 48 4 Mpx": realdata / "compressed" / "fujita2_qp48.png"}
     for name, path in frames.items():
         if path.exists():
             shape = cv2.imread(str(path)).shape[:2]

@@ -1,13 +1,13 @@
-"""The calibration's verdicts on 51 frames, to check that a change of speed changed nothing.
+"""The calibration's verdicts on 54 frames, to check that a change of speed changed nothing.
 
-The frames: 40 synthetic lenslet scenes (pitches 8-90 px; Keplerian, Galilean, multi-focus,
-and traps periodic at 2 x and sqrt(3) x the pitch), 7 white images of 2048 x 2048 (pitch
-6.3-95 px) and the real frames of REALDATA/raytrix. A synthetic frame is *right* (lattice
-kind, pitch within 0.1 %, angle within 0.02 deg, every lens within 0.1 pitch of its true
-centre), *wrong* or *refused*; a real frame is reported as found (kind, pitch, angle) or
-refused. With ``--baseline COMMIT`` the same frames go through that commit's code too (in a
-fresh process) and every frame whose verdict, lattice or pitch (beyond 1e-4 relative) differs
-is listed. Each side draws the synthetic frames with its own generator (``plenocli.synth``):
+The frames: 40 synthetic lenslet scenes (pitches 8-90 px; Keplerian, Galilean, multi-focus, and
+traps periodic at 2 x and sqrt(3) x the pitch), 7 white images of 2048 x 2048 (pitch 6.3-95 px)
+and the real frames of REALDATA/raytrix (compressed/ too, one entry each). A synthetic frame is
+*right* (lattice kind, pitch within 0.1 %, angle within 0.02 deg, every lens within 0.1 pitch of
+its true centre), *wrong* or *refused*; a real frame is reported as found (kind, pitch, angle)
+or refused. With ``--baseline COMMIT`` the same frames go through that commit's code too (in a
+fresh process) and every frame whose verdict, lattice or pitch (beyond 1e-4 relative) differs is
+listed. Each side draws the synthetic frames with its own generator (``plenocli.synth``):
 compare commits that draw them alike.
 
     PYTHONPATH=. .venv/bin/python bench/calibrate_verdicts.py [REALDATA] [--baseline COMMIT]
@@ -73,7 +73,8 @@ for k, (pitch, angle) in enumerate([(6.3, 0.3), (11.1, 1.0), (20.2, 0.05), (33.3
     results[f"white {pitch}"] = found(white.astype(np.float32) - 64)
 for path in sorted((Path(sys.argv[1]) / "raytrix").glob("*/*.png")):
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float32)
-    results[path.parent.name] = found(image.sum(-1) if image.ndim == 3 else image)
+    name = path.parent.name if path.parent.name != "compressed" else f"compressed/{path.stem}"
+    results[name] = found(image.sum(-1) if image.ndim == 3 else image)
 print(json.dumps(results))
 """
 

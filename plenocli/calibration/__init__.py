@@ -25,7 +25,7 @@ Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenoc
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,16 +35,23 @@ from plenocli.calibration.centres import (
     lens_centre,
     refine_centres,
 )
-from plenocli.calibration.fit import LatticeFit, compare_grids, fit_grid, fit_lattice
+from plenocli.calibration.fit import (
+    LatticeFit,
+    compare_grids,
+    fit_grid,
+    fit_lattice,
+    regional_lattice,
+)
 from plenocli.calibration.flatten import flatten
+from plenocli.calibration.judges import Decision, decide
 from plenocli.calibration.lenstypes import classify
-from plenocli.calibration.search import border_lattice, find_lattice, hypotheses, view_for, views
-from plenocli.calibration.verify import Verdict, control_contrast, doubt, judge
+from plenocli.calibration.search import BorderLattice, border_lattice, views
+from plenocli.calibration.verify import Verdict
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
 __all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
-           "refine_centres"]
+           "moved_from_start", "refine_centres"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # a lattice read from the border repetition is used when its pitch and angle errors move the
@@ -61,12 +68,16 @@ class CalibrationReport:
     verdict: Verdict
     lens_types: dict | None = None
     lens_centre: LensCentre | None = None
+    decision: Decision | None = None
+    lattice_from: str = "the micro-images' symmetry centres"   # what pinned pitch and angle
 
     def to_dict(self) -> dict:
         return {**{k: (v if isinstance(v, bool) else float(v) if isinstance(v, float)
                        else int(v)) for k, v in self.fit.__dict__.items()},
-                "confidence": self.verdict.to_dict(), "lens_types": self.lens_types,
-                "lens_centre": self.lens_centre.to_dict() if self.lens_centre else None}
+                "confidence": (self.decision.to_dict() if self.decision
+                               else self.verdict.to_dict()), "lens_types": self.lens_types,
+                "lens_centre": self.lens_centre.to_dict() if self.lens_centre else None,
+                "lattice_from": self.lattice_from}
 
 
 def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = None,
@@ -97,22 +108,35 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     """
     image = _checked(image, lattice, black_level, pitch_hint)
     all_views = views(image, cfa)
-    if start is None:
-        verdict = find_lattice(all_views, hypotheses(all_views, pitch_hint=pitch_hint))
-    else:
-        verdict = _start_verdict(start, all_views)
-    reason = doubt(verdict)
-    if reason and start is not None:
-        raise CalibrationError(f"the start grid ({verdict.lattice.describe()}) does not fit this "
-                               f"image: {reason}; check the --start file or calibrate without it")
-    if reason:
-        raise CalibrationError(f"{reason}; {_what_to_do(image.shape, pitch_hint)}")
-    found = verdict.lattice
+    try:
+        decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
+        return _grid(image, cfa, decision, all_views, lattice, pitch_hint)
+    except CalibrationError as err:
+        raise _refusal(err, image.shape, pitch_hint, start) from err
+
+
+def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationError:
+    """A refusal that says what to do (a hint the image contradicts already says it)."""
+    if any(s in str(err) for s in ("contradicts", "does not fit", "pass ")):
+        return err
+    if start is not None:
+        return CalibrationError(f"the image does not confirm the start grid ({start.lattice} "
+                                f"{start.pitch_px:.2f} px): {err}; check the --start file or "
+                                "calibrate without it")
+    return CalibrationError(f"{err}; {_what_to_do(shape, pitch_hint)}")
+
+
+def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
+          ) -> tuple[LensGrid, CalibrationReport]:
+    """Centres, lattice and lens types on the lattice a judge decided (steps 4 and 5)."""
+    verdict = decision.border
+    found = decision.lattice
     if lattice != "auto" and found.kind != lattice:
         raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
                                f"{found.describe()} lattice; use --lattice {found.kind} or auto")
     border = border_lattice(found, all_views)
     sure = _corner_error(border, image.shape) <= CORNER_TOLERANCE * found.pitch_px
+    pinned = "the border repetition" if sure else ""
     if sure:
         found = border.lattice
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
@@ -123,6 +147,9 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
             f"holes between them (the mean micro-image is as round about a hole: asymmetry "
             f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); "
             f"{_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
+    if not sure:   # the regions' mean micro-images may pin it down where the borders do not
+        found, border, sure = _regional(flat, found, centre, border, image.shape)
+        pinned = "the regions' mean micro-images" if sure else ""
     guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
                      image_shape=image.shape)
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad,
@@ -133,19 +160,50 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
             f"{found.describe()} lattice found, but on this scene neither the micro-image "
             f"centres nor the border repetition pin its pitch down (+-{border.pitch_err_px:.3f} "
             f"px); {_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
+    grid, type_info = _with_lens_types(flat, grid)
+    pinned = "the micro-images' symmetry centres" if fit.centres_refined else pinned
+    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
+                                   lens_centre=centre, decision=decision, lattice_from=pinned)
+
+
+def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport) -> dict:
+    """How far the calibration moved each part of a start grid, and what measured it: the
+    offset (the lens nearest the image centre), pitch, rotation and every centre. All four
+    are measured from the image (or the calibration is refused); what a start file holds
+    beyond the lattice (lens border, depth ranges, distortion) is the caller's to keep."""
+    shape = grid.image_shape
+    far = compare_grids(grid, start, shape)
+    near = start.lattice_xy(*start.nearest_index(*grid.offset_xy))
+    step = LATTICES[grid.lattice]
+    turn = (grid.angle_rad - start.angle_rad + step / 2) % step - step / 2
+    centres = ("each micro-image's symmetry centre" if report.fit.centres_refined else
+               f"the lattice ({report.lattice_from}; a scene moves each micro-image's own "
+               "centre)")
+    return {**far,
+            "offset": {"source": "measured: the mean micro-image's 6-fold centre",
+                       "moved_px": [float(v) for v in np.asarray(grid.offset_xy) - near]},
+            "pitch": {"source": f"measured: {report.lattice_from}",
+                      "moved_px": float(grid.pitch_px - start.pitch_px),
+                      "moved_percent": float(100 * (grid.pitch_px / start.pitch_px - 1))},
+            "rotation": {"source": f"measured: {report.lattice_from}",
+                         "moved_deg": float(np.degrees(turn))},
+            "centres": {"source": f"measured: {centres}", "rms_px": far["rms_px"],
+                        "max_px": far["max_px"]}}
+
+
+def _with_lens_types(flat: np.ndarray, grid: LensGrid) -> tuple[LensGrid, dict | None]:
+    """The grid with the lens types of a multi-focus hex array, and what they rest on."""
     types = classify(flat, grid.indices, grid.centres_xy, grid.pitch_px) \
         if grid.lattice == "hex" else None
-    type_info = None
-    if types is not None:
-        coset = tuple(int(types.types[np.flatnonzero(
-            (grid.indices[:, 0] - grid.indices[:, 1]) % 3 == k)[0]]) for k in range(3))
-        grid = LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
-                        image_shape=grid.image_shape, centres_xy=grid.centres_xy,
-                        indices=grid.indices, lens_type_of_coset=coset)
-        type_info = {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
-                     "p_value": types.p_value}
-    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
-                                   lens_centre=centre)
+    if types is None:
+        return grid, None
+    coset = tuple(int(types.types[np.flatnonzero(
+        (grid.indices[:, 0] - grid.indices[:, 1]) % 3 == k)[0]]) for k in range(3))
+    grid = LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
+                    image_shape=grid.image_shape, centres_xy=grid.centres_xy,
+                    indices=grid.indices, lens_type_of_coset=coset)
+    return grid, {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
+                  "p_value": types.p_value}
 
 
 def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,
@@ -161,6 +219,20 @@ def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,
         return (f"the {shape[1]} x {shape[0]} px image holds only {across:.0f} lenses of "
                 f"{pitch:.1f} px across: calibrate on a larger image, or {advice}")
     return advice
+
+
+def _regional(flat, found, centre, border, shape):
+    """The lattice through the regions' mean micro-images when it places the frame's corner
+    lenses within CORNER_TOLERANCE pitch (found, its uncertainty, True); else unchanged."""
+    regional = regional_lattice(flat, LensGrid(found.pitch_px, found.angle_rad,
+                                               centre.offset_xy, found.kind))
+    if regional is None:
+        return found, border, False
+    pitch, angle, _, se = regional
+    measured = BorderLattice(Lattice(found.kind, pitch, angle), *se)
+    if _corner_error(measured, shape) > CORNER_TOLERANCE * found.pitch_px:
+        return found, border, False
+    return measured.lattice, measured, True
 
 
 def _corner_error(border, shape: tuple[int, int]) -> float:
@@ -188,17 +260,3 @@ def _checked(image: np.ndarray, lattice: str, black_level: float,
     if not np.isfinite(image).all():
         raise CalibrationError("the image holds NaN or infinite values; pass a decoded frame")
     return image
-
-
-def _start_verdict(start: LensGrid, all_views) -> Verdict:
-    """The confidence of a given lattice: its border contrast against its detuned copies and
-    its relatives (a start file off by a harmonic is refused like a search would be)."""
-    own = Lattice(start.lattice, start.pitch_px, start.angle_rad)
-    scored = [(lat, view_for(lat, all_views).acf.contrast(lat))
-              for lat in [own, *own.relatives()]]
-    verdict = judge(scored, lambda lat: view_for(lat, all_views).acf)
-    verdict = replace(verdict, control=control_contrast(own, view_for(own, all_views).acf))
-    if not verdict.lattice.same_as(own):   # the start file is a relative of the lattice
-        return Verdict(own, scored[0][1], ((verdict.lattice, verdict.contrast),),
-                       verdict.control, undecided=True)
-    return verdict

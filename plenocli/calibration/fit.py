@@ -186,6 +186,33 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
                     indices=idx_out), report
 
 
+REGION_TILES = 4       # regions per side whose mean micro-images place the lattice
+
+
+def regional_lattice(flat: np.ndarray, grid: LensGrid) -> tuple | None:
+    """Pitch, angle, offset and their standard errors (pitch px, angle rad) of the lattice
+    through the lens centres of the mean micro-images of REGION_TILES x REGION_TILES regions
+    (:func:`regional_shifts`: scene content averaged over each region's lenses), robustly
+    (regions beyond 4 robust sigma dropped once); None when fewer than FIELD_REGIONS regions
+    show a round mean micro-image."""
+    middles, shifts = regional_shifts(flat, grid, tiles=REGION_TILES)
+    if len(shifts) < FIELD_REGIONS:
+        return None
+    i, j = grid.nearest_index(middles[:, 0] + shifts[:, 0], middles[:, 1] + shifts[:, 1])
+    idx = np.stack([i, j], axis=1)
+    points = grid.lattice_xy(i, j) + shifts
+    use = np.ones(len(points), bool)
+    for _ in range(2):
+        pitch, angle, offset, se = fit_lattice(idx[use], points[use], lattice=grid.lattice,
+                                               return_se=True)
+        resid = np.linalg.norm(points - LensGrid(pitch, angle, offset, grid.lattice)
+                               .lattice_xy(i, j), axis=1)
+        use = resid <= max(4 * 1.4826 * float(np.median(resid)), 0.01 * grid.pitch_px)
+        if use.sum() < FIELD_REGIONS:
+            return None
+    return pitch, angle, offset, se
+
+
 FIELD_DEGREE = 2       # of the polynomial field through the regions' shifts (6 terms per axis)
 FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
 FIELD_AGREEMENT = 0.02  # robust scatter (pitches) of the regions about the field

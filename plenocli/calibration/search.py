@@ -38,6 +38,7 @@ class View:
     acf: Autocorrelation
     suggested: tuple[Lattice, ...]
     borders: dict = field(default_factory=dict, compare=False, repr=False)   # border_lattice's
+    flat: np.ndarray | None = field(default=None, compare=False, repr=False)  # the crop, flat
 
 
 def views(image: np.ndarray, cfa: str | None) -> dict[int, View]:
@@ -71,7 +72,7 @@ def _view(image: np.ndarray, cfa: str | None, factor: int, coarser: int | None) 
                  for g in spectral_peaks(signal, cfa=bool(cfa) and factor == 1)
                  for lat in lattices_of_peak(g, factor)]
     suggested += [lat for v in acf_peaks(acf.acf) for lat in lattices_of_lag(v, factor)]
-    return View(factor, acf, tuple(suggested))
+    return View(factor, acf, tuple(suggested), flat=flat)
 
 
 def view_for(lattice: Lattice, all_views: dict[int, View]) -> View:
@@ -134,9 +135,19 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
         if not any(lat.kind == kind for lat in chosen):
             chosen += [lat for lat, c in first if c > 0 and lat.kind == kind][:1]
     if not chosen:   # no hypothesis has its points above its holes even over near lags
-        return Verdict(first[0][0], first[0][1])
+        return Verdict(first[0][0], first[0][1], considered=tuple(first[:REFINED]))
+    return judged([refined(lat, all_views) for lat in chosen], all_views)
+
+
+def refined(lattice: Lattice, all_views: dict[int, View]) -> tuple[Lattice, float]:
+    """A hypothesis at its local contrast maximum, moved onto its far border peaks."""
+    return _measured(*refine(lattice, view_for(lattice, all_views).acf), all_views)
+
+
+def judged(scored: list[tuple[Lattice, float]], all_views: dict[int, View]) -> Verdict:
+    """The verdict on refined hypotheses: the winner checked against its relatives and
+    rivals, measured again until it holds still, with its detuned control."""
     acf_for = lambda lat: view_for(lat, all_views).acf   # noqa: E731
-    scored = [_measured(*refine(lat, acf_for(lat)), all_views) for lat in chosen]
     verdict = judge(scored, acf_for)
     for _ in range(3):   # a winner reached through a relative is measured and judged again
         lat, c = _measured(verdict.lattice, verdict.contrast, all_views)
@@ -146,7 +157,7 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
     else:   # the far border peaks do not hold still on the winner: no stable lattice
         verdict = replace(verdict, undecided=True)
     control = control_contrast(verdict.lattice, view_for(verdict.lattice, all_views).acf)
-    return replace(verdict, control=control)
+    return replace(verdict, control=control, considered=tuple(scored))
 
 
 def _measured(lattice: Lattice, contrast: float, all_views) -> tuple[Lattice, float]:

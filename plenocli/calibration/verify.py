@@ -308,6 +308,8 @@ class Verdict:
     rivals: tuple[tuple[Lattice, float], ...] = field(default=())
     control: float = 0.0
     undecided: bool = False    # a sub- or super-lattice could not be ruled out
+    # every refined hypothesis with its contrast (what a second judge or a hint looks at)
+    considered: tuple[tuple[Lattice, float], ...] = field(default=(), compare=False, repr=False)
 
     @property
     def margin(self) -> float:

@@ -10,11 +10,13 @@ from plenocli.cli import options
               show_default=True, help="Micro-lens lattice; auto finds the kind (a kind that "
               "does not fit the image is refused).")
 @click.option("--pitch", type=options.FiniteFloat(min=4.0, max=200.0), default=None,
-              help="Approximate lens pitch in px (e.g. from the datasheet): only lattices "
-              "within 15 % are considered.")
+              help="Approximate lens pitch in px (e.g. from the datasheet): lattices within "
+              "15 % are looked at too; the image decides, and an answer outside 15 % of the "
+              "hint is refused.")
 @click.option("--start", type=options.InputFile(), default=None,
-              help="Refine this grid (plenocli YAML or Raytrix XML) instead of searching; the "
-              "report says how far the result moved.")
+              help="A camera calibration to refine (plenocli YAML or Raytrix XML): offset, "
+              "pitch, rotation and centres are measured from the image, the report says how "
+              "far each moved; a start the image contradicts is refused.")
 @click.option("--xml", type=options.OutputFile(".xml"), default=None,
               help="Also write the grid as Raytrix RayCalibData XML (with lens types).")
 @click.option("--compare", type=options.InputFile(), default=None,

@@ -145,6 +145,12 @@ def check_calib(calib: dict) -> None:
     if abs(float(bx[0] * by[1] - bx[1] * by[0])) < 0.1 * nx * ny:  # sin(angle) < 0.1
         raise ValueError(f"lens_base_x {list(bx)} and lens_base_y {list(by)} are (nearly) "
                          "parallel: they span no lattice")
+    # a lens array is hexagonal (bases 60 or 120 deg apart) or square (90 deg), of one pitch
+    between = float(np.degrees(np.arccos(np.clip(np.dot(bx, by) / (nx * ny), -1.0, 1.0))))
+    if min(abs(between - a) for a in (60.0, 90.0, 120.0)) > 1.0 or abs(nx / ny - 1) > 0.01:
+        raise ValueError(f"lens_base_x {list(bx)} and lens_base_y {list(by)} are {between:.1f} "
+                         f"deg apart with lengths {nx:.4g} and {ny:.4g}: not a hexagonal "
+                         "(60 or 120 deg) or square (90 deg) lens array of one pitch")
     _check_other_fields(calib)
 
 

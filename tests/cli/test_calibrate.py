@@ -98,3 +98,32 @@ def test_start_and_lens_types_in_yaml_and_xml(tmp_path):
     assert doc["residuals"]["confidence"]["contrast"] > 0
     types = {lt["id"]: lt["offset"] for lt in raytrix.read_calib(xml)["lens_types"]}
     assert types[0] == [0.0, 0.0] and types[1] == [-v for v in types[2]]
+
+
+def test_a_pitch_hint_the_image_contradicts_is_refused_in_one_line(tmp_path):
+    """Issue 21 class 5: --pitch 10.1 on a hex white of 20.2 px wrote a square grid of 11.4 px
+    with exit 0."""
+    image, _ = white_image((768, 768), pitch_px=20.2, angle_rad=0.05, offset_xy=(384.3, 384.6),
+                           seed=1)
+    src, out = tmp_path / "white.tif", tmp_path / "g.yaml"
+    tifffile.imwrite(src, image)
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--pitch", "10.1"])
+    assert res.exit_code == 1 and not out.exists()
+    assert res.output.strip().count("\n") == 0
+    assert "--pitch 10.1 contradicts the image" in res.output and "hex 20.20" in res.output
+
+
+def test_a_start_xml_that_is_not_a_lens_array_is_refused(tmp_path):
+    from plenocli.io import raytrix
+    from plenocli.model.lensgrid import LensGrid
+
+    image, _ = white_image((256, 256), pitch_px=15.0, angle_rad=0.2, offset_xy=(128, 128))
+    src, bad, out = tmp_path / "w.tif", tmp_path / "bad.xml", tmp_path / "o.yaml"
+    tifffile.imwrite(src, image)
+    calib = raytrix.calib_from_grid(LensGrid(15.0, 0.2, (128, 128), image_shape=(256, 256)))
+    calib["lens_base_y"] = [0.2588, 0.9659]   # 75 deg from lens_base_x (1, 0)
+    calib["lens_base_x"] = [1.0, 0.0]
+    raytrix.write_calib(bad, calib)
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--start", str(bad)])
+    assert res.exit_code == 1 and not out.exists()
+    assert "not a hexagonal" in res.output and res.output.strip().count("\n") == 0

@@ -202,3 +202,63 @@ def test_a_lossy_compressed_frame_calibrates_like_the_original(realdata, tmp_pat
     original, _ = _no_hint(_png(realdata, "fujita2"))
     assert abs(grid.pitch_px / xml.pitch_px - 1) <= 0.0005
     assert calibration.compare_grids(grid, original, image.shape)["max_px"] <= 0.5
+
+
+def _qp48(realdata, name):
+    """The VVC QP 48 encode of a shared frame (borders smeared) and its camera XML."""
+    image = _load(realdata / "raytrix" / "compressed" / f"{name.split('_')[0]}_qp48.png")
+    folder = realdata / "raytrix" / name
+    return image, raytrix.grid_from_calib(raytrix.read_calib(folder / "calib.xml"), image.shape)
+
+
+def _same_grid(grid, reference, shape):
+    """Pitch within 0.1 %, angle within 0.02 deg, every lens within 0.1 pitch (lattices)."""
+    step = np.pi / 3
+    dang = (grid.angle_rad - reference.angle_rad + step / 2) % step - step / 2
+    lattice = LensGrid(reference.pitch_px, reference.angle_rad, reference.offset_xy,
+                       image_shape=shape)
+    far = calibration.compare_grids(grid, lattice, shape)
+    return (abs(grid.pitch_px / reference.pitch_px - 1) <= 1e-3 and abs(np.degrees(dang)) <= 0.02
+            and far["max_px"] <= 0.1 * reference.pitch_px), far
+
+
+def test_fujita2_qp48_right_with_no_hint_the_nominal_pitch_and_its_xml(realdata):
+    """Refused three ways before (issue 19): the fold judge decides where the smeared borders
+    no longer do, the regions' mean micro-images pin the pitch."""
+    image, xml = _qp48(realdata, "fujita2")
+    reference, _ = _no_hint(_png(realdata, "fujita2"))
+    for hints in ({}, {"pitch_hint": 23.2}, {"start": xml}):
+        grid, report = calibration.calibrate(image, **hints)
+        right, far = _same_grid(grid, reference, image.shape)
+        assert right, (hints, far)   # measured: pitch -0.03 %, max 1.7 px
+        assert report.decision.judge == "fold"
+    flat = calibration.flatten(image, scale_px=grid.pitch_px)
+    _, ours = grid.lens_centres()
+    mine = _symmetry_offsets(flat, ours, grid.pitch_px, image.shape)
+    i, j = xml.nearest_index(ours[:, 0], ours[:, 1])
+    theirs = _symmetry_offsets(flat, xml.lattice_xy(i, j), grid.pitch_px, image.shape)
+    # measured with --start: 0.06-0.24 px per region (the XML's 0.10-0.36 px)
+    assert mine.max() <= 0.3 and np.sum(theirs > mine) >= 6, (mine, theirs)
+
+
+def test_boys2_nominal_xml_start_converges(realdata):
+    """Its calib.xml is nominal (70 px, the frame's pitch is 70.36): it was refused."""
+    image, corners = _boys2(realdata)
+    xml = raytrix.grid_from_calib(raytrix.read_calib(
+        realdata / "raytrix" / "boys2_galilean" / "calib.xml"), image.shape)
+    grid, report = calibration.calibrate(image, start=xml)
+    far = calibration.compare_grids(grid, _corner_lattice(corners), image.shape)
+    assert far["max_px"] <= 3.0, far
+    moved = calibration.moved_from_start(grid, xml, report)
+    assert moved["pitch"]["moved_percent"] == pytest.approx(0.51, abs=0.05)
+
+
+def test_wrong_hints_on_a_real_frame_are_refused(realdata):
+    image, _ = _frame(realdata, "origami")
+    for factor in (0.7, 1.3):
+        with pytest.raises(CalibrationError, match="contradicts the image: .*hex 23.2"):
+            calibration.calibrate(image, pitch_hint=23.2 * factor)
+    other = realdata / "raytrix" / "xml_only" / "ChessPieces-MovingCamera__calib.xml"
+    start = raytrix.grid_from_calib(raytrix.read_calib(other), image.shape)
+    with pytest.raises(CalibrationError, match="start grid .* does not fit this image"):
+        calibration.calibrate(image, start=start)

@@ -50,6 +50,11 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
     return image, cfa, black, meta
 
 
+def _is_xml(path: str) -> bool:
+    with open(path, "rb") as f:
+        return Path(path).suffix.lower() == ".xml" or f.read(64).lstrip().startswith(b"<")
+
+
 def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None = None,
         start: str | None = None, xml: str | None = None, compare: str | None = None,
         preview: str | None = None) -> dict:
@@ -71,9 +76,15 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         raise CalibrationError(f"{input}: the array is square; --xml writes hexagonal Raytrix "
                                "calibrations only, drop --xml")
     extra: dict = {"residuals": report.to_dict()}
+    template = meta.get("raytrix_calib")
     if first is not None:
         extra["moved_from_start"] = {"grid": str(start),
-                                     **calibration.compare_grids(grid, first, image.shape)}
+                                     **calibration.moved_from_start(grid, first, report)}
+        if _is_xml(start):   # what the image cannot measure is kept from the camera's file
+            template = raytrix.read_calib(start)
+            extra["moved_from_start"]["kept"] = (
+                "lens_border, tcp, distortion, lens types' depth ranges and k_matrix of the "
+                "start file (in --xml)" if xml else "nothing (no --xml written)")
     if other is not None:
         extra["compare"] = {"grid": str(compare),
                             **calibration.compare_grids(grid, other, image.shape)}
@@ -84,7 +95,7 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     protect = tuple(p for p in (input, compare, start) if p)
     gridfile.write_grid(output, grid, record, extra=extra, protect=protect)
     if xml:
-        raytrix.write_calib(xml, raytrix.calib_from_grid(grid, template=meta.get("raytrix_calib")),
+        raytrix.write_calib(xml, raytrix.calib_from_grid(grid, template=template),
                             protect=protect)
     if preview:
         flat = calibration.flatten(image, cfa=cfa, scale_px=max(grid.pitch_px, 8.0))
@@ -92,13 +103,21 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
                            protect=protect)
     fit = report.fit
     centres = (f"residual RMS {fit.residual_rms_px:.4f} px" if fit.centres_refined else
-               f"a scene: centres from the border lattice (pitch +-{fit.pitch_se_px:.4f} px); "
+               f"a scene: centres from the lattice of {report.lattice_from} (pitch "
+               f"+-{fit.pitch_se_px:.4f} px); "
                f"the content moves the micro-images' own centres by {fit.residual_rms_px:.2f} "
                "px RMS")
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
              "%d lenses, %s, contrast %.3f", shown(input), shown(output), grid.lattice,
              grid.pitch_px, np.degrees(grid.angle_rad), *grid.offset_xy, fit.lenses_total,
              centres, report.verdict.contrast)
+    if report.decision is not None:
+        log.info("calibrate: lattice decided by the %s", report.decision.describe())
+    if first is not None:
+        m = extra["moved_from_start"]
+        log.info("moved from the start grid: offset (%.3f, %.3f) px, pitch %+.4f px, rotation "
+                 "%+.4f deg, all measured (%s)", *m["offset"]["moved_px"], m["pitch"]["moved_px"],
+                 m["rotation"]["moved_deg"], report.lattice_from)
     for key in ("moved_from_start", "compare"):
         if key in extra:
             c = extra[key]
