@@ -37,10 +37,13 @@ def warm_calibrate() -> None:
 
 
 def warm_develop() -> None:
-    """The RCD demosaic kernels (develop's and stitch's default), on a float32 mosaic."""
+    """The RCD demosaic kernels (develop's and stitch's default) and the sRGB curve."""
     from plenocli.colour.demosaic import demosaic
 
+    from plenocli.io.photo import encode
+
     demosaic(np.ones((64, 64), np.float32), "RGGB", gains=(2.0, 1.0, 1.5))
+    encode(np.full((4, 4, 3), 0.5, np.float32), "srgb")
 
 
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop}

@@ -8,6 +8,7 @@ atomically.
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 from fractions import Fraction
@@ -43,10 +44,45 @@ def encode(rgb: np.ndarray, space: str) -> np.ndarray:
     if space not in OUTPUT_SPACES:
         raise ValueError(f"colour space {space!r} unknown; choose one of "
                          f"{', '.join(OUTPUT_SPACES)}")
-    x = np.clip(np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0), 0.0, 1.0)
     if space == "rec2020-linear":
-        return x
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+        return np.clip(np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0), 0.0, 1.0)
+    x = np.ascontiguousarray(rgb, np.float32)
+    out = np.empty(x.shape, np.float32)
+    _srgb_kernel()(x.reshape(-1), out.reshape(-1), _srgb_table())
+    return out
+
+
+# The sRGB curve read from a table of 2^16 steps, linearly interpolated (within 1e-6 of the
+# formula): the power function per value cost a third of developing a 30 MP frame.
+_CURVE_STEPS = 1 << 16
+
+
+@functools.cache
+def _srgb_table() -> np.ndarray:
+    x = np.linspace(0.0, 1.0, _CURVE_STEPS + 1)
+    curve = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return curve.astype(np.float32)
+
+
+@functools.cache
+def _srgb_kernel():
+    import numba  # only develop encodes: the other commands start without numba
+
+    @numba.njit(cache=True, nogil=True)
+    def srgb_curve(x, out, table):
+        steps = table.size - 1
+        for k in range(x.size):
+            v = x[k]
+            if not v > 0.0:  # NaN (masked) and negatives encode as 0
+                out[k] = 0.0
+            elif v >= 1.0:
+                out[k] = table[steps]
+            else:
+                s = v * steps
+                i = int(s)
+                out[k] = table[i] + (s - i) * (table[i + 1] - table[i])
+
+    return srgb_curve
 
 
 def image_bytes(encoded: np.ndarray, fmt: str, *, space: str, exif: dict | None,
