@@ -39,7 +39,6 @@ def warm_calibrate() -> None:
 def warm_develop() -> None:
     """The RCD demosaic kernels (develop's and stitch's default) and the sRGB curve."""
     from plenocli.colour.demosaic import demosaic
-
     from plenocli.io.photo import encode
 
     demosaic(np.ones((64, 64), np.float32), "RGGB", gains=(2.0, 1.0, 1.5))
