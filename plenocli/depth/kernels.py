@@ -66,7 +66,8 @@ def _usable(profile, half, ux, uy):
 @njit(cache=True, parallel=True)
 def normalise(frame, cx, cy, profile, gain, half, out):
     """out[p] = frame[p] / gain(u) (bilinear between bins) where the profile is finite (the
-    usable disc), else NaN (out must be NaN-filled). Usable discs never overlap, so lenses write disjoint pixels."""
+    usable disc), else NaN (out must be NaN-filled). Usable discs never overlap, so lenses
+    write disjoint pixels."""
     rows, cols = frame.shape
     reach = half + 1
     for k in prange(cx.shape[0]):

@@ -207,3 +207,25 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
         g = np.where(sw > 0, sg / sw, np.nan).astype(np.float32)
         conf = np.where(sw > 0, sc / sw, 0.0).astype(np.float32)
     return DepthMap(g, conf, lenses)
+
+
+def lens_g_table(grid: LensGrid, shape: tuple[int, int], g_map: np.ndarray, s: float
+                 ) -> tuple[np.ndarray, int, int]:
+    """Each lens's g for all-in-focus rendering: the depth map (on the grid of
+    ``refocus --s s``) where the lens's centre lands (s c_ij, which does not depend on g);
+    lenses over unknown depth take the median of the known g.
+
+    Returns (table, imin, jmin) for :func:`plenocli.refocus.refocus` ``lens_g``."""
+    g_map = np.asarray(g_map, float)
+    known = g_map[np.isfinite(g_map)]
+    if not known.size:
+        raise ValueError("the depth map holds no known g")
+    indices, centres = lens_table(grid, shape)
+    cols = np.clip(np.round(s * centres[:, 0]).astype(np.int64), 0, g_map.shape[1] - 1)
+    rows = np.clip(np.round(s * centres[:, 1]).astype(np.int64), 0, g_map.shape[0] - 1)
+    values = g_map[rows, cols]
+    values = np.where(np.isfinite(values), values, float(np.median(known)))
+    lo = indices.min(axis=0)
+    table = np.full(indices.max(axis=0) - lo + 1, np.nan)
+    table[indices[:, 0] - lo[0], indices[:, 1] - lo[1]] = values
+    return table, int(lo[0]), int(lo[1])

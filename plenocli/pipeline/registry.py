@@ -105,7 +105,7 @@ _TABLE = (
     Stage("bias", inputs=("input",), outputs=("output", "preview")),
     Stage("flat", inputs=("input", "white", "gain"), outputs=("output", "save_gain", "preview")),
     Stage("calibrate", inputs=("input", "compare", "start"), outputs=("output", "xml", "preview")),
-    Stage("refocus", inputs=("input", "grid"), outputs=("output", "preview")),
+    Stage("refocus", inputs=("input", "grid", "depth"), outputs=("output", "preview")),
     Stage("depth", inputs=("input", "grid"), outputs=("output", "preview")),
     Stage("sai", inputs=("input", "grid"), outputs=("output", "preview")),
     Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview", "mixing_out")),
