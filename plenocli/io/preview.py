@@ -218,6 +218,7 @@ def depth_picture(values: np.ndarray, confidence: np.ndarray, *, label: str = "g
         cv2.putText(bar, f"{lo + frac * (hi - lo):.3g}", (21, min(max(y + 4, 10), rows - 2)),
                     _FONT, 0.35, (0, 0, 0, 255), 1, cv2.LINE_AA)
     cv2.putText(bar, label[:10], (2, rows - 1), _FONT, 0.3, (0, 0, 0, 255), 1, cv2.LINE_AA)
+    bar[..., 3] = 255
     return np.hstack([image, bar])
 
 

@@ -1,0 +1,68 @@
+"""`plenocli depth` and `refocus --depth` end to end, including bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import tiffio
+from plenocli.pipeline.stages.simulate import simulate
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def lenslet(tmp_path_factory):
+    out = tmp_path_factory.mktemp("lenslet")
+    simulate("lenslet-depth", out, seed=4, pixels="300x400", scene="plane", g=4.5)
+    return out
+
+
+def test_depth_lies_on_the_refocus_grid_and_feeds_all_in_focus(lenslet, tmp_path):
+    depth, png, aif, ref = (tmp_path / n for n in ("d.tif", "d.png", "aif.tif", "r.tif"))
+    result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "-o", depth, "--preview", png)
+    assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(depth)
+    assert meta["views"] == ["g", "confidence"] and png.exists()
+    truth, _ = tiffio.read_image(lenslet / "depth.tif")
+    assert invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                  "-o", ref).exit_code == 0
+    image, _ = tiffio.read_image(ref)
+    assert data.shape[1:] == image.shape[1:] == truth.shape[1:]
+    inner = np.isfinite(data[0])
+    inner[:6], inner[-6:], inner[:, :6], inner[:, -6:] = False, False, False, False
+    assert np.median(np.abs(data[0][inner] - 4.5)) <= 0.1
+    result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "--depth", depth, "-o", aif)
+    assert result.exit_code == 0, result.output
+    assert tiffio.read_meta(aif)["provenance"]["parameters"]["depth"] == str(depth)
+
+
+def test_dual_pixel_views_give_disparity(tmp_path):
+    simulate("dualpixel-depth", tmp_path / "sim", seed=2, pixels="96x256",
+             disparities=(-1.0,) * 4 + (1.0,) * 4)
+    out = tmp_path / "d.tif"
+    result = invoke("depth", tmp_path / "sim" / "views.tif", "-o", out)
+    assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(out)
+    assert meta["views"] == ["disparity", "confidence"]
+    assert abs(np.median(data[0][20:-20, 20:100]) + 1.0) < 0.1
+    assert abs(np.median(data[0][20:-20, 156:236]) - 1.0) < 0.1
+
+
+def test_bad_input_is_refused_in_one_line(lenslet, tmp_path):
+    out = tmp_path / "d.tif"
+    result = invoke("depth", lenslet / "frames.tif", "-o", out)  # frames without --grid
+    assert result.exit_code == 1 and "--grid" in result.output and not out.exists()
+    result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "--g", "0.5:3", "-o", out)
+    assert result.exit_code == 2 and not out.exists()
+    result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "--depth", lenslet / "depth.tif", "--s", 0.25, "-o", out)
+    assert result.exit_code == 1 and "same --grid and --s" in result.output
+    assert not out.exists()
