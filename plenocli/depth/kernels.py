@@ -29,6 +29,26 @@ def _bilinear(img, x, y):
     return top * (1 - fy) + bot * fy
 
 
+@njit(cache=True, inline="always")
+def _bilinear_grad(img, x, y, ex, ey):
+    """(img, d img / d t) at (x, y) along the direction (ex, ey), from one bilinear cell."""
+    rows, cols = img.shape
+    if not (0.0 <= x < cols - 1 and 0.0 <= y < rows - 1):
+        return np.nan, np.nan
+    c0 = int(x)
+    r0 = int(y)
+    fx = x - c0
+    fy = y - r0
+    a = img[r0, c0]
+    b = img[r0, c0 + 1]
+    c = img[r0 + 1, c0]
+    d = img[r0 + 1, c0 + 1]
+    value = (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy
+    gx = (b - a) * (1 - fy) + (d - c) * fy
+    gy = (c - a) * (1 - fx) + (d - b) * fx
+    return value, gx * ex + gy * ey
+
+
 @njit(cache=True, parallel=True)
 def profile_sums(frame, cx, cy, radius, half, chunks):
     """Sums and counts of the frame binned by offset from the lens centre (0.5 px bins,
@@ -122,7 +142,7 @@ def match_costs(img, cx, cy, nb, profile, half, qs, stride):  # noqa: C901 (numb
 
 
 @njit(cache=True, parallel=True)
-def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations):  # noqa: C901 (numba kernel)
+def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations, stride):  # noqa: C901 (numba kernel)
     """Gauss-Newton steps on q of each lens, all its neighbours together: the residual
     img(p + B (1 - q)) - img(p) is linearised in q (derivative -B . grad img)."""
     n_lens = cx.shape[0]
@@ -138,6 +158,8 @@ def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations):  # noq
             den = 0.0
             for r in range(max(0, r0), min(img.shape[0], r0 + 2 * reach + 2)):
                 for c in range(max(0, c0), min(img.shape[1], c0 + 2 * reach + 2)):
+                    if stride > 1 and (r + c) % stride:
+                        continue
                     v = img[r, c]
                     if not math.isfinite(v):
                         continue
@@ -153,16 +175,10 @@ def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations):  # noq
                         by = cy[j] - cy[k]
                         if not _usable(profile, half, ux - bx * q[k], uy - by * q[k]):
                             continue
-                        tx = c + bx * (1 - q[k])
-                        ty = r + by * (1 - q[k])
-                        w = _bilinear(img, tx, ty)
-                        length = math.sqrt(bx * bx + by * by)
-                        ex = 0.5 * bx / length
-                        ey = 0.5 * by / length
-                        grad = _bilinear(img, tx + ex, ty + ey) - _bilinear(img, tx - ex, ty - ey)
-                        if not (math.isfinite(w) and math.isfinite(grad)):
+                        w, dq = _bilinear_grad(img, c + bx * (1 - q[k]), r + by * (1 - q[k]),
+                                               -bx, -by)  # d residual / d q = -B . grad
+                        if not (math.isfinite(w) and math.isfinite(dq)):
                             continue
-                        dq = -grad * length  # d residual / d q
                         num += (w - v) * dq
                         den += dq * dq
             if den <= 0.0:

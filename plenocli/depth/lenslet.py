@@ -35,8 +35,10 @@ RINGS = {"hex": ([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)],
                  [(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)]),
          "square": ([(1, 0), (0, 1), (-1, 0), (0, -1)],
                     [(1, 1), (-1, 1), (-1, -1), (1, -1)])}
-SHIFT_STEP_PX = 0.5   # candidate spacing of the coarse search, in shift along one pitch
-REFINE_STEPS = 4
+SHIFT_STEP_PX = 1.0   # candidate spacing of the coarse search, in shift along one pitch
+REFINE_STEPS = 3
+COARSE_STRIDE = 4     # the coarse search looks at every 4th pixel, the refinement every 2nd
+REFINE_STRIDE = 2
 RIM_BINS = 3          # 1.5 px (0.5 px bins) of rim left out of the usable disc
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
 
@@ -137,13 +139,14 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
     n_q = max(3, int(math.ceil((q_hi - q_lo) * grid.pitch_px / SHIFT_STEP_PX)) + 1)
     qs = np.linspace(q_lo, q_hi, n_q)
-    ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, ring1), profile, half, qs, 2)
-    min_samples = 0.1 * math.pi * r_use ** 2
+    ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, ring1[:len(ring1) // 2]),
+                              profile, half, qs, COARSE_STRIDE)
+    min_samples = 0.1 * math.pi * r_use ** 2 / COARSE_STRIDE
     with np.errstate(invalid="ignore", divide="ignore"):
         cost = np.where(cnt >= min_samples, ssd / cnt, np.nan)
     q0, confidence = _coarse(cost, qs)
-    q = kn.refine_q(flat, cx, cy, neighbours(indices, ring1 + ring2), profile, half, q0,
-                    q_lo, q_hi, REFINE_STEPS)
+    q = kn.refine_q(flat, cx, cy, neighbours(indices, ring1[::2] + ring2[::2]), profile, half, q0,
+                    q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & (q != 0), 1.0 / q, np.nan)
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
