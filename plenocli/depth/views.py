@@ -23,9 +23,11 @@ import cv2
 import numpy as np
 
 FLAT_SIGMA = 24.0
+FLAT_SHRINK = 8
 PRE_BLUR = 1.0
 WINDOW = 15
-LK_STEPS = 3
+LK_STEPS = 2
+TILE_ROWS = 512
 
 
 @dataclass(frozen=True)
@@ -40,22 +42,41 @@ def _prepare(view: np.ndarray) -> np.ndarray:
     v = np.asarray(view, np.float32)
     valid = np.isfinite(v)
     v = np.where(valid, v, 0.0).astype(np.float32)
-    low = cv2.GaussianBlur(v, (0, 0), FLAT_SIGMA)
-    cover = cv2.GaussianBlur(valid.astype(np.float32), (0, 0), FLAT_SIGMA)
-    level = low / np.maximum(cover, 1e-6)
+    level = _low_pass(v) / np.maximum(_low_pass(valid.astype(np.float32)), 1e-6)
     with np.errstate(invalid="ignore", divide="ignore"):
         out = np.where(valid & (level > 0), v / level, 0.0).astype(np.float32)
     return cv2.GaussianBlur(out, (0, 0), PRE_BLUR)
 
 
-def _shift_x(img: np.ndarray, dx) -> np.ndarray:
-    """img sampled at (x + dx, y) (dx a number or a map), cubic, border replicated."""
+def _low_pass(img: np.ndarray) -> np.ndarray:
+    """Gaussian of sigma FLAT_SIGMA, computed on an image shrunk by FLAT_SHRINK (the result is
+    smooth on that scale, so nothing is lost, and 30 Mpx take a fraction of a second)."""
     rows, cols = img.shape
-    grid_x = np.arange(cols, dtype=np.float32)[None, :] + np.asarray(dx, np.float32)
-    grid_x = np.broadcast_to(grid_x, (rows, cols)).astype(np.float32)
-    grid_y = np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None], (rows, cols))
-    return cv2.remap(img, grid_x, np.ascontiguousarray(grid_y), cv2.INTER_CUBIC,
-                     borderMode=cv2.BORDER_REPLICATE)
+    small = cv2.resize(img, (max(1, cols // FLAT_SHRINK), max(1, rows // FLAT_SHRINK)),
+                       interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), FLAT_SIGMA / FLAT_SHRINK,
+                             borderType=cv2.BORDER_REFLECT)
+    return cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR)
+
+
+def _shift_x(img: np.ndarray, dx: np.ndarray, grid_x: np.ndarray, grid_y: np.ndarray
+             ) -> np.ndarray:
+    """img sampled at (x + dx, y) (dx a map), cubic, border replicated."""
+    return cv2.remap(img, grid_x + dx, grid_y, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _shift_whole(img: np.ndarray, d: int) -> np.ndarray:
+    """img sampled at (x + d, y) for a whole number d, edge replicated."""
+    if d == 0:
+        return img
+    out = np.empty_like(img)
+    if d > 0:
+        out[:, :-d] = img[:, d:]
+        out[:, -d:] = img[:, -1:]
+    else:
+        out[:, -d:] = img[:, :d]
+        out[:, :-d] = img[:, :1]
+    return out
 
 
 def _box(img: np.ndarray) -> np.ndarray:
@@ -75,34 +96,80 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
         raise ValueError(f"max_disparity must be 0.5 to 64 px, got {max_disparity}")
     missing = ~(np.isfinite(a) & np.isfinite(b))
     pa, pb = _prepare(a), _prepare(b)
-    shifts = np.arange(-int(np.ceil(max_disparity)), int(np.ceil(max_disparity)) + 1)
-    costs = np.stack([_box((pa - _shift_x(pb, float(d))) ** 2) for d in shifts])
-    k = np.argmin(costs, axis=0)
-    best = np.take_along_axis(costs, k[None], 0)[0]
-    cm = np.take_along_axis(costs, np.clip(k - 1, 0, len(shifts) - 1)[None], 0)[0]
-    cp = np.take_along_axis(costs, np.clip(k + 1, 0, len(shifts) - 1)[None], 0)[0]
-    curv = cm - 2 * best + cp
-    inner = (k > 0) & (k < len(shifts) - 1) & (curv > 0)
-    frac = np.where(inner, 0.5 * (cm - cp) / np.where(curv > 0, curv, 1), 0.0)
-    d = (shifts[k] + np.clip(frac, -0.5, 0.5)).astype(np.float32)
-    median = np.median(costs, axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        conf = np.clip(1.0 - best / median, 0.0, 1.0)
-    del costs
-    d = _refine(pa, pb, d, float(shifts[-1]))
-    conf = np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
+    d = np.empty(a.shape, np.float32)
+    conf = np.empty(a.shape, np.float32)
+    reach = int(np.ceil(max_disparity))
+    margin = WINDOW
+    for top in range(0, a.shape[0], TILE_ROWS):  # tiles keep the working set small
+        lo, hi = max(0, top - margin), min(a.shape[0], top + TILE_ROWS + margin)
+        td, tc = _tile(pa[lo:hi], pb[lo:hi], reach)
+        keep = slice(top - lo, top - lo + min(TILE_ROWS, a.shape[0] - top))
+        d[top:top + TILE_ROWS] = td[keep]
+        conf[top:top + TILE_ROWS] = tc[keep]
     lost = cv2.dilate(missing.astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8)) > 0
     d[lost] = np.nan
     conf[lost] = 0.0
     return Disparity(d, conf)
 
 
+def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
+    """Disparity and confidence of one tile: the coarse search on the tile shrunk by two
+    (disparities halve, so do the shifts to try, on a quarter of the pixels), then
+    Lucas-Kanade at full size."""
+    rows, cols = pa.shape
+    half = (max(1, cols // 2), max(1, rows // 2))
+    d2, conf2 = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
+                        cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
+                        max(1, (reach + 1) // 2))
+    d = 2 * cv2.resize(d2, (cols, rows), interpolation=cv2.INTER_LINEAR)
+    conf = cv2.resize(conf2, (cols, rows), interpolation=cv2.INTER_LINEAR)
+    return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf
+
+
+def _search(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
+    """Whole-pixel search kept as a running minimum (best cost and its neighbours on both
+    sides), parabola through them; confidence 1 - best / mean cost."""
+    shape = pa.shape
+    best = np.full(shape, np.inf, np.float32)
+    left = np.full(shape, np.inf, np.float32)
+    right = np.full(shape, np.inf, np.float32)
+    k_best = np.zeros(shape, np.int16)
+    total = np.zeros(shape, np.float32)
+    previous = None
+    shifts = range(-reach, reach + 1)
+    for k, s in enumerate(shifts):
+        cost = _box((pa - _shift_whole(pb, s)) ** 2)
+        total += cost
+        np.copyto(right, cost, where=k_best == k - 1)
+        new = cost < best
+        if previous is not None:
+            np.copyto(left, previous, where=new)
+        np.copyto(left, np.float32(np.inf), where=new & (k == 0))
+        np.copyto(right, np.float32(np.inf), where=new)
+        np.copyto(best, cost, where=new)
+        np.copyto(k_best, np.int16(k), where=new)
+        previous = cost
+    curv = left - 2 * best + right
+    inner = np.isfinite(curv) & (curv > 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = np.where(inner, 0.5 * (left - right) / np.where(inner, curv, 1), 0.0)
+        conf = np.clip(1.0 - best / (total / len(shifts)), 0.0, 1.0)
+    d = (k_best - reach + np.clip(frac, -0.5, 0.5)).astype(np.float32)
+    return d, np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
+
+
 def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.ndarray:
     """Lucas-Kanade steps on d with symmetric warps (A at x - d/2, B at x + d/2)."""
+    rows, cols = pa.shape
+    grid_x = np.ascontiguousarray(np.broadcast_to(np.arange(cols, dtype=np.float32),
+                                                  (rows, cols)))
+    grid_y = np.ascontiguousarray(np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None],
+                                                  (rows, cols)))
+    diff = np.array([[-0.5, 0.0, 0.5]], np.float32)
     for _ in range(LK_STEPS):
-        wa = _shift_x(pa, -0.5 * d)
-        wb = _shift_x(pb, 0.5 * d)
-        grad = 0.5 * (np.gradient(wa, axis=1) + np.gradient(wb, axis=1))
+        wa = _shift_x(pa, -0.5 * d, grid_x, grid_y)
+        wb = _shift_x(pb, 0.5 * d, grid_x, grid_y)
+        grad = cv2.filter2D(wa + wb, -1, 0.5 * diff, borderType=cv2.BORDER_REPLICATE)
         num = _box((wb - wa) * grad)
         den = _box(grad * grad)
         step = np.where(den > 1e-12, -num / np.maximum(den, 1e-12), 0.0)
