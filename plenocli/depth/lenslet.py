@@ -39,6 +39,8 @@ SHIFT_STEP_PX = 1.0   # candidate spacing of the coarse search, in shift along o
 REFINE_STEPS = 3
 COARSE_STRIDE = 4     # the coarse search looks at every 4th pixel, the refinement every 2nd
 REFINE_STRIDE = 2
+PROFILE_DEGREE = 6
+PROFILE_TERMS = 16    # even monomials of degree <= 6
 RIM_BINS = 3          # 1.5 px (0.5 px bins) of rim left out of the usable disc
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
 
@@ -110,12 +112,35 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
     # rim of each lens (sub-pixel centres), and the residual pattern, the same in every
     # micro-image, would pull every match towards zero shift
     usable = ndimage.binary_erosion(usable, iterations=RIM_BINS)
+    mean = _smooth_profile(mean, counts, usable, xx / radius, yy / radius)
     profile = np.where(usable, mean, np.nan)
     r_use = float(np.max(np.hypot(xx, yy)[usable])) if usable.any() else 0.0
     if r_use < 2.0:
         raise ValueError(f"micro-images are usable over a radius of {r_use:.1f} px only; "
                          "depth needs micro-images of at least 4 px across")
     return profile, mean, half, r_use
+
+
+def _smooth_profile(mean, counts, usable, x, y) -> np.ndarray:
+    """The profile over the usable disc as an even polynomial of degree PROFILE_DEGREE in the
+    offset (least squares weighted by the samples per bin).
+
+    The binned mean carries the scene averaged over only as many lenses as the frame has:
+    offset u samples the scene s g u further along, so the scene's coarse gradients leave a
+    tilt (odd in u) and its texture leaves noise, the same in every micro-image, which would
+    bias every match. The mean vignetting of all lenses is point-symmetric (each lens is, and
+    the field's off-axis shifts cancel across the frame) and smooth inside the rim: even
+    terms keep it and drop both."""
+    if usable.sum() < 4 * PROFILE_TERMS:
+        return mean
+    powers = [(a, b) for a in range(PROFILE_DEGREE + 1) for b in range(PROFILE_DEGREE + 1 - a)
+              if (a + b) % 2 == 0]
+    design = np.stack([x[usable] ** a * y[usable] ** b for a, b in powers], axis=1)
+    weight = np.sqrt(counts[usable])
+    coef, *_ = np.linalg.lstsq(design * weight[:, None], mean[usable] * weight, rcond=None)
+    out = mean.copy()
+    out[usable] = design @ coef
+    return out
 
 
 def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0)
@@ -149,7 +174,26 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
                     q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & (q != 0), 1.0 / q, np.nan)
+    g = lens_median(g, confidence, neighbours(indices, ring1))
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
+
+
+def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
+                min_confidence: float = 0.1) -> np.ndarray:
+    """Each lens's g replaced by the median over itself and its first ring (the confident
+    ones): a lens sees a patch about one footprint across, its neighbours most of the same
+    patch, so the median lowers the scatter of a surface without blurring a depth edge (the
+    majority side wins, as it would at the lens's centre)."""
+    trusted = np.where(confidence >= min_confidence, g, np.nan)
+    padded = np.append(trusted, np.nan)
+    stack = np.concatenate([trusted[:, None], padded[np.where(nb >= 0, nb, -1)]], axis=1)
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # lenses with no trusted value
+            smoothed = np.nanmedian(stack, axis=1)
+    return np.where(np.isfinite(g), np.where(np.isfinite(smoothed), smoothed, g), np.nan)
 
 
 def _coarse(cost: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
