@@ -32,6 +32,9 @@ class GRange(click.ParamType):
               show_default=True, help="Lenses below this confidence leave g unknown (NaN).")
 @click.option("--max-disparity", type=options.FiniteFloat(0.5, 64), default=4.0,
               show_default=True, help="Largest |disparity| searched (px, dual/quad-pixel).")
+@click.option("--camera", type=click.Path(dir_okay=False), default=None,
+              help="Camera YAML (focal_length_mm, focus_distance_m, mla_sensor_mm): adds a "
+                   "depth_m page (lenslet).")
 @options.preview_opt
 @options.stage_command
 def depth(**params):

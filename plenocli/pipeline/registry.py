@@ -106,7 +106,7 @@ _TABLE = (
     Stage("flat", inputs=("input", "white", "gain"), outputs=("output", "save_gain", "preview")),
     Stage("calibrate", inputs=("input", "compare", "start"), outputs=("output", "xml", "preview")),
     Stage("refocus", inputs=("input", "grid", "depth"), outputs=("output", "preview")),
-    Stage("depth", inputs=("input", "grid"), outputs=("output", "preview")),
+    Stage("depth", inputs=("input", "grid", "camera"), outputs=("output", "preview")),
     Stage("sai", inputs=("input", "grid"), outputs=("output", "preview")),
     Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview", "mixing_out")),
     Stage("unmix", inputs=("inputs", "mixing"), outputs=("output", "noise_map", "preview")),

@@ -8,8 +8,9 @@ everywhere. Sensor pixel (x, y) of micro-image (i, j), u = (x, y) - c_ij, looks 
 
     g = (a + s (bx cx + by cy)) / (1 - s (bx ux + by uy))
 
-Where several planes are hit, the smallest g (the nearest object on a Keplerian camera, see
-docs/depth.md) hides the others. Each plane has its own band-limited texture, sampled with the
+Where several planes are hit, the largest g hides the others: g grows as an object comes
+nearer (the main lens images it farther behind the micro-lenses, docs/depth.md). Each plane
+has its own band-limited texture, sampled with the
 pixel's box filter (side s g) as in :mod:`plenocli.synth.focused`, then the micro-image
 vignetting of :func:`plenocli.synth.lenslet.micro_image_mask` and noise. The truth map holds, at
 each refocused pixel, the smallest g of the planes that cover it: no estimator code is involved.
@@ -39,17 +40,17 @@ SCENES = ("plane", "steps", "slanted")
 def scene_planes(scene: str, out_shape: tuple[int, int], *, g: float = 4.0) -> list[dict]:
     """The planes of a named lenslet scene on a refocused image of ``out_shape`` (rows, cols).
 
-    ``plane``: one fronto-parallel plane at ``g``. ``steps``: a background at 5.5 and two
-    nearer boxes at 3.0 and 4.2. ``slanted``: g from 2.5 at the left edge to 5.5 at the right.
+    ``plane``: one fronto-parallel plane at ``g``. ``steps``: a background at 2.8 and two
+    nearer boxes at 5.0 and 4.0. ``slanted``: g from 2.5 at the left edge to 5.5 at the right.
     """
     rows, cols = out_shape
     if scene == "plane":
         return [{"a": g, "bx": 0.0, "by": 0.0, "region": None}]
     if scene == "steps":
-        return [{"a": 5.5, "bx": 0.0, "by": 0.0, "region": None},
-                {"a": 3.0, "bx": 0.0, "by": 0.0,
+        return [{"a": 2.8, "bx": 0.0, "by": 0.0, "region": None},
+                {"a": 5.0, "bx": 0.0, "by": 0.0,
                  "region": [0.12 * cols, 0.15 * rows, 0.45 * cols, 0.85 * rows]},
-                {"a": 4.2, "bx": 0.0, "by": 0.0,
+                {"a": 4.0, "bx": 0.0, "by": 0.0,
                  "region": [0.58 * cols, 0.25 * rows, 0.9 * cols, 0.75 * rows]}]
     if scene == "slanted":
         slope = 3.0 / max(cols - 1, 1)
@@ -65,12 +66,13 @@ def _inside(region, X, Y) -> np.ndarray:
 
 
 def truth_depth(planes: list[dict], out_shape: tuple[int, int]) -> np.ndarray:
-    """(rows_out, cols_out) float32: at each refocused pixel the smallest g covering it."""
+    """(rows_out, cols_out) float32: at each refocused pixel the largest (nearest) g covering
+    it."""
     Y, X = np.mgrid[0:out_shape[0], 0:out_shape[1]].astype(float)
-    best = np.full(out_shape, np.inf)
+    best = np.full(out_shape, -np.inf)
     for p in planes:
         g = p["a"] + p["bx"] * X + p["by"] * Y
-        best = np.where(_inside(p["region"], X, Y) & (g < best), g, best)
+        best = np.where(_inside(p["region"], X, Y) & (g > best), g, best)
     return np.where(np.isfinite(best), best, np.nan).astype(np.float32)
 
 
@@ -87,12 +89,12 @@ def lenslet_depth_frame(grid: LensGrid, shape: tuple[int, int], planes: list[dic
     ux, uy = xx - cx, yy - cy
     del xx, yy, i, j, c
     image = np.full(shape, np.nan)
-    seen_g = np.full(shape, np.inf)
+    seen_g = np.full(shape, -np.inf)
     for p in planes:
         texture = random_texture(rng, max_freq=max_freq, contrast=0.6)
         g = (p["a"] + s * (p["bx"] * cx + p["by"] * cy)) / (1 - s * (p["bx"] * ux + p["by"] * uy))
         X, Y = s * (g * ux + cx), s * (g * uy + cy)
-        hit = _inside(p["region"], X, Y) & (g > 0) & (g < seen_g)
+        hit = _inside(p["region"], X, Y) & (g > 0) & (g > seen_g)
         image[hit] = texture_at(texture, X[hit], Y[hit], box=s * g[hit])
         seen_g[hit] = g[hit]
     if np.isnan(image).any():
@@ -102,12 +104,30 @@ def lenslet_depth_frame(grid: LensGrid, shape: tuple[int, int], planes: list[dic
     return image.astype(np.float32)
 
 
+# The simulated camera: a 50 mm main lens focused at 2 m, micro-lenses 0.4 mm from the sensor.
+CAMERA = {"focal_length_mm": 50.0, "focus_distance_m": 2.0, "mla_sensor_mm": 0.4}
+
+
+def virtual_depth(distance_m: float, camera: dict = CAMERA) -> float:
+    """g of an object ``distance_m`` away: where the thin main lens images it, measured from
+    the micro-lenses (on which it images the focus distance) in units of the MLA-sensor gap."""
+    f = camera["focal_length_mm"]
+    image = 1.0 / (1.0 / f - 1.0 / (1000.0 * distance_m))
+    mla = 1.0 / (1.0 / f - 1.0 / (1000.0 * camera["focus_distance_m"]))
+    return (image - mla) / camera["mla_sensor_mm"]
+
+
 def simulate_lenslet_depth(*, seed: int = 0, pixels: str | int | None = None,
                            scene: str = "steps", g: float = 4.0, pitch_px: float = 20.2,
-                           s: float = 0.2, noise: float = 0.005) -> Simulation:
+                           s: float = 0.2, noise: float = 0.005,
+                           distance_m: float = 0.0) -> Simulation:
     """``plenocli simulate lenslet-depth``: frames.tif, grid.yaml and depth.tif (true g on the
-    pixel grid of ``plenocli refocus --s S``), truth.json."""
+    pixel grid of ``plenocli refocus --s S``), truth.json (with the camera of ``CAMERA``).
+    ``distance_m`` > 0 puts the ``plane`` scene at that distance (its g from the camera)."""
     from plenocli.refocus import output_shape
+
+    if distance_m > 0:
+        g = virtual_depth(distance_m)
 
     rows, cols = _size(pixels, (480, 640))
     rng = np.random.default_rng(seed)
@@ -125,6 +145,7 @@ def simulate_lenslet_depth(*, seed: int = 0, pixels: str | int | None = None,
              SimFile("grid.yaml", grid, "grid"),
              SimFile("depth.tif", truth[None], "image", {"meta": {"views": ["g"], "cfa": None}}))
     doc = {"kind": "lenslet-depth", "scene": scene, "planes": planes, "s": s, "seed": seed,
+           "camera": CAMERA, "distance_m": distance_m or None,
            "pitch_px": pitch_px, "shape": [rows, cols], "noise": noise,
            "files": {"frames": "frames.tif", "grid": "grid.yaml", "depth": "depth.tif"}}
     return Simulation(files, doc)

@@ -66,3 +66,23 @@ def test_bad_input_is_refused_in_one_line(lenslet, tmp_path):
                     "--depth", lenslet / "depth.tif", "--s", 0.25, "-o", out)
     assert result.exit_code == 1 and "same --grid and --s" in result.output
     assert not out.exists()
+
+
+def test_metric_depth_on_the_simulated_camera(tmp_path):
+    truth = simulate("lenslet-depth", tmp_path / "sim", seed=6, pixels="300x400",
+                     scene="plane", distance_m=0.9)
+    camera = tmp_path / "camera.yaml"
+    camera.write_text("".join(f"{k}: {v}\n" for k, v in truth["camera"].items()))
+    out = tmp_path / "d.tif"
+    result = invoke("depth", tmp_path / "sim" / "frames.tif", "--grid",
+                    tmp_path / "sim" / "grid.yaml", "--camera", camera, "-o", out)
+    assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(out)
+    assert meta["views"] == ["g", "depth_m", "confidence"]
+    assert abs(np.nanmedian(data[1][8:-8, 8:-8]) - 0.9) < 0.005  # 0.5 %
+    camera.write_text("focal_length_mm: 50\nfocus_distance_m: -2\nmla_sensor_mm: 0.4\n")
+    other = tmp_path / "e.tif"
+    result = invoke("depth", tmp_path / "sim" / "frames.tif", "--grid",
+                    tmp_path / "sim" / "grid.yaml", "--camera", camera, "-o", other)
+    assert result.exit_code == 1 and "focus_distance_m" in result.output
+    assert not other.exists()

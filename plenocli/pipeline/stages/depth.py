@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli.depth import lenslet, views
+from plenocli.depth import lenslet, metric, views
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -29,25 +29,34 @@ def parse_range(text: str) -> tuple[float, float]:
 
 def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
         g: str = "2:8", min_confidence: float = 0.1, max_disparity: float = 4.0,
-        preview: str | None = None) -> None:
-    """Depth of ``input``: lenslet frames with ``grid``, else dual/quad-pixel views."""
+        camera: str | None = None, preview: str | None = None) -> None:
+    """Depth of ``input``: lenslet frames with ``grid``, else dual/quad-pixel views; with
+    ``camera`` (lenslet) a depth_m page."""
     try:
         g_range = parse_range(g)
     except ValueError as err:
         raise ConfigError(f"--g: {err}") from err
+    if camera and not grid:
+        raise ConfigError("--camera gives metres from g: it needs lenslet frames and --grid")
+    optics = _camera(camera) if camera else None
     data, meta = tiffio.read_image(input)
     params = dict(grid=grid, s=s, g=g, min_confidence=min_confidence,
-                  max_disparity=max_disparity)
+                  max_disparity=max_disparity, camera=camera)
     if grid:
         pages, names, info = _lenslet(input, grid, data, meta, s, g_range, min_confidence)
+        if optics is not None:
+            pages.insert(1, metric.distance_m(pages[0], optics))
+            names.insert(1, "depth_m")
+            info["camera"] = {**vars(optics), "mla_distance_mm": optics.mla_distance_mm,
+                              "formula": "z = F b / (b - F), b = b_L + g B"}
     else:
         pages, names, info = _views(input, data, meta, max_disparity)
-    record = stage_record("depth", params, {"input": input, "grid": grid})
+    record = stage_record("depth", params, {"input": input, "grid": grid, "camera": camera})
     stack = np.stack(pages).astype(np.float32)
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=None, origin=None, black_level=None, white_level=None,
         active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[], depth=info)
-    protect = (input,) + ((grid,) if grid else ())
+    protect = (input,) + ((grid,) if grid else ()) + ((camera,) if camera else ())
     tiffio.write_image(output, stack, out_meta, protect=protect)
     known = float(np.isfinite(stack[0]).mean())
     log.info("depth: %s -> %s (%s, %d x %d, %.1f %% known)", shown(input), shown(output),
@@ -55,6 +64,22 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
     if preview:
         unit = "g" if grid else "disparity (px)"
         write_depth_png(preview, stack[0], stack[-1], label=unit, protect=protect)
+
+
+def _camera(path: str) -> metric.Camera:
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = yaml.safe_load(fh)
+    except FileNotFoundError as err:
+        raise InputError(f"{path}: no such camera file") from err
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise InputError(f"{path}: not a readable YAML camera file ({err})") from err
+    try:
+        return metric.camera_from_dict(doc)
+    except ValueError as err:
+        raise InputError(f"{path}: {err}") from err
 
 
 def _grey(data: np.ndarray, meta: dict, framing) -> np.ndarray:
