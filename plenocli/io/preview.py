@@ -197,11 +197,13 @@ def write_grid_overlay(path: str | os.PathLike, flat: np.ndarray, centres: np.nd
 def depth_picture(values: np.ndarray, confidence: np.ndarray, *, label: str = "g",
                   bar_width: int = 72) -> np.ndarray:
     """BGRA uint8 picture of a depth map: turbo colours from the 2nd to the 98th percentile of
-    the known values (low = blue), alpha = confidence (NaN fully transparent), and an opaque
-    scale bar with three labelled ticks on the right."""
+    the confident values (confidence >= 0.5, else all known; low = blue), alpha = confidence
+    (NaN fully transparent), and an opaque scale bar with three labelled ticks on the right."""
     values = np.asarray(values, float)
     known = np.isfinite(values)
-    lo, hi = (np.percentile(values[known], (2, 98)) if known.any() else (0.0, 1.0))
+    sure = known & (np.nan_to_num(np.asarray(confidence, float), nan=0.0) >= 0.5)
+    scaled_from = values[sure] if sure.sum() >= 16 else values[known]
+    lo, hi = (np.percentile(scaled_from, (2, 98)) if scaled_from.size else (0.0, 1.0))
     hi = hi if hi > lo else lo + 1e-6
     scaled = np.clip(np.nan_to_num((values - lo) / (hi - lo), nan=0.0), 0, 1)
     bgr = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_TURBO)
