@@ -117,6 +117,32 @@ def virtual_depth(distance_m: float, camera: dict = CAMERA) -> float:
     return (image - mla) / camera["mla_sensor_mm"]
 
 
+def multi_focus_frame(grid: LensGrid, shape: tuple[int, int], planes: list[dict], *, s: float,
+                      focus_g: tuple[float, float, float] = (2.5, 4.0, 5.5),
+                      type_of_coset: tuple[int, int, int] = (1, 2, 0), blur_per_g: float = 0.8,
+                      seed: int = 0) -> np.ndarray:
+    """A multi-focus frame: lens type t (on coset (i - j) mod 3 per ``type_of_coset``) is
+    focused at virtual depth ``focus_g[t]``; its micro-images are blurred by a Gaussian of
+    sigma = blur_per_g |g - focus_g[t]| px, g the true depth at the lens's centre."""
+    import cv2
+
+    from plenocli.refocus import output_shape
+
+    frame = lenslet_depth_frame(grid, shape, planes, s=s, seed=seed)
+    truth = truth_depth(planes, output_shape(shape, s))
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    i, j = grid.nearest_index(xx, yy)
+    c = grid.lattice_xy(i, j)
+    rows = np.clip(np.round(s * c[..., 1]).astype(int), 0, truth.shape[0] - 1)
+    cols = np.clip(np.round(s * c[..., 0]).astype(int), 0, truth.shape[1] - 1)
+    lens_type = np.asarray(type_of_coset)[(i - j) % 3]
+    sigma = blur_per_g * np.abs(truth[rows, cols] - np.asarray(focus_g)[lens_type])
+    levels = np.arange(0.0, float(sigma.max()) + 0.25, 0.25)
+    stack = [frame] + [cv2.GaussianBlur(frame, (0, 0), v) for v in levels[1:]]
+    pick = np.clip(np.round(sigma / 0.25).astype(int), 0, len(levels) - 1)
+    return np.choose(pick, stack).astype(np.float32)
+
+
 def simulate_lenslet_depth(*, seed: int = 0, pixels: str | int | None = None,
                            scene: str = "steps", g: float = 4.0, pitch_px: float = 20.2,
                            s: float = 0.2, noise: float = 0.005,

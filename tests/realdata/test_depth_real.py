@@ -65,3 +65,19 @@ def test_pixel4_disparity_grows_away_from_the_focused_label(realdata):
     label, books, picture = (_median(d, x, y, 24) for x, y in ((900, 1100), (1500, 550),
                                                                (830, 220)))
     assert label < books < picture, (label, books, picture)  # measured 3.1, 5.9, 8.4
+
+
+@pytest.mark.parametrize("name", ["origami", "fujita2"])
+def test_near_focused_type_is_the_cameras_type_0(realdata, name):
+    from plenocli import calibration
+    from plenocli.io import raytrix
+
+    folder = realdata / "raytrix" / name
+    image = cv2.imread(str(folder / "frame0.png"), cv2.IMREAD_UNCHANGED)[..., :3]
+    grid, report = calibration.calibrate(image.astype(np.float32).sum(-1))
+    assert report.lens_types is not None
+    calib = raytrix.read_calib(folder / "calib.xml")
+    # the camera's type 0 sits at the XML's offset (from the image centre, y up)
+    rows, cols = image.shape[:2]
+    i, j = grid.nearest_index(cols / 2 + calib["offset"][0], rows / 2 - calib["offset"][1])
+    assert grid.lens_types(i, j) == 0
