@@ -189,8 +189,8 @@ def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations, stride)
 
 @njit(cache=True)
 def render_footprints(cx, cy, g, weight, radius, s, rows_out, cols_out):
-    """Each lens's value ``g`` spread over its footprint on the refocused grid: the disc of
-    radius s |g| radius around s c, weighted by a tent (1 at the centre, 0 at the rim) times
+    """Each lens's value ``g`` spread around s c (where its centre lands whatever g) over a
+    disc of ``radius`` output pixels, weighted by a tent (1 at the centre, 0 at the rim) times
     ``weight``. Returns (sum of w g, sum of w, sum of w * weight) maps."""
     sg = np.zeros((rows_out, cols_out))
     sw = np.zeros((rows_out, cols_out))
@@ -200,7 +200,7 @@ def render_footprints(cx, cy, g, weight, radius, s, rows_out, cols_out):
             continue
         X = s * cx[k]
         Y = s * cy[k]
-        rad = s * abs(g[k]) * radius
+        rad = radius
         for R in range(max(0, int(Y - rad)), min(rows_out, int(Y + rad) + 2)):
             for C in range(max(0, int(X - rad)), min(cols_out, int(X + rad) + 2)):
                 d = math.sqrt((C - X) ** 2 + (R - Y) ** 2) / rad

@@ -42,6 +42,7 @@ REFINE_STRIDE = 2
 PROFILE_DEGREE = 6
 PROFILE_TERMS = 16    # even monomials of degree <= 6
 RIM_BINS = 3          # 1.5 px (0.5 px bins) of rim left out of the usable disc
+RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output grid
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
 
 
@@ -248,8 +249,8 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
     rows_out, cols_out = output_shape(np.shape(frame), s)
     weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)
     sg, sw, sc = kn.render_footprints(lenses.centres[:, 0].copy(), lenses.centres[:, 1].copy(),
-                                      lenses.g, weight, lenses.radius_px, float(s),
-                                      rows_out, cols_out)
+                                      lenses.g, weight, RENDER_REACH * s * grid.pitch_px,
+                                      float(s), rows_out, cols_out)
     with np.errstate(invalid="ignore", divide="ignore"):
         g = np.where(sw > 0, sg / sw, np.nan).astype(np.float32)
         conf = np.where(sw > 0, sc / sw, 0.0).astype(np.float32)
