@@ -86,3 +86,20 @@ def test_metric_depth_on_the_simulated_camera(tmp_path):
                     tmp_path / "sim" / "grid.yaml", "--camera", camera, "-o", other)
     assert result.exit_code == 1 and "focus_distance_m" in result.output
     assert not other.exists()
+
+
+def test_more_refusals_leave_nothing(lenslet, tmp_path):
+    out = tmp_path / "x.tif"
+    cases = [
+        (["depth", lenslet / "depth.tif", "-o", out], 1, "dual-pixel views A, B"),
+        (["depth", lenslet / "frames.tif", "--camera", lenslet / "grid.yaml", "-o", out], 1,
+         "needs lenslet frames and --grid"),
+        (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
+          lenslet / "frames.tif", "-o", out], 1, "no page g"),
+        (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
+          lenslet / "depth.tif", "--g", "2,3", "-o", out], 1, "not a sweep"),
+    ]
+    for args, code, words in cases:
+        result = invoke(*args)
+        assert result.exit_code == code and words in result.output, (args, result.output)
+        assert len(result.output.strip().splitlines()) == 1 and not out.exists()
