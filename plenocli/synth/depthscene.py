@@ -40,7 +40,7 @@ SCENES = ("plane", "steps", "slanted")
 def scene_planes(scene: str, out_shape: tuple[int, int], *, g: float = 4.0) -> list[dict]:
     """The planes of a named lenslet scene on a refocused image of ``out_shape`` (rows, cols).
 
-    ``plane``: one fronto-parallel plane at ``g``. ``steps``: a background at 2.8 and two
+    ``plane``: one fronto-parallel plane at ``g`` (negative: a Galilean camera). ``steps``: a background at 2.8 and two
     nearer boxes at 5.0 and 4.0. ``slanted``: g from 2.5 at the left edge to 5.5 at the right.
     """
     rows, cols = out_shape
@@ -94,8 +94,8 @@ def lenslet_depth_frame(grid: LensGrid, shape: tuple[int, int], planes: list[dic
         texture = random_texture(rng, max_freq=max_freq, contrast=0.6)
         g = (p["a"] + s * (p["bx"] * cx + p["by"] * cy)) / (1 - s * (p["bx"] * ux + p["by"] * uy))
         X, Y = s * (g * ux + cx), s * (g * uy + cy)
-        hit = _inside(p["region"], X, Y) & (g > 0) & (g > seen_g)
-        image[hit] = texture_at(texture, X[hit], Y[hit], box=s * g[hit])
+        hit = _inside(p["region"], X, Y) & (np.abs(g) > 1) & (g > seen_g)
+        image[hit] = texture_at(texture, X[hit], Y[hit], box=s * np.abs(g[hit]))
         seen_g[hit] = g[hit]
     if np.isnan(image).any():
         raise ValueError("the planes leave sensor pixels that see nothing; add a background")
