@@ -40,8 +40,9 @@ SCENES = ("plane", "steps", "slanted")
 def scene_planes(scene: str, out_shape: tuple[int, int], *, g: float = 4.0) -> list[dict]:
     """The planes of a named lenslet scene on a refocused image of ``out_shape`` (rows, cols).
 
-    ``plane``: one fronto-parallel plane at ``g`` (negative: a Galilean camera). ``steps``: a background at 2.8 and two
-    nearer boxes at 5.0 and 4.0. ``slanted``: g from 2.5 at the left edge to 5.5 at the right.
+    ``plane``: one fronto-parallel plane at ``g`` (negative: a Galilean camera). ``steps``: a
+    background at 2.8 and two nearer boxes at 5.0 and 4.0. ``slanted``: g from 2.5 at the left
+    edge to 5.5 at the right.
     """
     rows, cols = out_shape
     if scene == "plane":
