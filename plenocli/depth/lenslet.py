@@ -99,14 +99,15 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
     half = int(math.ceil(radius)) + 1
     sums, counts = kn.profile_sums(frame, centres[:, 0].copy(), centres[:, 1].copy(),
                                    radius * 0.98, half, 8)
-    mean = np.where(counts > 0, sums / np.maximum(counts, 1), 0.0)
-    mean = ndimage.gaussian_filter(mean, 0.5) / np.maximum(
-        ndimage.gaussian_filter((counts > 0).astype(float), 0.5), 1e-9)
-    peak = float(np.max(mean)) if mean.size else 0.0
+    # normalised convolution: bins no pixel offset falls in (every lens at the same sub-pixel
+    # phase, as on an ideal lattice of whole-pixel pitch) take their neighbours' mean
+    weight = ndimage.gaussian_filter(counts, 1.0)
+    mean = ndimage.gaussian_filter(sums, 1.0) / np.maximum(weight, 1e-9)
+    peak = float(np.max(mean[weight > 0])) if (weight > 0).any() else 0.0
     if not peak > 0:
         raise ValueError("the micro-images hold no light (the frame is dark or NaN under the "
                          "grid); check the frames and the grid")
-    usable = (mean >= USABLE_LEVEL * peak) & (counts > 0)
+    usable = (mean >= USABLE_LEVEL * peak) & (weight > 0.05 * weight.max())
     yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
     usable &= np.hypot(xx, yy) <= radius * 0.95
     # the rim of a micro-image falls off within a pixel or two: its binned mean is not the
