@@ -23,6 +23,7 @@ from scipy import special
 SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in sharpness
 SLOPE_SEPARATION = 4.0  # changes of neighbouring types this many standard errors apart decide
 MIN_DEPTH_SPREAD = 0.5  # interquartile range of g (virtual depth) a frame needs to decide
+CLEAR_MATCH = 0.5       # median lens confidence at which one sign of g is taken at once
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,8 @@ def lens_virtual_depth(flat: np.ndarray, indices: np.ndarray, centres: np.ndarra
             continue
         if float(np.median(found.confidence)) > score:
             best, score = found, float(np.median(found.confidence))
+        if score >= CLEAR_MATCH:
+            break   # a clear Keplerian match: the Galilean search would only cost time
     if best is None:
         return np.full(len(indices), np.nan)
     # lens_depth lists the lenses whose centres lie in the frame, in the grid's order
