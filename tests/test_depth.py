@@ -76,8 +76,8 @@ def test_textureless_frame_has_low_confidence():
     frame = (0.5 + rng.normal(0, 0.003, SHAPE)).astype(np.float32)
     result = depth_map(frame, grid, s=S, min_confidence=0.0)
     assert np.median(result.lenses.confidence) < 0.3
-    textured, _, _ = _scene("plane", g=5.0, seed=5)
-    good = depth_map(textured, grid, s=S)
+    textured, textured_grid, _ = _scene("plane", g=5.0, seed=5)
+    good = depth_map(textured, textured_grid, s=S)
     assert np.median(good.lenses.confidence) > 0.6
 
 
