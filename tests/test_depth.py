@@ -60,6 +60,12 @@ def test_galilean_plane_has_negative_g():
     assert np.median(np.abs(result.g[ok] - truth[ok])) <= 0.03
 
 
+def test_galilean_frame_searched_with_positive_g_is_refused():
+    frame, grid, _ = _scene("plane", g=-4.0, seed=2)
+    with pytest.raises(ValueError, match="pass --g -8:-2"):
+        depth_map(frame, grid, s=S, g_range=(2, 8))
+
+
 def test_slanted_plane_rms_over_most_pixels():
     frame, grid, truth = _scene("slanted")
     result = depth_map(frame, grid, s=S, g_range=(2, 8))

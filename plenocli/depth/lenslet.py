@@ -42,6 +42,8 @@ REFINE_STRIDE = 2
 PROFILE_DEGREE = 6
 PROFILE_TERMS = 16    # even monomials of degree <= 6
 RIM_BINS = 3          # 1.5 px (0.5 px bins) of rim left out of the usable disc
+CLEAR_MATCH = 0.5     # median lens confidence above which the sign of g is not questioned
+SIGN_MARGIN = 0.2     # the other sign must beat this range's median confidence by this much
 RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output grid
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
 
@@ -174,8 +176,10 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     q0, confidence = _coarse(cost, qs)
     q = kn.refine_q(flat, cx, cy, neighbours(indices, ring1[::2] + ring2[::2]), profile, half, q0,
                     q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
+    # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
+    at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
     with np.errstate(divide="ignore", invalid="ignore"):
-        g = np.where(np.isfinite(q) & (q != 0), 1.0 / q, np.nan)
+        g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
     g = lens_median(g, confidence, neighbours(indices, ring1))
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
 
@@ -223,6 +227,21 @@ def _coarse(cost: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return q0, conf
 
 
+def _check_sign(frame, grid, g_range, lenses: LensDepth) -> None:
+    """ValueError when the frame matches far better with g of the other sign (a Galilean
+    camera searched with a Keplerian range, or the reverse): every g found would be wrong."""
+    ours = float(np.median(lenses.confidence))
+    if ours >= CLEAR_MATCH:
+        return
+    other = (-g_range[1], -g_range[0])
+    theirs = float(np.median(lens_depth(frame, grid, g_range=other).confidence))
+    if theirs > ours + SIGN_MARGIN:
+        kind = "Galilean (inverted micro-images)" if other[0] < 0 else "Keplerian"
+        raise ValueError(f"the micro-images match far better with g in {other[0]:g}:"
+                         f"{other[1]:g} (median confidence {theirs:.2f} against {ours:.2f}): "
+                         f"a {kind} camera; pass --g {other[0]:g}:{other[1]:g}")
+
+
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
     """(min, max) of a valid search range or ValueError saying what is wrong."""
     gmin, gmax = (float(v) for v in g_range)
@@ -247,6 +266,7 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
     if not 0 <= min_confidence <= 1:
         raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
     lenses = lens_depth(frame, grid, g_range=g_range)
+    _check_sign(frame, grid, g_range, lenses)
     rows_out, cols_out = output_shape(np.shape(frame), s)
     weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)
     sg, sw, sc = kn.render_footprints(lenses.centres[:, 0].copy(), lenses.centres[:, 1].copy(),
