@@ -21,7 +21,7 @@ import numpy as np
 from scipy import special
 
 SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in sharpness
-SLOPE_SEPARATION = 4.0  # changes of neighbouring types this many standard errors apart decide
+SLOPE_SEPARATION = 4.0  # changes of types 0 and 2 this many standard errors apart decide
 MIN_DEPTH_SPREAD = 0.5  # interquartile range of g (virtual depth) a frame needs to decide
 CLEAR_MATCH = 0.5       # median lens confidence at which one sign of g is taken at once
 
@@ -152,12 +152,12 @@ def lens_virtual_depth(flat: np.ndarray, indices: np.ndarray, centres: np.ndarra
 def types_by_depth(g: np.ndarray, local: np.ndarray, coset: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray] | None:
     """(cosets ordered type 0, 1, 2; each coset's change of relative sharpness from the near
-    third of the frame's |g| to its far third), or None when the depths spread too little or
-    neighbouring changes are within SLOPE_SEPARATION standard errors, or when the near- and
-    the far-focused types do not swap places between the near and the far third (a blur that
-    does not depend on depth). Medians, not a line
-    fit: relative sharpness peaks inside a type's range and has outliers on textureless
-    lenses."""
+    third of the frame's |g| to its far third), or None when the depths spread too little,
+    when the near- and the far-focused types' changes are within SLOPE_SEPARATION standard
+    errors (the third coset is type 1 by elimination), or when those two types do not swap
+    places between the near and the far third (a blur that does not depend on depth).
+    Medians, not a line fit: relative sharpness peaks inside a type's range and has outliers
+    on textureless lenses."""
     known = np.isfinite(g)
     if known.sum() < 30:
         return None
@@ -182,9 +182,9 @@ def types_by_depth(g: np.ndarray, local: np.ndarray, coset: np.ndarray
     first, last = rank[0], rank[-1]
     if not (at_near[first] > at_near[last] and at_far[first] < at_far[last]):
         return None   # no crossing: one type is sharper everywhere, which says nothing of depth
-    for a, b in zip(rank[:-1], rank[1:], strict=True):
-        if change[b] - change[a] < SLOPE_SEPARATION * np.hypot(error[a], error[b]):
-            return None
+    # the near- and the far-focused types decide; the third coset is type 1 by elimination
+    if change[last] - change[first] < SLOPE_SEPARATION * np.hypot(error[first], error[last]):
+        return None
     return rank, change
 
 
