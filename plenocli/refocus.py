@@ -89,7 +89,7 @@ def _flush(line, lo, hi, n2, table, Y, bins, half, out_r0, out_r1, off, buf):
 @njit(cache=True, parallel=True)
 def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g,  # noqa: C901, PLR0915 (numba kernel)
            xsign, ysign, half_mask, radius2, chan_map, table, band_rows, band_out, buf_off,
-           buf, rows_out, cols_out):
+           buf, rows_out, cols_out, g_tab, g_imin, g_jmin):
     """Splat ``frame`` into ``buf`` (total band rows, cols_out, 2 * channels).
 
     The last axis interleaves (sum of w * value, sum of w) per channel. Separable splatting:
@@ -101,7 +101,8 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g, 
     The input rows are cut into fixed bands (``band_rows[k]`` .. ``band_rows[k + 1]``), each
     with its own slice of ``buf`` (output rows ``band_out[k]`` .. ``band_out[n + k]``, buffer
     rows from ``buf_off[k]``), so bands run in parallel without races and the merge order, hence
-    the result, does not depend on the number of threads.
+    the result, does not depend on the number of threads. ``g_tab[i - g_imin, j - g_jmin]``,
+    where finite, is lens (i, j)'s own g (all-in-focus); other lenses use ``g``.
     """
     n_bands = band_rows.shape[0] - 1
     cols = frame.shape[1]
@@ -117,6 +118,7 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g, 
         out_r1 = min(band_out[n_bands + band], rows_out)  # exclusive
         off = buf_off[band] - band_out[band]
         line = np.zeros((cols_out, n2))
+        gl = g
         for r in range(band_rows[band], band_rows[band + 1]):
             y = r + y0
             run_i = -(1 << 62)
@@ -168,7 +170,13 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g, 
                     hi = 0
                     run_i = bi
                     run_j = bj
-                    run_y = s * (g * dy + cy)
+                    gl = g
+                    gi = bi - g_imin
+                    gj = bj - g_jmin
+                    if 0 <= gi < g_tab.shape[0] and 0 <= gj < g_tab.shape[1] and \
+                            math.isfinite(g_tab[gi, gj]):
+                        gl = g_tab[gi, gj]
+                    run_y = s * (gl * dy + cy)
                 ch = chan_map[r & 1, c & 1]
                 if ch < 0:
                     continue
@@ -186,7 +194,7 @@ def _splat(frame, x0, y0, inv, basis, offset, cx_tab, cy_tab, imin, jmin, s, g, 
                     continue
                 if radius2 >= 0.0 and dx * dx + dy * dy > radius2:
                     continue
-                X = s * (g * dx + cx)
+                X = s * (gl * dx + cx)
                 bx = math.floor(X)
                 fx = int((X - bx) * bins + 0.5)
                 kx0 = int(bx) - half + 1
@@ -289,12 +297,13 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
 def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0,
                view: str = "full", mask_width: float = 2.0, kernel: str = "lanczos3",
                radius: float | None = None, cfa: str | None = None,
-               bands: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+               bands: int | None = None, lens_g: tuple[np.ndarray, int, int] | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
     """The raw splatting sums of Eq. 3: (sum of w * value, sum of w), each (channels, R, C).
 
     ``channels`` is 3 (R, G, B) when ``cfa`` is given, else 1. Parameters as in :func:`refocus`;
     ``bands`` fixes the number of parallel row bands (default: from the frame size only, so
-    results never depend on the number of threads).
+    results never depend on the number of threads); ``lens_g`` as in :func:`refocus`.
     """
     frame = np.asarray(frame)
     _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, 0.0)
@@ -326,7 +335,11 @@ def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 
     reach = grid.pitch_px * _CELL_RADIUS[grid.lattice] + 2 * stray + 1.0
     if radius is not None:
         reach = min(reach, radius + stray + 1.0)
-    spread = s * abs(g - 1.0) * reach + a + 2
+    g_tab, g_imin, g_jmin = lens_g if lens_g is not None else (np.full((1, 1), np.nan), 0, 0)
+    g_tab = np.ascontiguousarray(g_tab, float)
+    own = g_tab[np.isfinite(g_tab)]
+    g_far = max(abs(g - 1.0), float(np.max(np.abs(own - 1.0))) if own.size else 0.0)
+    spread = s * g_far * reach + a + 2
     n_bands = bands if bands else int(min(8, max(1, rows // 256)))
     edges = np.linspace(0, rows, n_bands + 1).round().astype(np.int64)
     lo = np.clip(np.floor(s * (edges[:-1] + 0) - spread), 0, rows_out).astype(np.int64)
@@ -339,7 +352,7 @@ def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 
            imin, jmin, float(s), float(g), xsign, ysign, mask_width / 2.0,
            -1.0 if radius is None else float(radius) ** 2, chan_map, kernel_table(a), edges,
            band_out,
-           buf_off, buf, rows_out, cols_out)
+           buf_off, buf, rows_out, cols_out, g_tab, int(g_imin), int(g_jmin))
     sums = np.zeros((n_chan, rows_out, cols_out))
     weights = np.zeros((n_chan, rows_out, cols_out))
     for k in range(n_bands):  # fixed order: deterministic
@@ -352,7 +365,8 @@ def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 
 def refocus(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0,
             view: str = "full", mask_width: float = 2.0, kernel: str = "lanczos3",
             radius: float | None = None, cfa: str | None = None,
-            min_weight: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+            min_weight: float = 0.25, lens_g: tuple[np.ndarray, int, int] | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Refocus a focused-plenoptic sensor image (paper Eq. 3).
 
     Parameters
@@ -379,6 +393,9 @@ def refocus(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0
     min_weight : float
         Output pixels whose weight is below ``min_weight`` times the typical weight (the median
         of the positive weights of that channel) are NaN instead of noisy ratios.
+    lens_g : (table, imin, jmin) or None
+        Each lens's own g (all-in-focus, :func:`plenocli.depth.lenslet.lens_g_table`);
+        ``g`` for lenses whose entry is NaN or missing.
 
     Returns
     -------
@@ -389,7 +406,7 @@ def refocus(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0
     """
     _check(np.asarray(frame), grid, s, g, view, mask_width, kernel, radius, cfa, min_weight)
     sums, weights = splat_sums(frame, grid, s=s, g=g, view=view, mask_width=mask_width,
-                               kernel=kernel, radius=radius, cfa=cfa)
+                               kernel=kernel, radius=radius, cfa=cfa, lens_g=lens_g)
     image = np.full(sums.shape, np.nan, np.float32)
     for ch in range(sums.shape[0]):
         w = weights[ch]

@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "flat": "Correct vignetting with a gain from a white image.",
     "calibrate": "Calibrate the micro-lens grid from a white or scene image.",
     "refocus": "Refocus a focused-plenoptic capture (Lanczos splatting, Eq. 3).",
+    "depth": "Depth from one snapshot (lenslet g, dual/quad-pixel disparity).",
     "sai": "Sub-aperture images of an N x N plenoptic sensor (Eq. 1).",
     "crosstalk": "Measure sub-aperture cross-talk from masked white captures.",
     "unmix": "Remove sub-aperture cross-talk (ghosts) with a measured mixing.",

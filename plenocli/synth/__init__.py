@@ -18,6 +18,9 @@ from functools import partial
 _SOURCES: dict[str, tuple[str, str, dict]] = {
     "dualpixel": ("dualpixel", "simulate_capture_set", {}),
     "raytrix-scene": ("focused", "simulate_raytrix_scene", {}),
+    "lenslet-depth": ("depthscene", "simulate_lenslet_depth", {}),
+    "dualpixel-depth": ("depthscene", "simulate_disparity", {}),
+    "quadpixel-depth": ("depthscene", "simulate_disparity", {"quad": True}),
     "hexgrid-white": ("whiteimage", "simulate_hexgrid_white", {}),
     "quadpixel-pyramid": ("prismsets", "simulate_quadpixel", {}),
     "quadpixel-white": ("prismsets", "simulate_quadpixel", {"scene": "white", "no_prisms": True}),

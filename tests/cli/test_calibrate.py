@@ -94,7 +94,8 @@ def test_start_and_lens_types_in_yaml_and_xml(tmp_path):
     assert res.exit_code == 0, res.output
     doc = yaml.safe_load(out.read_text())
     assert doc["moved_from_start"]["rms_px"] > 0.5
-    assert sorted(doc["lens_grid"]["lens_type_of_coset"]) == [0, 1, 2]
+    # the scene's types differ in blur at every depth: no depth decides, so no types
+    assert doc["lens_grid"].get("lens_type_of_coset") is None
     assert doc["residuals"]["confidence"]["contrast"] > 0
     types = {lt["id"]: lt["offset"] for lt in raytrix.read_calib(xml)["lens_types"]}
     assert types[0] == [0.0, 0.0] and types[1] == [-v for v in types[2]]

@@ -112,7 +112,7 @@ def test_missing_grid_fails_cleanly(scene, tmp_path):
 
 def test_registered_stages():
     stages = get_stages()
-    assert stages["refocus"].inputs == ("input", "grid")
+    assert stages["refocus"].inputs == ("input", "grid", "depth")
     assert set(stages["refocus"].parameters()) >= {"s", "g", "view", "mask_width", "kernel"}
     assert "n" in stages["sai"].parameters()
 

@@ -38,6 +38,9 @@ SMALL = {
     "raytrix-scene": (["--param", "rows=48", "--param", "cols=64"],
                       {"frames.tif", "grid.yaml", "texture.tif"}),
     "raytrix-white": (["--pixels", "60"], {"capture.tif"}),
+    "lenslet-depth": (["--pixels", "96x128"], {"frames.tif", "grid.yaml", "depth.tif"}),
+    "dualpixel-depth": (["--pixels", "64"], {"views.tif", "disparity.tif"}),
+    "quadpixel-depth": (["--pixels", "64"], {"views.tif", "disparity.tif"}),
     "stereo-rig": (["--param", "view_shape=[48, 64]"], {"views.tif", "white_L.tif",
                                                          "white_R.tif"}),
 }

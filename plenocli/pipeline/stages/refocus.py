@@ -19,8 +19,10 @@ from plenocli.progress import log, shown
 def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = "4",
         view: str = "full", mask_width: float = 2.0, kernel: str = "lanczos3",
         radius: float | None = None, min_weight: float = 0.25,
-        preview: str | None = None) -> None:
-    """Refocus every page of ``input`` at each g; one output page per (g, channel)."""
+        preview: str | None = None, depth: str | None = None) -> None:
+    """Refocus every page of ``input`` at each g; one output page per (g, channel). With
+    ``depth`` (a ``plenocli depth`` output on this grid), each lens at its own g
+    (all-in-focus); ``g`` is then used only where the depth is unknown."""
     try:
         g_values = rf.parse_g(g)
     except ValueError as err:
@@ -38,17 +40,24 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
+    if depth:
+        if len(g_values) > 1:
+            raise ConfigError("--depth renders one all-in-focus image: give one --g (used "
+                              "where the depth is unknown), not a sweep")
+        options = {"lens_g": _lens_g(depth, framing, s)}
+    else:
+        options = {}
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
     sweep = len(g_values) > 1
     period = s * framing.grid.pitch_px
     out_pages, names, scores = _refocus_pages(
         data, pages, framing, g_values, s=s, view=view, mask_width=mask_width, kernel=kernel,
-        radius=radius, min_weight=min_weight)
+        radius=radius, min_weight=min_weight, **options)
     finite = [sc for sc in scores if np.isfinite(sc["sharpness"])]
     best = max(finite, key=lambda sc: sc["sharpness"])["g"] if finite else None
     params = dict(grid=grid, s=s, g=g, view=view, mask_width=mask_width, kernel=kernel,
-                  radius=radius, min_weight=min_weight)
-    record = stage_record("refocus", params, {"input": input, "grid": grid})
+                  radius=radius, min_weight=min_weight, depth=depth)
+    record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
     stack = np.stack(out_pages).astype(np.float32)
     covered = float(np.isfinite(stack).mean())
     out_meta = tiffio.derived_meta(
@@ -60,14 +69,15 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
                  "covered_fraction": covered},
         sharpness={"measure": "mean(Lap(I_s)^2) / var(I_s), I_s = Gaussian(sigma = s * pitch / 2)",
                    "lens_period_px": period, "scores": scores, "best_g": best})
-    tiffio.write_image(output, stack, out_meta, protect=(input, grid))
+    protect = (input, grid) + ((depth,) if depth else ())
+    tiffio.write_image(output, stack, out_meta, protect=protect)
     log.info("refocus: %s -> %s (%d page(s) of %d x %d, view %s, %.1f %% covered%s)",
              shown(input), shown(output), stack.shape[0], stack.shape[2], stack.shape[1], view,
              100 * covered,
              f", sharpest g = {best:g}" if sweep and best is not None else "")
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
-                  protect=(input, grid), colour=meta.get("colour"))
+                  protect=protect, colour=meta.get("colour"))
 
 
 def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[float], *,
@@ -116,3 +126,22 @@ def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
         return np.nanmean(chunk, axis=0)
+
+
+def _lens_g(depth: str, framing, s: float) -> tuple[np.ndarray, int, int]:
+    """Each lens's g from a depth map made on the same grid and s (all-in-focus)."""
+    from plenocli.depth.lenslet import lens_g_table
+
+    data, meta = tiffio.read_image(depth)
+    names = list(meta.get("views") or [])
+    if "g" not in names:
+        raise InputError(f"{depth} holds no page g; give a `plenocli depth --grid` output")
+    expected = rf.output_shape(framing.shape, s)
+    if data.shape[1:] != expected:
+        raise InputError(f"{depth} is {data.shape[2]} x {data.shape[1]} but refocus at s = "
+                         f"{s:g} makes {expected[1]} x {expected[0]}; make the depth with the "
+                         "same --grid and --s")
+    try:
+        return lens_g_table(framing.grid, framing.shape, data[names.index("g")], s)
+    except ValueError as err:
+        raise InputError(f"{depth}: {err}") from err

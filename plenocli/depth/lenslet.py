@@ -1,0 +1,300 @@
+"""Depth of a focused-plenoptic (lenslet) capture from the disparity between micro-images.
+
+A scene point at virtual depth g (the refocus parameter of Eq. 3) is seen by every micro-image
+whose footprint covers it. In micro-image i it lies at offset u from the centre c_i; in the
+neighbouring micro-image j at u - (c_j - c_i) / g. So the content of neighbouring micro-images
+is shifted by the baseline c_j - c_i times q = 1 / g, and q is found by matching each
+micro-image against its neighbours (first ring at one pitch, second ring at sqrt(3) pitch on a
+hex array, sqrt(2) on a square one):
+
+1. The micro-image vignetting is measured from the frame itself: the mean of all micro-images
+   by offset from their centre (textures average out over thousands of lenses). Dividing by it
+   flattens every micro-image, and where it is below half its peak the micro-image is not used.
+2. Coarse search: the sum of squared differences against the first ring at candidate q,
+   0.5 px of shift apart, over the bounds given (``g_range``).
+3. Refinement: Gauss-Newton steps on q against both rings together (sub-pixel, unbiased by the
+   candidate spacing).
+4. Confidence per lens: 1 - (best cost / median cost) of the coarse curve: near 1 for a sharp,
+   unique minimum, near 0 where every q fits alike (no texture) or where nothing fits.
+5. Each lens's g is spread over its footprint on the refocused grid (the disc of radius
+   s |g| r around s c_i where its pixels land, r the usable micro-image radius), weighted by a
+   tent times the confidence: the map lies on the grid of ``refocus --s S``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from plenocli.depth import kernels as kn
+from plenocli.model.lensgrid import LensGrid
+
+RINGS = {"hex": ([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)],
+                 [(1, 1), (-1, 2), (-2, 1), (-1, -1), (1, -2), (2, -1)]),
+         "square": ([(1, 0), (0, 1), (-1, 0), (0, -1)],
+                    [(1, 1), (-1, 1), (-1, -1), (1, -1)])}
+SHIFT_STEP_PX = 1.0   # candidate spacing of the coarse search, in shift along one pitch
+REFINE_STEPS = 3
+COARSE_STRIDE = 4     # the coarse search looks at every 4th pixel, the refinement every 2nd
+REFINE_STRIDE = 2
+PROFILE_DEGREE = 6
+PROFILE_TERMS = 16    # even monomials of degree <= 6
+RIM_BINS = 3          # 1.5 px (0.5 px bins) of rim left out of the usable disc
+CLEAR_MATCH = 0.5     # median lens confidence above which the sign of g is not questioned
+SIGN_MARGIN = 0.2     # the other sign must beat this range's median confidence by this much
+RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output grid
+USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
+
+
+@dataclass(frozen=True)
+class LensDepth:
+    """Per-lens estimate: centres (K, 2), g (K,) (NaN: none), confidence (K,) in 0..1, and the
+    usable micro-image radius (px)."""
+
+    centres: np.ndarray
+    g: np.ndarray
+    confidence: np.ndarray
+    radius_px: float
+
+
+@dataclass(frozen=True)
+class DepthMap:
+    """A depth map on the refocused grid: g and confidence (rows_out, cols_out) float32."""
+
+    g: np.ndarray
+    confidence: np.ndarray
+    lenses: LensDepth
+
+
+def lens_table(grid: LensGrid, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (K, 2), centres (K, 2)) of the lenses of ``grid`` whose centre lies in a
+    (rows, cols) image: refined centres where the grid has them."""
+    if grid.centres_xy is None:
+        grid = replace(grid, image_shape=tuple(shape))
+    idx, xy = grid.lens_centres()
+    inside = ((xy[:, 0] >= 0) & (xy[:, 0] <= shape[1] - 1)
+              & (xy[:, 1] >= 0) & (xy[:, 1] <= shape[0] - 1) & np.isfinite(xy).all(axis=1))
+    return np.asarray(idx, np.int64)[inside], np.asarray(xy, float)[inside]
+
+
+def neighbours(indices: np.ndarray, offsets: list[tuple[int, int]]) -> np.ndarray:
+    """(K, len(offsets)) index of each lens's neighbour at each lattice offset, -1 if absent."""
+    lo = indices.min(axis=0) - 3
+    size = indices.max(axis=0) - lo + 4
+    table = np.full(size, -1, np.int64)
+    table[indices[:, 0] - lo[0], indices[:, 1] - lo[1]] = np.arange(len(indices))
+    out = np.full((len(indices), len(offsets)), -1, np.int64)
+    for m, (di, dj) in enumerate(offsets):
+        out[:, m] = table[indices[:, 0] - lo[0] + di, indices[:, 1] - lo[1] + dj]
+    return out
+
+
+def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
+                  ) -> tuple[np.ndarray, np.ndarray, int, float]:
+    """The mean micro-image by offset (0.5 px bins): NaN where unusable, and filled; its
+    half-size in pixels and the usable radius."""
+    from scipy import ndimage
+
+    radius = 0.5 * pitch
+    half = int(math.ceil(radius)) + 1
+    sums, counts = kn.profile_sums(frame, centres[:, 0].copy(), centres[:, 1].copy(),
+                                   radius * 0.98, half, 8)
+    # normalised convolution: bins no pixel offset falls in (every lens at the same sub-pixel
+    # phase, as on an ideal lattice of whole-pixel pitch) take their neighbours' mean
+    weight = ndimage.gaussian_filter(counts, 1.0)
+    mean = ndimage.gaussian_filter(sums, 1.0) / np.maximum(weight, 1e-9)
+    peak = float(np.max(mean[weight > 0])) if (weight > 0).any() else 0.0
+    if not peak > 0:
+        raise ValueError("the micro-images hold no light (the frame is dark or NaN under the "
+                         "grid); check the frames and the grid")
+    usable = (mean >= USABLE_LEVEL * peak) & (weight > 0.05 * weight.max())
+    yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
+    usable &= np.hypot(xx, yy) <= radius * 0.95
+    # the rim of a micro-image falls off within a pixel or two: its binned mean is not the
+    # rim of each lens (sub-pixel centres), and the residual pattern, the same in every
+    # micro-image, would pull every match towards zero shift
+    usable = ndimage.binary_erosion(usable, iterations=RIM_BINS)
+    mean = _smooth_profile(mean, counts, usable, xx / radius, yy / radius)
+    profile = np.where(usable, mean, np.nan)
+    r_use = float(np.max(np.hypot(xx, yy)[usable])) if usable.any() else 0.0
+    if r_use < 2.0:
+        raise ValueError(f"micro-images are usable over a radius of {r_use:.1f} px only; "
+                         "depth needs micro-images of at least 4 px across")
+    return profile, mean, half, r_use
+
+
+def _smooth_profile(mean, counts, usable, x, y) -> np.ndarray:
+    """The profile over the usable disc as an even polynomial of degree PROFILE_DEGREE in the
+    offset (least squares weighted by the samples per bin).
+
+    The binned mean carries the scene averaged over only as many lenses as the frame has:
+    offset u samples the scene s g u further along, so the scene's coarse gradients leave a
+    tilt (odd in u) and its texture leaves noise, the same in every micro-image, which would
+    bias every match. The mean vignetting of all lenses is point-symmetric (each lens is, and
+    the field's off-axis shifts cancel across the frame) and smooth inside the rim: even
+    terms keep it and drop both."""
+    if usable.sum() < 4 * PROFILE_TERMS:
+        return mean
+    powers = [(a, b) for a in range(PROFILE_DEGREE + 1) for b in range(PROFILE_DEGREE + 1 - a)
+              if (a + b) % 2 == 0]
+    design = np.stack([x[usable] ** a * y[usable] ** b for a, b in powers], axis=1)
+    weight = np.sqrt(counts[usable])
+    coef, *_ = np.linalg.lstsq(design * weight[:, None], mean[usable] * weight, rcond=None)
+    out = mean.copy()
+    out[usable] = design @ coef
+    return out
+
+
+def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0)
+               ) -> LensDepth:
+    """g and confidence of every lens of ``grid`` on ``frame`` (2-D, NaN pixels unused).
+
+    ``g_range`` (min, max) bounds the search; a Galilean (inverted) camera has negative g,
+    e.g. (-8, -2). Both bounds share one sign and |g| > 1.
+    """
+    gmin, gmax = check_range(g_range)
+    img = np.ascontiguousarray(frame, np.float32)
+    indices, centres = lens_table(grid, img.shape)
+    if len(indices) < 7:
+        raise ValueError(f"only {len(indices)} micro-images lie in the frame; depth needs "
+                         "at least 7 (a lens and its neighbours)")
+    cx, cy = centres[:, 0].copy(), centres[:, 1].copy()
+    profile, gain, half, r_use = micro_profile(img, centres, grid.pitch_px)
+    flat = np.full(img.shape, np.nan, np.float32)
+    kn.normalise(img, cx, cy, profile, gain, half, flat)
+    ring1, ring2 = RINGS[grid.lattice]
+    q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
+    n_q = max(3, int(math.ceil((q_hi - q_lo) * grid.pitch_px / SHIFT_STEP_PX)) + 1)
+    qs = np.linspace(q_lo, q_hi, n_q)
+    ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, ring1[:len(ring1) // 2]),
+                              profile, half, qs, COARSE_STRIDE)
+    min_samples = 0.1 * math.pi * r_use ** 2 / COARSE_STRIDE
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cost = np.where(cnt >= min_samples, ssd / cnt, np.nan)
+    q0, confidence = _coarse(cost, qs)
+    q = kn.refine_q(flat, cx, cy, neighbours(indices, ring1[::2] + ring2[::2]), profile, half, q0,
+                    q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
+    # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
+    at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
+    g = lens_median(g, confidence, neighbours(indices, ring1))
+    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
+
+
+def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
+                min_confidence: float = 0.1) -> np.ndarray:
+    """Each lens's g replaced by the median over itself and its first ring (the confident
+    ones): a lens sees a patch about one footprint across, its neighbours most of the same
+    patch, so the median lowers the scatter of a surface without blurring a depth edge (the
+    majority side wins, as it would at the lens's centre)."""
+    trusted = np.where(confidence >= min_confidence, g, np.nan)
+    padded = np.append(trusted, np.nan)
+    stack = np.concatenate([trusted[:, None], padded[np.where(nb >= 0, nb, -1)]], axis=1)
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # lenses with no trusted value
+            smoothed = np.nanmedian(stack, axis=1)
+    return np.where(np.isfinite(g), np.where(np.isfinite(smoothed), smoothed, g), np.nan)
+
+
+def _coarse(cost: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Best q of each lens's cost curve (parabola through the minimum and its neighbours) and
+    the confidence 1 - best / median cost."""
+    have = np.isfinite(cost).sum(axis=1) >= 3
+    filled = np.where(np.isfinite(cost), cost, np.inf)
+    k = np.argmin(filled, axis=1)
+    rows = np.arange(len(cost))
+    best = filled[rows, k]
+    km, kp = np.clip(k - 1, 0, len(qs) - 1), np.clip(k + 1, 0, len(qs) - 1)
+    cm, cp = filled[rows, km], filled[rows, kp]
+    inner = (k > 0) & (k < len(qs) - 1) & np.isfinite(cm) & np.isfinite(cp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curv = cm - 2 * best + cp
+        frac = np.where(inner & (curv > 0), 0.5 * (cm - cp) / curv, 0.0)
+        median = np.nanmedian(np.where(np.isfinite(cost), cost, np.nan)[have], axis=1)
+    q0 = np.full(len(cost), np.nan)
+    step = qs[1] - qs[0]
+    q0[have] = qs[k[have]] + np.clip(frac[have], -0.5, 0.5) * step
+    conf = np.zeros(len(cost))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        conf[have] = np.clip(1.0 - best[have] / median, 0.0, 1.0)
+    conf[~np.isfinite(conf)] = 0.0
+    return q0, conf
+
+
+def _check_sign(frame, grid, g_range, lenses: LensDepth) -> None:
+    """ValueError when the frame matches far better with g of the other sign (a Galilean
+    camera searched with a Keplerian range, or the reverse): every g found would be wrong."""
+    ours = float(np.median(lenses.confidence))
+    if ours >= CLEAR_MATCH:
+        return
+    other = (-g_range[1], -g_range[0])
+    theirs = float(np.median(lens_depth(frame, grid, g_range=other).confidence))
+    if theirs > ours + SIGN_MARGIN:
+        kind = "Galilean (inverted micro-images)" if other[0] < 0 else "Keplerian"
+        raise ValueError(f"the micro-images match far better with g in {other[0]:g}:"
+                         f"{other[1]:g} (median confidence {theirs:.2f} against {ours:.2f}): "
+                         f"a {kind} camera; pass --g {other[0]:g}:{other[1]:g}")
+
+
+def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
+    """(min, max) of a valid search range or ValueError saying what is wrong."""
+    gmin, gmax = (float(v) for v in g_range)
+    if not (math.isfinite(gmin) and math.isfinite(gmax) and gmin < gmax):
+        raise ValueError(f"g range must be MIN:MAX with MIN < MAX, got {gmin:g}:{gmax:g}")
+    if gmin * gmax <= 0 or min(abs(gmin), abs(gmax)) <= 1.0:
+        raise ValueError(f"g range {gmin:g}:{gmax:g}: both bounds need one sign and |g| > 1 "
+                         "(a point at |g| <= 1 is seen by one micro-image only); Keplerian "
+                         "cameras have g > 1, Galilean ones g < -1")
+    return gmin, gmax
+
+
+def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
+              g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1
+              ) -> DepthMap:
+    """g and confidence on the pixel grid of ``refocus(frame, grid, s=s)``; NaN where no lens
+    with confidence >= ``min_confidence`` covers a pixel."""
+    from plenocli.refocus import output_shape
+
+    if not (math.isfinite(s) and s > 0):
+        raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
+    if not 0 <= min_confidence <= 1:
+        raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
+    lenses = lens_depth(frame, grid, g_range=g_range)
+    _check_sign(frame, grid, g_range, lenses)
+    rows_out, cols_out = output_shape(np.shape(frame), s)
+    weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)
+    sg, sw, sc = kn.render_footprints(lenses.centres[:, 0].copy(), lenses.centres[:, 1].copy(),
+                                      lenses.g, weight, RENDER_REACH * s * grid.pitch_px,
+                                      float(s), rows_out, cols_out)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        g = np.where(sw > 0, sg / sw, np.nan).astype(np.float32)
+        conf = np.where(sw > 0, sc / sw, 0.0).astype(np.float32)
+    return DepthMap(g, conf, lenses)
+
+
+def lens_g_table(grid: LensGrid, shape: tuple[int, int], g_map: np.ndarray, s: float
+                 ) -> tuple[np.ndarray, int, int]:
+    """Each lens's g for all-in-focus rendering: the depth map (on the grid of
+    ``refocus --s s``) where the lens's centre lands (s c_ij, which does not depend on g);
+    lenses over unknown depth take the median of the known g.
+
+    Returns (table, imin, jmin) for :func:`plenocli.refocus.refocus` ``lens_g``."""
+    g_map = np.asarray(g_map, float)
+    known = g_map[np.isfinite(g_map)]
+    if not known.size:
+        raise ValueError("the depth map holds no known g")
+    indices, centres = lens_table(grid, shape)
+    cols = np.clip(np.round(s * centres[:, 0]).astype(np.int64), 0, g_map.shape[1] - 1)
+    rows = np.clip(np.round(s * centres[:, 1]).astype(np.int64), 0, g_map.shape[0] - 1)
+    values = g_map[rows, cols]
+    values = np.where(np.isfinite(values), values, float(np.median(known)))
+    lo = indices.min(axis=0)
+    table = np.full(indices.max(axis=0) - lo + 1, np.nan)
+    table[indices[:, 0] - lo[0], indices[:, 1] - lo[1]] = values
+    return table, int(lo[0]), int(lo[1])

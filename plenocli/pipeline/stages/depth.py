@@ -1,0 +1,144 @@
+"""Stage ``depth``: a lenslet frames TIFF + lens grid -> g and confidence on the refocus grid,
+or dual/quad-pixel views -> disparity and confidence (docs/depth.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli.depth import lenslet, metric, views
+from plenocli.errors import ConfigError, InputError
+from plenocli.io import tiffio
+from plenocli.io.framing import frame_grid
+from plenocli.io.preview import write_depth_png
+from plenocli.model.provenance import stage_record
+from plenocli.progress import log, shown
+
+DUAL = ["A", "B"]
+QUAD = ["S00", "S01", "S10", "S11"]
+
+
+def parse_range(text: str) -> tuple[float, float]:
+    """MIN:MAX -> (min, max), ValueError with the usage otherwise."""
+    try:
+        lo, hi = (float(v) for v in str(text).split(":"))
+    except ValueError as err:
+        raise ValueError(f"g range must be MIN:MAX (e.g. 2:8, Galilean -8:-2), got {text!r}") \
+            from err
+    return lenslet.check_range((lo, hi))
+
+
+def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
+        g: str = "2:8", min_confidence: float = 0.1, max_disparity: float = 4.0,
+        camera: str | None = None, preview: str | None = None) -> None:
+    """Depth of ``input``: lenslet frames with ``grid``, else dual/quad-pixel views; with
+    ``camera`` (lenslet) a depth_m page."""
+    try:
+        g_range = parse_range(g)
+    except ValueError as err:
+        raise ConfigError(f"--g: {err}") from err
+    if camera and not grid:
+        raise ConfigError("--camera gives metres from g: it needs lenslet frames and --grid")
+    optics = _camera(camera) if camera else None
+    data, meta = tiffio.read_image(input)
+    params = dict(grid=grid, s=s, g=g, min_confidence=min_confidence,
+                  max_disparity=max_disparity, camera=camera)
+    if grid:
+        pages, names, info = _lenslet(input, grid, data, meta, s, g_range, min_confidence)
+        if optics is not None:
+            pages.insert(1, metric.distance_m(pages[0], optics))
+            names.insert(1, "depth_m")
+            info["camera"] = {**vars(optics), "mla_distance_mm": optics.mla_distance_mm,
+                              "formula": "z = F b / (b - F), b = b_L + g B"}
+    else:
+        pages, names, info = _views(input, data, meta, max_disparity)
+    record = stage_record("depth", params, {"input": input, "grid": grid, "camera": camera})
+    stack = np.stack(pages).astype(np.float32)
+    out_meta = tiffio.derived_meta(
+        meta, record, views=names, cfa=None, origin=None, black_level=None, white_level=None,
+        active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[], depth=info)
+    protect = (input,) + ((grid,) if grid else ()) + ((camera,) if camera else ())
+    tiffio.write_image(output, stack, out_meta, protect=protect)
+    known = float(np.isfinite(stack[0]).mean())
+    log.info("depth: %s -> %s (%s, %d x %d, %.1f %% known)", shown(input), shown(output),
+             ", ".join(names), stack.shape[2], stack.shape[1], 100 * known)
+    if preview:
+        unit = "g" if grid else "disparity (px)"
+        write_depth_png(preview, stack[0], stack[-1], label=unit, protect=protect)
+
+
+def _camera(path: str) -> metric.Camera:
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = yaml.safe_load(fh)
+    except FileNotFoundError as err:
+        raise InputError(f"{path}: no such camera file") from err
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise InputError(f"{path}: not a readable YAML camera file ({err})") from err
+    try:
+        return metric.camera_from_dict(doc)
+    except ValueError as err:
+        raise InputError(f"{path}: {err}") from err
+
+
+def _grey(data: np.ndarray, meta: dict, framing) -> np.ndarray:
+    """One grey sensor image: the mean of the pages; a Bayer mosaic through the 3 x 3 binomial,
+    which weighs R, G, B alike (1/4, 1/2, 1/4) at every pixel and shifts nothing."""
+    import cv2
+
+    page = framing.crop(data).astype(np.float32).mean(axis=0)
+    if framing.cfa:
+        page = cv2.sepFilter2D(page, -1, np.array([0.25, 0.5, 0.25], np.float32),
+                               np.array([0.25, 0.5, 0.25], np.float32),
+                               borderType=cv2.BORDER_REFLECT)
+    return page
+
+
+def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
+    from plenocli import refocus as rf
+
+    framing = frame_grid(grid_path, meta, data.shape[1:], frames_path=input)
+    try:
+        rf.check_output_size(framing.shape, s, pages=2)
+        result = lenslet.depth_map(_grey(data, meta, framing), framing.grid, s=s,
+                                   g_range=g_range, min_confidence=min_confidence)
+    except ValueError as err:
+        raise InputError(f"depth: {err}") from err
+    if not np.isfinite(result.g).any():
+        raise InputError(f"depth: no micro-image of {input} matched its neighbours with "
+                         f"confidence >= {min_confidence:g} for g in {g_range[0]:g}:"
+                         f"{g_range[1]:g}; check the grid, or widen --g (a Galilean camera, "
+                         "with inverted micro-images, needs a negative range such as -8:-2)")
+    lens = result.lenses
+    info = {"method": "disparity between neighbouring micro-images, q = 1/g",
+            "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
+            "crop_sensor_origin": list(framing.sensor_origin),
+            "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
+            "lenses_confident": int(np.sum(lens.confidence >= min_confidence))}
+    return [result.g, result.confidence], ["g", "confidence"], info
+
+
+def _views(input, data, meta, max_disparity):
+    names = list(meta.get("views") or [])
+    have = {n: k for k, n in enumerate(names)}
+    try:
+        if all(n in have for n in QUAD):
+            dx, dy = views.quad_disparity(np.stack([data[have[n]] for n in QUAD]),
+                                          max_disparity=max_disparity)
+            conf = np.minimum(dx.confidence, dy.confidence)
+            pages, out = [dx.disparity, dy.disparity, conf], ["disparity_x", "disparity_y",
+                                                              "confidence"]
+        elif all(n in have for n in DUAL):
+            d = views.disparity_x(data[have["A"]], data[have["B"]], max_disparity=max_disparity)
+            pages, out = [d.disparity, d.confidence], ["disparity", "confidence"]
+        else:
+            raise InputError(f"{input} holds views {names or 'without names'}; depth needs "
+                             "dual-pixel views A, B, quad-pixel SAIs S00, S01, S10, S11, or "
+                             "lenslet frames with --grid")
+    except ValueError as err:
+        raise InputError(f"depth: {err}") from err
+    info = {"method": "shift of B against A along the baseline (+: B's content to the right)",
+            "max_disparity": max_disparity, "normalisation": "each view / its Gaussian "
+            f"low-pass (sigma {views.FLAT_SIGMA:g} px)", "window_px": views.WINDOW}
+    return pages, out, info

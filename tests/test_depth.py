@@ -1,0 +1,153 @@
+"""Depth estimation against the simulator's analytic ground truth (docs/depth.md figures)."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from plenocli.depth.lenslet import check_range, depth_map, lens_g_table
+from plenocli.depth.views import disparity_x, quad_disparity
+from plenocli.io.preview import depth_picture
+from plenocli.model.lensgrid import LensGrid
+from plenocli.refocus import refocus
+from plenocli.synth.depthscene import (
+    disparity_views,
+    lenslet_depth_frame,
+    scene_planes,
+    truth_depth,
+)
+
+SHAPE = (360, 480)
+S = 0.2
+
+
+@functools.cache
+def _scene(scene: str, g: float = 4.0, seed: int = 0):
+    """(frame, grid, truth) of a named scene, rendered once per session (read-only)."""
+    from plenocli.refocus import output_shape
+
+    grid = LensGrid(20.2, 0.0, (5.3 + seed, 8.7), "hex", image_shape=SHAPE)
+    planes = scene_planes(scene, output_shape(SHAPE, S), g=g)
+    frame = lenslet_depth_frame(grid, SHAPE, planes, s=S, seed=seed + 1, noise=0.005)
+    truth = truth_depth(planes, output_shape(SHAPE, S))
+    frame.flags.writeable = truth.flags.writeable = False
+    return frame, grid, truth
+
+
+def _inner(shape, margin=6):
+    m = np.zeros(shape, bool)
+    m[margin:-margin, margin:-margin] = True
+    return m
+
+
+@pytest.mark.parametrize("g", [3.0, 5.0])
+def test_fronto_parallel_plane_median_error(g):
+    frame, grid, truth = _scene("plane", g=g, seed=int(g))
+    result = depth_map(frame, grid, s=S, g_range=(2, 8))
+    assert result.g.shape == truth.shape
+    ok = np.isfinite(result.g) & _inner(truth.shape)
+    assert ok.sum() > 0.9 * _inner(truth.shape).sum()
+    assert np.median(np.abs(result.g[ok] - truth[ok])) <= 0.03  # measured 0.007-0.01
+
+
+def test_galilean_plane_has_negative_g():
+    frame, grid, truth = _scene("plane", g=-4.0, seed=2)
+    result = depth_map(frame, grid, s=S, g_range=(-8, -2))
+    ok = np.isfinite(result.g) & _inner(truth.shape)
+    assert ok.sum() > 0.9 * _inner(truth.shape).sum()
+    assert np.median(np.abs(result.g[ok] - truth[ok])) <= 0.03
+
+
+def test_galilean_frame_searched_with_positive_g_is_refused():
+    frame, grid, _ = _scene("plane", g=-4.0, seed=2)
+    with pytest.raises(ValueError, match="pass --g -8:-2"):
+        depth_map(frame, grid, s=S, g_range=(2, 8))
+
+
+def test_slanted_plane_rms_over_most_pixels():
+    frame, grid, truth = _scene("slanted")
+    result = depth_map(frame, grid, s=S, g_range=(2, 8))
+    inner = _inner(truth.shape)
+    ok = np.isfinite(result.g) & inner
+    assert ok.sum() >= 0.7 * inner.sum()
+    assert np.sqrt(np.mean((result.g[ok] - truth[ok]) ** 2)) <= 0.06  # measured 0.025
+    assert 0.0 <= result.confidence.min() and result.confidence.max() <= 1.0
+
+
+def test_textureless_frame_has_low_confidence():
+    grid = LensGrid(20.2, 0.0, (5.3, 8.7), "hex", image_shape=SHAPE)
+    rng = np.random.default_rng(1)
+    frame = (0.5 + rng.normal(0, 0.003, SHAPE)).astype(np.float32)
+    result = depth_map(frame, grid, s=S, min_confidence=0.0)
+    assert np.median(result.lenses.confidence) < 0.3
+    textured, textured_grid, _ = _scene("plane", g=5.0, seed=5)
+    good = depth_map(textured, textured_grid, s=S)
+    assert np.median(good.lenses.confidence) > 0.6
+
+
+def test_range_is_checked():
+    with pytest.raises(ValueError, match="one sign"):
+        check_range((-3, 4))
+    with pytest.raises(ValueError, match="MIN < MAX"):
+        check_range((5, 3))
+    assert check_range((-8, -2)) == (-8.0, -2.0)
+
+
+def test_all_in_focus_with_one_g_is_the_plain_refocus():
+    frame, grid, truth = _scene("steps")
+    table = lens_g_table(grid, SHAPE, np.full(truth.shape, 4.2), S)
+    aif, _ = refocus(frame, grid, s=S, g=4.2, lens_g=table)
+    plain, _ = refocus(frame, grid, s=S, g=4.2)
+    np.testing.assert_array_equal(aif, plain)
+
+
+def test_all_in_focus_takes_each_region_at_its_depth():
+    frame, grid, truth = _scene("slanted")
+    aif, _ = refocus(frame, grid, s=S, lens_g=lens_g_table(grid, SHAPE, truth, S))
+    for g in (3.0, 5.0):
+        at, _ = refocus(frame, grid, s=S, g=g)
+        off, _ = refocus(frame, grid, s=S, g=g + 0.8)
+        band = (np.abs(truth - g) < 0.1) & _inner(truth.shape, 8)
+        assert np.nanmean(np.abs(aif - at)[band]) < 0.75 * np.nanmean(np.abs(off - at)[band])
+
+
+@pytest.mark.parametrize("quad", [False, True])
+def test_dual_and_quad_pixel_disparity_within_a_tenth(quad):
+    disparities = [-2.0, -1.0, -0.4, 0.0, 0.6, 1.3, 2.0]
+    views, names, truth = disparity_views((192, 448), disparities, quad=quad, seed=3)
+    results = quad_disparity(views) if quad else (disparity_x(views[0], views[1]),)
+    band = 448 // len(disparities)
+    for result in results:
+        for k, d in enumerate(disparities):
+            cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
+            assert abs(np.median(cut) - d) <= 0.07, (names, d, np.median(cut))  # measured <= 0.052
+
+
+def test_depth_picture_has_alpha_and_scale_bar():
+    g = np.linspace(2, 6, 40 * 60).reshape(40, 60)
+    conf = np.ones_like(g)
+    conf[:, :10] = 0.0
+    g[0, 0] = np.nan
+    pic = depth_picture(g, conf)
+    assert pic.shape[2] == 4 and pic.shape[1] > 60
+    assert pic[5, 5, 3] == 0 and pic[20, 30, 3] == 255
+    assert (pic[:, 60:, 3] == 255).all()  # the bar is opaque
+
+
+@pytest.mark.parametrize("options", [dict(pitch_px=30.0, galilean=True, g_true=3.0),
+                                     dict(pitch_px=17.3, lattice="square", angle_rad=0.2,
+                                          g_true=3.5)])
+def test_another_renderer_and_whole_pixel_lattices(options):
+    """The calibration simulator's scenes (their own renderer and vignetting; pitch 30 at
+    angle 0 puts every lens at the same sub-pixel phase)."""
+    from plenocli.depth.lenslet import lens_depth
+    from plenocli.synth.lenslet import lenslet_scene
+
+    image, t = lenslet_scene((360, 480), seed=1, **options)
+    grid = LensGrid(t["pitch_px"], t["angle_rad"], tuple(t["offset_xy"]), t["lattice"],
+                    image_shape=(360, 480))
+    sign = -1 if t["galilean"] else 1
+    found = lens_depth(image, grid, g_range=(-8, -2) if sign < 0 else (2, 8))
+    assert abs(np.nanmedian(found.g) - sign * t["g_true"]) <= 0.03  # measured 0.004, 0.005

@@ -1,0 +1,36 @@
+"""Lens types labelled by the depth at which each coset is sharpest (type 0 = near-focused)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli.calibration.lenstypes import classify
+from plenocli.model.lensgrid import LensGrid
+from plenocli.refocus import output_shape
+from plenocli.synth.depthscene import multi_focus_frame, scene_planes
+
+SHAPE = (600, 800)
+
+
+def _types(type_of_coset, planes, shape=SHAPE):
+    grid = LensGrid(20.2, 0.0, (6.1, 7.9), "hex", image_shape=shape)
+    frame = multi_focus_frame(grid, shape, planes, s=0.2, type_of_coset=type_of_coset, seed=2)
+    indices, centres = grid.lens_centres()
+    return classify(frame, indices, centres, grid.pitch_px), indices
+
+
+def test_types_follow_the_depth_each_coset_is_focused_at():
+    planes = scene_planes("slanted", output_shape(SHAPE, 0.2))
+    truth = (1, 2, 0)  # coset 2 focused nearest (type 0), not the sharpest over the frame
+    found, indices = _types(truth, planes)
+    assert found is not None
+    coset = (indices[:, 0] - indices[:, 1]) % 3
+    assert np.array_equal(found.types, np.asarray(truth)[coset])
+    assert found.change[0] < found.change[1] < found.change[2]
+
+
+def test_one_plane_decides_nothing():
+    small = (360, 480)
+    planes = scene_planes("plane", output_shape(small, 0.2), g=4.0)
+    found, _ = _types((1, 2, 0), planes, small)
+    assert found is None
