@@ -45,7 +45,24 @@ def warm_develop() -> None:
     encode(np.full((4, 4, 3), 0.5, np.float32), "srgb")
 
 
-WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop}
+def warm_depth() -> None:
+    """The depth kernels: a small simulated lenslet plane and a dual-pixel pair."""
+    from plenocli.depth.lenslet import depth_map
+    from plenocli.depth.views import disparity_x
+    from plenocli.model.lensgrid import LensGrid
+    from plenocli.refocus import output_shape
+    from plenocli.synth.depthscene import disparity_views, lenslet_depth_frame, scene_planes
+
+    shape = (120, 160)
+    grid = LensGrid(20.2, 0.0, (5.3, 8.7), "hex", image_shape=shape)
+    planes = scene_planes("plane", output_shape(shape, 0.2), g=4.0)
+    depth_map(lenslet_depth_frame(grid, shape, planes, s=0.2, seed=1), grid, s=0.2)
+    views = disparity_views((96, 96), [1.0], seed=1)[0]
+    disparity_x(views[0], views[1])
+
+
+WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,
+           "depth": warm_depth}
 
 
 def main() -> None:

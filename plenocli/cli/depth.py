@@ -21,7 +21,7 @@ class GRange(click.ParamType):
 @click.command(short_help="Depth from one snapshot (lenslet g, dual/quad-pixel disparity).")
 @options.input_arg
 @options.output_opt
-@click.option("--grid", type=click.Path(dir_okay=False), default=None,
+@click.option("--grid", type=options.InputFile(), default=None,
               help="Lens grid (YAML or RayCalibData XML): INPUT is lenslet frames. Without "
                    "it INPUT holds dual-pixel views A, B or quad-pixel SAIs S00..S11.")
 @click.option("--s", "s", type=options.FiniteFloat(min=0, min_open=True), default=0.2,
@@ -32,7 +32,7 @@ class GRange(click.ParamType):
               show_default=True, help="Lenses below this confidence leave g unknown (NaN).")
 @click.option("--max-disparity", type=options.FiniteFloat(0.5, 64), default=4.0,
               show_default=True, help="Largest |disparity| searched (px, dual/quad-pixel).")
-@click.option("--camera", type=click.Path(dir_okay=False), default=None,
+@click.option("--camera", type=options.InputFile(), default=None,
               help="Camera YAML (focal_length_mm, focus_distance_m, mla_sensor_mm): adds a "
                    "depth_m page (lenslet).")
 @options.preview_opt

@@ -41,7 +41,7 @@ class GValues(click.ParamType):
               help="Use only pixels within this distance (px) of their micro-image centre.")
 @click.option("--min-weight", type=options.FiniteFloat(0, 1), default=0.25, show_default=True,
               help="Pixels with less than this fraction of the typical weight become NaN.")
-@click.option("--depth", type=click.Path(dir_okay=False), default=None,
+@click.option("--depth", type=options.InputFile(), default=None,
               help="Depth map (`plenocli depth` on the same grid and --s): each lens at its "
                    "own g, the all-in-focus image; --g only where the depth is unknown.")
 @options.preview_opt
