@@ -272,16 +272,21 @@ def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
             (2, 3): (0.0, 105.0)}
 
     def measured(shifts):
-        def pair(luma, a, b, direction, model, search, prior, tol):
+        def pair(images, a, b, direction, model, search, prior, tol, shape):
             return np.array(shifts[(a, b)], float), {}
         return pair
 
     luma = np.zeros((4, 120, 160), np.float32)
+
+    def images(a, b, _):
+        return luma[a], luma[b], (0, 0), (0, 0)
+
     expected = {pair: (None, None) for pair in true}
     monkeypatch.setattr(registration, "_measure_pair", measured(true))
-    _, _, closure = registration.register(luma, "2x2", "translation", {}, expected)
+    _, _, closure = registration.register(images, 4, (120, 160), "2x2", "translation", {},
+                                          expected)
     assert closure < 1e-9
     monkeypatch.setattr(registration, "_measure_pair",
                         measured({**true, (2, 3): (0.0, 117.0)}))
     with pytest.raises(InputError, match="do not close"):
-        registration.register(luma, "2x2", "translation", {}, expected)
+        registration.register(images, 4, (120, 160), "2x2", "translation", {}, expected)

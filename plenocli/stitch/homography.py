@@ -72,7 +72,7 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                         min_correlation: float = 0.4,
                         prior: tuple[float, float] | None = None,
                         tolerance_px: float | None = None,
-                        max_overlap: float = 0.7) -> tuple[np.ndarray, dict]:
+                        max_overlap: float | None = 0.7) -> tuple[np.ndarray, dict]:
     """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + photometric
     refinement. With ``prior`` = expected shift (dy, dx), only matches displaced by it within
     ``tolerance_px`` (default 5 % of the view, >= 8 px) are kept: a periodic scene's false
@@ -106,16 +106,26 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
+    overlap = None if max_overlap is None else check_overlap(refined, a.shape, direction,
+                                                             max_overlap)
+    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
+            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
+            **photometric}
+    return refined, info
+
+
+def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,
+                  max_overlap: float) -> float:
+    """The fraction of view a that view b covers along the stitching direction under ``h_ab``
+    (views of ``shape``); refused when not in (0, ``max_overlap``]: a false match, as a
+    periodic scene gives."""
     axis = 0 if direction == "h" else 1
-    size = a.shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
-    centre = np.array([[[(b.shape[1] - 1) / 2, (b.shape[0] - 1) / 2]]])
-    step = float(cv2.perspectiveTransform(centre, refined)[0, 0, axis] - centre[0, 0, axis])
+    size = shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
+    centre = np.array([[[(shape[1] - 1) / 2, (shape[0] - 1) / 2]]])
+    step = float(cv2.perspectiveTransform(centre, h_ab)[0, 0, axis] - centre[0, 0, axis])
     overlap = 1.0 - step / size
     if not 0 < overlap <= max_overlap:
         raise InputError(f"the homography lays one view {100 * overlap:.0f} % over the other "
                          f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "
                          "periodic scene gives; use --overlap or --rig")
-    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
-            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
-            **photometric}
-    return refined, info
+    return overlap

@@ -186,51 +186,83 @@ def common_extent(rig: PrismRig, view: int, shape: tuple[int, int]) -> np.ndarra
     return np.array([cx[ok].min(), cy[ok].min(), cx[ok].max(), cy[ok].max()])
 
 
-def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.ndarray]:
-    """Resample every view into the common undistorted frame.
-
-    Parameters
-    ----------
-    stack : (V, C, rows, cols) float views (NaN = no data), V = ``len(rig.views)``.
-    rig : the rig.
+def canvases(rig: PrismRig, shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int]]:
+    """The views' canvases in the common undistorted frame: one equal-size canvas per view
+    holding its whole footprint.
 
     Returns
     -------
-    canvases : (V, C, rows', cols') float32, one equal-size canvas per view holding its
-        undistorted image (NaN outside it); Lanczos-4 resampling.
     origins : (V, 2) [row, col] common-frame pixel of each canvas's pixel (0, 0): canvas pixel
         (r, c) of view k is common pixel (r + origins[k, 0], c + origins[k, 1]). The views'
         relative positions predicted by the rig are the differences of the origins.
+    size : the canvases' (rows, cols).
     """
-    n_views, n_chan, rows, cols = stack.shape
-    if n_views != len(rig.views):
-        raise ValueError(f"the rig describes {len(rig.views)} views but there are {n_views}")
-    boxes = np.array([common_extent(rig, k, (rows, cols)) for k in range(n_views)])
+    rows, cols = shape
+    boxes = np.array([common_extent(rig, k, shape) for k in range(len(rig.views))])
     origin_xy = np.floor(boxes[:, :2])
     size = np.ceil(boxes[:, 2:] - origin_xy).max(axis=0).astype(int) + 1
     if size.prod() > 16 * rows * cols:
         raise ValueError(f"the rig spreads a view over {size[0]} x {size[1]} px; check its "
                          "focal_mm, sensor_mm and prism")
-    out = np.empty((n_views, n_chan, size[1], size[0]), np.float32)
-    for k in range(n_views):
-        valid = np.isfinite(stack[k]).all(axis=0).astype(np.float32)
-        filled = fill_nan_channels(np.asarray(stack[k], np.float32))
-        for band, mx, my, bad in _view_maps(rig, k, origin_xy[k], (size[1], size[0]),
-                                            (rows, cols)):
-            cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                              borderValue=0) > 0.999
-            cover &= ~bad
-            # canvas pixels more than a pixel off the view come out NaN whatever is resampled
-            # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off
-            # its slow border path
-            off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
-            mx[off_view] = 4
-            my[off_view] = 4
-            for c in range(n_chan):
-                warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
-                                   borderMode=cv2.BORDER_REPLICATE)
-                out[k, c, band] = np.where(cover, warped, np.nan)
-    return out, origin_xy[:, ::-1].copy()
+    return origin_xy[:, ::-1].copy(), (int(size[1]), int(size[0]))
+
+
+def map_pitch(shape: tuple[int, int]) -> int:
+    """The node pitch (px) of the remap maps of a view of ``shape``."""
+    return int(np.clip(shape[1] // MAP_NODES_PER_VIEW, 1, 16))
+
+
+def undistort_region(image: np.ndarray, rig: PrismRig, view: int, origin_xy: np.ndarray,
+                     region: tuple[int, int]) -> np.ndarray:
+    """A (rows, cols) view in the common undistorted frame over a region of ``region`` =
+    (rows', cols') pixels whose pixel (0, 0) is common pixel ``origin_xy`` (x, y): float32,
+    Lanczos-4, NaN where the view does not cover it."""
+    rows, cols = image.shape
+    valid = np.isfinite(image).astype(np.float32)
+    filled = fill_nan_channels(np.asarray(image, np.float32)[np.newaxis])[0]
+    out = np.empty(region, np.float32)
+    for band, mx, my, bad in _view_maps(rig, view, origin_xy, region, (rows, cols)):
+        cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0) > 0.999
+        cover &= ~bad
+        # region pixels more than a pixel off the view come out NaN whatever is resampled
+        # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its
+        # slow border path
+        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+        mx[off_view] = 4
+        my[off_view] = 4
+        warped = cv2.remap(filled, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        out[band] = np.where(cover, warped, np.nan)
+    return out
+
+
+STRIP_MARGIN_PX = 64  # past the searched overlap: the high-pass (4 sigma) and refinement margins
+
+
+def rig_strips(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, size: tuple[int, int],
+               a: int, b: int, direction: str, expected) -> tuple:
+    """The overlap strips of views a and b's canvases (see :func:`canvases`) in the common
+    frame, from their luminance (V, rows, cols): the part of each canvas that the rig's predicted
+    shift, within its tolerance and a margin, can bring over the other. Returns (strip of a,
+    strip of b, [dy, dx] of a's strip in its canvas, the same for b). Strips start on the maps'
+    node grid and on multiples of 4, so they hold exactly the pixels of the whole canvases."""
+    (prior, tol) = expected
+    axis = 1 if direction == "h" else 0
+    along = prior[axis]
+    pitch = map_pitch(luma.shape[1:])
+    align = pitch * 4 // math.gcd(pitch, 4)
+    start = max(0, int(np.floor(along - tol)) - STRIP_MARGIN_PX) // align * align
+    stop = min(size[axis], int(np.ceil(size[axis] - along + tol)) + STRIP_MARGIN_PX)
+    out, offsets = [], []
+    for view, (lo, hi) in ((a, (start, size[axis])), (b, (0, stop))):
+        offset = [0, 0]
+        offset[axis] = lo
+        shape = list(size)
+        shape[axis] = hi - lo
+        origin_xy = origins[view, ::-1] + offset[::-1]
+        out.append(undistort_region(luma[view], rig, view, origin_xy, tuple(shape)))
+        offsets.append(tuple(offset))
+    return out[0], out[1], offsets[0], offsets[1]
 
 
 def _traced(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
@@ -288,7 +320,7 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     the pixels of cells that miss it by more than MAP_TOLERANCE_PX, or whose nodes lose their
     ray (total reflection), are traced exactly."""
     rows, cols = canvas
-    pitch = int(np.clip(shape[1] // MAP_NODES_PER_VIEW, 1, 16))
+    pitch = map_pitch(shape)
     node_y = (np.arange((rows - 1) // pitch + 4) - 1.0) * pitch + origin_xy[1]
     node_x = (np.arange((cols - 1) // pitch + 4) - 1.0) * pitch + origin_xy[0]
     nodes = _traced(rig, view, *np.meshgrid(node_x, node_y), shape)
