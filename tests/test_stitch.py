@@ -182,8 +182,10 @@ def test_views_without_overlap_are_refused():
                            seed=9)
     # overlap 0: view 1 starts exactly where view 0 ends; shift it 40 px further away
     far, _, _ = make_rig(layout="1x2", view_shape=(200, 260), overlap=0.0, seed=10)
-    with pytest.raises(InputError, match="no reliable overlap|no overlap"):
+    with pytest.raises(InputError, match="no reliable overlap|no overlap") as refused:
         stitch(np.stack([views[0], far[1]]), layout="1x2")
+    # views through prisms can hide their overlap: the refusal says what to pass
+    assert "prism" in str(refused.value) and "--rig RIG.yaml" in str(refused.value)
 
 
 def test_views_without_texture_are_refused():

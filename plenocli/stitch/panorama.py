@@ -9,6 +9,7 @@ measure the local shifts left in every overlap.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -180,12 +181,17 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     overlap, overlap_tolerance = search["overlap"], search["overlap_tolerance"]
     if k1:
         luma = np.stack([undistort(v, k1) for v in luma])
-    if layout == "auto":
-        layout = "2x2" if n_views == 4 else auto_layout(luma, limits, overlap, overlap_tolerance)
+    if layout == "auto" and n_views == 4:
+        layout = "2x2"
+    elif layout == "auto":
+        with _prism_hint(rig):
+            layout = auto_layout(luma, limits, overlap, overlap_tolerance)
     tolerance = search["tolerance_px"]
     if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
         tolerance = max(8.0, 0.05 * max(frame_shape))
     expected = priors(layout, frame_shape, origins, overlap, overlap_tolerance, tolerance)
+    if rig is not None:
+        _check_rig_layout(expected, layout, frame_shape)
     if rig is None:
         def images(a, b, _):
             return luma[a], luma[b], (0, 0), (0, 0)
@@ -193,16 +199,37 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               expected[(a, b)])
-    try:
+    with _prism_hint(rig):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
                                                   limits, expected)
-    except InputError as err:
-        if rig is None and "no reliable overlap" in str(err):
-            raise InputError(f"{err}; views taken through prisms may overlap without showing "
-                             "it (the prisms' distortion hides it): pass the rig "
-                             "(--rig RIG.yaml, see configs/rigs/)") from err
-        raise
     return transforms, layout, "estimated", pair_info, closure
+
+
+@contextlib.contextmanager
+def _prism_hint(rig: PrismRig | None):
+    """Without a rig, an overlap not found gets the way out for views seen through prisms."""
+    try:
+        yield
+    except InputError as err:
+        if rig is None and ("no reliable overlap" in str(err) or "no overlap" in str(err)):
+            raise InputError(f"{err}; views seen through prisms can hide their overlap (the "
+                             "prisms' distortion bends it): pass the rig (--rig RIG.yaml, see "
+                             "configs/rigs/)") from err
+        raise
+
+
+def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int]) -> None:
+    """Refuse a rig whose predicted view positions do not make the layout: each view after its
+    neighbour (right of it, or below) and overlapping it."""
+    for a, b, direction in neighbour_pairs(layout):
+        (dy, dx), _ = expected[(a, b)]
+        along, size = (dx, frame_shape[1]) if direction == "h" else (dy, frame_shape[0])
+        if not 0 < along < size:
+            where = "right of" if direction == "h" else "below"
+            raise InputError(f"the rig puts view {b} {along:.0f} px from view {a} along the "
+                             f"layout {layout} (views {size} px long), so not {where} it with an "
+                             "overlap; list the views in the rig's order (--views) or fix the "
+                             "rig's prisms and pupils")
 
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,

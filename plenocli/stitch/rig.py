@@ -111,24 +111,67 @@ class PrismRig:
     @classmethod
     def from_dict(cls, data: dict) -> PrismRig:
         """A rig from its dict (YAML/JSON; see :meth:`to_dict`). Raises ValueError naming the
-        missing or bad key."""
+        missing, unknown or bad key."""
         if not isinstance(data, dict):
             raise ValueError("a rig is a mapping with focal_mm, sensor_mm, prism_n, "
                              "prism_apex_deg and views")
+        unknown = sorted(set(map(str, data)) - RIG_KEYS)
+        if unknown:
+            raise ValueError(f"the rig has an unknown key {unknown[0]!r} (keys: "
+                             f"{', '.join(sorted(RIG_KEYS))})")
         try:
-            views = tuple(ViewOptics(tuple(int(s) for s in v.get("pupil", (0, 0))),
-                                     None if v.get("prism") is None
-                                     else tuple(int(s) for s in v["prism"]))
+            views = tuple(ViewOptics(_sides(v, "pupil", (0, 0)), _sides(v, "prism", None))
                           for v in data["views"])
             dist = data.get("object_distance_mm")
-            return cls(float(data["focal_mm"]), float(data["sensor_mm"]),
-                       float(data["prism_n"]), float(data["prism_apex_deg"]), views,
-                       float(data.get("aperture_mm") or 0.0),
-                       math.inf if dist is None else float(dist))
+            rig = cls(_number(data, "focal_mm"), _number(data, "sensor_mm"),
+                      _number(data, "prism_n"), _number(data, "prism_apex_deg"), views,
+                      _number(data, "aperture_mm", 0.0),
+                      math.inf if dist is None else _number(data, "object_distance_mm"))
         except KeyError as err:
             raise ValueError(f"the rig has no {err.args[0]!r} key") from err
-        except (TypeError, AttributeError) as err:
+        except TypeError as err:
             raise ValueError(f"the rig has a malformed entry ({err})") from err
+        if rig.prism_n <= 1 or rig.prism_n > 4:
+            raise ValueError(f"rig prism_n {rig.prism_n} is not a glass's refractive index "
+                             "(1 < n <= 4)")
+        if not math.isfinite(rig.aperture_mm) or rig.aperture_mm > 2 * rig.focal_mm:
+            raise ValueError(f"rig aperture_mm {rig.aperture_mm} must be finite and at most "
+                             f"twice focal_mm (f/0.5)")
+        if len(set(rig.views)) != len(rig.views):
+            raise ValueError("two rig views have the same pupil part and prism: each view sees "
+                             "its own part of the pupil")
+        return rig
+
+
+RIG_KEYS = {"focal_mm", "sensor_mm", "prism_n", "prism_apex_deg", "aperture_mm",
+            "object_distance_mm", "views"}
+
+
+def _number(data: dict, key: str, default: float | None = None) -> float:
+    """A finite or infinite real number of the rig (NaN, text and booleans refused)."""
+    value = data.get(key, default) if default is not None else data[key]
+    if value is None and default is not None:
+        value = default
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        raise ValueError(f"rig {key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _sides(view, key: str, default):
+    """A view's [sx, sy] entry: two of -1, 0, 1 (integers), or ``default`` when absent/null."""
+    if not isinstance(view, dict):
+        raise ValueError(f"a rig view is a mapping with pupil and prism, got {view!r}")
+    unknown = set(map(str, view)) - {"pupil", "prism"}
+    if unknown:
+        raise ValueError(f"a rig view has an unknown key {sorted(unknown)[0]!r} (keys: pupil, "
+                         "prism)")
+    value = view.get(key)
+    if value is None:
+        return default
+    if not isinstance(value, list | tuple) or len(value) != 2 or any(
+            isinstance(s, bool) or not isinstance(s, int) or s not in (-1, 0, 1) for s in value):
+        raise ValueError(f"rig view {key} is [sx, sy] with each -1, 0 or 1, got {value!r}")
+    return tuple(value)
 
 
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
