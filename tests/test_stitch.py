@@ -274,7 +274,7 @@ def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
             (2, 3): (0.0, 105.0)}
 
     def measured(shifts):
-        def pair(images, a, b, direction, model, search, prior, tol, shape):
+        def pair(images, a, b, direction, model, search, prior, tol, shape, found):
             return np.array(shifts[(a, b)], float), {}
         return pair
 

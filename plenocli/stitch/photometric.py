@@ -38,8 +38,17 @@ def match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
 
 def _polynomial_terms(xn: np.ndarray, yn: np.ndarray, degree: int) -> np.ndarray:
     """(N, terms) monomials xn^i yn^j with i + j <= degree (coordinates in [-1, 1])."""
-    return np.stack([xn**i * yn**j for i in range(degree + 1) for j in range(degree + 1 - i)],
-                    axis=1)
+    xp, yp = [np.ones_like(xn)], [np.ones_like(yn)]
+    for _ in range(degree):
+        xp.append(xp[-1] * xn)
+        yp.append(yp[-1] * yn)
+    out = np.empty((xn.size, (degree + 1) * (degree + 2) // 2))
+    k = 0
+    for i in range(degree + 1):
+        for j in range(degree + 1 - i):
+            np.multiply(xp[i], yp[j], out=out[:, k])
+            k += 1
+    return out
 
 
 def _template(a: np.ndarray, valid_a: np.ndarray, valid_b: np.ndarray, h_ab: np.ndarray,

@@ -8,7 +8,7 @@ import numpy as np
 
 from plenocli.errors import InputError
 from plenocli.progress import step
-from plenocli.stitch.homography import check_overlap, estimate_homography
+from plenocli.stitch.homography import check_overlap, estimate_homography, features
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import LAYOUTS, corners_xy, neighbour_pairs, translation_matrix
 
@@ -83,11 +83,13 @@ def auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
 
 
 def _measure_pair(images, a: int, b: int, direction: str, model: str, search: dict,
-                  prior, tol, shape: tuple[int, int]) -> tuple[np.ndarray, dict]:
+                  prior, tol, shape: tuple[int, int], found: dict | None = None
+                  ) -> tuple[np.ndarray, dict]:
     """One neighbour pair: the shift [dy, dx] or the homography b -> a, and its report.
     ``images`` = (image of a, image of b, offset of a, offset of b): the views, or crops of them
     whose pixel (0, 0) is the views' pixel ``offset`` [dy, dx] (a rig's overlap strips);
-    ``shape`` is the views' (rows, cols)."""
+    ``shape`` is the views' (rows, cols); ``found`` keeps each image's features for the next
+    pair that uses the same image."""
     img_a, img_b, off_a, off_b = images
     to_crops = np.asarray(off_b, float) - np.asarray(off_a, float)
     local = None if prior is None else tuple(np.asarray(prior, float) + to_crops)
@@ -101,9 +103,15 @@ def _measure_pair(images, a: int, b: int, direction: str, model: str, search: di
             info.update(overlap_px=float(size - along), overlap_fraction=float(1 - along / size))
             info["shift_px"] = [dy, dx]
             return np.array([dy, dx]), info
-        h, info = estimate_homography(img_a, img_b, direction=direction,
-                                      min_correlation=search["min_correlation"], prior=local,
-                                      tolerance_px=tol, max_overlap=None)
+        found = {} if found is None else found
+        for key, img in (((a, tuple(off_a), img_a.shape), img_a),
+                         ((b, tuple(off_b), img_b.shape), img_b)):
+            if key not in found:
+                found[key] = features(img)
+        h, info = estimate_homography(
+            img_a, img_b, direction=direction, min_correlation=search["min_correlation"],
+            prior=local, tolerance_px=tol, max_overlap=None,
+            found=(found[(a, tuple(off_a), img_a.shape)], found[(b, tuple(off_b), img_b.shape)]))
         h = translation_matrix(*off_a) @ h @ translation_matrix(-off_b[0], -off_b[1])
         h /= h[2, 2]
         info["overlap_fraction"] = check_overlap(h, shape, direction, search["max_overlap"])
@@ -135,12 +143,12 @@ def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, mod
     """Transforms (view -> view 0), the per-pair reports and the closure (px, or None).
     ``pair_images(a, b, direction)`` gives the images a pair is registered on (see
     :func:`_measure_pair`); ``shape`` is the views' (rows, cols)."""
-    pair_info, measured = [], {}
+    pair_info, measured, found = [], {}, {}
     for a, b, direction in neighbour_pairs(layout):
         prior, tol = expected[(a, b)]
         step(f"registering views {a} and {b}")
         measured[(a, b)], info = _measure_pair(pair_images(a, b, direction), a, b, direction,
-                                               model, search, prior, tol, shape)
+                                               model, search, prior, tol, shape, found)
         if prior is not None:
             info["expected_shift_px"] = list(prior)
         pair_info.append({"views": [a, b], "direction": direction, **info})
