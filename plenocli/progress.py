@@ -66,7 +66,8 @@ def progress(items: Iterable[T], label: str, *, total: int | None = None) -> Ite
 
 @contextlib.contextmanager
 def working(label: str, *, after_s: float = 1.0, every_s: float = 0.5):
-    """Show ``label: N.N s`` on stderr while the block runs, once it has taken ``after_s``.
+    """Show ``label: N.N s`` on stderr while the block runs, once it has taken ``after_s``,
+    followed by the block's current :func:`step` ("warping view 1 of 2, band 7 of 48").
 
     For work with no natural steps (a registration, a large write). Only on a terminal and when
     not quiet; the line is cleared when the block ends.

@@ -292,3 +292,27 @@ def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
                         measured({**true, (2, 3): (0.0, 117.0)}))
     with pytest.raises(InputError, match="do not close"):
         registration.register(images, 4, (120, 160), "2x2", "translation", {}, expected)
+
+
+def test_the_steps_say_what_the_stitch_is_doing():
+    import logging
+
+    seen = []
+
+    class Steps(logging.Handler):
+        def emit(self, record):
+            seen.append(record.getMessage())
+
+    log = logging.getLogger("plenocli")
+    handler, level = Steps(), log.level
+    log.addHandler(handler)
+    log.setLevel(logging.DEBUG)
+    try:
+        views, _, _ = make_rig(layout="1x2", view_shape=(200, 260), overlap=0.3, seed=7)
+        stitch(views, layout="1x2")
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+    assert "registering views 0 and 1" in seen
+    assert "measuring the overlap of views 0 and 1" in seen
+    assert any(s.startswith("warping view 2 of 2, band 1 of") for s in seen)
