@@ -146,7 +146,8 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
             rows = slice(box[0].start + band.start, box[0].start + band.stop)
             weight = feather(mx, my, vmap.view_shape, lost, holes[k])
             img = resample(view, mx, my)
-            img *= gain
+            if (gain != 1).any():
+                img *= gain
             img *= weight
             panorama[:, rows, box[1]] += img
             total[rows, box[1]] += weight

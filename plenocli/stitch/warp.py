@@ -118,17 +118,18 @@ def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.nda
     or to its nearest no-data pixel when it has some (``holes`` = (valid as float32, distance
     map)); 0 where the view does not fully cover the pixel."""
     rows, cols = shape
-    weight = np.minimum(np.minimum(mx + 1, cols - mx), np.minimum(my + 1, rows - my))
+    weight = np.minimum(mx + 1, cols - mx)
+    np.minimum(weight, np.minimum(my + 1, rows - my), out=weight)
+    # the distance to the edge is below 1 exactly where the source lies off the view
+    outside = weight < 1 - COVER_EPS_PX
+    if lost is not None:
+        outside |= lost
     if holes is not None:
         valid, distance = holes
         np.minimum(weight, cv2.remap(distance, mx, my, cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_REPLICATE), out=weight)
-        weight[cv2.remap(valid, mx, my, cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REPLICATE) <= 0.999] = 0
-    outside = (mx < -COVER_EPS_PX) | (mx > cols - 1 + COVER_EPS_PX) | (my < -COVER_EPS_PX) \
-        | (my > rows - 1 + COVER_EPS_PX)
-    if lost is not None:
-        outside |= lost
+        outside |= cv2.remap(valid, mx, my, cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REPLICATE) <= 0.999
     weight[outside] = 0
     return weight
 
