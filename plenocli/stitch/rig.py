@@ -36,7 +36,8 @@ from scipy import ndimage
 from plenocli.optics import prism as optics_prism
 from plenocli.stitch.views import fill_nan_channels
 
-MAP_BAND_PIXELS = 1 << 18  # canvas pixels ray-traced or resampled at a time
+MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slows on thin bands)
+TRACE_BAND_PIXELS = 1 << 18  # rays traced at a time (float64 temporaries of a few tens of MB)
 MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
 MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
 
@@ -310,10 +311,10 @@ def rig_strips(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, size: tuple
 
 def _traced(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
             shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`common_to_view` in bands of about MAP_BAND_PIXELS points (the ray tracing's
+    """:func:`common_to_view` in bands of about TRACE_BAND_PIXELS points (the ray tracing's
     float64 temporaries stay a few tens of MB); x, y are common pixels of equal 2-D shape."""
     vx, vy = np.empty(x.shape), np.empty(x.shape)
-    step = max(1, MAP_BAND_PIXELS // max(1, x.shape[1]))
+    step = max(1, TRACE_BAND_PIXELS // max(1, x.shape[1]))
     for r0 in range(0, x.shape[0], step):
         band = slice(r0, r0 + step)
         vx[band], vy[band] = common_to_view(rig, view, x[band], y[band], shape)
