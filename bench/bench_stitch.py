@@ -17,7 +17,13 @@ plenocli). Memory: tracemalloc peak of numpy allocations during one plenocli run
 process peak RSS (ru_maxrss) after it. Errors are against the known geometry: shift error (px)
 and the far-corner error of the homography (px).
 
-    PYTHONPATH=. python bench/bench_stitch.py [--repeat 1] [--skip-stitcher]
+Sharpness (``--baseline COMMIT``): the same analytic scene seen through the demo's dual-pixel
+prism rig (each view pixel evaluated at the common-frame point the rig's ray model sends it to),
+stitched with the rig by this checkout and by the baseline commit (its own process); printed:
+the RMS error of each panorama against the scene evaluated at every panorama pixel (pixels
+both cover, 8 px from the edges), so a resampling fewer shows as a smaller error.
+
+    PYTHONPATH=. python bench/bench_stitch.py [--repeat 1] [--skip-stitcher] [--baseline e6b5602]
 
 (from the checkout root: without PYTHONPATH the installed plenocli is measured instead).
 """
@@ -25,13 +31,17 @@ and the far-corner error of the homography (px).
 from __future__ import annotations
 
 import argparse
+import json
 import resource
+import tempfile
 import tracemalloc
+from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
-from bench.timing import best_time
+from bench.timing import ROOT, best_time, export_package, run_python
 from plenocli.stitch import stitch
 from plenocli.synth.rig import random_scene
 
@@ -128,13 +138,77 @@ def run_case(name: str, layout: str, n_rows: int, n_cols: int, size: int, model:
     print(f"ratio plenocli / cv2.Stitcher = {t_ours / t_base:.2f} x")
 
 
+SHARP_RUNNER = """
+import json, sys, time
+import numpy as np
+from plenocli.pipeline.stages.stitch import load_rig
+from plenocli.stitch import stitch
+start = time.perf_counter()
+pano, rep = stitch(np.load(sys.argv[1]), layout=sys.argv[4], rig=load_rig(sys.argv[2]))
+seconds = time.perf_counter() - start
+np.save(sys.argv[3], pano)
+print(json.dumps({"seconds": seconds, "origin": rep.origin_px, "canvas": rep.canvas_origins_px,
+                  "shifts": rep.shifts_px}))
+"""
+
+
+def sharpness(baseline: str, rig_name: str, layout: str, pixels: int) -> None:
+    """Error against the analytic scene of the rig's panorama, this checkout vs ``baseline``."""
+    from plenocli.pipeline.stages.stitch import load_rig
+    from plenocli.stitch import view_to_common
+
+    rig_file = ROOT / "configs" / "rigs" / f"{rig_name}.yaml"
+    rig = load_rig(str(rig_file))
+    scene = random_scene(seed=5, min_period_px=8.0)
+    shape = (pixels if layout == "2x2" else pixels * 2 // 3, pixels)
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float64)
+    # views 1.. see the scene moved by a fraction of a pixel (the rig model's error, which the
+    # registration measures): their pixels land between the panorama's
+    offsets = ((0.0, 0.0), (0.37, 0.41), (-0.29, 0.33), (0.45, -0.21))[:len(rig.views)]
+    views = np.stack([scene(*(c + d for c, d in zip(view_to_common(rig, k, xx, yy, shape),
+                                                    offset, strict=True)))
+                      for k, offset in enumerate(offsets)])
+    print(f"\n== sharpness: {rig_name} rig, {len(views)} views {shape[1]} x {shape[0]}, analytic "
+          "scene (periods >= 8 px: no aliasing through the prisms), views 1.. 0.3-0.5 px off ==")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        np.save(folder / "views.npy", views.astype(np.float32))
+        export_package(baseline, folder)
+        results = []
+        for name, root in ((f"baseline {baseline}", folder), ("this checkout", ROOT)):
+            out = folder / f"pano{len(results)}.npy"
+            rep = json.loads(run_python(SHARP_RUNNER, str(folder / "views.npy"), str(rig_file),
+                                        str(out), layout, root=root).strip().splitlines()[-1])
+            pano = np.load(out)
+            rr, cc = np.mgrid[0:pano.shape[0], 0:pano.shape[1]].astype(np.float64)
+            truth = scene(cc - rep["origin"][1] + rep["canvas"][0][1],
+                          rr - rep["origin"][0] + rep["canvas"][0][0])
+            results.append((name, rep, pano, truth))
+        for name, rep, pano, truth in results:
+            ok = ndimage.binary_erosion(np.isfinite(pano), iterations=8)
+            err = np.where(ok, pano - truth, np.nan)
+            thirds = [np.sqrt(np.nanmean(part**2)) for part in np.array_split(err, 3, axis=1)]
+            print(f"{name:22s} {rep['seconds']:6.2f} s   RMS error vs the scene "
+                  f"{np.sqrt(np.nanmean(err**2)):.5f} (left, middle, right third "
+                  f"{', '.join(f'{t:.5f}' for t in thirds)}; scene std {truth[ok].std():.3f}), "
+                  f"shift {rep['shifts'][1][0]:.4f}, {rep['shifts'][1][1]:.4f} px")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--skip-stitcher", action="store_true",
                         help="do not run the cv2.Stitcher baseline (slow on 3000 px views)")
+    parser.add_argument("--baseline", default=None,
+                        help="git commit to compare the rig panorama's sharpness with")
+    parser.add_argument("--only-sharpness", action="store_true")
     args = parser.parse_args()
     print(f"OpenCV {cv2.__version__}, threads {cv2.getNumThreads()}")
+    if args.baseline:
+        sharpness(args.baseline, "quadpixel_pyramid", "2x2", 768)
+        sharpness(args.baseline, "dualpixel_prism", "1x2", 1536)
+    if args.only_sharpness:
+        return
     for model in ("translation", "homography"):
         run_case("pair", "1x2", 1, 2, 3000, model, args.repeat, args.skip_stitcher)
         run_case("quad", "2x2", 2, 2, 1500, model, args.repeat, args.skip_stitcher)

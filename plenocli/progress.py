@@ -13,6 +13,16 @@ from typing import TypeVar
 
 log = logging.getLogger("plenocli")
 T = TypeVar("T")
+_step = {"text": ""}  # what the running stage is doing now, shown by :func:`working`
+
+
+def step(text: str) -> None:
+    """Say what a long stage is doing now ("warping view 1 of 2, band 3 of 9"): the line of
+    :func:`working` shows it beside the seconds elapsed; ``-v`` logs it."""
+    if text != _step["text"]:
+        _step["text"] = text
+        if text:
+            log.debug(text)
 
 
 def configure(verbosity: int) -> None:
@@ -56,7 +66,8 @@ def progress(items: Iterable[T], label: str, *, total: int | None = None) -> Ite
 
 @contextlib.contextmanager
 def working(label: str, *, after_s: float = 1.0, every_s: float = 0.5):
-    """Show ``label: N.N s`` on stderr while the block runs, once it has taken ``after_s``.
+    """Show ``label: N.N s`` on stderr while the block runs, once it has taken ``after_s``,
+    followed by the block's current :func:`step` ("warping view 1 of 2, band 7 of 48").
 
     For work with no natural steps (a registration, a large write). Only on a terminal and when
     not quiet; the line is cleared when the block ends.
@@ -64,17 +75,19 @@ def working(label: str, *, after_s: float = 1.0, every_s: float = 0.5):
     show = sys.stderr.isatty() and log.isEnabledFor(logging.INFO)
     done = threading.Event()
     start = time.monotonic()
+    _step["text"] = ""
 
     def tick():
-        shown_once = False
+        width = 0
         while not done.wait(every_s):
             elapsed = time.monotonic() - start
             if elapsed >= after_s:
-                sys.stderr.write(f"\r{label}: {elapsed:.1f} s ")
+                line = f"{label}: {elapsed:.1f} s  {_step['text']}"
+                sys.stderr.write("\r" + line.ljust(width))
                 sys.stderr.flush()
-                shown_once = True
-        if shown_once:
-            sys.stderr.write("\r" + " " * (len(label) + 16) + "\r")
+                width = max(width, len(line))
+        if width:
+            sys.stderr.write("\r" + " " * width + "\r")
             sys.stderr.flush()
 
     thread = threading.Thread(target=tick, daemon=True) if show else None

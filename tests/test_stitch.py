@@ -182,8 +182,10 @@ def test_views_without_overlap_are_refused():
                            seed=9)
     # overlap 0: view 1 starts exactly where view 0 ends; shift it 40 px further away
     far, _, _ = make_rig(layout="1x2", view_shape=(200, 260), overlap=0.0, seed=10)
-    with pytest.raises(InputError, match="no reliable overlap|no overlap"):
+    with pytest.raises(InputError, match="no reliable overlap|no overlap") as refused:
         stitch(np.stack([views[0], far[1]]), layout="1x2")
+    # views through prisms can hide their overlap: the refusal says what to pass
+    assert "prism" in str(refused.value) and "--rig RIG.yaml" in str(refused.value)
 
 
 def test_views_without_texture_are_refused():
@@ -272,16 +274,45 @@ def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
             (2, 3): (0.0, 105.0)}
 
     def measured(shifts):
-        def pair(luma, a, b, direction, model, search, prior, tol):
+        def pair(images, a, b, direction, model, search, prior, tol, shape, found):
             return np.array(shifts[(a, b)], float), {}
         return pair
 
     luma = np.zeros((4, 120, 160), np.float32)
+
+    def images(a, b, _):
+        return luma[a], luma[b], (0, 0), (0, 0)
+
     expected = {pair: (None, None) for pair in true}
     monkeypatch.setattr(registration, "_measure_pair", measured(true))
-    _, _, closure = registration.register(luma, "2x2", "translation", {}, expected)
+    _, _, closure = registration.register(images, 4, (120, 160), "2x2", "translation", {},
+                                          expected)
     assert closure < 1e-9
     monkeypatch.setattr(registration, "_measure_pair",
                         measured({**true, (2, 3): (0.0, 117.0)}))
     with pytest.raises(InputError, match="do not close"):
-        registration.register(luma, "2x2", "translation", {}, expected)
+        registration.register(images, 4, (120, 160), "2x2", "translation", {}, expected)
+
+
+def test_the_steps_say_what_the_stitch_is_doing():
+    import logging
+
+    seen = []
+
+    class Steps(logging.Handler):
+        def emit(self, record):
+            seen.append(record.getMessage())
+
+    log = logging.getLogger("plenocli")
+    handler, level = Steps(), log.level
+    log.addHandler(handler)
+    log.setLevel(logging.DEBUG)
+    try:
+        views, _, _ = make_rig(layout="1x2", view_shape=(200, 260), overlap=0.3, seed=7)
+        stitch(views, layout="1x2")
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(level)
+    assert "registering views 0 and 1" in seen
+    assert "measuring the overlap of views 0 and 1" in seen
+    assert any(s.startswith("warping view 2 of 2, band 1 of") for s in seen)

@@ -26,20 +26,45 @@ def _data_mask(view: np.ndarray) -> np.ndarray | None:
     return None if valid.all() else ndimage.binary_erosion(valid, iterations=4).astype(np.uint8)
 
 
+def features(image: np.ndarray) -> tuple:
+    """SIFT keypoints (N, 2) float32 (x, y, view pixels) and descriptors of a view, its no-data
+    edges left out; views over FEATURE_SIDE_PX are searched at half size (the photometric
+    refinement, full size, sets the result; the start need only be within its reach)."""
+    sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=0.01)
+    factor = 2 if max(image.shape) > FEATURE_SIDE_PX else 1
+    img, mask = _to_uint8(image), _data_mask(image)
+    if factor > 1:
+        size = (image.shape[1] // factor, image.shape[0] // factor)
+        img = cv2.resize(img[:size[1] * factor, :size[0] * factor], size,
+                         interpolation=cv2.INTER_AREA)
+        mask = None if mask is None else cv2.resize(
+            mask[:size[1] * factor, :size[0] * factor], size, interpolation=cv2.INTER_NEAREST)
+    keys, desc = sift.detectAndCompute(img, mask)
+    pts = np.float32([k.pt for k in keys]).reshape(-1, 2)
+    return (pts + 0.5) * factor - 0.5, desc
+
+
+# the RANSAC start only needs to be within the photometric refinement's reach; the refinement
+# over the whole overlap sets the result (8000 features at full size took 4 x the detection
+# and 16 x the matching for the same corners within 0.001 px on the bench's 2 x 2)
+MAX_FEATURES = 3000
+FEATURE_SIDE_PX = 1200
+
+
 def _feature_matches(a: np.ndarray, b: np.ndarray, *, direction: str, min_inliers: int,
-                     prior: tuple[float, float] | None, tolerance_px: float | None):
+                     prior: tuple[float, float] | None, tolerance_px: float | None,
+                     found: tuple | None = None):
     """Matched SIFT points (pa, pb), (N, 2) float32 (x, y), that pass the ratio test and lie
-    in the expected direction (and within ``tolerance_px`` of the prior shift)."""
-    sift = cv2.SIFT_create(nfeatures=8000, contrastThreshold=0.01)
-    ka, da = sift.detectAndCompute(_to_uint8(a), _data_mask(a))
-    kb, db = sift.detectAndCompute(_to_uint8(b), _data_mask(b))
+    in the expected direction (and within ``tolerance_px`` of the prior shift). ``found``: the
+    views' :func:`features`, when already detected."""
+    (ka, da), (kb, db) = found if found is not None else (features(a), features(b))
     if da is None or db is None or len(ka) < min_inliers or len(kb) < min_inliers:
         raise InputError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
                          "views have no texture; try --model translation")
     knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(db, da, k=2)
     good = [m for m, *rest in knn if rest and m.distance < 0.75 * rest[0].distance]
-    pb = np.float32([kb[m.queryIdx].pt for m in good]).reshape(-1, 2)
-    pa = np.float32([ka[m.trainIdx].pt for m in good]).reshape(-1, 2)
+    pb = kb[[m.queryIdx for m in good]].reshape(-1, 2)
+    pa = ka[[m.trainIdx for m in good]].reshape(-1, 2)
     axis = 0 if direction == "h" else 1
     ahead = pa[:, axis] - pb[:, axis] > 0  # b lies after a: its points sit later in a
     if prior is not None:
@@ -72,7 +97,8 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                         min_correlation: float = 0.4,
                         prior: tuple[float, float] | None = None,
                         tolerance_px: float | None = None,
-                        max_overlap: float = 0.7) -> tuple[np.ndarray, dict]:
+                        max_overlap: float | None = 0.7,
+                        found: tuple | None = None) -> tuple[np.ndarray, dict]:
     """Homography mapping view b's pixels to view a's, from SIFT + RANSAC + photometric
     refinement. With ``prior`` = expected shift (dy, dx), only matches displaced by it within
     ``tolerance_px`` (default 5 % of the view, >= 8 px) are kept: a periodic scene's false
@@ -88,7 +114,7 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     if direction not in ("h", "v"):
         raise ValueError(f"direction must be 'h' or 'v', got {direction!r}")
     pa, pb = _feature_matches(a, b, direction=direction, min_inliers=min_inliers, prior=prior,
-                              tolerance_px=tolerance_px)
+                              tolerance_px=tolerance_px, found=found)
     h, inl = _ransac(pa, pb, ransac_px=ransac_px, min_inliers=min_inliers)
     ha, hb = highpass(a), highpass(b)
     before = aligned_correlation(ha, hb, h, a, b)
@@ -106,16 +132,26 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
+    overlap = None if max_overlap is None else check_overlap(refined, a.shape, direction,
+                                                             max_overlap)
+    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
+            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
+            **photometric}
+    return refined, info
+
+
+def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,
+                  max_overlap: float) -> float:
+    """The fraction of view a that view b covers along the stitching direction under ``h_ab``
+    (views of ``shape``); refused when not in (0, ``max_overlap``]: a false match, as a
+    periodic scene gives."""
     axis = 0 if direction == "h" else 1
-    size = a.shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
-    centre = np.array([[[(b.shape[1] - 1) / 2, (b.shape[0] - 1) / 2]]])
-    step = float(cv2.perspectiveTransform(centre, refined)[0, 0, axis] - centre[0, 0, axis])
+    size = shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
+    centre = np.array([[[(shape[1] - 1) / 2, (shape[0] - 1) / 2]]])
+    step = float(cv2.perspectiveTransform(centre, h_ab)[0, 0, axis] - centre[0, 0, axis])
     overlap = 1.0 - step / size
     if not 0 < overlap <= max_overlap:
         raise InputError(f"the homography lays one view {100 * overlap:.0f} % over the other "
                          f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "
                          "periodic scene gives; use --overlap or --rig")
-    info = {"matches": int(len(pa)), "inliers": int(inl.sum()), "reprojection_rms_px": rms,
-            "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
-            **photometric}
-    return refined, info
+    return overlap

@@ -9,26 +9,33 @@ measure the local shifts left in every overlap.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from plenocli.errors import InputError
+from plenocli.progress import step
 from plenocli.stitch import compose
-from plenocli.stitch.quality import overlap_residual
+from plenocli.stitch.ncc import ncc
+from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
-from plenocli.stitch.rig import PrismRig, rig_axis_and_field, undistort_views
+from plenocli.stitch.rig import PrismRig, canvases, rig_axis_and_field, rig_strips
 from plenocli.stitch.views import (
     BLENDS,
     LAYOUTS,
     MODELS,
     as_view_stack,
     fill_nan_channels,
+    highpass,
     luminance,
     neighbour_pairs,
+    translation_matrix,
     undistort,
 )
+from plenocli.stitch.warp import holes_of
 
 
 @dataclass(frozen=True)
@@ -105,27 +112,26 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     stack, colour = as_view_stack(views)
     n_views, n_chan, rows, cols = stack.shape
     _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
-                   overlap_tolerance=overlap_tolerance)
+                   overlap_tolerance=overlap_tolerance, k1=distortion_k1)
     rig = _rig_of(rig, transform, n_views)
-    own = bool(distortion_k1) or rig is not None  # a new stack: its NaN are filled in place
-    if distortion_k1:
-        stack = np.stack([[undistort(ch, distortion_k1) for ch in v] for v in stack])
-    origins = None
+    origins, frame_shape = None, (rows, cols)
     if rig is not None:
-        stack, origins, layout = _undistort_rig(stack, rig, layout)
+        origins, frame_shape, layout = _rig_canvases(rig, (rows, cols), layout, n_views)
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
+    step("registering the views")
     transforms, layout, source, pair_info, closure = _transforms(
-        luminance(stack), transform, layout, model, origins, search, view_shape=(rows, cols))
+        luminance(stack), transform, layout, model, origins, search, view_shape=(rows, cols),
+        frame_shape=frame_shape, k1=distortion_k1, rig=rig)
     pairs = neighbour_pairs(layout)
-    canvas_shape = list(stack.shape[-2:])
-    panorama, layers, offset, gains, residuals = _composite(
-        stack, transforms, pairs, match_gain=match_gain, blend=blend, fill_in_place=own)
-    del stack
+    frame_to_ref = list(transforms) if rig is None else [
+        t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
+    panorama, covered, offset, gains, residuals = _composite(
+        stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
+        rig=rig, check_correlation=min_correlation if source == "given" else None)
     pair_info = _pair_report(pair_info, pairs, residuals)
     measured = [res for res, _ in residuals if res is not None]
-    covered = np.isfinite(panorama).all(axis=0)
     axis_px = field_deg = None
     if rig is not None:
         axis_px, field_deg = rig_axis_and_field(rig, (rows, cols), origins, offset, covered)
@@ -133,7 +139,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     report = StitchReport(
         model=model, layout=layout, n_views=n_views, channels=n_chan if colour else 1,
         view_shape=[rows, cols], distortion_k1=distortion_k1, blend=blend, rig=rig_dict,
-        canvas_shape=canvas_shape if rig is not None else None,
+        canvas_shape=list(frame_shape) if rig is not None else None,
         canvas_origins_px=origins.tolist() if origins is not None else None,
         axis_px=axis_px, field_deg=field_deg, transform_source=source,
         transform={"model": model, "layout": layout, "view_shape": [rows, cols],
@@ -144,7 +150,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         residual_px=float(np.sqrt(np.mean(np.square(measured)))) if measured else None,
         closure_px=closure, panorama_shape=list(panorama.shape[1:]),
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
-        coverage_fraction=float((layers.total > 0).mean()))
+        coverage_fraction=float(covered.mean()))
     return (panorama if colour else panorama[0]), report
 
 
@@ -159,53 +165,129 @@ def _pair_report(pair_info: list[dict] | None, pairs, residuals) -> list[dict]:
 
 
 def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
-                origins: np.ndarray | None, search: dict, *, view_shape: tuple[int, int]):
-    """View -> view 0 transforms: registered (priors from the rig or the expected overlap),
-    or a saved transform checked against the input views' ``view_shape``. Returns them, the
-    layout, their source, the per-pair reports (None for a saved transform) and the closure."""
-    n_views, rows, cols = luma.shape  # with a rig: the common frame's canvases
+                origins: np.ndarray | None, search: dict, *, view_shape: tuple[int, int],
+                frame_shape: tuple[int, int], k1: float, rig: PrismRig | None):
+    """View -> view 0 transforms (with a rig: between the views' canvases of ``frame_shape``):
+    registered (priors from the rig or the expected overlap), or a saved transform checked
+    against the input views' ``view_shape``. Returns them, the layout, their source, the
+    per-pair reports (None for a saved transform) and the closure."""
+    n_views = luma.shape[0]
     if transform is not None:
-        transforms, layout, source = check_transform(transform, n_views, view_shape, model)
+        transforms, layout, source = check_transform(
+            transform, n_views, view_shape, model, k1=k1, rig=rig, frame_shape=frame_shape,
+            max_overlap=search["max_overlap"])
         return transforms, layout, source, None, None
     limits = {k: search[k] for k in ("max_overlap", "min_overlap_px", "min_correlation")}
     overlap, overlap_tolerance = search["overlap"], search["overlap_tolerance"]
-    if layout == "auto":
-        layout = "2x2" if n_views == 4 else auto_layout(luma, limits, overlap, overlap_tolerance)
-    expected = priors(layout, (rows, cols), origins, overlap, overlap_tolerance,
-                      search["tolerance_px"])
-    transforms, pair_info, closure = register(luma, layout, model, limits, expected)
+    if k1:
+        luma = np.stack([undistort(v, k1) for v in luma])
+    if layout == "auto" and n_views == 4:
+        layout = "2x2"
+    elif layout == "auto":
+        with _prism_hint(rig):
+            layout = auto_layout(luma, limits, overlap, overlap_tolerance)
+    tolerance = search["tolerance_px"]
+    if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
+        tolerance = max(8.0, 0.05 * max(frame_shape))
+    expected = priors(layout, frame_shape, origins, overlap, overlap_tolerance, tolerance)
+    if rig is not None:
+        _check_rig_layout(expected, layout, frame_shape)
+    if rig is None:
+        def images(a, b, _):
+            return luma[a], luma[b], (0, 0), (0, 0)
+    else:
+        def images(a, b, direction):
+            return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
+                              expected[(a, b)])
+    with _prism_hint(rig):
+        transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
+                                                  limits, expected)
     return transforms, layout, "estimated", pair_info, closure
 
 
-def _composite(stack: np.ndarray, transforms: list[np.ndarray], pairs: list, *,
-               match_gain: bool, blend: str, fill_in_place: bool):
-    """The blended panorama (C, rows', cols'), the views' layers on it, the view-0 -> panorama
-    translation, the per-view, per-channel gains and per pair (residual px, overlap area).
-    The views' NaN are filled (nearest value) in ``stack`` itself when ``fill_in_place``."""
-    valid = [np.isfinite(view).all(axis=0) for view in stack]
-    filled = [fill_nan_channels(view, in_place=fill_in_place) for view in stack]
-    offset, pano_shape = compose.canvas(transforms, stack.shape[-2:])
-    layers = compose.place_views(valid, transforms, offset, pano_shape)
-    del valid
-    layers, offset = compose.trim_to_coverage(layers, offset)
-    overlaps = compose.pair_overlaps(layers, pairs)
+@contextlib.contextmanager
+def _prism_hint(rig: PrismRig | None):
+    """Without a rig, an overlap not found gets the way out for views seen through prisms."""
+    try:
+        yield
+    except InputError as err:
+        if rig is None and ("no reliable overlap" in str(err) or "no overlap" in str(err)):
+            raise InputError(f"{err}; views seen through prisms can hide their overlap (the "
+                             "prisms' distortion bends it): pass the rig (--rig RIG.yaml, see "
+                             "configs/rigs/)") from err
+        raise
+
+
+def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int]) -> None:
+    """Refuse a rig whose predicted view positions do not make the layout: each view after its
+    neighbour (right of it, or below) and overlapping it."""
+    for a, b, direction in neighbour_pairs(layout):
+        (dy, dx), _ = expected[(a, b)]
+        along, size = (dx, frame_shape[1]) if direction == "h" else (dy, frame_shape[0])
+        if not 0 < along < size:
+            where = "right of" if direction == "h" else "below"
+            raise InputError(f"the rig puts view {b} {along:.0f} px from view {a} along the "
+                             f"layout {layout} (views {size} px long), so not {where} it with an "
+                             "overlap; list the views in the rig's order (--views) or fix the "
+                             "rig's prisms and pupils")
+
+
+def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
+               match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
+               check_correlation: float | None):
+    """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
+    cover, the reference -> panorama translation, the per-view, per-channel gains and per pair
+    (residual px, overlap area). ``check_correlation``: refuse a (given) transform under which
+    the views correlate less than this over an overlap."""
+    maps, boxes, offset, shape = compose.place(frame_to_ref, stack.shape[-2:], k1=k1, rig=rig)
+    holes = [holes_of(view) for view in stack]
+    filled = [view if h is None else fill_nan_channels(view) for view, h in
+              zip(stack, holes, strict=True)]
+    crops = compose.overlap_crops(filled, maps, boxes, holes, pairs)
+    if check_correlation is not None:
+        _check_fit(crops, pairs, check_correlation)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = compose.match_gains(filled, layers, pairs, overlaps)
-    residuals = []
-    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
-        if overlap is None:
-            residuals.append((None, 0))
-            continue
-        region, both = overlap
-        luma_a = compose.overlap_luminance(filled, layers, a, region, gains)
-        luma_b = compose.overlap_luminance(filled, layers, b, region, gains)
-        residuals.append((overlap_residual(luma_a, luma_b, both), int(both.sum())))
-    return compose.blend(filled, layers, gains, blend), layers, offset, gains, residuals
+        gains = compose.match_gains(crops, pairs, *stack.shape[:2])
+    residuals = compose.residuals(crops, pairs, gains)
+    del crops
+    if blend == "multiband":
+        panorama = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)
+        covered = np.isfinite(panorama).all(axis=0)
+    else:
+        panorama, total = compose.blend(filled, maps, boxes, holes, gains, shape)
+        covered = total > 0
+        del total
+    box = bounding_box(covered)
+    if box is None:
+        raise InputError("the views cover no pixel of the panorama; check the transform")
+    if (box[0].stop - box[0].start, box[1].stop - box[1].start) != covered.shape:
+        panorama, covered = panorama[(slice(None),) + box], covered[box]
+        offset = translation_matrix(-box[0].start, -box[1].start) @ offset
+    return panorama, covered, offset, gains, residuals
+
+
+def _check_fit(crops: list, pairs: list, min_correlation: float) -> None:
+    """Refuse a given transform under which a pair's overlap does not correlate: it was made
+    for another rig or capture, or it lies."""
+    for (a, b, _), crop in zip(pairs, crops, strict=True):
+        if crop is None:
+            raise InputError(f"the transform places views {a} and {b} without an overlap; it "
+                             "does not describe these views: register them again (without "
+                             "--transform-in)")
+        ha, hb = (highpass(np.where(crop[2], x.mean(axis=0), np.nan)) for x in crop[:2])
+        inner = ndimage.binary_erosion(crop[2], iterations=2)
+        corr = ncc(ha[inner], hb[inner]) if inner.sum() >= 64 else float("nan")
+        if not corr >= min_correlation:
+            raise InputError(f"the transform does not fit these views: views {a} and {b} "
+                             f"correlate {corr:.2f} over the overlap it gives (at least "
+                             f"{min_correlation}); register them again (without --transform-in)")
 
 
 def _check_options(n_views: int, *, layout: str, model: str, blend: str,
-                   overlap: float | None, overlap_tolerance: float) -> None:
+                   overlap: float | None, overlap_tolerance: float, k1: float) -> None:
+    if not (np.isfinite(k1) and -1 < k1 <= 1):
+        raise ValueError(f"distortion k1 must be a finite number in (-1, 1], got {k1}")
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, got {model!r}")
     if blend not in BLENDS:
@@ -235,14 +317,14 @@ def _rig_of(rig: PrismRig | None, transform: dict | None, n_views: int) -> Prism
     return rig
 
 
-def _undistort_rig(stack: np.ndarray, rig: PrismRig, layout: str):
-    """The views in the rig's common undistorted frame, their canvases' origins and the
-    layout (for two views, "auto" follows the rig's offset between them)."""
+def _rig_canvases(rig: PrismRig, shape: tuple[int, int], layout: str, n_views: int):
+    """The rig's canvases (origins, size) for views of ``shape`` and the layout (for two views,
+    "auto" follows the rig's offset between them)."""
     try:
-        stack, origins = undistort_views(stack, rig)
+        origins, size = canvases(rig, shape)
     except ValueError as err:
         raise InputError(f"the rig does not fit these views: {err}") from err
     if layout == "auto":
         d = origins[1] - origins[0]
-        layout = "2x2" if len(stack) == 4 else ("1x2" if abs(d[1]) >= abs(d[0]) else "2x1")
-    return stack, origins, layout
+        layout = "2x2" if n_views == 4 else ("1x2" if abs(d[1]) >= abs(d[0]) else "2x1")
+    return origins, size, layout

@@ -38,8 +38,17 @@ def match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
 
 def _polynomial_terms(xn: np.ndarray, yn: np.ndarray, degree: int) -> np.ndarray:
     """(N, terms) monomials xn^i yn^j with i + j <= degree (coordinates in [-1, 1])."""
-    return np.stack([xn**i * yn**j for i in range(degree + 1) for j in range(degree + 1 - i)],
-                    axis=1)
+    xp, yp = [np.ones_like(xn)], [np.ones_like(yn)]
+    for _ in range(degree):
+        xp.append(xp[-1] * xn)
+        yp.append(yp[-1] * yn)
+    out = np.empty((xn.size, (degree + 1) * (degree + 2) // 2))
+    k = 0
+    for i in range(degree + 1):
+        for j in range(degree + 1 - i):
+            np.multiply(xp[i], yp[j], out=out[:, k])
+            k += 1
+    return out
 
 
 def _template(a: np.ndarray, valid_a: np.ndarray, valid_b: np.ndarray, h_ab: np.ndarray,
@@ -78,15 +87,23 @@ def _photometric_residual(warped: np.ndarray, template: np.ndarray, inside: np.n
     """Residual of the photometric model a ~ p(x, y) * b + offset (p the smooth ratio of the
     views' gains and vignetting over the overlap, a linear least-squares fit) and its Huber
     weights (occlusions, ghosts or clipped pixels do not pull the fit)."""
-    design = np.concatenate([poly * warped[:, None], np.ones((warped.size, 1))], axis=1)
-    used = design[inside]  # one copy of the rows used (N x 16 float64), not three
-    normal = used.T @ used
-    rhs = used.T @ template[inside]
+    scaled = poly * warped[:, None]  # the ratio's columns; the offset's column is all ones
+    used = scaled if inside.all() else scaled[inside]
+    target = template[inside]
+    sums = used.sum(axis=0)
+    normal = np.empty((poly.shape[1] + 1,) * 2)
+    normal[:-1, :-1] = used.T @ used
+    normal[-1, :-1] = normal[:-1, -1] = sums
+    normal[-1, -1] = len(target)
+    rhs = np.append(used.T @ target, target.sum())
     del used
     coef = np.linalg.lstsq(normal, rhs, rcond=None)[0]
-    err = np.where(inside, design @ coef - template, 0.0)
+    err = scaled @ coef[:-1]
+    err += coef[-1] - template
+    err[~inside] = 0.0
     sigma = 1.4826 * float(np.median(np.abs(err[inside]))) + 1e-12
-    weight = np.where(inside, np.minimum(1.0, 3.0 * sigma / np.maximum(np.abs(err), 1e-30)), 0.0)
+    weight = np.minimum(1.0, 3.0 * sigma / np.maximum(np.abs(err), 1e-30))
+    weight[~inside] = 0.0
     return err, weight
 
 

@@ -7,9 +7,10 @@ import cv2
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.stitch.homography import estimate_homography
+from plenocli.progress import step
+from plenocli.stitch.homography import check_overlap, estimate_homography, features
 from plenocli.stitch.translation import estimate_translation
-from plenocli.stitch.views import corners_xy, neighbour_pairs, translation_matrix
+from plenocli.stitch.views import LAYOUTS, corners_xy, neighbour_pairs, translation_matrix
 
 # A 2 x 2 layout reaches the fourth view two ways; correct pair registrations agree within a
 # fraction of a pixel (noise), a wrong match by about the size of the shift it got wrong.
@@ -81,18 +82,39 @@ def auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
 
 
 
-def _measure_pair(luma: np.ndarray, a: int, b: int, direction: str, model: str, search: dict,
-                  prior, tol) -> tuple[np.ndarray, dict]:
-    """One neighbour pair: the shift [dy, dx] or the homography b -> a, and its report."""
+def _measure_pair(images, a: int, b: int, direction: str, model: str, search: dict,
+                  prior, tol, shape: tuple[int, int], found: dict | None = None
+                  ) -> tuple[np.ndarray, dict]:
+    """One neighbour pair: the shift [dy, dx] or the homography b -> a, and its report.
+    ``images`` = (image of a, image of b, offset of a, offset of b): the views, or crops of them
+    whose pixel (0, 0) is the views' pixel ``offset`` [dy, dx] (a rig's overlap strips);
+    ``shape`` is the views' (rows, cols); ``found`` keeps each image's features for the next
+    pair that uses the same image."""
+    img_a, img_b, off_a, off_b = images
+    to_crops = np.asarray(off_b, float) - np.asarray(off_a, float)
+    local = None if prior is None else tuple(np.asarray(prior, float) + to_crops)
     try:
         if model == "translation":
-            dy, dx, info = estimate_translation(luma[a], luma[b], direction=direction,
-                                                prior=prior, tolerance_px=tol, **search)
+            dy, dx, info = estimate_translation(img_a, img_b, direction=direction,
+                                                prior=local, tolerance_px=tol, **search)
+            dy, dx = dy - to_crops[0], dx - to_crops[1]
+            size = shape[1] if direction == "h" else shape[0]
+            along = dx if direction == "h" else dy
+            info.update(overlap_px=float(size - along), overlap_fraction=float(1 - along / size))
             info["shift_px"] = [dy, dx]
             return np.array([dy, dx]), info
-        h, info = estimate_homography(luma[a], luma[b], direction=direction,
-                                      min_correlation=search["min_correlation"], prior=prior,
-                                      tolerance_px=tol, max_overlap=search["max_overlap"])
+        found = {} if found is None else found
+        for key, img in (((a, tuple(off_a), img_a.shape), img_a),
+                         ((b, tuple(off_b), img_b.shape), img_b)):
+            if key not in found:
+                found[key] = features(img)
+        h, info = estimate_homography(
+            img_a, img_b, direction=direction, min_correlation=search["min_correlation"],
+            prior=local, tolerance_px=tol, max_overlap=None,
+            found=(found[(a, tuple(off_a), img_a.shape)], found[(b, tuple(off_b), img_b.shape)]))
+        h = translation_matrix(*off_a) @ h @ translation_matrix(-off_b[0], -off_b[1])
+        h /= h[2, 2]
+        info["overlap_fraction"] = check_overlap(h, shape, direction, search["max_overlap"])
         info["homography"] = h.tolist()
         return h, info
     except InputError as err:
@@ -116,18 +138,22 @@ def _chain_homographies(measured: dict, n_views: int, shape: tuple[int, int]):
     return transforms, float(np.max(np.linalg.norm((p1 - p2).reshape(-1, 2), axis=1)))
 
 
-def register(luma: np.ndarray, layout: str, model: str, search: dict, expected: dict):
-    """Transforms (view -> view 0), the per-pair reports and the closure (px, or None)."""
-    n_views = luma.shape[0]
-    pair_info, measured = [], {}
+def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, model: str,
+             search: dict, expected: dict):
+    """Transforms (view -> view 0), the per-pair reports and the closure (px, or None).
+    ``pair_images(a, b, direction)`` gives the images a pair is registered on (see
+    :func:`_measure_pair`); ``shape`` is the views' (rows, cols)."""
+    pair_info, measured, found = [], {}, {}
     for a, b, direction in neighbour_pairs(layout):
         prior, tol = expected[(a, b)]
-        measured[(a, b)], info = _measure_pair(luma, a, b, direction, model, search, prior, tol)
+        step(f"registering views {a} and {b}")
+        measured[(a, b)], info = _measure_pair(pair_images(a, b, direction), a, b, direction,
+                                               model, search, prior, tol, shape, found)
         if prior is not None:
             info["expected_shift_px"] = list(prior)
         pair_info.append({"views": [a, b], "direction": direction, **info})
     if model == "homography":
-        transforms, closure = _chain_homographies(measured, n_views, luma.shape[1:])
+        transforms, closure = _chain_homographies(measured, n_views, shape)
     else:
         pos, closure = _solve_translations([(a, b, d) for (a, b), d in measured.items()],
                                            n_views)
@@ -144,23 +170,70 @@ def register(luma: np.ndarray, layout: str, model: str, search: dict, expected: 
     return transforms, pair_info, closure
 
 
-def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str):
-    """The view transforms and layout of a saved transform, refused unless it fits the views."""
+def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str, *,
+                    k1: float = 0.0, rig=None, frame_shape: tuple[int, int] | None = None,
+                    max_overlap: float = 0.7):
+    """The view transforms and layout of a saved transform, refused (InputError, one line)
+    unless it fits the views: its model, layout, view size, distortion and rig as given, finite
+    matrices, view 0 the reference, and every neighbour pair overlapping along its direction
+    by at most ``max_overlap`` (in ``frame_shape``: the rig's canvases, else the views)."""
+    again = "register them again (without --transform-in)"
     try:
         mats = [np.asarray(t, dtype=np.float64) for t in transform["view_to_reference"]]
         layout = transform["layout"]
-        view_shape = tuple(transform["view_shape"])
-    except (KeyError, TypeError, ValueError) as err:
+        view_shape = tuple(int(v) for v in transform["view_shape"])
+        saved_k1 = float(transform.get("distortion_k1") or 0.0)
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise InputError(f"the transform is not a plenocli stitch transform (missing or bad "
                          f"{err}); save one with --transform-out") from err
+    if layout not in LAYOUTS or LAYOUTS[layout][0] * LAYOUTS[layout][1] != len(mats):
+        raise InputError(f"the transform's layout {layout!r} does not fit its {len(mats)} view "
+                         f"transforms; {again}")
     if len(mats) != n_views or any(m.shape != (3, 3) for m in mats):
         raise InputError(f"the transform holds {len(mats)} view transforms for {n_views} views")
-    if view_shape != shape:
-        raise InputError(f"the transform was made for views of {view_shape[1]} x {view_shape[0]} "
-                         f"px, these are {shape[1]} x {shape[0]}; register them again")
+    if view_shape != tuple(shape):
+        raise InputError(f"the transform was made for views of {view_shape[-1]} x "
+                         f"{view_shape[0]} px, these are {shape[1]} x {shape[0]}; {again}")
     if transform.get("model", model) != model:
         raise InputError(f"the transform is a {transform.get('model')} model but --model is "
                          f"{model}; pass --model {transform.get('model')}")
+    if saved_k1 != k1:
+        raise InputError(f"the transform was made with --distortion {saved_k1:g}, not {k1:g}; "
+                         f"pass --distortion {saved_k1:g} or {again}")
+    saved_rig = transform.get("rig")
+    if (saved_rig is None) != (rig is None) or (rig is not None and saved_rig != rig.to_dict()):
+        made = "without a rig" if saved_rig is None else "with another rig than --rig gives"
+        raise InputError(f"the transform was made {made}; pass the rig it was made with or "
+                         f"{again}")
+    _check_matrices(mats, model, frame_shape or tuple(shape))
+    for a, b, direction in neighbour_pairs(layout):
+        h_ab = np.linalg.inv(mats[a]) @ mats[b]
+        try:
+            check_overlap(h_ab / h_ab[2, 2], frame_shape or tuple(shape), direction, max_overlap)
+        except InputError as err:
+            raise InputError(f"the transform does not fit these views (views {a} and {b}: "
+                             f"{err}); {again}") from err
     return mats, layout, "given"
 
 
+def _check_matrices(mats: list[np.ndarray], model: str, shape: tuple[int, int]) -> None:
+    """Finite matrices, view 0 the identity, translations pure shifts, and homographies that
+    keep a view's corners within a view of where a shift would put them (no fold, no blow-up)."""
+    if not all(np.isfinite(m).all() for m in mats) or not np.allclose(mats[0], np.eye(3),
+                                                                      atol=1e-9):
+        raise InputError("the transform's matrices are not finite, or view 0's is not the "
+                         "identity; save a transform with --transform-out")
+    corners = corners_xy(shape)
+    for k, m in enumerate(mats[1:], 1):
+        shift_only = np.allclose(m[:2, :2], np.eye(2), atol=0) and np.allclose(m[2], [0, 0, 1],
+                                                                             atol=0)
+        if model == "translation" and not shift_only:
+            raise InputError(f"the transform's view {k} is not a translation though its model "
+                             "says so; save a transform with --transform-out")
+        moved = cv2.perspectiveTransform(corners, m / m[2, 2]).reshape(-1, 2)
+        warp = moved - (corners.reshape(-1, 2) + [m[0, 2] / m[2, 2], m[1, 2] / m[2, 2]])
+        if not np.isfinite(moved).all() or np.abs(warp).max() > 0.25 * max(shape) \
+                or np.linalg.det(m[:2, :2] / m[2, 2]) <= 0:
+            raise InputError(f"the transform's view {k} folds or stretches the view (corners "
+                             f"moved {np.abs(warp).max():.0f} px past a shift); it does not "
+                             "describe a rig of overlapping views: register them again")

@@ -36,7 +36,8 @@ from scipy import ndimage
 from plenocli.optics import prism as optics_prism
 from plenocli.stitch.views import fill_nan_channels
 
-MAP_BAND_PIXELS = 1 << 18  # canvas pixels ray-traced or resampled at a time
+MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slows on thin bands)
+TRACE_BAND_PIXELS = 1 << 18  # rays traced at a time (float64 temporaries of a few tens of MB)
 MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
 MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
 
@@ -111,24 +112,67 @@ class PrismRig:
     @classmethod
     def from_dict(cls, data: dict) -> PrismRig:
         """A rig from its dict (YAML/JSON; see :meth:`to_dict`). Raises ValueError naming the
-        missing or bad key."""
+        missing, unknown or bad key."""
         if not isinstance(data, dict):
             raise ValueError("a rig is a mapping with focal_mm, sensor_mm, prism_n, "
                              "prism_apex_deg and views")
+        unknown = sorted(set(map(str, data)) - RIG_KEYS)
+        if unknown:
+            raise ValueError(f"the rig has an unknown key {unknown[0]!r} (keys: "
+                             f"{', '.join(sorted(RIG_KEYS))})")
         try:
-            views = tuple(ViewOptics(tuple(int(s) for s in v.get("pupil", (0, 0))),
-                                     None if v.get("prism") is None
-                                     else tuple(int(s) for s in v["prism"]))
+            views = tuple(ViewOptics(_sides(v, "pupil", (0, 0)), _sides(v, "prism", None))
                           for v in data["views"])
             dist = data.get("object_distance_mm")
-            return cls(float(data["focal_mm"]), float(data["sensor_mm"]),
-                       float(data["prism_n"]), float(data["prism_apex_deg"]), views,
-                       float(data.get("aperture_mm") or 0.0),
-                       math.inf if dist is None else float(dist))
+            rig = cls(_number(data, "focal_mm"), _number(data, "sensor_mm"),
+                      _number(data, "prism_n"), _number(data, "prism_apex_deg"), views,
+                      _number(data, "aperture_mm", 0.0),
+                      math.inf if dist is None else _number(data, "object_distance_mm"))
         except KeyError as err:
             raise ValueError(f"the rig has no {err.args[0]!r} key") from err
-        except (TypeError, AttributeError) as err:
+        except TypeError as err:
             raise ValueError(f"the rig has a malformed entry ({err})") from err
+        if rig.prism_n <= 1 or rig.prism_n > 4:
+            raise ValueError(f"rig prism_n {rig.prism_n} is not a glass's refractive index "
+                             "(1 < n <= 4)")
+        if not math.isfinite(rig.aperture_mm) or rig.aperture_mm > 2 * rig.focal_mm:
+            raise ValueError(f"rig aperture_mm {rig.aperture_mm} must be finite and at most "
+                             f"twice focal_mm (f/0.5)")
+        if len(set(rig.views)) != len(rig.views):
+            raise ValueError("two rig views have the same pupil part and prism: each view sees "
+                             "its own part of the pupil")
+        return rig
+
+
+RIG_KEYS = {"focal_mm", "sensor_mm", "prism_n", "prism_apex_deg", "aperture_mm",
+            "object_distance_mm", "views"}
+
+
+def _number(data: dict, key: str, default: float | None = None) -> float:
+    """A finite or infinite real number of the rig (NaN, text and booleans refused)."""
+    value = data.get(key, default) if default is not None else data[key]
+    if value is None and default is not None:
+        value = default
+    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
+        raise ValueError(f"rig {key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _sides(view, key: str, default):
+    """A view's [sx, sy] entry: two of -1, 0, 1 (integers), or ``default`` when absent/null."""
+    if not isinstance(view, dict):
+        raise ValueError(f"a rig view is a mapping with pupil and prism, got {view!r}")
+    unknown = set(map(str, view)) - {"pupil", "prism"}
+    if unknown:
+        raise ValueError(f"a rig view has an unknown key {sorted(unknown)[0]!r} (keys: pupil, "
+                         "prism)")
+    value = view.get(key)
+    if value is None:
+        return default
+    if not isinstance(value, list | tuple) or len(value) != 2 or any(
+            isinstance(s, bool) or not isinstance(s, int) or s not in (-1, 0, 1) for s in value):
+        raise ValueError(f"rig view {key} is [sx, sy] with each -1, 0 or 1, got {value!r}")
+    return tuple(value)
 
 
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
@@ -186,59 +230,91 @@ def common_extent(rig: PrismRig, view: int, shape: tuple[int, int]) -> np.ndarra
     return np.array([cx[ok].min(), cy[ok].min(), cx[ok].max(), cy[ok].max()])
 
 
-def undistort_views(stack: np.ndarray, rig: PrismRig) -> tuple[np.ndarray, np.ndarray]:
-    """Resample every view into the common undistorted frame.
-
-    Parameters
-    ----------
-    stack : (V, C, rows, cols) float views (NaN = no data), V = ``len(rig.views)``.
-    rig : the rig.
+def canvases(rig: PrismRig, shape: tuple[int, int]) -> tuple[np.ndarray, tuple[int, int]]:
+    """The views' canvases in the common undistorted frame: one equal-size canvas per view
+    holding its whole footprint.
 
     Returns
     -------
-    canvases : (V, C, rows', cols') float32, one equal-size canvas per view holding its
-        undistorted image (NaN outside it); Lanczos-4 resampling.
     origins : (V, 2) [row, col] common-frame pixel of each canvas's pixel (0, 0): canvas pixel
         (r, c) of view k is common pixel (r + origins[k, 0], c + origins[k, 1]). The views'
         relative positions predicted by the rig are the differences of the origins.
+    size : the canvases' (rows, cols).
     """
-    n_views, n_chan, rows, cols = stack.shape
-    if n_views != len(rig.views):
-        raise ValueError(f"the rig describes {len(rig.views)} views but there are {n_views}")
-    boxes = np.array([common_extent(rig, k, (rows, cols)) for k in range(n_views)])
+    rows, cols = shape
+    boxes = np.array([common_extent(rig, k, shape) for k in range(len(rig.views))])
     origin_xy = np.floor(boxes[:, :2])
     size = np.ceil(boxes[:, 2:] - origin_xy).max(axis=0).astype(int) + 1
     if size.prod() > 16 * rows * cols:
         raise ValueError(f"the rig spreads a view over {size[0]} x {size[1]} px; check its "
                          "focal_mm, sensor_mm and prism")
-    out = np.empty((n_views, n_chan, size[1], size[0]), np.float32)
-    for k in range(n_views):
-        valid = np.isfinite(stack[k]).all(axis=0).astype(np.float32)
-        filled = fill_nan_channels(np.asarray(stack[k], np.float32))
-        for band, mx, my, bad in _view_maps(rig, k, origin_xy[k], (size[1], size[0]),
-                                            (rows, cols)):
-            cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                              borderValue=0) > 0.999
-            cover &= ~bad
-            # canvas pixels more than a pixel off the view come out NaN whatever is resampled
-            # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off
-            # its slow border path
-            off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
-            mx[off_view] = 4
-            my[off_view] = 4
-            for c in range(n_chan):
-                warped = cv2.remap(filled[c], mx, my, cv2.INTER_LANCZOS4,
-                                   borderMode=cv2.BORDER_REPLICATE)
-                out[k, c, band] = np.where(cover, warped, np.nan)
-    return out, origin_xy[:, ::-1].copy()
+    return origin_xy[:, ::-1].copy(), (int(size[1]), int(size[0]))
+
+
+def map_pitch(shape: tuple[int, int]) -> int:
+    """The node pitch (px) of the remap maps of a view of ``shape``."""
+    return int(np.clip(shape[1] // MAP_NODES_PER_VIEW, 1, 16))
+
+
+def undistort_region(image: np.ndarray, rig: PrismRig, view: int, origin_xy: np.ndarray,
+                     region: tuple[int, int]) -> np.ndarray:
+    """A (rows, cols) view in the common undistorted frame over a region of ``region`` =
+    (rows', cols') pixels whose pixel (0, 0) is common pixel ``origin_xy`` (x, y): float32,
+    Lanczos-4, NaN where the view does not cover it."""
+    rows, cols = image.shape
+    valid = np.isfinite(image).astype(np.float32)
+    filled = fill_nan_channels(np.asarray(image, np.float32)[np.newaxis])[0]
+    out = np.empty(region, np.float32)
+    for band, mx, my, bad in _view_maps(rig, view, origin_xy, region, (rows, cols)):
+        cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0) > 0.999
+        cover &= ~bad
+        # region pixels more than a pixel off the view come out NaN whatever is resampled
+        # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its
+        # slow border path
+        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+        mx[off_view] = 4
+        my[off_view] = 4
+        warped = cv2.remap(filled, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        out[band] = np.where(cover, warped, np.nan)
+    return out
+
+
+STRIP_MARGIN_PX = 64  # past the searched overlap: the high-pass (4 sigma) and refinement margins
+
+
+def rig_strips(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, size: tuple[int, int],
+               a: int, b: int, direction: str, expected) -> tuple:
+    """The overlap strips of views a and b's canvases (see :func:`canvases`) in the common
+    frame, from their luminance (V, rows, cols): the part of each canvas that the rig's predicted
+    shift, within its tolerance and a margin, can bring over the other. Returns (strip of a,
+    strip of b, [dy, dx] of a's strip in its canvas, the same for b). Strips start on the maps'
+    node grid and on multiples of 4, so they hold exactly the pixels of the whole canvases."""
+    (prior, tol) = expected
+    axis = 1 if direction == "h" else 0
+    along = prior[axis]
+    pitch = map_pitch(luma.shape[1:])
+    align = pitch * 4 // math.gcd(pitch, 4)
+    start = max(0, int(np.floor(along - tol)) - STRIP_MARGIN_PX) // align * align
+    stop = min(size[axis], int(np.ceil(size[axis] - along + tol)) + STRIP_MARGIN_PX)
+    out, offsets = [], []
+    for view, (lo, hi) in ((a, (start, size[axis])), (b, (0, stop))):
+        offset = [0, 0]
+        offset[axis] = lo
+        shape = list(size)
+        shape[axis] = hi - lo
+        origin_xy = origins[view, ::-1] + offset[::-1]
+        out.append(undistort_region(luma[view], rig, view, origin_xy, tuple(shape)))
+        offsets.append(tuple(offset))
+    return out[0], out[1], offsets[0], offsets[1]
 
 
 def _traced(rig: PrismRig, view: int, x: np.ndarray, y: np.ndarray,
             shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`common_to_view` in bands of about MAP_BAND_PIXELS points (the ray tracing's
+    """:func:`common_to_view` in bands of about TRACE_BAND_PIXELS points (the ray tracing's
     float64 temporaries stay a few tens of MB); x, y are common pixels of equal 2-D shape."""
     vx, vy = np.empty(x.shape), np.empty(x.shape)
-    step = max(1, MAP_BAND_PIXELS // max(1, x.shape[1]))
+    step = max(1, TRACE_BAND_PIXELS // max(1, x.shape[1]))
     for r0 in range(0, x.shape[0], step):
         band = slice(r0, r0 + step)
         vx[band], vy[band] = common_to_view(rig, view, x[band], y[band], shape)
@@ -288,7 +364,7 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     the pixels of cells that miss it by more than MAP_TOLERANCE_PX, or whose nodes lose their
     ray (total reflection), are traced exactly."""
     rows, cols = canvas
-    pitch = int(np.clip(shape[1] // MAP_NODES_PER_VIEW, 1, 16))
+    pitch = map_pitch(shape)
     node_y = (np.arange((rows - 1) // pitch + 4) - 1.0) * pitch + origin_xy[1]
     node_x = (np.arange((cols - 1) // pitch + 4) - 1.0) * pitch + origin_xy[0]
     nodes = _traced(rig, view, *np.meshgrid(node_x, node_y), shape)

@@ -84,13 +84,19 @@ def luminance(stack: np.ndarray) -> np.ndarray:
             warnings.simplefilter("ignore", RuntimeWarning)
             for k in range(n_views):
                 for r0 in range(0, rows, step):
-                    luma[k, r0:r0 + step] = np.nanmean(stack[k, :, r0:r0 + step], axis=0)
+                    band = stack[k, :, r0:r0 + step]
+                    out = luma[k, r0:r0 + step]
+                    np.add.reduce(band, axis=0, out=out)
+                    out *= np.float32(1.0 / n_chan)
+                    if not np.isfinite(out).all():  # a channel without data: the others' mean
+                        out[...] = np.nanmean(band, axis=0)
     else:
         luma = stack[:, 0]
     for k in range(len(luma)):
-        if not np.isfinite(luma[k]).any():
+        lo, hi = np.fmin.reduce(luma[k], axis=None), np.fmax.reduce(luma[k], axis=None)
+        if not np.isfinite(hi):
             raise InputError(f"view {k} holds no data (all NaN)")
-        if float(np.nanstd(luma[k])) == 0.0:
+        if lo == hi:
             raise InputError(f"view {k} has no texture (constant image); stitching needs "
                              "structure in the overlap")
     return luma

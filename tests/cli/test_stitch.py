@@ -173,3 +173,68 @@ def test_a_view_named_twice_is_refused(tmp_path):
                                       "-o", str(tmp_path / "p.tif")])
     assert result.exit_code == 1 and "twice" in result.output, result.output
     assert not (tmp_path / "p.tif").exists()
+
+
+def _saved_transform(tmp_path):
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(200, 260), seed=1)
+    views = tmp_path / "rig" / "views.tif"
+    saved = tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "p.tif"),
+                                   "--transform-out", str(saved)])
+    assert res.exit_code == 0, res.output
+    return views, json.loads(saved.read_text())
+
+
+def _lies(data):
+    """Transforms that claim what is not so, and the words their refusal must hold."""
+    t = data["transform"]
+    m = np.array(t["view_to_reference"][1])
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], (m * 1e30).tolist()]}, \
+        "translation"
+    yield {**t, "view_to_reference": [t["view_to_reference"][0],
+                                      np.where(np.eye(3) > 0, np.nan, m).tolist()]}, "finite"
+    off = m.copy()
+    off[:2, 2] += [9.0, 23.0]  # 23 px off along, 9 across: overlap still there, views disagree
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], off.tolist()]}, "does not fit"
+    far = m.copy()
+    far[0, 2] += 400  # past the view: no overlap
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], far.tolist()]}, "does not fit"
+    yield {**t, "views": t["views"][::-1]}, "--views"
+    yield {**t, "views": [1, 2]}, "distinct names"
+    yield {**t, "layout": "2x2"}, "layout"
+    yield {**t, "distortion_k1": 0.05}, "--distortion"
+
+
+def test_a_transform_that_lies_is_refused_in_one_line(tmp_path):
+    views, data = _saved_transform(tmp_path)
+    for k, (lie, words) in enumerate(_lies(data)):
+        side = tmp_path / f"lie{k}.json"
+        side.write_text(json.dumps({"transform": lie}).replace("NaN", "NaN"))
+        out = tmp_path / f"out{k}.tif"
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(out), "--transform-in",
+                                       str(side)])
+        assert res.exit_code == 1, (k, res.output)
+        assert words in res.output and len(res.output.strip().splitlines()) == 1, (k, res.output)
+        assert not out.exists()
+
+
+def test_a_rig_that_lies_is_refused_in_one_line(tmp_path):
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(200, 260), seed=1)
+    views = tmp_path / "rig" / "views.tif"
+    good = {"focal_mm": 6.16, "sensor_mm": 3.6, "prism_n": 1.74, "prism_apex_deg": 30.0,
+            "aperture_mm": 3.09, "object_distance_mm": 2000,
+            "views": [{"pupil": [1, 0], "prism": [1, 0]}, {"pupil": [-1, 0], "prism": None}]}
+    lies = [({**good, "prism_n": 1e30}, "prism_n"), ({**good, "aperture_mm": ".nan"}, "aperture"),
+            ({**good, "focal": 6}, "unknown key"), ({**good, "focal_mm": -6}, "focal_mm"),
+            ({**good, "views": [good["views"][0]] * 2}, "same pupil"),
+            ({**good, "views": [{"pupil": [0.5, 0]}, good["views"][1]]}, "pupil"),
+            ({**good, "views": good["views"][::-1]}, "rig puts view 1")]
+    for k, (lie, words) in enumerate(lies):
+        side = tmp_path / f"rig{k}.yaml"
+        side.write_text(json.dumps(lie).replace('".nan"', ".nan"))
+        out = tmp_path / f"out{k}.tif"
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(out), "--rig",
+                                       str(side), "--layout", "1x2"])
+        assert res.exit_code == 1, (k, res.output)
+        assert words in res.output and len(res.output.strip().splitlines()) == 1, (k, res.output)
+        assert not out.exists()

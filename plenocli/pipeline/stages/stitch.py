@@ -123,17 +123,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
-    transform = None
-    if transform_in:
-        path = Path(transform_in)
-        if not path.is_file():
-            raise InputError(f"{path}: no such file (the --transform-in JSON)")
-        try:
-            transform = json.loads(path.read_text(encoding="utf-8"))
-            transform = transform.get("transform", transform)
-        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError) as err:
-            raise InputError(f"{path}: not a JSON stitch transform ({err}); save one with "
-                             "--transform-out") from err
+    transform = load_transform(transform_in, names) if transform_in else None
     prism_rig = load_rig(rig) if rig else None
     panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
                                       distortion_k1=distortion, transform=transform, blend=blend,
@@ -158,7 +148,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
     if transform_out:
-        write_text(transform_out, json.dumps(json_safe({"transform": rep["transform"],
+        saved = {**rep["transform"], "views": names}
+        write_text(transform_out, json.dumps(json_safe({"transform": saved,
                                                      "provenance": record}), indent=2),
                    protect=protect)
     if preview:
@@ -178,6 +169,35 @@ def _alignment(rep: dict) -> str:
         return (f"loop closure {rep['closure_px']:.3f} px (overlaps too narrow for a "
                 "residual)")
     return "overlaps too narrow to measure a residual"
+
+
+def load_transform(path: str, names: list[str]) -> dict:
+    """A transform saved by ``--transform-out`` (the JSON, or its ``transform`` key), refused
+    unless it is a mapping, and, when it names its views, unless they are distinct names in the
+    order of these views (views named after other files are not compared)."""
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"{file}: no such file (the --transform-in JSON)")
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
+                         "--transform-out") from err
+    transform = data.get("transform", data) if isinstance(data, dict) else None
+    if not isinstance(transform, dict):
+        raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "
+                         "--transform-out")
+    saved = transform.get("views")
+    if saved is not None:
+        if not isinstance(saved, list) or not all(isinstance(n, str) for n in saved) \
+                or len(set(saved)) != len(saved):
+            raise InputError(f"{file}: the transform's views must be distinct names, got "
+                             f"{saved!r}; save one with --transform-out")
+        if saved != names and set(saved) & set(names):  # other names: other files, can't tell
+            raise InputError(f"{file}: the transform was made for views {','.join(saved)}, "
+                             f"these are {','.join(names)}; pass --views {','.join(saved)} or "
+                             "register them again (without --transform-in)")
+    return transform
 
 
 def load_rig(path: str) -> PrismRig:

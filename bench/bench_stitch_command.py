@@ -1,0 +1,156 @@
+"""Benchmark: the whole ``plenocli stitch`` command on a dual-pixel + prism capture with the rig,
+against the floor of one Lanczos resampling per colour plane, measured in the same run.
+
+A simulated capture (``simulate dualpixel-prism --pixels N``: views N x 2N/3, through decode,
+bias and flat, Bayer views A and B in one TIFF) is stitched by the command of this checkout
+(``plenocli stitch views.tif --views A,B --rig configs/rigs/dualpixel_prism.yaml``, a child
+process: wall time and its own peak RSS from ``os.wait4``). Baselines, on the same views,
+demosaiced once, in this process:
+
+- six remaps: ``cv2.remap`` INTER_LANCZOS4 of each colour plane of both views at view size
+  (the issue's floor);
+- footprint floor: the same, each plane remapped into its view's footprint box on the panorama
+  (the prism bends the views, so the footprints are larger than the views);
+- demosaic: ``colour.demosaic`` of both views (the command must demosaic Bayer views; it is
+  not the stitch's work and is printed apart).
+
+With ``--batch N``, a transform saved by the first command is reapplied to N captures
+(``--transform-in``): the time per capture against the footprint floor.
+
+Memory: peak RSS of the command as a multiple of the bytes of the views (float32 RGB) plus the
+panorama (float32 RGB). Run ``uptime`` first: the ratios are meaningful on a loaded machine,
+the seconds are not.
+
+    PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from bench.timing import ROOT, best_time
+
+RIG = ROOT / "configs" / "rigs" / "dualpixel_prism.yaml"
+
+
+def capture(folder: Path, pixels: int) -> Path:
+    """views.tif (Bayer A, B, flat-fielded) of a simulated dual-pixel + prism capture."""
+    from plenocli.pipeline.stages import bias, decode, flat, simulate
+
+    for kind, name in (("dualpixel-prism", "capture"), ("dualpixel-white", "white")):
+        simulate.simulate(kind, folder / name, pixels=pixels)
+        decode.run(str(folder / name / "capture.dng"), str(folder / f"{name}_frames.tif"))
+        bias.run(str(folder / f"{name}_frames.tif"), str(folder / f"{name}_biased.tif"))
+    flat.run(str(folder / "capture_biased.tif"), str(folder / "views.tif"),
+             white=str(folder / "white_biased.tif"))
+    return folder / "views.tif"
+
+
+def command(views: Path, out: Path, *extra: str) -> tuple[float, float]:
+    """Wall seconds and peak RSS (bytes) of one ``plenocli stitch`` child process."""
+    argv = [sys.executable, "-m", "plenocli", "stitch", str(views), "--views", "A,B", "--rig",
+            str(RIG), "-o", str(out), *extra]
+    start = time.perf_counter()
+    proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    seconds = time.perf_counter() - start
+    err = proc.stderr.read().decode()
+    if status:
+        raise RuntimeError(f"plenocli stitch failed:\n{err}")
+    return seconds, usage.ru_maxrss * 1024.0
+
+
+def floors(views: Path, report: dict, repeat: int) -> dict:
+    """Seconds of the six view-size remaps, of the footprint remaps and of the demosaics."""
+    from bench.bench_stitch_colour import mosaics
+    from plenocli.colour.demosaic import demosaic
+    from plenocli.stitch import PrismRig
+    from plenocli.stitch.rig import _view_maps
+
+    mosaic, cfa = mosaics(views)
+    t_demosaic, rgb = best_time(lambda: [demosaic(v, cfa) for v in mosaic], repeat)
+    planes = [np.ascontiguousarray(v[..., c]) for v in rgb for c in range(3)]
+    rows, cols = planes[0].shape
+    rig = PrismRig.from_dict(report["rig"])
+    maps = []  # each view's rig map over its own size, and over its footprint's box
+    footprint_px = 0.0
+    for k in range(2):
+        origin = np.array(report["canvas_origins_px"][k][::-1], float)
+        for which, shape in enumerate(((rows, cols), tuple(report["canvas_shape"]))):
+            parts = list(_view_maps(rig, k, origin, shape, (rows, cols)))
+            mx, my = (np.concatenate([p[i] for p in parts]) for i in (1, 2))
+            if which:  # the box of the canvas pixels the view covers, off-view pixels pointed
+                # inside (as the stitch does: OpenCV's border path is slow)
+                on = (mx >= 0) & (mx <= cols - 1) & (my >= 0) & (my <= rows - 1)
+                r, c = np.flatnonzero(on.any(axis=1)), np.flatnonzero(on.any(axis=0))
+                box = (slice(r[0], r[-1] + 1), slice(c[0], c[-1] + 1))
+                mx, my, on = mx[box], my[box], on[box]
+                mx, my = np.where(on, mx, np.float32(4)), np.where(on, my, np.float32(4))
+                footprint_px += mx.size / 2
+            maps.append((np.ascontiguousarray(mx), np.ascontiguousarray(my)))
+
+    def remap(which: int):
+        for k in range(2):
+            mx, my = maps[2 * k + which]
+            for plane in planes[3 * k:3 * k + 3]:
+                cv2.remap(plane, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+
+    t_six, _ = best_time(lambda: remap(0), repeat)
+    t_foot, _ = best_time(lambda: remap(1), repeat)
+    return {"six": t_six, "footprint": t_foot, "demosaic": t_demosaic,
+            "views_bytes": 4.0 * 6 * rows * cols, "footprint_px": footprint_px,
+            "view_px": float(rows * cols)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pixels", type=int, default=3072)
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--batch", type=int, default=0)
+    args = parser.parse_args()
+    print("load:", os.getloadavg(), f"OpenCV threads {cv2.getNumThreads()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        views = capture(folder, args.pixels)
+        rep_file, transform = folder / "report.json", folder / "transform.json"
+        t_cmd, rss = min(command(views, folder / "pano.tif", "--report", str(rep_file),
+                                 "--transform-out", str(transform))
+                         for _ in range(args.repeat))
+        report = json.loads(rep_file.read_text())
+        base = floors(views, report, args.repeat)
+        pano_bytes = 4.0 * 3 * np.prod(report["panorama_shape"])
+        print(f"views {report['view_shape'][1]} x {report['view_shape'][0]}, panorama "
+              f"{report['panorama_shape'][1]} x {report['panorama_shape'][0]}, footprint boxes "
+              f"{base['footprint_px'] / base['view_px']:.2f} x the view (mean of A, B)")
+        print(f"plenocli stitch (command) {t_cmd:7.2f} s   peak RSS {rss / 2**20:6.0f} MiB = "
+              f"{rss / (base['views_bytes'] + pano_bytes):.2f} x (views + panorama)")
+        print(f"six remaps (view size)    {base['six']:7.2f} s")
+        print(f"footprint remaps          {base['footprint']:7.2f} s")
+        print(f"demosaic of A and B       {base['demosaic']:7.2f} s (inside the command)")
+        print(f"ratio command / six remaps = {t_cmd / base['six']:.2f} x; command / footprint "
+              f"floor = {t_cmd / base['footprint']:.2f} x; (command - demosaic) / footprint "
+              f"floor = {(t_cmd - base['demosaic']) / base['footprint']:.2f} x")
+        if args.batch:
+            start = time.perf_counter()
+            for k in range(args.batch):
+                command(views, folder / f"batch{k}.tif", "--transform-in", str(transform))
+            per = (time.perf_counter() - start) / args.batch
+            print(f"batch of {args.batch} with --transform-in: {per:.2f} s per capture = "
+                  f"{per / base['footprint']:.2f} x the footprint floor, "
+                  f"{(per - base['demosaic']) / base['footprint']:.2f} x without the demosaic")
+        print("load:", os.getloadavg())
+
+
+if __name__ == "__main__":
+    main()
