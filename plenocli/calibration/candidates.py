@@ -65,6 +65,20 @@ class Lattice:
     def describe(self) -> str:
         return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(self.angle_rad):.2f} deg"
 
+    def climbed(self, score, *, step: float, evaluations: int, xatol: float,
+                fatol: float) -> Lattice:
+        """The local maximum of ``score(lattice)`` near this lattice: Nelder-Mead in (log
+        pitch, angle) from a simplex of ``step`` on each axis."""
+        from scipy.optimize import minimize  # only calibrate climbs: keep other starts light
+
+        def cost(p):
+            return -score(Lattice(self.kind, self.pitch_px * np.exp(p[0]), self.angle_rad + p[1]))
+
+        res = minimize(cost, np.zeros(2), method="Nelder-Mead",
+                       options={"initial_simplex": [[0, 0], [step, 0], [0, step]],
+                                "xatol": xatol, "fatol": fatol, "maxfev": evaluations})
+        return Lattice(self.kind, self.pitch_px * np.exp(res.x[0]), self.angle_rad + res.x[1])
+
 
 def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
                    count: int = PEAKS_PER_SPECTRUM) -> list[np.ndarray]:

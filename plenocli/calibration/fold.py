@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
-from scipy.optimize import minimize
 
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.flatten import flatten
@@ -160,15 +159,8 @@ def refine_fold(lattice: Lattice, folds: Folds) -> tuple[Lattice, float]:
         crop = 1.0 if reach is None else min(1.0, reach * current.pitch_px / folds.radius)
         span = step * current.pitch_px / (crop * folds.radius)
 
-        def cost(p, base=current, crop=crop):
-            return -folds.sharpness(Lattice(base.kind, base.pitch_px * np.exp(p[0]),
-                                            base.angle_rad + p[1]), crop)
-
-        res = minimize(cost, np.zeros(2), method="Nelder-Mead",
-                       options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
-                                "xatol": 1e-6, "fatol": 1e-7, "maxfev": evaluations})
-        current = Lattice(current.kind, current.pitch_px * np.exp(res.x[0]),
-                          current.angle_rad + res.x[1])
+        current = current.climbed(lambda lat, crop=crop: folds.sharpness(lat, crop),
+                                  step=span, evaluations=evaluations, xatol=1e-6, fatol=1e-7)
     return current, folds.sharpness(current)
 
 

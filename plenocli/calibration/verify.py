@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.fft
-from scipy.optimize import minimize
 
 from plenocli.calibration.candidates import Lattice, _parabola
 
@@ -335,16 +334,12 @@ def refine(lattice: Lattice, acf: Autocorrelation) -> tuple[Lattice, float]:
     (near, far pitches, first step, evaluations)."""
     current = lattice
     for near, far, span, evaluations in REFINE_STAGES:
-        def cost(p, base=current, near=near, far=far):
-            cand = Lattice(base.kind, base.pitch_px * np.exp(p[0]), base.angle_rad + p[1])
-            c = acf.contrast(cand) if near is None else acf.contrast(cand, near=near, far=far)
-            return -c if np.isfinite(c) else 10.0
+        def score(lat, near=near, far=far):
+            c = acf.contrast(lat) if near is None else acf.contrast(lat, near=near, far=far)
+            return c if np.isfinite(c) else -10.0
 
-        res = minimize(cost, np.zeros(2), method="Nelder-Mead",
-                       options={"initial_simplex": [[0, 0], [span, 0], [0, span]],
-                                "xatol": 1e-5, "fatol": 1e-4, "maxfev": evaluations})
-        current = Lattice(current.kind, current.pitch_px * np.exp(res.x[0]),
-                          current.angle_rad + res.x[1])
+        current = current.climbed(score, step=span, evaluations=evaluations, xatol=1e-5,
+                                  fatol=1e-4)
     return current, acf.contrast(current)
 
 

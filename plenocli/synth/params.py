@@ -72,6 +72,10 @@ PARAMS: dict[str, Param] = {
     "open_halves": Param("open pupil halves"),
     "open_quarters": Param("open pupil quarters"),
     "scene": Param("scene"),
+    "g": Param("refocus parameter g of the scene (negative: Galilean)", -100, 100),
+    "distance_m": Param("distance of the plane, metres (0: placed by g)", 0),
+    "disparities": Param("disparity of each band, pixels", -32, 32),
+    "quad": Param("2 x 2 sub-aperture views instead of A, B"),
 }
 
 
