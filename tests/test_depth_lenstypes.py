@@ -34,3 +34,19 @@ def test_one_plane_decides_nothing():
     planes = scene_planes("plane", output_shape(small, 0.2), g=4.0)
     found, _ = _types((1, 2, 0), planes, small)
     assert found is None
+
+
+def test_a_large_pitch_is_typed_alike_at_a_reduced_scale():
+    """Types of the same frame upsampled 2 x (pitch 40.4 px): the depth pass runs at a reduced
+    pitch (lenstypes.DEPTH_PITCH_PX), so its cost follows the lenses, and types do not change."""
+    import cv2
+
+    planes = scene_planes("slanted", output_shape(SHAPE, 0.2))
+    grid = LensGrid(20.2, 0.0, (6.1, 7.9), "hex", image_shape=SHAPE)
+    frame = multi_focus_frame(grid, SHAPE, planes, s=0.2, type_of_coset=(1, 2, 0), seed=2)
+    indices, centres = grid.lens_centres()
+    big = cv2.resize(frame, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+    found = classify(big, indices, (centres + 0.5) * 2 - 0.5, 2 * grid.pitch_px)
+    assert found is not None
+    coset = (indices[:, 0] - indices[:, 1]) % 3
+    assert np.array_equal(found.types, np.asarray((1, 2, 0))[coset])

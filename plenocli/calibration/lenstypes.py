@@ -24,6 +24,9 @@ SIGNIFICANCE = 1e-6   # a one-way ANOVA p-value below this: the cosets differ in
 SLOPE_SEPARATION = 4.0  # changes of types 0 and 2 this many standard errors apart decide
 MIN_DEPTH_SPREAD = 0.5  # interquartile range of g (virtual depth) a frame needs to decide
 CLEAR_MATCH = 0.5       # median lens confidence at which one sign of g is taken at once
+# Lens types need each lens's g only roughly: the frame is matched at most at this pitch, so the
+# cost follows the number of lenses, not of pixels (g is a ratio of shifts: scale-free).
+DEPTH_PITCH_PX = 24.0
 
 
 @dataclass(frozen=True)
@@ -126,12 +129,18 @@ def lens_virtual_depth(flat: np.ndarray, indices: np.ndarray, centres: np.ndarra
     from plenocli.depth.lenslet import lens_depth
     from plenocli.model.lensgrid import LensGrid
 
-    grid = LensGrid(float(pitch_px), 0.0, tuple(float(v) for v in centres[0]), "hex",
-                    centres_xy=np.asarray(centres, float), indices=np.asarray(indices))
+    scale = min(1.0, DEPTH_PITCH_PX / float(pitch_px))
+    xy = np.asarray(centres, float)
+    frame = np.asarray(flat, np.float32)
+    if scale < 0.9:
+        frame = cv2.resize(frame, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        xy = (xy + 0.5) * scale - 0.5
+    grid = LensGrid(float(pitch_px) * scale, 0.0, tuple(float(v) for v in xy[0]), "hex",
+                    centres_xy=xy, indices=np.asarray(indices))
     best, score = None, -1.0
     for bounds in ((2.0, 12.0), (-12.0, -2.0)):
         try:
-            found = lens_depth(np.asarray(flat, np.float32), grid, g_range=bounds)
+            found = lens_depth(frame, grid, g_range=bounds)
         except ValueError:
             continue
         if float(np.median(found.confidence)) > score:
@@ -141,9 +150,8 @@ def lens_virtual_depth(flat: np.ndarray, indices: np.ndarray, centres: np.ndarra
     if best is None:
         return np.full(len(indices), np.nan)
     # lens_depth lists the lenses whose centres lie in the frame, in the grid's order
-    xy = np.asarray(centres, float)
-    inside = (np.isfinite(xy).all(axis=1) & (xy[:, 0] >= 0) & (xy[:, 0] <= flat.shape[1] - 1)
-              & (xy[:, 1] >= 0) & (xy[:, 1] <= flat.shape[0] - 1))
+    inside = (np.isfinite(xy).all(axis=1) & (xy[:, 0] >= 0) & (xy[:, 0] <= frame.shape[1] - 1)
+              & (xy[:, 1] >= 0) & (xy[:, 1] <= frame.shape[0] - 1))
     out = np.full(len(indices), np.nan)
     out[inside] = np.where(best.confidence >= 0.3, best.g, np.nan)
     return out
