@@ -21,7 +21,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.colour.balance import normalised_gains
-from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
+from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic, grey_edge_gains
 from plenocli.colour.highlights import rebuild_partly_clipped
 from plenocli.io.photo import encode
 from plenocli.model.colour import srgb_to_space
@@ -79,8 +79,10 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
     if view.cfa is None:
         return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
     frame = pages[view.pages[0]]
+    if gains is None:
+        gains = grey_edge_gains(frame, view.cfa)
     rgb = demosaic(frame, view.cfa, method=method, gains=gains)
-    rebuild_partly_clipped(rgb, frame, view.cfa)
+    rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains))
     return rgb
 
 

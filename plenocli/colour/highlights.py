@@ -17,17 +17,20 @@ from scipy import ndimage
 
 BLOCK = 4  # colours of the unclipped surroundings averaged over 4 x 4 pixels (noise)
 MARGIN = 32  # pixels around the masked area searched for unclipped colour first
+BRIGHT = 0.25  # unclipped colour taken from pixels within two stops of the lowest clip level
 
 
-def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str) -> int:
+def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gains) -> int:
     """Fill, in place, the masked (NaN) pixels of ``rgb`` (rows, cols, 3; demosaiced from the
     Bayer ``frame`` with NaN where a photosite clipped) that still have an unclipped channel.
 
     A channel is measured at a pixel when no photosite of its colour in the 3 x 3 neighbourhood
     is NaN (its value: the mean of those photosites); the others are clipped. A clipped channel
     gets the nearest unclipped pixels' colour ratio to the measured channels, and never less
-    than its clip level (the largest finite value of its colour in the frame). Returns the
-    number of pixels rebuilt.
+    than its clip level (the largest finite value of its colour in the frame), nor, white
+    balanced by ``gains``, than the darkest measured channel: a channel that clipped is not
+    the pixel's darkest (a clipped green below red and blue is the magenta of a badly
+    developed highlight). Returns the number of pixels rebuilt.
     """
     masked = ~np.isfinite(rgb).all(axis=-1)
     if not masked.any():
@@ -38,47 +41,82 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str) -> 
     top -= top % 2
     left -= left % 2  # even: the crop keeps the CFA phase of pixel (0, 0)
     window = (slice(top, bottom), slice(left, right))
-    measured, clip = _measured(np.asarray(frame, np.float32), pattern, window)
+    measured, lower = _measured(np.asarray(frame, np.float32), pattern, window, gains)
     region = rgb[window]
     where = np.nonzero(masked[window])
-    values = measured[where]  # (n, 3), NaN where clipped
+    values, floor = measured[where], lower[where]  # (n, 3); values NaN where clipped
     known = np.isfinite(values)
     partly = known.any(axis=1)
     if not partly.any():
         return 0
-    ratios = _nearest_colour(region, where)
-    if ratios is None:
-        return 0
+    gains = np.asarray(gains, np.float32)
+    bright = BRIGHT * float(np.nanmin(np.nanmax(lower, axis=(0, 1)) * gains))
+    ratios = _nearest_colour(region, where, gains, bright)
     values, known, ratios = values[partly], known[partly], ratios[partly]
     scale = (np.where(known, values, 0).sum(axis=1)
              / np.maximum(np.where(known, ratios, 0).sum(axis=1), 1e-12))
-    rebuilt = np.where(known, values, np.maximum(scale[:, None] * ratios, clip))
+    alone = known.sum(axis=1) == 1  # two unknowns from one measurement: grey at its level
+    ratios[alone] = 1.0 / gains
+    scale[alone] = np.where(known[alone], values[alone] * gains, 0).sum(axis=1)
+    darkest = np.where(known, values * gains, np.inf).min(axis=1, keepdims=True) / gains
+    floor = np.maximum(floor[partly], darkest)
+    rebuilt = np.where(known, values, np.maximum(scale[:, None] * ratios, floor))
     region[where[0][partly], where[1][partly]] = rebuilt
     return int(partly.sum())
 
 
-def _measured(frame: np.ndarray, pattern: str, window) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel of ``window`` and colour: the mean of the finite photosites of that colour in
-    the 3 x 3 neighbourhood, NaN when one of them is NaN; and each colour's clip level."""
+def _measured(frame: np.ndarray, pattern: str, window, gains) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of ``window`` and colour: its value interpolated from the photosites of that
+    colour in the 3 x 3 neighbourhood, NaN when one of them is NaN (clipped); and its lower
+    bound, the least of those photosites with every clipped one at its clip level (the largest
+    finite value of its colour in the frame; at an edge the pixel can be darker than their
+    mean). Green is the mean of its photosites (the pixel's
+    own, or its four neighbours); red and blue are green plus the mean colour difference of
+    their photosites, white balanced (bright and dark change all channels together: no fringes
+    where a highlight meets a dark edge), or their plain mean where green is unknown."""
     crop = frame[window]
-    out = np.full((*crop.shape, 3), np.nan, np.float32)
-    clip = np.zeros(3, np.float32)
-    kernel = np.ones((3, 3), np.float32)
+    out = np.empty((*crop.shape, 3), np.float32)
+    lower = np.empty((*crop.shape, 3), np.float32)
     for c, colour in enumerate("RGB"):
-        site = np.zeros(crop.shape, bool)
-        for k, p in enumerate(pattern):
-            if p == colour:
-                site[k // 2::2, k % 2::2] = True
-        finite = site & np.isfinite(crop)
-        value = np.where(finite, crop, 0).astype(np.float32)
-        total = cv2.filter2D(value, -1, kernel, borderType=cv2.BORDER_REFLECT)
-        count = cv2.filter2D(finite.astype(np.float32), -1, kernel, borderType=cv2.BORDER_REFLECT)
-        lost = cv2.filter2D((site & ~finite).astype(np.float32), -1, kernel,
-                            borderType=cv2.BORDER_REFLECT)
-        ok = (count > 0) & (lost == 0)
-        out[..., c][ok] = total[ok] / count[ok]
-        clip[c] = _clip_level(frame, pattern, colour)
-    return out, clip
+        site = _sites(crop.shape, pattern, colour)
+        clip = _clip_level(frame, pattern, colour)
+        floor = np.where(site, np.where(np.isnan(crop), np.float32(clip), crop), np.inf)
+        lower[..., c] = cv2.erode(floor.astype(np.float32),
+                                  (_CROSS if c == 1 else _SQUARE).astype(np.uint8))
+    green, green_lost = _mean(crop * np.float32(gains[1]), _sites(crop.shape, pattern, "G"),
+                              _CROSS)
+    out[..., 1] = np.where(green_lost, np.nan, green / np.float32(gains[1]))
+    for c in (0, 2):
+        site = _sites(crop.shape, pattern, "RGB"[c])
+        value = crop * np.float32(gains[c])
+        plain, lost = _mean(value, site, _SQUARE)
+        difference, differences_lost = _mean(value - green, site & ~green_lost, _SQUARE)
+        rebuilt = np.where(differences_lost | green_lost, plain, green + difference)
+        out[..., c] = np.where(lost, np.nan, rebuilt / np.float32(gains[c]))
+    return out, lower
+
+
+_SQUARE = np.ones((3, 3), np.float32)
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.float32)
+
+
+def _sites(shape, pattern: str, colour: str) -> np.ndarray:
+    site = np.zeros(shape, bool)
+    for k, p in enumerate(pattern):
+        if p == colour:
+            site[k // 2::2, k % 2::2] = True
+    return site
+
+
+def _mean(values: np.ndarray, site: np.ndarray, kernel: np.ndarray):
+    """The mean of the finite ``values`` at ``site`` under ``kernel``, and where one of those
+    sites is not finite (or none is under it)."""
+    finite = site & np.isfinite(values)
+    total = cv2.filter2D(np.where(finite, values, 0).astype(np.float32), -1, kernel,
+                         borderType=cv2.BORDER_REFLECT)
+    count = cv2.filter2D(finite.astype(np.float32), -1, kernel, borderType=cv2.BORDER_REFLECT)
+    sites = cv2.filter2D(site.astype(np.float32), -1, kernel, borderType=cv2.BORDER_REFLECT)
+    return total / np.maximum(count, 1), (count == 0) | (count < sites)
 
 
 def _clip_level(frame: np.ndarray, pattern: str, colour: str) -> float:
@@ -92,9 +130,11 @@ def _clip_level(frame: np.ndarray, pattern: str, colour: str) -> float:
     return level
 
 
-def _nearest_colour(region: np.ndarray, where) -> np.ndarray | None:
+def _nearest_colour(region: np.ndarray, where, gains: np.ndarray, bright: float) -> np.ndarray:
     """The colour (R, G, B ratios, geometric mean 1) of the nearest unclipped 4 x 4 block at
-    each masked pixel ``where`` of ``region``; None when the region has no unclipped pixel."""
+    each masked pixel ``where`` of ``region``, among the blocks whose brightest white-balanced
+    channel reaches ``bright`` (the surface around a highlight, not a dark object next to it);
+    grey (1 / gains) where the region has none."""
     rows, cols = region.shape[:2]
     pad_r, pad_c = -rows % BLOCK, -cols % BLOCK
     data = np.pad(region, ((0, pad_r), (0, pad_c), (0, 0)), constant_values=np.nan)
@@ -102,9 +142,10 @@ def _nearest_colour(region: np.ndarray, where) -> np.ndarray | None:
     good = np.isfinite(blocks).all(axis=-1, keepdims=True)
     count = good.sum(axis=(1, 3))
     mean = np.where(good, blocks, 0).sum(axis=(1, 3)) / np.maximum(count, 1)
-    source = (count[..., 0] > 0) & (mean > 0).all(axis=-1)
+    source = ((count[..., 0] > 0) & (mean > 0).all(axis=-1)
+              & ((mean * gains).max(axis=-1) >= bright))
     if not source.any():
-        return None
+        return np.broadcast_to(1.0 / gains, (len(where[0]), 3)).copy()
     log = np.log(np.where(source[..., None], mean, 1.0))
     log -= log.mean(axis=-1, keepdims=True)
     _, (near_r, near_c) = ndimage.distance_transform_edt(~source, return_indices=True)
