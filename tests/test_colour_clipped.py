@@ -9,6 +9,7 @@ import warnings
 import numpy as np
 
 from plenocli.colour import develop as dev
+from plenocli.colour import highlights
 from plenocli.colour.demosaic import demosaic
 from plenocli.model.colour import camera_to_srgb, gains_from_neutral, rgb_to_xyz
 from plenocli.synth.natural import natural_capture
@@ -76,3 +77,16 @@ def test_one_channel_clipped_keeps_its_hue_and_all_clipped_stays_white():
     assert hue_median <= 3.0 and hue_p90 <= 5.0 and 0.8 <= chroma <= 1.25, figures
     assert figures["today"][2] < 0.1, figures  # today's white has no chroma at all
     assert not np.isfinite(camera[every]).any()  # clipped in every channel: still masked
+
+
+def test_bands_change_nothing(monkeypatch):
+    cap = natural_capture(_sunset(96, 128), seed=5, peak=PEAK)
+    frame = cap.raw.astype(np.float32) - cap.black
+    frame[cap.raw >= cap.white] = np.nan
+    gains = gains_from_neutral(cap.as_shot_neutral)
+    whole = demosaic(frame, "RGGB", gains=gains)
+    banded = whole.copy()
+    assert highlights.rebuild_partly_clipped(whole, frame, "RGGB", gains) > 500
+    monkeypatch.setattr(highlights, "BAND_ROWS", 8)
+    highlights.rebuild_partly_clipped(banded, frame, "RGGB", gains)
+    np.testing.assert_array_equal(banded, whole)

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+BAND_ROWS = 512  # rows measured at a time: bounds the scratch memory
 BLOCK = 4  # colours of the unclipped surroundings averaged over 4 x 4 pixels (noise)
 MARGIN = 32  # pixels around the masked area searched for unclipped colour first
 BRIGHT = 0.25  # unclipped colour taken from pixels within two stops of the lowest clip level
@@ -32,6 +33,8 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     the pixel's darkest (a clipped green below red and blue is the magenta of a badly
     developed highlight). Returns the number of pixels rebuilt.
     """
+    if np.isfinite(np.sum(frame, dtype=np.float64)):  # nothing clipped: one cheap pass
+        return 0
     masked = ~np.isfinite(rgb).all(axis=-1)
     if not masked.any():
         return 0
@@ -41,16 +44,17 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     top -= top % 2
     left -= left % 2  # even: the crop keeps the CFA phase of pixel (0, 0)
     window = (slice(top, bottom), slice(left, right))
-    measured, lower = _measured(np.asarray(frame, np.float32), pattern, window, gains)
+    frame = np.asarray(frame, np.float32)
+    gains = np.asarray(gains, np.float32)
+    clip = np.array([_clip_level(frame, pattern, c) for c in "RGB"], np.float32)
     region = rgb[window]
     where = np.nonzero(masked[window])
-    values, floor = measured[where], lower[where]  # (n, 3); values NaN where clipped
+    values, floor = _measured_at(frame, pattern, window, gains, clip, where)
     known = np.isfinite(values)
     partly = known.any(axis=1)
     if not partly.any():
         return 0
-    gains = np.asarray(gains, np.float32)
-    bright = BRIGHT * float(np.nanmin(np.nanmax(lower, axis=(0, 1)) * gains))
+    bright = BRIGHT * float((clip * gains).min())
     ratios = _nearest_colour(region, where, gains, bright)
     values, known, ratios = values[partly], known[partly], ratios[partly]
     scale = (np.where(known, values, 0).sum(axis=1)
@@ -65,22 +69,41 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     return int(partly.sum())
 
 
-def _measured(frame: np.ndarray, pattern: str, window, gains) -> tuple[np.ndarray, np.ndarray]:
+def _measured_at(frame, pattern: str, window, gains, clip, where):
+    """:func:`_measured` at the pixels ``where`` of ``window``, band by band (bounded
+    scratch); a 2-row margin (even: the CFA phase is kept) covers the 3 x 3 neighbourhoods."""
+    values = np.empty((len(where[0]), 3), np.float32)
+    floor = np.empty_like(values)
+    top, bottom = window[0].start, window[0].stop
+    for start in range(top, bottom, BAND_ROWS):
+        stop = min(start + BAND_ROWS, bottom)
+        inside = (where[0] >= start - top) & (where[0] < stop - top)
+        if not inside.any():
+            continue
+        first = max(start - 2, 0)
+        band = (slice(first, min(stop + 2, frame.shape[0])), window[1])
+        measured, lower = _measured(frame, pattern, band, gains, clip)
+        at = (where[0][inside] + top - first, where[1][inside])
+        values[inside], floor[inside] = measured[at], lower[at]
+    return values, floor
+
+
+def _measured(frame: np.ndarray, pattern: str, window, gains, clip
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Per pixel of ``window`` and colour: its value interpolated from the photosites of that
     colour in the 3 x 3 neighbourhood, NaN when one of them is NaN (clipped); and its lower
-    bound, the least of those photosites with every clipped one at its clip level (the largest
-    finite value of its colour in the frame; at an edge the pixel can be darker than their
-    mean). Green is the mean of its photosites (the pixel's
-    own, or its four neighbours); red and blue are green plus the mean colour difference of
-    their photosites, white balanced (bright and dark change all channels together: no fringes
-    where a highlight meets a dark edge), or their plain mean where green is unknown."""
+    bound, the least of those photosites with every clipped one at its ``clip`` level (at an
+    edge the pixel can be darker than their mean). Green is the mean of its photosites (the
+    pixel's own, or its four neighbours); red and blue are green plus the mean colour
+    difference of their photosites, white balanced (bright and dark change all channels
+    together: no fringes where a highlight meets a dark edge), or their plain mean where green
+    is unknown."""
     crop = frame[window]
     out = np.empty((*crop.shape, 3), np.float32)
     lower = np.empty((*crop.shape, 3), np.float32)
     for c, colour in enumerate("RGB"):
         site = _sites(crop.shape, pattern, colour)
-        clip = _clip_level(frame, pattern, colour)
-        floor = np.where(site, np.where(np.isnan(crop), np.float32(clip), crop), np.inf)
+        floor = np.where(site, np.where(np.isnan(crop), clip[c], crop), np.inf)
         lower[..., c] = cv2.erode(floor.astype(np.float32),
                                   (_CROSS if c == 1 else _SQUARE).astype(np.uint8))
     green, green_lost = _mean(crop * np.float32(gains[1]), _sites(crop.shape, pattern, "G"),
@@ -135,14 +158,8 @@ def _nearest_colour(region: np.ndarray, where, gains: np.ndarray, bright: float)
     each masked pixel ``where`` of ``region``, among the blocks whose brightest white-balanced
     channel reaches ``bright`` (the surface around a highlight, not a dark object next to it);
     grey (1 / gains) where the region has none."""
-    rows, cols = region.shape[:2]
-    pad_r, pad_c = -rows % BLOCK, -cols % BLOCK
-    data = np.pad(region, ((0, pad_r), (0, pad_c), (0, 0)), constant_values=np.nan)
-    blocks = data.reshape((rows + pad_r) // BLOCK, BLOCK, (cols + pad_c) // BLOCK, BLOCK, 3)
-    good = np.isfinite(blocks).all(axis=-1, keepdims=True)
-    count = good.sum(axis=(1, 3))
-    mean = np.where(good, blocks, 0).sum(axis=(1, 3)) / np.maximum(count, 1)
-    source = ((count[..., 0] > 0) & (mean > 0).all(axis=-1)
+    mean, count = _block_means(region)
+    source = ((count > 0) & (mean > 0).all(axis=-1)
               & ((mean * gains).max(axis=-1) >= bright))
     if not source.any():
         return np.broadcast_to(1.0 / gains, (len(where[0]), 3)).copy()
@@ -151,3 +168,22 @@ def _nearest_colour(region: np.ndarray, where, gains: np.ndarray, bright: float)
     _, (near_r, near_c) = ndimage.distance_transform_edt(~source, return_indices=True)
     br, bc = where[0] // BLOCK, where[1] // BLOCK
     return np.exp(log[near_r[br, bc], near_c[br, bc]]).astype(np.float32)
+
+
+def _block_means(region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mean RGB of the finite pixels of each BLOCK x BLOCK block, and their number; band by
+    band (bounded scratch)."""
+    rows, cols = region.shape[:2]
+    shape = (-(-rows // BLOCK), -(-cols // BLOCK))
+    mean, count = np.zeros((*shape, 3), np.float32), np.zeros(shape, np.int32)
+    for start in range(0, rows, BAND_ROWS):
+        band = region[start:start + BAND_ROWS]
+        pad = ((0, -band.shape[0] % BLOCK), (0, -cols % BLOCK), (0, 0))
+        blocks = np.pad(band, pad, constant_values=np.nan).reshape(
+            -1, BLOCK, shape[1], BLOCK, 3)
+        good = np.isfinite(blocks).all(axis=-1, keepdims=True)
+        n = good.sum(axis=(1, 3))
+        out = slice(start // BLOCK, start // BLOCK + blocks.shape[0])
+        mean[out] = np.where(good, blocks, 0).sum(axis=(1, 3)) / np.maximum(n, 1)
+        count[out] = n[..., 0]
+    return mean, count
