@@ -6,7 +6,7 @@ Why it generalises: a clipped photosite says only "at least the clip level"; the
 surface changes slowly compared with its brightness (shading, a highlight's fall-off), so the
 colour ratios of the unclipped pixels around a clipped area, applied to the channels still
 measured inside it, are the best guess; the clip level is a floor no reconstruction may go
-below (which also rules out magenta: a clipped green is never lower than its clip level).
+below. Measured figures: docs/colour.md (Clipped highlights).
 """
 
 from __future__ import annotations
@@ -26,12 +26,14 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     Bayer ``frame`` with NaN where a photosite clipped) that still have an unclipped channel.
 
     A channel is measured at a pixel when no photosite of its colour in the 3 x 3 neighbourhood
-    is NaN (its value: the mean of those photosites); the others are clipped. A clipped channel
-    gets the nearest unclipped pixels' colour ratio to the measured channels, and never less
-    than its clip level (the largest finite value of its colour in the frame), nor, white
-    balanced by ``gains``, than the darkest measured channel: a channel that clipped is not
-    the pixel's darkest (a clipped green below red and blue is the magenta of a badly
-    developed highlight). Returns the number of pixels rebuilt.
+    is NaN (:func:`_measured`); the others are clipped. A clipped channel gets the colour ratio
+    to the measured channels of the nearest unclipped block bright enough to be the same
+    surface (grey when only one channel is measured: two ratios from one value are guesses),
+    and never less than its neighbouring photosites allow (clipped ones at the clip level, the
+    largest finite value of their colour in the frame), nor, white balanced by ``gains``, than
+    the darkest measured channel: a channel that clipped is not the pixel's darkest (a clipped
+    green below red and blue is the magenta of a badly developed highlight). Returns the number
+    of pixels rebuilt.
     """
     if np.isfinite(np.sum(frame, dtype=np.float64)):  # nothing clipped: one cheap pass
         return 0
