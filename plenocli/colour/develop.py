@@ -21,7 +21,8 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.colour.balance import normalised_gains
-from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic
+from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic, grey_edge_gains
+from plenocli.colour.highlights import rebuild_partly_clipped
 from plenocli.io.photo import encode
 from plenocli.model.colour import srgb_to_space
 
@@ -72,10 +73,17 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
                gains=None) -> np.ndarray:
     """Camera RGB (rows, cols, 3) float32 of one colour view; a Bayer view is demosaiced
     white-balanced by ``gains`` (the ones the photograph is developed with; None: the mosaic's
-    own estimate), see :func:`plenocli.colour.demosaic.demosaic`."""
+    own estimate), see :func:`plenocli.colour.demosaic.demosaic`. Pixels clipped in some
+    channels only are rebuilt (:func:`plenocli.colour.highlights.rebuild_partly_clipped`);
+    those clipped in every channel stay NaN."""
     if view.cfa is None:
         return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
-    return demosaic(pages[view.pages[0]], view.cfa, method=method, gains=gains)
+    frame = pages[view.pages[0]]
+    if gains is None:
+        gains = grey_edge_gains(frame, view.cfa)
+    rgb = demosaic(frame, view.cfa, method=method, gains=gains)
+    rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains))
+    return rgb
 
 
 def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,
