@@ -381,8 +381,7 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         band = slice(r0, min(r0 + step, rows))
         first_y, weights_y = _cubic_weights(band.stop, pitch)
         first_y, weights_y = first_y[band], weights_y[band]
-        vx, vy = (sum(a[first_y + j] * weights_y[:, j, None] for j in range(4))
-                  for a in along_x)
+        vx, vy = (_along_y(a, first_y, weights_y) for a in along_x)
         exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
         if exact.any():
             ys, xs = np.nonzero(exact)
@@ -391,6 +390,20 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         bad = ~(np.isfinite(vx) & np.isfinite(vy))
         yield (band, np.where(bad, -10, vx).astype(np.float32),
                np.where(bad, -10, vy).astype(np.float32), bad)
+
+
+def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rows of node values (nodes y, cols) interpolated to the band's rows (``first`` stencil
+    node and 4 weights per row): one small matrix product over the band's node rows; NaN
+    nodes (no ray) are gathered row by row so that they spread only to their own stencils."""
+    lo, hi = int(first[0]), int(first[-1]) + 4
+    nodes = along_x[lo:hi]
+    if not np.isfinite(nodes).all():
+        return sum(along_x[first + j] * weights[:, j, None] for j in range(4))
+    stencil = np.zeros((len(first), hi - lo))
+    for j in range(4):
+        stencil[np.arange(len(first)), first - lo + j] = weights[:, j]
+    return stencil @ nodes
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
