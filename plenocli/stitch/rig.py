@@ -393,17 +393,17 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
 
 
 def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Rows of node values (nodes y, cols) interpolated to the band's rows (``first`` stencil
-    node and 4 weights per row): one small matrix product over the band's node rows; NaN
-    nodes (no ray) are gathered row by row so that they spread only to their own stencils."""
-    lo, hi = int(first[0]), int(first[-1]) + 4
-    nodes = along_x[lo:hi]
-    if not np.isfinite(nodes).all():
-        return sum(along_x[first + j] * weights[:, j, None] for j in range(4))
-    stencil = np.zeros((len(first), hi - lo))
-    for j in range(4):
-        stencil[np.arange(len(first)), first - lo + j] = weights[:, j]
-    return stencil @ nodes
+    """Rows of node values (nodes y, cols) interpolated to a band's rows (``first`` stencil node
+    and 4 weights per row, ``first`` non-decreasing): the rows sharing a stencil at once, from
+    node rows as they are (no gathered copies)."""
+    out = np.empty((len(first), along_x.shape[1]))
+    starts = np.flatnonzero(np.diff(first, prepend=first[0] - 1))
+    for lo, hi in zip(starts, np.append(starts[1:], len(first)), strict=True):
+        node, part = int(first[lo]), out[lo:hi]
+        np.multiply(weights[lo:hi, 0, None], along_x[node], out=part)
+        for j in range(1, 4):
+            part += weights[lo:hi, j, None] * along_x[node + j]
+    return out
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
