@@ -60,7 +60,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32, their names, whether
     any was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata.
     Only the views wanted are demosaiced, one at a time, straight into the stack."""
-    found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa))
+    found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
         data, meta = tiffio.read_image(path)
@@ -71,7 +71,8 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
         names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
         for name, pages in _view_groups(names, Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
-            found.append((name, (path, data, pages, cfa)))
+            wb = (meta.get("colour") or {}).get("as_shot_wb")
+            found.append((name, (path, data, pages, cfa, wb)))
     if views:
         by_name = dict(found)
         wanted = [v.strip() for v in views.split(",") if v.strip()]
@@ -93,7 +94,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
 
 
-def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None) -> tuple:
+def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None, wb) -> tuple:
     """The shape of a view once loaded: (3, rows, cols) demosaiced, else its pages'."""
     if cfa:
         return (3,) + data.shape[1:]
@@ -101,13 +102,14 @@ def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None) 
 
 
 def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: list[int],
-               cfa: str | None) -> None:
-    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB."""
+               cfa: str | None, wb) -> None:
+    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB (balanced by the
+    capture's as-shot white balance while interpolating, when the metadata has one)."""
     if not cfa:
         out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
         return
     try:
-        rgb = demosaic(data[pages[0]], cfa)
+        rgb = demosaic(data[pages[0]], cfa, gains=wb)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
     for c in range(3):
