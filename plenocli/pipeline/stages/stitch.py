@@ -1,8 +1,9 @@
 """Stage ``stitch``: 2 or 4 views (from one or more TIFFs) -> extended-FOV panorama + report.
 
-Views are found by page name: a page ``VIEW.CHANNEL`` (``S00.R``, ``S00.G``, ...) is one channel
-of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is a view of its
-own. A file that holds a single view (e.g. a left or right refocused image) names it after the
+Views are found by page name (:class:`plenocli.model.views.ViewNames`: a page ``VIEW.CHANNEL``
+is one channel of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is
+a view of its own; unnamed pages are ``view0``, ``view1``, ...; ``--views`` takes a page number
+too). A file that holds a single view (e.g. a left or right refocused image) names it after the
 file (``left.tif`` -> ``left``). A single-page Bayer view is demosaiced
 (``plenocli.colour.demosaic``, the default method) and stitched as full-resolution camera RGB;
 clipped (NaN) pixels stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
@@ -27,23 +28,9 @@ from plenocli.io.preview import write_png
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
+from plenocli.model.views import CHANNELS, ViewNames
 from plenocli.progress import log, shown
 from plenocli.stitch import PrismRig
-
-CHANNELS = ("R", "G", "B")
-
-
-def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
-    """(view name, page indices) in page order; see the module docstring for the rules."""
-    if names == list(CHANNELS):
-        return [(stem, [0, 1, 2])]
-    groups: dict[str, list[int]] = {}
-    for k, name in enumerate(names):
-        view, dot, channel = name.rpartition(".")
-        groups.setdefault(view if dot and channel in CHANNELS else name, []).append(k)
-    if len(groups) == 1:
-        return [(stem, next(iter(groups.values())))]
-    return list(groups.items())
 
 
 def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
@@ -68,14 +55,16 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
             first_meta = meta
         framing = active_area(meta, data.shape[1:])  # the light-sensitive area only
         data, top, left = framing.crop(data), framing.top, framing.left
-        names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-        for name, pages in _view_groups(names, Path(path).stem):
+        for name, pages in ViewNames.of(meta, data.shape[0]).groups(Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
             wb = (meta.get("colour") or {}).get("as_shot_wb")
             found.append((name, (path, data, pages, cfa, wb)))
     if views:
         by_name = dict(found)
+        # a page number (one input file) picks the view holding that page
+        numbers = {str(src[2][0]): name for name, src in found} if len(inputs) == 1 else {}
         wanted = [v.strip() for v in views.split(",") if v.strip()]
+        wanted = [v if v in by_name else numbers.get(v, v) for v in wanted]
         check_named_once(wanted)
         missing = [v for v in wanted if v not in by_name]
         if missing:
