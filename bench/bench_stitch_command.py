@@ -21,7 +21,10 @@ Memory: peak RSS of the command as a multiple of the bytes of the views (float32
 panorama (float32 RGB). Run ``uptime`` first: the ratios are meaningful on a loaded machine,
 the seconds are not.
 
-    PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10]
+With ``--baseline COMMIT`` the same command (and batch) by that commit's code is timed after,
+in the same run, and the largest difference of the shifts printed.
+
+    PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10] [--baseline C]
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bench.timing import ROOT, best_time
+from bench.timing import ROOT, best_time, export_package
 
 RIG = ROOT / "configs" / "rigs" / "dualpixel_prism.yaml"
 
@@ -56,12 +59,13 @@ def capture(folder: Path, pixels: int) -> Path:
     return folder / "views.tif"
 
 
-def command(views: Path, out: Path, *extra: str) -> tuple[float, float]:
-    """Wall seconds and peak RSS (bytes) of one ``plenocli stitch`` child process."""
+def command(views: Path, out: Path, *extra: str, root: Path = ROOT) -> tuple[float, float]:
+    """Wall seconds and peak RSS (bytes) of one ``plenocli stitch`` child process (the package
+    under ``root``)."""
     argv = [sys.executable, "-m", "plenocli", "stitch", str(views), "--views", "A,B", "--rig",
             str(RIG), "-o", str(out), *extra]
     start = time.perf_counter()
-    proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    proc = subprocess.Popen(argv, cwd=root, env={**os.environ, "PYTHONPATH": str(root)},
                             stderr=subprocess.PIPE)
     _, status, usage = os.wait4(proc.pid, 0)
     seconds = time.perf_counter() - start
@@ -113,11 +117,36 @@ def floors(views: Path, report: dict, repeat: int) -> dict:
             "view_px": float(rows * cols)}
 
 
+def batch(views: Path, folder: Path, transform: Path, n: int, root: Path = ROOT) -> float:
+    """Seconds per capture of ``n`` commands reapplying a saved transform."""
+    start = time.perf_counter()
+    for k in range(n):
+        command(views, folder / f"batch{k}.tif", "--transform-in", str(transform), root=root)
+    return (time.perf_counter() - start) / n
+
+
+def baseline(views: Path, folder: Path, commit: str, n_batch: int, report: dict) -> None:
+    """The same command (and batch) by the code of ``commit``, in the same run."""
+    (folder / "baseline").mkdir()
+    root = export_package(commit, folder / "baseline")
+    rep_file, transform = folder / "report_baseline.json", folder / "transform_baseline.json"
+    t_cmd, rss = command(views, folder / "pano_baseline.tif", "--report", str(rep_file),
+                         "--transform-out", str(transform), root=root)
+    shifts = np.array(json.loads(rep_file.read_text())["shifts_px"])
+    moved = float(np.abs(shifts - np.array(report["shifts_px"])).max())
+    print(f"baseline {commit} command  {t_cmd:7.2f} s   peak RSS {rss / 2**20:6.0f} MiB; "
+          f"shifts differ by {moved:.4f} px at most")
+    if n_batch:
+        print(f"baseline batch            {batch(views, folder, transform, n_batch, root):7.2f}"
+              " s per capture")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pixels", type=int, default=3072)
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--batch", type=int, default=0)
+    parser.add_argument("--baseline", default=None, help="a commit whose command is timed too")
     args = parser.parse_args()
     print("load:", os.getloadavg(), f"OpenCV threads {cv2.getNumThreads()}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -142,13 +171,12 @@ def main() -> None:
               f"floor = {t_cmd / base['footprint']:.2f} x; (command - demosaic) / footprint "
               f"floor = {(t_cmd - base['demosaic']) / base['footprint']:.2f} x")
         if args.batch:
-            start = time.perf_counter()
-            for k in range(args.batch):
-                command(views, folder / f"batch{k}.tif", "--transform-in", str(transform))
-            per = (time.perf_counter() - start) / args.batch
+            per = batch(views, folder, transform, args.batch)
             print(f"batch of {args.batch} with --transform-in: {per:.2f} s per capture = "
                   f"{per / base['footprint']:.2f} x the footprint floor, "
                   f"{(per - base['demosaic']) / base['footprint']:.2f} x without the demosaic")
+        if args.baseline:
+            baseline(views, folder, args.baseline, args.batch, report)
         print("load:", os.getloadavg())
 
 

@@ -102,8 +102,6 @@ def test_every_command_names_unnamed_pages_alike(unnamed):
     _run("crosstalk", d / "views.tif", "--intended", "0", "-o", d / "c1.json")
 
 
-@pytest.mark.xfail(strict=True, reason="stages/stitch.py still names unnamed pages '0', '1' "
-                   "(its owner: names = ViewNames.of(meta, pages)); remove this mark then")
 def test_stitch_names_unnamed_pages_alike(unnamed):
     d = unnamed
     _run("stitch", d / "views.tif", "-o", d / "p.tif", "--report", d / "s.json")

@@ -9,7 +9,9 @@ view's weight is its alone, so the normalisation leaves it as resampled.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -22,6 +24,7 @@ from plenocli.stitch.views import translation_matrix
 from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, feather, resample
 
 Box = tuple[slice, slice]
+BLEND_WORKERS = 2  # bands resampled while the next band's maps are computed
 
 
 def place(frame_to_ref: list[np.ndarray], view_shape: tuple[int, int], *, k1: float = 0.0,
@@ -134,23 +137,36 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
           gains: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Feathered panorama (C, rows, cols) float32 (NaN where no view covers) and its weight sum:
     each view resampled once through its map, band by band, weighted by its distance to its
-    edge."""
+    edge.
+
+    The maps of a band are computed here while worker threads resample the bands before it
+    (numpy and OpenCV release the GIL); the bands are added in their order, so the sums are
+    those of a serial loop."""
     n_chan = views[0].shape[0]
     panorama = np.zeros((n_chan,) + shape, np.float32)
     total = np.zeros(shape, np.float32)
-    for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
-        bands = list(vmap.bands(box))
-        gain = gains[k].astype(np.float32)[:, None, None]
-        for j, (band, mx, my, lost) in enumerate(bands):
-            step(f"warping view {k + 1} of {len(views)}, band {j + 1} of {len(bands)}")
-            rows = slice(box[0].start + band.start, box[0].start + band.stop)
-            weight = feather(mx, my, vmap.view_shape, lost, holes[k])
-            img = resample(view, mx, my)
-            if (gain != 1).any():
-                img *= gain
-            img *= weight
-            panorama[:, rows, box[1]] += img
-            total[rows, box[1]] += weight
+    pending: deque = deque()
+
+    def add_oldest() -> None:
+        rows, cols, job = pending.popleft()
+        img, weight = job.result()
+        panorama[:, rows, cols] += img
+        total[rows, cols] += weight
+
+    with ThreadPoolExecutor(max_workers=BLEND_WORKERS) as pool:
+        for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
+            gain = gains[k].astype(np.float32)[:, None, None]
+            n_bands = vmap.n_bands(box)
+            for j, (band, mx, my, lost) in enumerate(vmap.bands(box)):
+                step(f"warping view {k + 1} of {len(views)}, band {j + 1} of {n_bands}")
+                rows = slice(box[0].start + band.start, box[0].start + band.stop)
+                job = pool.submit(_weighted_band, view, mx, my, lost, vmap.view_shape,
+                                  holes[k], gain)
+                pending.append((rows, box[1], job))
+                while len(pending) > BLEND_WORKERS:
+                    add_oldest()
+        while pending:
+            add_oldest()
     step("normalising the blend")
     for r0 in range(0, shape[0], max(1, (1 << 18) // shape[1])):
         rows = slice(r0, r0 + max(1, (1 << 18) // shape[1]))
@@ -158,6 +174,18 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
         panorama[:, rows] *= 1.0 / np.maximum(t, 1e-12)
         panorama[:, rows][:, t <= 0] = np.nan
     return panorama, total
+
+
+def _weighted_band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape,
+                   hole, gain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A band of a view resampled at its maps, times its gains and feather weight; the
+    weight."""
+    weight = feather(mx, my, view_shape, lost, hole)
+    img = resample(view, mx, my)
+    if (gain != 1).any():
+        img *= gain
+    img *= weight
+    return img, weight
 
 
 def multiband_blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],

@@ -173,7 +173,8 @@ def _pyramid_level(fa, fb, valid_a, valid_b, level: int):
 def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
                       max_points: int = 400_000, iterations: int = 30, degree: int = 4,
                       tol_px: float = 1e-3,
-                      motion: str = "homography") -> tuple[np.ndarray, dict]:
+                      motion: str = "homography", pyramid: bool = True
+                      ) -> tuple[np.ndarray, dict]:
     """Refine a homography by direct photometric least squares over the whole overlap.
 
     Inverse-compositional Gauss-Newton (Baker-Matthews) on ``a(x) = p(x) b(H^-1 x) + o``, with
@@ -192,6 +193,8 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
     degree : degree of the photometric ratio polynomial.
     tol_px : stop when the update moves the overlap's corners by less than this (px).
     motion : "homography" (8 parameters) or "translation" (only the shift is updated).
+    pyramid : start on the coarse levels; False fits at full resolution only (a shift already
+        within a pixel converges there as well: the coarse levels add time, not accuracy).
 
     Returns
     -------
@@ -211,7 +214,7 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
     fa = fill_nan(np.asarray(a, np.float64))
     fb = fill_nan(np.asarray(b, np.float64))
     h = np.asarray(h_ab, np.float64) / h_ab[2, 2]
-    levels = int(max(0, np.ceil(np.log2(max(a.shape) / 1024))))
+    levels = int(max(0, np.ceil(np.log2(max(a.shape) / 1024)))) if pyramid else 0
     info: dict = {}
     for level in range(levels, -1, -1):
         la, lb, va, vb = _pyramid_level(fa, fb, valid_a, valid_b, level)

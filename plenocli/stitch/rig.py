@@ -381,8 +381,7 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         band = slice(r0, min(r0 + step, rows))
         first_y, weights_y = _cubic_weights(band.stop, pitch)
         first_y, weights_y = first_y[band], weights_y[band]
-        vx, vy = (sum(a[first_y + j] * weights_y[:, j, None] for j in range(4))
-                  for a in along_x)
+        vx, vy = (_along_y(a, first_y, weights_y) for a in along_x)
         exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
         if exact.any():
             ys, xs = np.nonzero(exact)
@@ -391,6 +390,20 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         bad = ~(np.isfinite(vx) & np.isfinite(vy))
         yield (band, np.where(bad, -10, vx).astype(np.float32),
                np.where(bad, -10, vy).astype(np.float32), bad)
+
+
+def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rows of node values (nodes y, cols) interpolated to a band's rows (``first`` stencil node
+    and 4 weights per row, ``first`` non-decreasing): the rows sharing a stencil at once, from
+    node rows as they are (no gathered copies)."""
+    out = np.empty((len(first), along_x.shape[1]))
+    starts = np.flatnonzero(np.diff(first, prepend=first[0] - 1))
+    for lo, hi in zip(starts, np.append(starts[1:], len(first)), strict=True):
+        node, part = int(first[lo]), out[lo:hi]
+        np.multiply(weights[lo:hi, 0, None], along_x[node], out=part)
+        for j in range(1, 4):
+            part += weights[lo:hi, j, None] * along_x[node + j]
+    return out
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,

@@ -173,7 +173,8 @@ def _ecc_subpixel(a: np.ndarray, b: np.ndarray, dy0: int, dx0: int) -> tuple[flo
 
 # pixels of the overlap the polish fits a shift on: two parameters are fixed within ~0.002 px by
 # 1e5 textured pixels (4e5, the homography's budget, moved the demo's shifts by < 0.002 px and
-# took four times as long)
+# took four times as long); fitted at full resolution only: its start (ECC or the template's
+# sub-pixel peak) is within a pixel, where coarse levels add time, not accuracy
 POLISH_POINTS = 100_000
 
 
@@ -185,7 +186,8 @@ def _photometric_polish(a: np.ndarray, b: np.ndarray, dy: float, dx: float,
     try:
         (sa, sb), (off_y, off_x) = _translation_crops(a.shape, b.shape, dy, dx)
         shifted, _ = refine_homography(a[sa], b[sb], translation_matrix(dy - off_y, dx - off_x),
-                                       motion="translation", max_points=POLISH_POINTS)
+                                       motion="translation", max_points=POLISH_POINTS,
+                                       pyramid=False)
     except ValueError:
         return dy, dx, method
     ry, rx = float(shifted[1, 2]) + off_y, float(shifted[0, 2]) + off_x

@@ -1,8 +1,9 @@
 """Stage ``stitch``: 2 or 4 views (from one or more TIFFs) -> extended-FOV panorama + report.
 
-Views are found by page name: a page ``VIEW.CHANNEL`` (``S00.R``, ``S00.G``, ...) is one channel
-of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is a view of its
-own. A file that holds a single view (e.g. a left or right refocused image) names it after the
+Views are found by page name (:class:`plenocli.model.views.ViewNames`: a page ``VIEW.CHANNEL``
+is one channel of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is
+a view of its own; unnamed pages are ``view0``, ``view1``, ...; ``--views`` takes a page number
+too). A file that holds a single view (e.g. a left or right refocused image) names it after the
 file (``left.tif`` -> ``left``). A single-page Bayer view is demosaiced
 (``plenocli.colour.demosaic``, the default method) and stitched as full-resolution camera RGB;
 clipped (NaN) pixels stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
@@ -27,23 +28,9 @@ from plenocli.io.preview import write_png
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
+from plenocli.model.views import CHANNELS, ViewNames
 from plenocli.progress import log, shown
 from plenocli.stitch import PrismRig
-
-CHANNELS = ("R", "G", "B")
-
-
-def _view_groups(names: list[str], stem: str) -> list[tuple[str, list[int]]]:
-    """(view name, page indices) in page order; see the module docstring for the rules."""
-    if names == list(CHANNELS):
-        return [(stem, [0, 1, 2])]
-    groups: dict[str, list[int]] = {}
-    for k, name in enumerate(names):
-        view, dot, channel = name.rpartition(".")
-        groups.setdefault(view if dot and channel in CHANNELS else name, []).append(k)
-    if len(groups) == 1:
-        return [(stem, next(iter(groups.values())))]
-    return list(groups.items())
 
 
 def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
@@ -60,7 +47,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32, their names, whether
     any was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata.
     Only the views wanted are demosaiced, one at a time, straight into the stack."""
-    found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa))
+    found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
         data, meta = tiffio.read_image(path)
@@ -68,13 +55,16 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
             first_meta = meta
         framing = active_area(meta, data.shape[1:])  # the light-sensitive area only
         data, top, left = framing.crop(data), framing.top, framing.left
-        names = list(meta.get("views") or [str(k) for k in range(data.shape[0])])
-        for name, pages in _view_groups(names, Path(path).stem):
+        for name, pages in ViewNames.of(meta, data.shape[0]).groups(Path(path).stem):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
-            found.append((name, (path, data, pages, cfa)))
+            wb = (meta.get("colour") or {}).get("as_shot_wb")
+            found.append((name, (path, data, pages, cfa, wb)))
     if views:
         by_name = dict(found)
+        # a page number (one input file) picks the view holding that page
+        numbers = {str(src[2][0]): name for name, src in found} if len(inputs) == 1 else {}
         wanted = [v.strip() for v in views.split(",") if v.strip()]
+        wanted = [v if v in by_name else numbers.get(v, v) for v in wanted]
         check_named_once(wanted)
         missing = [v for v in wanted if v not in by_name]
         if missing:
@@ -93,7 +83,7 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
     return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
 
 
-def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None) -> tuple:
+def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None, wb) -> tuple:
     """The shape of a view once loaded: (3, rows, cols) demosaiced, else its pages'."""
     if cfa:
         return (3,) + data.shape[1:]
@@ -101,13 +91,14 @@ def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None) 
 
 
 def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: list[int],
-               cfa: str | None) -> None:
-    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB."""
+               cfa: str | None, wb) -> None:
+    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB (balanced by the
+    capture's as-shot white balance while interpolating, when the metadata has one)."""
     if not cfa:
         out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
         return
     try:
-        rgb = demosaic(data[pages[0]], cfa)
+        rgb = demosaic(data[pages[0]], cfa, gains=wb)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
     for c in range(3):
