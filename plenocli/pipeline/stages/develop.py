@@ -18,6 +18,7 @@ from plenocli.io.atomic import outputs_together, write_bytes
 from plenocli.io.framing import active_area
 from plenocli.model import colour as colour_matrix
 from plenocli.model.provenance import json_safe, stage_record
+from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
 
 PREVIEW_SIDE = 1024
@@ -87,7 +88,7 @@ def _read(path: str) -> tuple[np.ndarray, dict, str | None, list[str]]:
     and the view names."""
     data, meta = tiffio.read_image(path)
     framing = active_area(meta, data.shape[1:])
-    names = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    names = list(ViewNames.of(meta, data.shape[0]).pages)
     return framing.crop(_levels(data, meta)), meta, framing.cfa, names
 
 

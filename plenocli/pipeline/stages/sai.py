@@ -10,6 +10,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import active_area, frame_grid
 from plenocli.io.preview import view_mosaic, write_png
 from plenocli.model.provenance import stage_record
+from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
 
 
@@ -22,7 +23,7 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
         raise ConfigError(f"unknown --cfa-layout {cfa_layout!r}; choose one of "
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
-    pages = list(meta.get("views") or [f"view{k}" for k in range(data.shape[0])])
+    pages = list(ViewNames.of(meta, data.shape[0]).pages)
     _check_sensor_image(input, meta, pages, cfa_layout)
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
