@@ -14,26 +14,17 @@ cv2.remap INTER_CUBIC of both views (the baseline: one full-size warp per view).
 from __future__ import annotations
 
 import argparse
-import time
 
 import cv2
 import numba
 import numpy as np
 
+from bench.timing import best_time
 from plenocli.depth.lenslet import depth_map
 from plenocli.depth.views import disparity_x
 from plenocli.model.lensgrid import LensGrid
 from plenocli.refocus import refocus
 from plenocli.synth.depthscene import lenslet_depth_frame
-
-
-def best_time(func, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def lenslet(repeat: int) -> None:
@@ -43,8 +34,8 @@ def lenslet(repeat: int) -> None:
     frame = lenslet_depth_frame(grid, (rows, cols), planes, s=0.2, seed=1)
     depth_map(frame[:400, :400], grid, s=0.2)  # numba compile / cache
     refocus(frame[:400, :400], grid, s=0.2, g=4.0)
-    t_depth = best_time(lambda: depth_map(frame, grid, s=0.2), repeat)
-    t_ref = best_time(lambda: refocus(frame, grid, s=0.2, g=4.0), repeat)
+    t_depth = best_time(lambda: depth_map(frame, grid, s=0.2), repeat)[0]
+    t_ref = best_time(lambda: refocus(frame, grid, s=0.2, g=4.0), repeat)[0]
     result = depth_map(frame, grid, s=0.2)
     known = np.isfinite(result.g)
     print(f"lenslet {cols} x {rows} ({rows * cols / 1e6:.1f} Mpx), pitch 20.2, plane g = 4")
@@ -68,10 +59,10 @@ def dual_pixel(repeat: int) -> None:
     yy = np.ascontiguousarray(np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None],
                                               (rows, cols)))
     disparity_x(a[:256, :256], b[:256, :256])
-    t_dp = best_time(lambda: disparity_x(a, b), repeat)
+    t_dp = best_time(lambda: disparity_x(a, b), repeat)[0]
     map_x = np.ascontiguousarray(xx + 0.3)
     t_remap = best_time(lambda: [cv2.remap(v, map_x, yy, cv2.INTER_CUBIC) for v in (a, b)],
-                        repeat)
+                        repeat)[0]
     d = disparity_x(a, b).disparity
     print(f"dual pixel {cols} x {rows} ({rows * cols / 1e6:.1f} Mpx), true disparity 1.3 px")
     print(f"  disparity : {t_dp:.3f} s  (median {np.nanmedian(d):.3f} px)  (target <= 10 s)")

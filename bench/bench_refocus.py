@@ -16,26 +16,18 @@ from __future__ import annotations
 
 import argparse
 import resource
-import time
 import tracemalloc
 
 import cv2
 import numba
 import numpy as np
 
+from bench.timing import best_time
 from plenocli.model.lensgrid import LensGrid
 from plenocli.refocus import refocus
 
 ROWS, COLS = 4480, 6720
 
-
-def best_time(func, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:
@@ -52,7 +44,7 @@ def main() -> None:
     def splat():
         return refocus(frame, grid, s=0.2, g=4.0, kernel="lanczos3")
 
-    t_splat = best_time(splat, args.repeat)
+    t_splat = best_time(splat, args.repeat)[0]
     tracemalloc.start()
     image, _ = splat()
     _, traced_peak = tracemalloc.get_traced_memory()
@@ -67,7 +59,7 @@ def main() -> None:
     def remap():
         return cv2.remap(frame, map_x, map_y, cv2.INTER_LANCZOS4)
 
-    t_remap = best_time(remap, args.repeat)
+    t_remap = best_time(remap, args.repeat)[0]
     mpx = ROWS * COLS / 1e6
     print(f"frame {COLS} x {ROWS} float32 ({mpx:.1f} Mpx), hex pitch 20.2 px, s = 0.2, g = 4")
     print(f"threads: numba {numba.get_num_threads()}, OpenCV {cv2.getNumThreads()}")
