@@ -4,10 +4,11 @@ Views are found by page name (:class:`plenocli.model.views.ViewNames`: a page ``
 is one channel of view ``VIEW``; pages exactly ``R, G, B`` are one colour view; any other page is
 a view of its own; unnamed pages are ``view0``, ``view1``, ...; ``--views`` takes a page number
 too). A file that holds a single view (e.g. a left or right refocused image) names it after the
-file (``left.tif`` -> ``left``). A single-page Bayer view is demosaiced
-(``plenocli.colour.demosaic``, the default method) and stitched as full-resolution camera RGB;
-clipped (NaN) pixels stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
-gives it the camera's white balance and colour matrix.
+file (``left.tif`` -> ``left``). A single-page Bayer view is made camera RGB as develop makes it
+(``plenocli.colour.develop.camera_rgb``: the default demosaic, pixels clipped in some channels
+rebuilt) and stitched at full resolution; pixels clipped in every channel stay NaN. The panorama
+keeps the capture's colour metadata, so ``develop`` gives it the camera's white balance and colour
+matrix.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import stitch as stitch_lib
-from plenocli.colour.demosaic import demosaic
+from plenocli.colour.develop import ColourView, camera_rgb
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
@@ -92,13 +93,14 @@ def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None, 
 
 def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: list[int],
                cfa: str | None, wb) -> None:
-    """Write one view into ``out``: its pages, or its mosaic demosaiced to RGB (balanced by the
-    capture's as-shot white balance while interpolating, when the metadata has one)."""
+    """Write one view into ``out``: its pages, or its mosaic made camera RGB as develop makes it
+    (balanced by the capture's as-shot white balance while interpolating, when the metadata has
+    one; pixels clipped in some channels only rebuilt, so a panorama keeps their colour)."""
     if not cfa:
         out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
         return
     try:
-        rgb = demosaic(data[pages[0]], cfa, gains=wb)
+        rgb = camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
     for c in range(3):
