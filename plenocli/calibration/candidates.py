@@ -17,6 +17,7 @@ import cv2
 import numba
 import numpy as np
 import scipy.fft
+from scipy.optimize import minimize
 
 from plenocli.model.lensgrid import LATTICES
 
@@ -69,8 +70,6 @@ class Lattice:
                 fatol: float) -> Lattice:
         """The local maximum of ``score(lattice)`` near this lattice: Nelder-Mead in (log
         pitch, angle) from a simplex of ``step`` on each axis."""
-        from scipy.optimize import minimize  # only calibrate climbs: keep other starts light
-
         def cost(p):
             return -score(Lattice(self.kind, self.pitch_px * np.exp(p[0]), self.angle_rad + p[1]))
 

@@ -68,6 +68,19 @@ class DepthMap:
     lenses: LensDepth
 
 
+def sensor_grey(pages: np.ndarray, *, mosaic: bool) -> np.ndarray:
+    """One grey sensor image (rows, cols) float32 of (P, rows, cols) pages: their mean; a Bayer
+    mosaic through the 3 x 3 binomial, which weighs R, G, B alike (1/4, 1/2, 1/4) at every
+    pixel and shifts nothing."""
+    import cv2
+
+    grey = np.asarray(pages, np.float32).mean(axis=0)
+    if mosaic:
+        taps = np.array([0.25, 0.5, 0.25], np.float32)
+        grey = cv2.sepFilter2D(grey, -1, taps, taps, borderType=cv2.BORDER_REFLECT)
+    return grey
+
+
 def lens_table(grid: LensGrid, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """(indices (K, 2), centres (K, 2)) of the lenses of ``grid`` whose centre lies in a
     (rows, cols) image: refined centres where the grid has them."""

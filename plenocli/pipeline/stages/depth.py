@@ -11,6 +11,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
 from plenocli.model.provenance import stage_record
+from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
@@ -82,26 +83,14 @@ def _camera(path: str) -> metric.Camera:
         raise InputError(f"{path}: {err}") from err
 
 
-def _grey(data: np.ndarray, meta: dict, framing) -> np.ndarray:
-    """One grey sensor image: the mean of the pages; a Bayer mosaic through the 3 x 3 binomial,
-    which weighs R, G, B alike (1/4, 1/2, 1/4) at every pixel and shifts nothing."""
-    import cv2
-
-    page = framing.crop(data).astype(np.float32).mean(axis=0)
-    if framing.cfa:
-        page = cv2.sepFilter2D(page, -1, np.array([0.25, 0.5, 0.25], np.float32),
-                               np.array([0.25, 0.5, 0.25], np.float32),
-                               borderType=cv2.BORDER_REFLECT)
-    return page
-
-
 def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     from plenocli import refocus as rf
 
     framing = frame_grid(grid_path, meta, data.shape[1:], frames_path=input)
     try:
         rf.check_output_size(framing.shape, s, pages=2)
-        result = lenslet.depth_map(_grey(data, meta, framing), framing.grid, s=s,
+        grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
+        result = lenslet.depth_map(grey, framing.grid, s=s,
                                    g_range=g_range, min_confidence=min_confidence)
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
@@ -120,7 +109,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
 
 
 def _views(input, data, meta, max_disparity):
-    names = list(meta.get("views") or [])
+    names = list(ViewNames.of(meta, data.shape[0]).pages)
     have = {n: k for k, n in enumerate(names)}
     try:
         if all(n in have for n in QUAD):
@@ -133,7 +122,7 @@ def _views(input, data, meta, max_disparity):
             d = views.disparity_x(data[have["A"]], data[have["B"]], max_disparity=max_disparity)
             pages, out = [d.disparity, d.confidence], ["disparity", "confidence"]
         else:
-            raise InputError(f"{input} holds views {names or 'without names'}; depth needs "
+            raise InputError(f"{input} holds views {', '.join(names)}; depth needs "
                              "dual-pixel views A, B, quad-pixel SAIs S00, S01, S10, S11, or "
                              "lenslet frames with --grid")
     except ValueError as err:
