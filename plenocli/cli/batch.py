@@ -1,15 +1,16 @@
 import click
 
 from plenocli.cli import options
+from plenocli.pipeline.validators import FiniteFloat, InputFile, OutputFolder
 
 
 @click.command(short_help="Run a pipeline template over many captures, in parallel.")
-@click.argument("config", type=options.InputFile())
+@click.argument("config", type=options.Declared(InputFile()))
 @click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Worker processes on this machine [default: number of CPUs].")
-@click.option("--out", type=options.OutputFolder(), default=None,
+@click.option("--out", type=options.Declared(OutputFolder()), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="Say what would run, run nothing.")
@@ -18,9 +19,9 @@ from plenocli.cli import options
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Send the captures to this dask.distributed scheduler (tcp://host:8786) "
                    "instead of local processes; needs pip install 'plenocli[dask]'.")
-@click.option("--timeout", type=options.FiniteFloat(min=0, min_open=True), default=None,
-              metavar="SECONDS", help="Stop a capture that runs longer than this in its worker "
-              "and report it as failed.")
+@click.option("--timeout", type=options.Declared(FiniteFloat(min=0, min_open=True)),
+              default=None, metavar="SECONDS", help="Stop a capture that runs longer than "
+              "this in its worker and report it as failed.")
 @options.stage_command
 def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, timeout):
     """Run the pipeline template CONFIG over many captures.

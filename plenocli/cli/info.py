@@ -1,10 +1,11 @@
 import click
 
 from plenocli.cli import options
+from plenocli.pipeline.validators import InputFile
 
 
 @click.command(short_help="Show what a raw, plenocli TIFF, lens grid or XML file holds.")
-@click.argument("file", type=options.InputFile())
+@click.argument("file", type=options.Declared(InputFile()))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON (for scripts).")
 @options.stage_command
 def info(file, as_json):

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import math
-import os
 import signal
 import sys
 import warnings
@@ -13,123 +11,65 @@ import warnings
 import click
 
 from plenocli.errors import PlenocliError, Terminated, os_error_message
+from plenocli.pipeline.params import Param
+from plenocli.pipeline.validators import Validator
 from plenocli.progress import configure, working
 
-TIFF = (".tif", ".tiff")
 
+class Declared(click.ParamType):
+    """The one adapter from a validator (:mod:`plenocli.pipeline.validators`) to click: its
+    ValueError becomes click's usage error (exit 2, "Invalid value for '--x': ...")."""
 
-class OutputFile(click.Path):
-    """A file a command writes, whose name must end in one of ``suffixes`` (any case): a name
-    saying another format (a preview named .jpg, frames named .png) would hold what it does not
-    say, and the make-style runner reads outputs by their suffix."""
+    def __init__(self, validator: Validator):
+        self.validator = validator
+        self.name = validator.name
 
-    def __init__(self, *suffixes: str):
-        super().__init__(dir_okay=False)
-        self.suffixes = suffixes
-
-    def convert(self, value, param, ctx):
-        value = super().convert(value, param, ctx)
-        if os.path.splitext(str(value))[1].lower() not in self.suffixes:
-            self.fail(f"{str(value)!r} is written as {self.suffixes[0][1:].upper()}; give a name "
-                      f"ending in {' or '.join(self.suffixes)}", param, ctx)
-        return value
-
-
-class InputFile(click.Path):
-    """A file a command reads. A folder is a usage error (exit 2), like any value of the wrong
-    kind; whether the file is there and can be read is the reader's to say (exit 1 with the
-    reason), as for a file that turns out to be damaged."""
-
-    def __init__(self):
-        super().__init__(dir_okay=False, readable=False)
+    def get_metavar(self, param, ctx):
+        choices = self.validator.choices
+        if choices is None:
+            return None
+        if param.required and param.param_type_name == "argument":
+            return "{" + "|".join(choices) + "}"
+        return "[" + "|".join(choices) + "]"
 
     def convert(self, value, param, ctx):
-        if str(value) == "":
-            self.fail("the file name is empty", param, ctx)
-        return super().convert(value, param, ctx)
-
-
-class OutputFolder(click.Path):
-    """A folder a command writes into (made when missing); an empty name would be the current
-    folder, which no one means."""
-
-    def __init__(self):
-        super().__init__(file_okay=False)
-
-    def convert(self, value, param, ctx):
-        if str(value) == "":
-            self.fail("the folder name is empty", param, ctx)
-        return super().convert(value, param, ctx)
-
-
-def output_option(*suffixes: str):
-    """The -o/--output option of a command whose output is a file of one of ``suffixes``
-    (any file name when none is given: the command checks it)."""
-    return click.option("-o", "--output", required=True,
-                        type=OutputFile(*suffixes) if suffixes else click.Path(dir_okay=False),
-                        help="Output file (written atomically).")
-
-
-output_opt = output_option(*TIFF)
-preview_opt = click.option("--preview", type=OutputFile(".png"), default=None,
-                           help="Also write a PNG preview here.")
-input_arg = click.argument("input", type=InputFile())
-
-
-class RowsCols(click.ParamType):
-    """A size ROWSxCOLS of positive whole numbers, e.g. 2000x2000 (kept as that text)."""
-
-    name = "ROWSxCOLS"
-
-    def convert(self, value, param, ctx):
-        text = str(value).strip().lower()
-        rows, sep, cols = text.partition("x")
-        if not (sep and rows.isdigit() and cols.isdigit() and int(rows) > 0 and int(cols) > 0):
-            self.fail(f"{value!r} is not ROWSxCOLS (e.g. 2000x2000)", param, ctx)
-        return f"{int(rows)}x{int(cols)}"
-
-
-class FiniteFloat(click.ParamType):
-    """A finite float, optionally bounded: NaN and infinities are refused (click's FloatRange
-    lets NaN through, since every comparison with NaN is false).
-
-    ``min_open``/``max_open`` make a bound exclusive, e.g. ``FiniteFloat(min=0, min_open=True)``
-    for a strictly positive value.
-    """
-
-    name = "float"
-
-    def __init__(self, min: float | None = None, max: float | None = None, *,
-                 min_open: bool = False, max_open: bool = False):
-        self.min, self.max, self.min_open, self.max_open = min, max, min_open, max_open
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, bool):
-            self.fail(f"{value!r} is not a number", param, ctx)
         try:
-            number = float(value)
-        except (TypeError, ValueError):
-            self.fail(f"{value!r} is not a number", param, ctx)
-        if not math.isfinite(number):
-            self.fail(f"{value!r} is not a finite number", param, ctx)
-        low_bad = self.min is not None and (number <= self.min if self.min_open
-                                            else number < self.min)
-        high_bad = self.max is not None and (number >= self.max if self.max_open
-                                             else number > self.max)
-        if low_bad or high_bad:
-            self.fail(f"{number:g} is not in the range {self._describe()}", param, ctx)
-        return number
+            return self.validator.convert(value)
+        except ValueError as err:
+            self.fail(str(err), param, ctx)
 
-    def _describe(self) -> str:
-        parts = []
-        if self.min is not None:
-            parts.append(f"x{'>' if self.min_open else '>='}{self.min:g}")
-        if self.max is not None:
-            parts.append(f"x{'<' if self.max_open else '<='}{self.max:g}")
-        return " and ".join(parts) or "of finite numbers"
 
-    def __repr__(self) -> str:
-        return f"FiniteFloat({self._describe()})"
+class DeclaredOption(click.Option):
+    """An option whose --help shows its validator's range, as click's IntRange does."""
+
+    def get_help_extra(self, ctx):
+        extra = super().get_help_extra(ctx)
+        range_help = getattr(self.type, "validator", None) and self.type.validator.range_help
+        if range_help:
+            extra["range"] = range_help
+        return extra
+
+
+def declared(params: tuple[Param, ...]):
+    """Decorator: the click arguments and options of a stage's declared ``params``, in order."""
+
+    def decorate(func):
+        for p in reversed(params):
+            kind = Declared(p.type)
+            if p.positional:
+                func = click.argument(p.name, type=kind, required=p.required,
+                                      nargs=-1 if p.multiple else 1, metavar=p.metavar)(func)
+            elif p.is_flag:
+                func = click.option(*p.flags, p.name, is_flag=True, default=bool(p.default),
+                                    help=p.help)(func)
+            else:
+                func = click.option(*p.flags, p.name, cls=DeclaredOption, type=kind,
+                                    default=p.default, required=p.required,
+                                    multiple=p.multiple, metavar=p.metavar, help=p.help,
+                                    show_default=p.default is not None)(func)
+        return func
+
+    return decorate
 
 
 def stage_command(func):
@@ -179,11 +119,15 @@ def stage_command(func):
 
 
 def _stage_edge(name: str, params: dict):
-    """The registered stage's guard (output checks, outputs landing together), if any."""
+    """The registered stage's check across parameters, then its guard (output checks, outputs
+    landing together); none for a command that is not a stage."""
     from plenocli.pipeline.registry import get_stages
 
     stage = get_stages().get(name)
-    return stage.guard(params) if stage is not None else contextlib.nullcontext()
+    if stage is None:
+        return contextlib.nullcontext()
+    stage.check(params)
+    return stage.guard(params)
 
 
 @contextlib.contextmanager

@@ -1,15 +1,16 @@
 import click
 
 from plenocli.cli import options
+from plenocli.pipeline.validators import InputFile, OutputFolder
 
 
 @click.command(short_help="Run a pipeline config (make-style).")
-@click.argument("config", type=options.InputFile())
+@click.argument("config", type=options.Declared(InputFile()))
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
 @click.option("--dry-run", is_flag=True, help="List what would run, run nothing.")
 @click.option("--set", "overrides", multiple=True, metavar="STEP.PARAM=VALUE",
               help="Override a step parameter (repeatable), e.g. --set bias.smooth=9.")
-@click.option("--out", type=options.OutputFolder(), default=None,
+@click.option("--out", type=options.Declared(OutputFolder()), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--print-make", is_flag=True,
               help="Print the pipeline as a Makefile fragment (stdout) instead of running it.")

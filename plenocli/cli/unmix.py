@@ -1,21 +1,11 @@
 import click
 
 from plenocli.cli import options
+from plenocli.pipeline.schema import unmix as schema
 
 
 @click.command(short_help="Remove sub-aperture cross-talk (ghosts) with a measured mixing.")
-@click.argument("inputs", nargs=-1, required=True, type=options.InputFile())
-@options.output_opt
-@click.option("--mixing", required=True, type=options.InputFile(),
-              help="Mixing file from plenocli crosstalk --mixing-out (masked whites of this rig, "
-                   "processed like these views).")
-@click.option("--regularise", type=options.FiniteFloat(min=0.0, max=1.0), default=0.0,
-              show_default=True,
-              help="Tikhonov lambda (units of M, diagonal 1): damps ill-conditioned pixels; "
-                   "0 = exact inverse.")
-@click.option("--noise-map", type=options.OutputFile(*options.TIFF), default=None,
-              help="Also write the per-pixel noise gain of every unmixed view (TIFF).")
-@options.preview_opt
+@options.declared(schema.PARAMS)
 @options.stage_command
 def unmix(**params):
     """Solve, per pixel, the mixing O_k = sum_j M_kj T_j of the views for the clean views T.

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from plenocli.errors import ConfigError
 from plenocli.pipeline.config import Step
+from plenocli.pipeline.params import shell_words
 from plenocli.pipeline.runner import check_inputs
 
 _UNSAFE = re.compile(r"[^\w.+,@~/-]")  # spaces, :, =, $, #, quotes, globs: not in make names
@@ -69,8 +70,6 @@ def make_fragment(steps: Sequence[Step], config: str | Path, *,
 
 def _recipe(step: Step, root: Path) -> str:
     """The shell command of a step: the values the config gave, in the command's own words."""
-    from plenocli.cli.params import argv_for
-
     values = {}
     for key in step.given:
         value = step.params[key]
@@ -80,7 +79,7 @@ def _recipe(step: Step, root: Path) -> str:
                      for v in (value if many else [value])]
             value = names if many else names[0]
         values[key] = value
-    words = argv_for(step.stage.command, values)
+    words = shell_words(step.stage.params, values)
     return " ".join(["$(PLENOCLI)", step.stage.name, *(_quote(w) for w in words)])
 
 

@@ -1,11 +1,12 @@
-"""The stage registry: every stage a config can name, with which parameters are files.
+"""The stage registry: every stage a config can name, with its declared parameters.
 
-A stage is a plain function ``run(**params)`` in ``plenocli.pipeline.stages.<name>`` and a click
-command ``plenocli.cli.<name>``. The command is the one definition of the stage's parameters
-(type, range, choices, default): the shell, a YAML step and ``--set`` all go through it
-(:mod:`plenocli.cli.params`); this is the one place the pipeline reaches up to the commands.
-``inputs`` and ``outputs`` name the parameters that are file paths, which is what the make-style
-runner and the output checks need.
+A stage is a plain function ``run(**params)`` in ``plenocli.pipeline.stages.<name>`` and the
+declaration of its parameters, ``PARAMS`` in ``plenocli.pipeline.schema.<name>``
+(:mod:`plenocli.pipeline.params`): the command line builds its options from it, a YAML step
+and ``--set`` are resolved with it, and its roles say which parameters are files the stage
+reads or writes, which is what the make-style runner and the output checks need. A schema
+module may also define ``check(params)``: a check across parameters (ConfigError), run on
+the resolved parameters before the stage, whichever path they came from.
 """
 
 from __future__ import annotations
@@ -16,45 +17,67 @@ import inspect
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
 from plenocli.model.provenance import RESOLVED
 from plenocli.pipeline import records
+from plenocli.pipeline.params import Param, names_by_role, resolve
+
+# every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
+NAMES = ("decode", "bias", "flat", "calibrate", "refocus", "depth", "sai", "crosstalk", "unmix",
+         "stitch", "develop", "optics", "simulate")
 
 
 @dataclass(frozen=True)
 class Stage:
     name: str
-    inputs: tuple[str, ...]
-    outputs: tuple[str, ...]
-    folder_outputs: tuple[str, ...] = ()  # outputs that are folders the stage fills
+
+    @cached_property
+    def schema(self) -> ModuleType:
+        """The stage's declaration module (light: no pixels, no click)."""
+        return importlib.import_module(f"plenocli.pipeline.schema.{self.name}")
+
+    @property
+    def params(self) -> tuple[Param, ...]:
+        return self.schema.PARAMS
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return names_by_role(self.params, "input")
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return names_by_role(self.params, "output", "folder")
+
+    @property
+    def folder_outputs(self) -> tuple[str, ...]:
+        return names_by_role(self.params, "folder")
 
     @property
     def run(self):
         """The stage function ``run(**params)``."""
         return importlib.import_module(f"plenocli.pipeline.stages.{self.name}").run
 
-    @property
-    def command(self):
-        """The click command that defines the stage's parameters."""
-        return getattr(importlib.import_module(f"plenocli.cli.{self.name}"), self.name)
-
     def parameters(self) -> dict[str, Any]:
         """Parameter names and defaults (``inspect.Parameter.empty`` when required)."""
-        from plenocli.cli.params import defaults, stage_parameters
-
-        values = defaults(self.command)
-        return {name: inspect.Parameter.empty if p.required else values.get(name)
-                for name, p in stage_parameters(self.command).items()}
+        return {p.name: inspect.Parameter.empty if p.required else p.unset for p in self.params}
 
     def resolve(self, values: dict[str, Any]) -> dict[str, Any]:
-        """Every parameter, converted and checked by the command's own types (ConfigError)."""
-        from plenocli.cli.params import resolve
+        """Every parameter, converted and checked by its declared validator (ConfigError)."""
+        params = resolve(self.params, values)
+        self.check(params)
+        return params
 
-        return resolve(self.command, values)
+    def check(self, params: dict[str, Any]) -> None:
+        """The schema's check across parameters, if it has one (ConfigError)."""
+        check = getattr(self.schema, "check", None)
+        if check is not None:
+            check(params)
 
     def paths(self, params: dict[str, Any], roles: tuple[str, ...]) -> list[Path]:
         """The file paths held by the parameters named in ``roles``."""
@@ -117,28 +140,12 @@ def _check_listed_once(params: dict[str, Any], roles: tuple[str, ...]) -> None:
             seen[key] = item
 
 
-_TABLE = (
-    Stage("decode", inputs=("input", "calib"), outputs=("output", "preview")),
-    Stage("bias", inputs=("input",), outputs=("output", "preview")),
-    Stage("flat", inputs=("input", "white", "gain"), outputs=("output", "save_gain", "preview")),
-    Stage("calibrate", inputs=("input", "compare", "start"), outputs=("output", "xml", "preview")),
-    Stage("refocus", inputs=("input", "grid", "depth"), outputs=("output", "preview")),
-    Stage("depth", inputs=("input", "grid", "camera"), outputs=("output", "preview")),
-    Stage("sai", inputs=("input", "grid"), outputs=("output", "preview")),
-    Stage("crosstalk", inputs=("inputs", "grid"), outputs=("output", "preview", "mixing_out")),
-    Stage("unmix", inputs=("inputs", "mixing"), outputs=("output", "noise_map", "preview")),
-    Stage("stitch", inputs=("inputs", "transform_in", "rig"),
-          outputs=("output", "transform_out", "report", "preview")),
-    Stage("develop", inputs=("input", "wb_from", "recover_highlights"),
-          outputs=("output", "linear", "preview")),
-    Stage("optics", inputs=("input",), outputs=("json",)),
-    Stage("simulate", inputs=(), outputs=("output",), folder_outputs=("output",)),
-)
+_STAGES = {name: Stage(name) for name in NAMES}
 
 
 def get_stages() -> dict[str, Stage]:
     """All registered stages by name."""
-    return {s.name: s for s in _TABLE}
+    return dict(_STAGES)
 
 
 def get_stage(name: str) -> Stage:

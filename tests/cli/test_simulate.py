@@ -93,7 +93,7 @@ def test_options_reach_the_generator(tmp_path):
 
 @pytest.mark.parametrize("args, code, words", [
     (["quadpixel-pyramid", "--param", "colour=1"], 1, "does not take 'colour'"),
-    (["quadpixel-pyramid", "--param", "crosstalk"], 1, "expected KEY=VALUE"),
+    (["quadpixel-pyramid", "--param", "crosstalk"], 2, "expected KEY=VALUE"),  # usage
     (["quadpixel-pyramid", "--pixels", "15"], 1, "pixels 15"),
     (["dualpixel", "--pixels", "wide"], 1, "ROWSxCOLS"),
     (["moon-rig"], 2, "moon-rig"),

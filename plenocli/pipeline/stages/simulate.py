@@ -12,32 +12,19 @@ import os
 from plenocli.errors import ConfigError
 from plenocli.io.simfiles import write_simulation
 from plenocli.model.provenance import stage_record
+from plenocli.pipeline.schema.simulate import generator_kwargs
 from plenocli.progress import log, shown
 
 
-def run(kind: str, output: str, *, seed: int = 0, pixels: str | int | None = None,
-        rays: int | None = None, no_prisms: bool | None = None,
-        param: tuple[str, ...] = ()) -> None:
+def run(kind: str, output: str, *, seed: int = 0, pixels: str | None = None,
+        rays: int | None = None, no_prisms: bool = False, param: tuple[str, ...] = ()) -> None:
     """Write the capture set of ``kind`` into the folder ``output``.
 
     ``pixels`` (one number or ROWSxCOLS), ``rays`` and ``no_prisms`` go to the kinds that take
     them; ``param`` holds more keyword options as ``KEY=VALUE`` strings (YAML values).
     """
-    import yaml
-
-    kwargs: dict = {"seed": seed}
-    for key, value in (("pixels", pixels), ("rays", rays), ("no_prisms", no_prisms)):
-        if value is not None:
-            kwargs[key] = value
-    if isinstance(kwargs.get("pixels"), str) and kwargs["pixels"].strip().isdigit():
-        kwargs["pixels"] = int(kwargs["pixels"])  # one number, else ROWSxCOLS
-    if kwargs.get("pixels") == 0:
-        raise ConfigError("--pixels 0: give a sensor size, ROWSxCOLS or one number")
-    for item in param:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise ConfigError(f"--param {item!r}: expected KEY=VALUE")
-        kwargs[key.strip().replace("-", "_")] = yaml.safe_load(value)
+    kwargs = generator_kwargs(dict(seed=seed, pixels=pixels, rays=rays, no_prisms=no_prisms,
+                                   param=param))
     simulate(kind, output, **kwargs)
     log.info("simulate %s: wrote %s", kind, shown(output))
 

@@ -1,0 +1,26 @@
+"""Parameters of ``plenocli crosstalk``."""
+
+from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param
+from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
+
+PARAMS = (
+    inputs_arg(),
+    output_param(".json"),
+    Param("views", Text(), "Views to compare, by name or page number, e.g. A,B (leaves out the "
+          "sum view S that bias writes); default: all pages."),
+    Param("intended", Text(), "Name of the view whose pupil part was open (one, or one per "
+          "input, comma separated); default: the brightest view. With --mask-widths: "
+          "left|right."),
+    Param("tile", Int(min=2), "Tile side (px, even) of the cross-talk map.", default=64),
+    PREVIEW,
+    Param("mask_widths", Text(), "Raytrix sweep: mask widths m (px), e.g. 0,1,2,3; INPUT is then "
+          "a frames TIFF and --grid is needed (uses plenocli refocus)."),
+    Param("grid", InputFile(), "Lens grid YAML (only with --mask-widths).", role="input"),
+    Param("s", FiniteFloat(min=0, min_open=True), "Refocus scale s (only with --mask-widths).",
+          default=0.2),
+    Param("g", FiniteFloat(min=0, min_open=True), "Refocus g (only with --mask-widths).",
+          default=4.0),
+    Param("mixing_out", OutputFile(*TIFF), "Also write the mixing-matrix field M (TIFF) for "
+          "plenocli unmix; needs one masked white per pupil part (with --intended naming each "
+          "one's open part).", role="output"),
+)

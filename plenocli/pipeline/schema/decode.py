@@ -1,0 +1,19 @@
+"""Parameters of ``plenocli decode``."""
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Text
+
+PARAMS = (
+    input_arg(),
+    OUTPUT,
+    Param("camera", Choice(["auto", "canon-dp", "dng", "raytrix", "image"]),
+          "Input kind; auto looks at the file's first bytes.", default="auto"),
+    Param("frames", Text(), "Names for the frames, comma separated (e.g. S,A)."),
+    Param("black", FiniteFloat(min=0), "Black level (DN) when the file has none."),
+    Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN."),
+    Param("cfa", Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
+          "Bayer pattern at pixel (0, 0), e.g. RGGB."),
+    Param("calib", InputFile(), "Raytrix RayCalibData XML (with --camera raytrix); stored in "
+          "the metadata.", role="input"),
+    PREVIEW,
+)

@@ -1,0 +1,36 @@
+"""Parameters of ``plenocli depth``."""
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
+
+
+class GRange(Validator):
+    """MIN:MAX of the g search, checked by the stage's own parser (kept as that text)."""
+
+    name = "MIN:MAX"
+
+    def convert(self, value) -> str:
+        from plenocli.pipeline.stages.depth import parse_range
+
+        parse_range(shell_text(value))
+        return shell_text(value).strip()
+
+
+PARAMS = (
+    input_arg(),
+    OUTPUT,
+    Param("grid", InputFile(), "Lens grid (YAML or RayCalibData XML): INPUT is lenslet frames. "
+          "Without it INPUT holds dual-pixel views A, B or quad-pixel SAIs S00..S11.",
+          role="input"),
+    Param("s", FiniteFloat(min=0, min_open=True), "Output grid of `plenocli refocus --s S` "
+          "(lenslet).", default=0.2),
+    Param("g", GRange(), "Search range of g (lenslet); Galilean cameras: negative, e.g. -8:-2.",
+          default="2:8"),
+    Param("min_confidence", FiniteFloat(0, 1),
+          "Lenses below this confidence leave g unknown (NaN).", default=0.1),
+    Param("max_disparity", FiniteFloat(0.5, 64),
+          "Largest |disparity| searched (px, dual/quad-pixel).", default=4.0),
+    Param("camera", InputFile(), "Camera YAML (focal_length_mm, focus_distance_m, mla_sensor_mm):"
+          " adds a depth_m page (lenslet).", role="input"),
+    PREVIEW,
+)

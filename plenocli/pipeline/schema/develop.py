@@ -1,0 +1,65 @@
+"""Parameters of ``plenocli develop``."""
+
+from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
+from plenocli.model.colour import OUTPUT_SPACES
+from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param
+from plenocli.pipeline.validators import (
+    TIFF,
+    Choice,
+    FiniteFloat,
+    InputFile,
+    Int,
+    OutputFile,
+    Text,
+)
+
+MAX_GAIN_RATIO = 100.0  # beyond any light source: a typo, and float overflow further on
+
+
+class WhiteBalance(Text):
+    """``as-shot`` or three positive finite gains ``R,G,B``."""
+
+    name = "as-shot|R,G,B"
+
+    def convert(self, value) -> str:
+        text = super().convert(value).strip()
+        if text == "as-shot":
+            return text
+        try:
+            gains = [float(p) for p in text.split(",")]
+        except ValueError:
+            gains = []
+        if len(gains) != 3 or not all(0 < g < float("inf") for g in gains):
+            raise ValueError(f"{text!r}: give as-shot or three positive gains R,G,B (e.g. "
+                             "2.1,1,1.6)")
+        if max(gains) > MAX_GAIN_RATIO * min(gains):
+            raise ValueError(f"{text!r}: one gain is more than {MAX_GAIN_RATIO:g} times another; "
+                             "white-balance gains are within a few times each other (e.g. "
+                             "2.1,1,1.6)")
+        return ",".join(repr(g) for g in gains)
+
+
+PARAMS = (
+    input_arg(),
+    output_param(),
+    Param("view", Text(), "Which view to develop (e.g. S); needed when the file holds several."),
+    Param("method", Choice(METHODS), "Demosaicing method (docs/colour.md compares them).",
+          default=DEFAULT_METHOD),
+    Param("wb", WhiteBalance(), "White balance: the raw's as-shot gains, or R,G,B multipliers.",
+          default="as-shot"),
+    Param("wb_from", InputFile(), "White balance measured on a white image (bias-corrected views "
+          "TIFF).", role="input"),
+    Param("matrix", Choice(["as-shot", "none"]), "Camera colour matrix from the raw, or none "
+          "(camera RGB taken as sRGB).", default="as-shot"),
+    Param("space", Choice(OUTPUT_SPACES), "Output colour space (its ICC profile is embedded).",
+          default="srgb"),
+    Param("exposure", FiniteFloat(min=-10, max=10), "Exposure (EV) on top of the automatic white "
+          "point (99th percentile = 1).", default=0.0),
+    Param("quality", Int(1, 100), "JPEG quality.", default=95),
+    Param("recover_highlights", InputFile(), "Dual-pixel: rebuild S (and B) from A where only S "
+          "clipped, with the A/S split of this white image (views A, B, S, processed like "
+          "INPUT).", role="input"),
+    Param("linear", OutputFile(*TIFF), "Also write the scene-referred linear sRGB as a float32 "
+          "TIFF (R, G, B pages).", role="output"),
+    PREVIEW,
+)

@@ -1,0 +1,24 @@
+"""Parameters of ``plenocli flat``."""
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.validators import TIFF, Choice, FiniteFloat, InputFile, Int, OutputFile
+
+PARAMS = (
+    input_arg(),
+    OUTPUT,
+    Param("white", InputFile(), "Bias-corrected white image (same sensor, crop and views).",
+          role="input"),
+    Param("gain", InputFile(), "A gain map saved earlier with --save-gain (instead of --white).",
+          role="input"),
+    Param("median", Int(min=1), "Median filter size (pixels of one colour plane, odd).",
+          default=5),
+    Param("reference", Choice(["max", "percentile"]),
+          "Normalise by the maximum (paper) or a percentile.", default="max"),
+    Param("percentile", FiniteFloat(0, 100), "Percentile for --reference percentile.",
+          default=99.5),
+    Param("floor", FiniteFloat(0, 1, max_open=True),
+          "Mask (NaN) pixels whose white is below floor x reference.", default=0.05),
+    Param("save_gain", OutputFile(*TIFF), "Also write the gain map, for reuse with --gain.",
+          role="output"),
+    PREVIEW,
+)

@@ -1,0 +1,23 @@
+"""Parameters of ``plenocli optics``."""
+
+from plenocli.pipeline.params import Param, input_arg
+from plenocli.pipeline.validators import FiniteFloat, Flag, OutputFile
+
+PARAMS = (
+    input_arg(),
+    Param("sensor_mm", FiniteFloat(min=0, min_open=True),
+          "Side of the square sensor (mm), for the field of view.", default=3.6),
+    Param("json", OutputFile(".json"), "Also write the figures as JSON here.", role="output"),
+    Param("crosstalk", Flag(), "Also trace a quad-pixel micro-lens array behind the lens and "
+          "report the sub-aperture cross-talk ratio, without and with a cross mask at the stop."),
+    Param("mask_width", FiniteFloat(min=0, max=1, max_open=True),
+          "Cross mask width as a fraction of the stop diameter.", default=1 / 15),
+    Param("pixel_um", FiniteFloat(min=0.1, max=100), "Pixel size (um) for --crosstalk.",
+          default=1.2),
+    Param("object_distance_mm", FiniteFloat(min=0, min_open=True),
+          "White board distance (mm) for --crosstalk.", default=2000.0),
+    Param("prism_n", FiniteFloat(min=1, max=4, min_open=True),
+          "Prism index for the deviation figures.", default=1.74),
+    Param("prism_apex_deg", FiniteFloat(min=0, max=90, max_open=True),
+          "Prism apex angle A (deg).", default=16.7),
+)

@@ -1,0 +1,42 @@
+"""Parameters of ``plenocli refocus``."""
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
+from plenocli.refocus import KERNELS, VIEWS, parse_g
+
+
+class GValues(Validator):
+    """One g, a list 2,3,4 or a range 2:6:0.5, checked by the library's own parser (kept as
+    that text: the stage parses it again)."""
+
+    name = "G"
+
+    def convert(self, value) -> str:
+        parse_g(shell_text(value))
+        return shell_text(value).strip()
+
+
+PARAMS = (
+    input_arg(),
+    OUTPUT,
+    Param("grid", InputFile(), "Lens grid (plenocli YAML from `plenocli calibrate`).",
+          role="input", required=True),
+    Param("s", FiniteFloat(min=0, min_open=True),
+          "Size of the refocused image relative to the sensor image.", default=0.2),
+    Param("g", GValues(), "Refocus parameter; a list (2,3,4) or range (2:6:0.5, stop included) "
+          "makes a focal sweep: one page per g and a sharpness score per g.", default="4"),
+    Param("view", Choice(VIEWS), "Pupil mask: the whole micro-image, a half or a quadrant.",
+          default="full"),
+    Param("mask_width", FiniteFloat(min=0),
+          "Width m (px) of the central band left out of half views.", default=2.0),
+    Param("kernel", Choice(KERNELS),
+          "Splatting kernel.", default="lanczos3"),
+    Param("radius", FiniteFloat(min=0, min_open=True),
+          "Use only pixels within this distance (px) of their micro-image centre."),
+    Param("min_weight", FiniteFloat(0, 1),
+          "Pixels with less than this fraction of the typical weight become NaN.", default=0.25),
+    Param("depth", InputFile(), "Depth map (`plenocli depth` on the same grid and --s): each "
+          "lens at its own g, the all-in-focus image; --g only where the depth is unknown.",
+          role="input"),
+    PREVIEW,
+)

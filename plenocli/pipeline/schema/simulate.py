@@ -1,0 +1,74 @@
+"""Parameters of ``plenocli simulate``; the generator's own (``--param KEY=VALUE``) are declared
+in :mod:`plenocli.synth.params` and checked by :func:`check`, for the shell and a YAML step."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from plenocli.errors import ConfigError
+from plenocli.pipeline.params import Param
+from plenocli.pipeline.validators import Choice, Flag, Int, OutputFolder, Text, Validator
+from plenocli.synth import KIND_NAMES
+
+
+class KeyValue(Validator):
+    """``KEY=VALUE``, the value read as YAML (kept as that text)."""
+
+    name = "KEY=VALUE"
+
+    def convert(self, value: Any) -> str:
+        text = super().convert(value)
+        key, sep, _ = text.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"{text!r}: expected KEY=VALUE, e.g. noise=0")
+        return text
+
+
+PARAMS = (
+    Param("kind", Choice(KIND_NAMES), role="value", positional=True, required=True,
+          metavar="KIND"),
+    Param("output", OutputFolder(), "Folder for the capture files and truth.json.",
+          role="folder", flags=("-o", "--output"), required=True),
+    Param("seed", Int(min=0), "Random seed.", default=0),
+    Param("pixels", Text(), "Sensor size, ROWSxCOLS or one number."),
+    Param("rays", Int(min=1), "Rays per pixel (optical kinds)."),
+    Param("no_prisms", Flag(), "Remove the prisms (optical kinds)."),
+    Param("param", KeyValue(), "Another option of the kind (repeatable), e.g. --param noise=0.",
+          multiple=True, metavar="KEY=VALUE"),
+)
+
+
+def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
+    """The keyword arguments of the kind's generator that ``params`` ask for."""
+    import yaml
+
+    kwargs: dict[str, Any] = {"seed": params["seed"]}
+    pixels = params.get("pixels")
+    if pixels is not None:
+        kwargs["pixels"] = int(pixels) if pixels.strip().isdigit() else pixels
+        if kwargs["pixels"] == 0:
+            raise ConfigError("--pixels 0: give a sensor size, ROWSxCOLS or one number")
+    if params.get("rays") is not None:
+        kwargs["rays"] = params["rays"]
+    if params.get("no_prisms"):
+        kwargs["no_prisms"] = True
+    for item in params.get("param", ()):
+        key, _, value = item.partition("=")
+        try:
+            kwargs[key.strip().replace("-", "_")] = yaml.safe_load(value)
+        except yaml.YAMLError as err:
+            raise ConfigError(f"--param {item!r}: the value is not valid YAML; quote it") \
+                from err
+    return kwargs
+
+
+def check(params: dict[str, Any]) -> None:
+    """Every generator parameter known to the kind, of its type and in its declared range."""
+    from plenocli.synth import generator
+    from plenocli.synth.params import check_params
+
+    kind = params["kind"]
+    try:
+        check_params(kind, generator(kind), generator_kwargs(params))
+    except ValueError as err:
+        raise ConfigError(str(err)) from err

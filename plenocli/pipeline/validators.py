@@ -1,0 +1,196 @@
+"""Validators of stage parameters: convert one value and check it, without click.
+
+A value comes as the text a shell passes or as a YAML value (a number, a boolean, text); both
+get the same checks and the same messages, which name the value as a shell would have typed it.
+A bad value raises ValueError with the message the user reads (click prefixes it with
+``Invalid value for '--option':``, and so does :func:`plenocli.pipeline.params.resolve`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from typing import Any
+
+TIFF = (".tif", ".tiff")
+
+
+def shell_text(value: Any) -> str:
+    """A value as the shell word that carries it (``true``/``false`` for a boolean)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+class Validator:
+    """Base: ``name`` is what ``--help`` shows (upper-cased), ``convert`` checks one value."""
+
+    name = "text"
+    is_path = False
+    choices: tuple[str, ...] | None = None
+    range_help: str | None = None  # shown in --help as [x>=0]
+
+    def convert(self, value: Any) -> Any:
+        return shell_text(value)
+
+
+class Text(Validator):
+    """Any text (the stage parses it)."""
+
+
+class Flag(Validator):
+    """An on/off switch: true or false."""
+
+    name = "boolean"
+
+    def convert(self, value: Any) -> bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"expected true or false, got {value!r}")
+        return value
+
+
+class Int(Validator):
+    """A whole number, optionally bounded (both ends closed)."""
+
+    def __init__(self, min: int | None = None, max: int | None = None):
+        self.min, self.max = min, max
+        self.name = "integer" if min is None and max is None else "integer range"
+        if min is not None and max is not None:
+            self.range_help = f"{min}<=x<={max}"
+        elif min is not None or max is not None:
+            self.range_help = f"x>={min}" if min is not None else f"x<={max}"
+
+    def convert(self, value: Any) -> int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            number = value
+        else:
+            try:
+                number = int(shell_text(value))
+            except ValueError:
+                raise ValueError(f"{shell_text(value)!r} is not a valid integer.") from None
+        if (self.min is not None and number < self.min) or (
+                self.max is not None and number > self.max):
+            raise ValueError(f"{number} is not in the range {self.range_help}.")
+        return number
+
+
+class FiniteFloat(Validator):
+    """A finite number, optionally bounded; ``min_open``/``max_open`` make a bound exclusive,
+    e.g. ``FiniteFloat(min=0, min_open=True)`` for a strictly positive value. NaN and the
+    infinities are refused (every comparison with NaN is false, so a range alone lets it in)."""
+
+    name = "float"
+
+    def __init__(self, min: float | None = None, max: float | None = None, *,
+                 min_open: bool = False, max_open: bool = False):
+        self.min, self.max, self.min_open, self.max_open = min, max, min_open, max_open
+
+    def convert(self, value: Any) -> float:
+        if isinstance(value, bool):
+            raise ValueError(f"{shell_text(value)!r} is not a number")
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{shell_text(value)!r} is not a number") from None
+        if not math.isfinite(number):
+            raise ValueError(f"{shell_text(value)!r} is not a finite number")
+        low_bad = self.min is not None and (number <= self.min if self.min_open
+                                            else number < self.min)
+        high_bad = self.max is not None and (number >= self.max if self.max_open
+                                             else number > self.max)
+        if low_bad or high_bad:
+            raise ValueError(f"{number:g} is not in the range {self.describe()}")
+        return number
+
+    def describe(self) -> str:
+        parts = []
+        if self.min is not None:
+            parts.append(f"x{'>' if self.min_open else '>='}{self.min:g}")
+        if self.max is not None:
+            parts.append(f"x{'<' if self.max_open else '<='}{self.max:g}")
+        return " and ".join(parts) or "of finite numbers"
+
+
+class Choice(Validator):
+    """One of ``choices`` (matched ignoring case when ``case_sensitive`` is False)."""
+
+    name = "choice"
+
+    def __init__(self, choices, *, case_sensitive: bool = True):
+        self.choices = tuple(choices)
+        self.case_sensitive = case_sensitive
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value)
+        for choice in self.choices:
+            if text == choice or (not self.case_sensitive and text.lower() == choice.lower()):
+                return choice
+        listed = ", ".join(repr(c) for c in self.choices)
+        raise ValueError(f"{text!r} is not one of {listed}.")
+
+
+class RowsCols(Validator):
+    """A size ROWSxCOLS of positive whole numbers, e.g. 2000x2000 (kept as that text)."""
+
+    name = "ROWSxCOLS"
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value).strip().lower()
+        rows, sep, cols = text.partition("x")
+        if not (sep and rows.isdigit() and cols.isdigit() and int(rows) > 0 and int(cols) > 0):
+            raise ValueError(f"{shell_text(value)!r} is not ROWSxCOLS (e.g. 2000x2000)")
+        return f"{int(rows)}x{int(cols)}"
+
+
+class InputFile(Validator):
+    """A file a stage reads. A folder is a usage error, like any value of the wrong kind;
+    whether the file is there and can be read is the reader's to say (exit 1 with the reason),
+    as for a file that turns out to be damaged."""
+
+    name = "file"
+    is_path = True
+
+    def convert(self, value: Any) -> str:
+        path = shell_text(value)
+        if path == "":
+            raise ValueError("the file name is empty")
+        if os.path.isdir(path):
+            raise ValueError(f"File {path!r} is a directory.")
+        return path
+
+
+class OutputFile(Validator):
+    """A file a stage writes, whose name must end in one of ``suffixes`` (any case; any name
+    when none is given): a name saying another format (a preview named .jpg, frames named .png)
+    would hold what it does not say, and the make-style runner reads outputs by their suffix."""
+
+    name = "file"
+    is_path = True
+
+    def __init__(self, *suffixes: str):
+        self.suffixes = suffixes
+
+    def convert(self, value: Any) -> str:
+        path = shell_text(value)
+        if os.path.isdir(path):
+            raise ValueError(f"File {path!r} is a directory.")
+        if self.suffixes and os.path.splitext(path)[1].lower() not in self.suffixes:
+            raise ValueError(f"{path!r} is written as {self.suffixes[0][1:].upper()}; give a "
+                             f"name ending in {' or '.join(self.suffixes)}")
+        return path
+
+
+class OutputFolder(Validator):
+    """A folder a stage writes into (made when missing); an empty name would be the current
+    folder, which no one means."""
+
+    name = "directory"
+    is_path = True
+
+    def convert(self, value: Any) -> str:
+        path = shell_text(value)
+        if path == "":
+            raise ValueError("the folder name is empty")
+        if os.path.exists(path) and not os.path.isdir(path):
+            raise ValueError(f"Directory {path!r} is a file.")
+        return path
