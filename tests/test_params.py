@@ -34,20 +34,28 @@ BAD_VALUES = [
     ("refocus", "mask-width", -1, "-1"),
     ("stitch", "overlap", 1.5, "1.5"),
     ("optics", "sensor-mm", float("nan"), "nan"),
+    ("optics", "prism-n", 1, "1"),
+    ("sai", "cfa-layout", "quad", "quad"),
+    ("decode", "cfa", "RGBG", "RGBG"),
+    ("develop", "quality", 101, "101"),
+    ("develop", "wb", "1e308,1,1", "1e308,1,1"),
+    ("depth", "g", "8", "8"),
+    ("unmix", "regularise", 1.5, "1.5"),
+    ("stitch", "layout", "3x3", "3x3"),
 ]
 
 
 def _argv(stage: str, option: str, value: str) -> list[str]:
-    required = {"refocus": ["--grid", "g.yaml"], "flat": [], "optics": []}.get(stage, [])
+    required = {"refocus": ["--grid", "g.yaml"], "unmix": ["--mixing", "m.tif"]}.get(stage, [])
     out = [] if stage == "optics" else ["-o", "out.tif"]
     return [stage, "in.tif", *out, *required, f"--{option}", value]
 
 
 def _config(tmp_path: Path, stage: str, extra: str = "") -> Path:
-    body = {"refocus": "    grid: g.yaml\n"}.get(stage, "")
+    body = {"refocus": "    grid: g.yaml\n", "unmix": "    mixing: m.tif\n"}.get(stage, "")
     out = "" if stage == "optics" else "    output: out.tif\n"
     path = tmp_path / "c.yaml"
-    key = "inputs" if stage == "stitch" else "input"
+    key = "inputs" if stage in ("stitch", "unmix") else "input"
     path.write_text(f"steps:\n  {stage}:\n    {key}: in.tif\n{out}{body}{extra}")
     return path
 
@@ -120,3 +128,29 @@ def test_dry_run_says_which_parameter_changed(project, caplog):
     assert result.exit_code == 0, result.output
     said = result.output + caplog.text  # the log goes to the handler of the first configure()
     assert re.search(r"would run\s+flat .*parameter median changed \(\d+ -> 7\)", said)
+
+
+def test_every_stage_runs_with_exactly_its_declared_parameters():
+    import inspect
+
+    for stage in get_stages().values():
+        run = inspect.signature(stage.run).parameters
+        assert set(run) == {p.name for p in stage.params}, stage.name
+        for param in stage.params:  # a direct call (a test, a script) gets the same defaults
+            if run[param.name].default is not inspect.Parameter.empty:
+                assert run[param.name].default == param.unset, (stage.name, param.name)
+
+
+def test_simulate_params_are_checked_alike_from_the_shell_and_yaml(tmp_path):
+    result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "s"),
+                                      "--param", "noise=-5"])
+    assert result.exit_code == 1
+    shell_message = result.output.strip().removeprefix("Error: ")
+    config = tmp_path / "c.yaml"
+    config.write_text("steps:\n  simulate:\n    kind: dualpixel\n    output: s\n"
+                      "    param: ['noise=-5']\n")
+    with pytest.raises(ConfigError) as from_yaml:  # at load: before any step runs
+        load_config(config)
+    assert str(from_yaml.value).endswith(shell_message)
+    assert "noise must be >= 0" in shell_message
+    assert not list(tmp_path.glob("s*"))

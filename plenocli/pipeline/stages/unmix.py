@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli import unmix as unmix_lib
-from plenocli.errors import CalibrationError, ConfigError, InputError
+from plenocli.errors import CalibrationError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
@@ -99,10 +99,6 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
         raise InputError("no input given; pass the views TIFF (or one TIFF per view)")
-    top = unmix_lib.MAX_REGULARISE
-    if not (np.isfinite(regularise) and 0 <= regularise <= top):
-        raise ConfigError(f"--regularise must be a number in [0, {top:g}] (units of M, whose "
-                          f"diagonal is 1; e.g. 0.05), got {regularise}")
     field, mix_meta = read_mixing(mixing)
     info = mix_meta["mixing"]
     pages, names, meta = _load(inputs)
