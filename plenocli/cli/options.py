@@ -63,10 +63,10 @@ def declared(params: tuple[Param, ...]):
                 func = click.option(*p.flags, p.name, is_flag=True, default=bool(p.default),
                                     help=p.help)(func)
             else:
+                given = {} if p.default is None else {"default": p.default, "show_default": True}
                 func = click.option(*p.flags, p.name, cls=DeclaredOption, type=kind,
-                                    default=p.default, required=p.required,
-                                    multiple=p.multiple, metavar=p.metavar, help=p.help,
-                                    show_default=p.default is not None)(func)
+                                    required=p.required, multiple=p.multiple, metavar=p.metavar,
+                                    help=p.help, **given)(func)
         return func
 
     return decorate

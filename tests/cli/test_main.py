@@ -42,3 +42,14 @@ def test_unknown_command_is_a_usage_error():
     result = CliRunner().invoke(cli, ["no-such-stage"])
     assert result.exit_code == 2
     assert "No such command" in result.output
+
+
+def test_every_stage_command_is_built_from_its_declaration():
+    from plenocli.pipeline.registry import get_stages
+
+    for name, stage in get_stages().items():
+        command = cli.get_command(None, name)
+        built = [p.name for p in command.params if p.name not in ("verbose", "quiet", "debug")]
+        assert built == [p.name for p in stage.params], name
+        result = CliRunner().invoke(cli, [name])  # a required argument or option left out
+        assert result.exit_code == 2 and "Missing" in result.output, (name, result.output)
