@@ -154,3 +154,28 @@ def test_simulate_params_are_checked_alike_from_the_shell_and_yaml(tmp_path):
     assert str(from_yaml.value).endswith(shell_message)
     assert "noise must be >= 0" in shell_message
     assert not list(tmp_path.glob("s*"))
+
+
+@pytest.mark.parametrize("stage, extra, words", [
+    ("optics", "    crosstalk: 1\n", "--crosstalk: expected true or false, got 1"),
+    ("optics", "    crosstalk: [true, false]\n", "--crosstalk: expected one value"),
+    ("bias", "    smooth: {a: 1}\n", "--smooth: expected a value, got a mapping"),
+    ("bias", "    crop: [[2, 3]]\n", "--crop: expected a plain value"),
+    ("bias", "    preview: [a.png, b.png]\n", "--preview: expected one file path"),
+    ("bias", "    crop: []\n", "--crop: expected one value, got a list []"),
+], ids=["flag-number", "flag-list", "mapping", "nested", "two-paths", "empty-list"])
+def test_what_no_shell_word_can_carry_is_refused(tmp_path, stage, extra, words):
+    with pytest.raises(ConfigError, match=re.escape(words)):
+        load_config(_config(tmp_path, stage, extra))
+
+
+def test_a_yaml_flag_and_a_repeated_option_resolve_as_the_shell_gives_them(tmp_path):
+    step = load_config(_config(tmp_path, "optics", "    crosstalk: true\n"))[0]
+    assert step.params["crosstalk"] is True
+    shell = CliRunner().invoke(cli, ["simulate", "--help"])  # --param repeats
+    assert "--param KEY=VALUE" in shell.output
+    config = tmp_path / "s.yaml"
+    config.write_text("steps:\n  simulate:\n    kind: dualpixel\n    output: s\n"
+                      "    param: noise=0\n    no-prisms: false\n")
+    step = load_config(config)[0]
+    assert step.params["param"] == ("noise=0",) and step.params["no_prisms"] is False
