@@ -44,9 +44,8 @@ class DeclaredOption(click.Option):
 
     def get_help_extra(self, ctx):
         extra = super().get_help_extra(ctx)
-        range_help = getattr(self.type, "validator", None) and self.type.validator.range_help
-        if range_help:
-            extra["range"] = range_help
+        if self.type.validator.range_help:
+            extra["range"] = self.type.validator.range_help
         return extra
 
 

@@ -166,9 +166,9 @@ def shell_words(params: Sequence[Param], values: Mapping[str, Any]) -> list[str]
     positional: list[str] = []
     for name, value in values.items():
         param = declared[name]
-        items = list(value) if isinstance(value, (list, tuple)) else [value]
         if value is None:
             continue
+        items = list(value) if isinstance(value, (list, tuple)) else [value]
         if param.positional:
             positional.extend(shell_text(v) for v in items)
         elif param.is_flag:

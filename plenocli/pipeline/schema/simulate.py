@@ -44,8 +44,8 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
 
     kwargs: dict[str, Any] = {"seed": params["seed"]}
     pixels = params.get("pixels")
-    if pixels is not None:
-        kwargs["pixels"] = int(pixels) if pixels.strip().isdigit() else pixels
+    if pixels is not None:  # one number, else ROWSxCOLS (the generator checks it)
+        kwargs["pixels"] = int(pixels) if str(pixels).strip().isdigit() else pixels
         if kwargs["pixels"] == 0:
             raise ConfigError("--pixels 0: give a sensor size, ROWSxCOLS or one number")
     if params.get("rays") is not None:
