@@ -55,7 +55,7 @@ _PLACEHOLDER = re.compile(r"\{(capture|name|out)\}")
 class Step:
     name: str
     stage: Stage
-    params: dict[str, Any]  # every parameter of the stage, resolved by its command; paths absolute
+    params: dict[str, Any]  # every parameter, resolved by the declaration; paths absolute
     given: tuple[str, ...] = ()  # the parameters the config named (the rest are defaults)
 
     def input_paths(self) -> list[Path]:
@@ -374,7 +374,7 @@ def _flat(value) -> list:
 
 def _resolve(base: Path, value):
     if value is None or value == "" or "\0" in str(value):
-        return value  # refused by the command as the shell's word would be
+        return value  # refused by its validator as the shell's word would be
     if isinstance(value, (list, tuple)):
         return [_resolve(base, v) for v in value]
     return str((base / str(value)).resolve()) if not Path(str(value)).is_absolute() else str(value)
