@@ -21,10 +21,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from plenocli.model.mixing import MixingField
+from plenocli.model.mixing import MAX_REGULARISE, MixingField
 from plenocli.model.mixing import axis_weights as _axis_weights
 
-MAX_REGULARISE = 1.0  # lambda above M's diagonal damps the views more than it unmixes them
 SINGULAR_PIVOT = 1e-9  # a pivot below this (M entries are ~1) means M is singular there
 
 

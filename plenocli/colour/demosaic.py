@@ -41,11 +41,9 @@ import numpy as np
 from plenocli.colour.menon import menon2007
 from plenocli.colour.rcd import Workspace as RcdWorkspace
 from plenocli.colour.rcd import rcd
-from plenocli.model.colour import normalised_gains
+from plenocli.model.colour import DEFAULT_METHOD, METHODS, normalised_gains  # noqa: F401
 
 BAYER_PATTERNS = ("RGGB", "BGGR", "GRBG", "GBRG")
-METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
-DEFAULT_METHOD = "rcd"  # best PSNR and dE2000 on natural photographs (docs/colour.md)
 BAND_ROWS = 512  # rows demosaiced at a time: bounds the methods' scratch memory
 
 # How far (pixels, Chebyshev) an input pixel can reach into the output, per method: the masks of

@@ -15,6 +15,9 @@ import warnings
 import numpy as np
 
 OUTPUT_SPACES = {"srgb": "sRGB", "display-p3": "Display P3", "rec2020-linear": "ITU-R BT.2020"}
+# Demosaicing methods (plenocli.colour.demosaic; compared in docs/colour.md).
+METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
+DEFAULT_METHOD = "rcd"  # best PSNR and dE2000 on natural photographs (docs/colour.md)
 CONDITION_LIMIT = 1e6  # beyond this a matrix inverse amplifies rounding into visible colour
 
 

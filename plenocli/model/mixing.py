@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+MAX_REGULARISE = 1.0  # lambda above M's diagonal damps the views more than it unmixes them
+
 
 @dataclass(frozen=True)
 class MixingField:

@@ -38,6 +38,19 @@ def test_help_imports_no_command_module():
     assert done.stderr.strip() == ""
 
 
+def test_stage_help_loads_neither_numba_nor_opencv():
+    """A declaration takes its choices from light model modules, not from the kernels."""
+    code = ("import sys; from plenocli.cli.main import cli\n"
+            "for name in sys.argv[1:]:\n"
+            "    try:\n        cli([name, '--help'])\n    except SystemExit:\n        pass\n"
+            "heavy = [m for m in sys.modules if m.split('.')[0] in ('numba', 'cv2')]\n"
+            "print(','.join(heavy), file=sys.stderr)")
+    names = [n for n in COMMANDS if n != "simulate"]
+    done = subprocess.run([sys.executable, "-c", code, *names], capture_output=True, text=True,
+                          check=True)
+    assert done.stderr.strip() == ""
+
+
 def test_unknown_command_is_a_usage_error():
     result = CliRunner().invoke(cli, ["no-such-stage"])
     assert result.exit_code == 2

@@ -1,7 +1,6 @@
 """Parameters of ``plenocli develop``."""
 
-from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
-from plenocli.model.colour import OUTPUT_SPACES
+from plenocli.model.colour import DEFAULT_METHOD, METHODS, OUTPUT_SPACES
 from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param
 from plenocli.pipeline.validators import (
     TIFF,

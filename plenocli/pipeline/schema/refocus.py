@@ -1,8 +1,8 @@
 """Parameters of ``plenocli refocus``."""
 
+from plenocli.model.focus import KERNELS, VIEWS, parse_g
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
-from plenocli.refocus import KERNELS, VIEWS, parse_g
 
 
 class GValues(Validator):

@@ -1,8 +1,8 @@
 """Parameters of ``plenocli unmix``."""
 
+from plenocli.model.mixing import MAX_REGULARISE
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, inputs_arg
 from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, OutputFile
-from plenocli.unmix import MAX_REGULARISE
 
 PARAMS = (
     inputs_arg(),

@@ -1,0 +1,53 @@
+"""The refocus parameters' vocabulary: splatting kernels, pupil views and g values.
+
+Kept apart from :mod:`plenocli.refocus` (numba kernels) so that declaring and checking the
+parameters (the stage schema, ``--help``) does not compile or load the kernels.
+"""
+
+from __future__ import annotations
+
+import math
+
+KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
+# (x sign, y sign) of the kept half-planes: -1 keeps d < -m/2, +1 keeps d > m/2, 0 keeps all.
+VIEWS = {
+    "full": (0, 0), "left": (-1, 0), "right": (1, 0), "top": (0, -1), "bottom": (0, 1),
+    "q00": (-1, -1), "q01": (1, -1), "q10": (-1, 1), "q11": (1, 1),
+}
+MAX_G_VALUES = 1000  # a focal sweep longer than this is a typo, not a plan
+
+
+def parse_g(text: str | float) -> list[float]:
+    """g values from "4", "2,3,4" or a range "start:stop:step" (stop included when on a step).
+
+    Every value must be positive and finite, and a sweep holds at most MAX_G_VALUES values
+    (checked before the list is built: ``0:1e9:1`` is refused at once)."""
+    if isinstance(text, (int, float)):
+        values = [float(text)]
+    else:
+        values = _g_values(str(text).strip(), text)
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f"g must hold positive finite numbers (paper: 4), got {text!r}")
+    return [round(v, 10) for v in values]
+
+
+def _g_values(spec: str, text) -> list[float]:
+    usage = (f"g must be a number, a list like 2,3,4 or a range like 2:6:0.5 "
+             f"(start:stop:step, step > 0), got {text!r}")
+    try:
+        parts = [float(p) for p in (spec.split(":") if ":" in spec else spec.split(","))]
+    except ValueError as err:
+        raise ValueError(usage) from err
+    if ":" in spec:
+        if (len(parts) != 3 or not all(math.isfinite(p) for p in parts) or parts[2] <= 0
+                or parts[1] < parts[0]):
+            raise ValueError(usage)
+        count = int(math.floor((parts[1] - parts[0]) / parts[2] + 1e-9)) + 1
+    else:
+        count = len(parts)
+    if count > MAX_G_VALUES:
+        raise ValueError(f"g {text!r} asks for {count} refocus planes; a sweep holds at most "
+                         f"{MAX_G_VALUES} (use a larger step)")
+    if ":" in spec:
+        return [parts[0] + k * parts[2] for k in range(count)]
+    return parts
