@@ -14,7 +14,6 @@ distance: NaN.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +21,11 @@ import numpy as np
 FIELDS = {"focal_length_mm": "main-lens focal length F (mm)",
           "focus_distance_m": "object distance imaged onto the micro-lens array (m)",
           "mla_sensor_mm": "distance B from the micro-lenses to the sensor (mm)"}
+# What a camera can have, wide enough for a phone module (F 2 mm) and a 2 m telescope, a focus
+# from 1 cm to 1 km, micro-lenses up to 10 mm from the sensor (plenoptic cameras: 0.1-3 mm); a
+# value outside is a value in other units (m for mm) or a typing error.
+RANGES = {"focal_length_mm": (1.0, 2000.0), "focus_distance_m": (0.01, 1000.0),
+          "mla_sensor_mm": (0.005, 10.0)}
 
 
 @dataclass(frozen=True)
@@ -41,12 +45,18 @@ def camera_from_dict(doc) -> Camera:
     """A Camera from a mapping with FIELDS; ValueError naming what is missing or wrong."""
     if not isinstance(doc, dict):
         raise ValueError("a camera file is a YAML mapping with " + ", ".join(FIELDS))
+    unknown = sorted(str(k) for k in doc if k not in FIELDS)
+    if unknown:
+        raise ValueError(f"unknown key(s) {', '.join(unknown)}; a camera file holds "
+                         + ", ".join(FIELDS))
     values = {}
     for key, what in FIELDS.items():
         value = doc.get(key)
+        lo, hi = RANGES[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value) or value <= 0:
-            raise ValueError(f"{key} must be a positive number: {what}")
+                not lo <= value <= hi:    # also false for NaN
+            raise ValueError(f"{key} must be a number from {lo:g} to {hi:g}: {what}; got "
+                             f"{value!r}")
         values[key] = float(value)
     if 1000.0 * values["focus_distance_m"] <= values["focal_length_mm"]:
         raise ValueError("focus_distance_m must be beyond the focal length (an object at or "

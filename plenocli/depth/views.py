@@ -107,6 +107,9 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
         d[top:top + TILE_ROWS] = td[keep]
         conf[top:top + TILE_ROWS] = tc[keep]
     lost = cv2.dilate(missing.astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8)) > 0
+    # a best shift pinned at the search bound is no minimum, and a cost that does not vary
+    # with the shift (confidence 0: no texture) measures nothing
+    lost |= (np.abs(d) >= reach - 1e-3) | ~(conf > 0)
     d[lost] = np.nan
     conf[lost] = 0.0
     return Disparity(d, conf)

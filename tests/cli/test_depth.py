@@ -115,3 +115,75 @@ def test_bayer_frames_of_the_refocus_simulator(tmp_path):
     assert result.exit_code == 0, result.output
     data, _ = tiffio.read_image(out)
     assert abs(np.nanmedian(data[0][6:-6, 6:-6]) - 4.5) <= 0.03  # measured 0.007 at 480 x 640
+
+
+def _edited(src, dst, page0=None, meta_change=None):
+    data, meta = tiffio.read_image(src)
+    if page0 is not None:
+        data = data.copy()
+        data[0] = page0
+    if meta_change:
+        meta_change(meta)
+    tiffio.write_image(dst, data, meta)
+    return dst
+
+
+def test_a_depth_map_that_does_not_fit_is_refused(lenslet, tmp_path):
+    depth, out = tmp_path / "d.tif", tmp_path / "aif.tif"
+    assert invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                  "-o", depth).exit_code == 0
+    moved = tmp_path / "moved.yaml"
+    moved.write_text((lenslet / "grid.yaml").read_text().replace("offset_xy:\n  - ",
+                                                                 "offset_xy:\n  - 5"))
+    assert moved.read_text() != (lenslet / "grid.yaml").read_text()
+
+    def forge_s(meta):
+        meta["depth"]["s"] = 0.25
+
+    def no_record(meta):
+        meta.pop("depth")
+
+    cases = {"g 0": (_edited(depth, tmp_path / "g0.tif", 0.0), lenslet / "grid.yaml", "g holds 0"),
+             "g 1e30": (_edited(depth, tmp_path / "gh.tif", 1e30), lenslet / "grid.yaml",
+                        "outside the range"),
+             "g 50": (_edited(depth, tmp_path / "g50.tif", 50.0), lenslet / "grid.yaml",
+                      "outside the range"),
+             "another grid": (depth, moved, "another grid"),
+             "forged s": (_edited(depth, tmp_path / "fs.tif", meta_change=forge_s),
+                          lenslet / "grid.yaml", "s = 0.25"),
+             "no record": (_edited(depth, tmp_path / "nr.tif", meta_change=no_record),
+                           lenslet / "grid.yaml", "not a `plenocli depth` output")}
+    for case, (dmap, grid, words) in cases.items():
+        result = invoke("refocus", lenslet / "frames.tif", "--grid", grid, "--depth", dmap,
+                        "-o", out)
+        assert result.exit_code == 1 and words in result.output, (case, result.output)
+        assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_range_that_misses_the_scene_is_refused(lenslet, tmp_path):
+    out = tmp_path / "d.tif"
+    result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "--g", "2:3", "-o", out)   # the plane is at g = 4.5
+    assert result.exit_code == 1 and "widen the range" in result.output and not out.exists()
+
+
+def test_textureless_views_are_unknown_not_at_the_bound(tmp_path):
+    from plenocli.depth.views import disparity_x
+
+    flat = np.ones((64, 96), np.float32)
+    assert not np.isfinite(disparity_x(flat, flat).disparity).any()
+
+
+@pytest.mark.parametrize("text, field", [
+    ("focal_length_mm: 50\nfocus_distance_m: 2\nmla_sensor_mm: 1000000\n", "mla_sensor_mm"),
+    ("focal_length_mm: 0.05\nfocus_distance_m: 2\nmla_sensor_mm: 0.4\n", "focal_length_mm"),
+    ("focal_length_mm: 50\nfocus_distance_m: 2000\nmla_sensor_mm: 0.4\n", "focus_distance_m"),
+    ("focal_length_mm: 50\nfocus_distance_m: 2\nmla_sensor_mm: 0.4\nfocal_length_m: 0.05\n",
+     "focal_length_m"),
+])
+def test_an_implausible_camera_file_is_refused(lenslet, tmp_path, text, field):
+    camera, out = tmp_path / "camera.yaml", tmp_path / "d.tif"
+    camera.write_text(text)
+    result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                    "--camera", camera, "-o", out)
+    assert result.exit_code == 1 and field in result.output and not out.exists()

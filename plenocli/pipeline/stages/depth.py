@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.depth import lenslet, metric, views
+from plenocli.depth.gridcheck import check_fits
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -16,6 +17,7 @@ from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
 QUAD = ["S00", "S01", "S10", "S11"]
+MIN_KNOWN = 0.25  # fraction of the frame a depth map must measure
 
 
 def parse_range(text: str) -> tuple[float, float]:
@@ -52,6 +54,8 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
                               "formula": "z = F b / (b - F), b = b_L + g B"}
     else:
         pages, names, info = _views(input, data, meta, max_disparity)
+    _check_known(pages[0], f"g in --g {g}" if grid else
+                 f"disparity within --max-disparity {max_disparity:g}")
     record = stage_record("depth", params, {"input": input, "grid": grid, "camera": camera})
     stack = np.stack(pages).astype(np.float32)
     out_meta = tiffio.derived_meta(
@@ -65,6 +69,16 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
     if preview:
         unit = "g" if grid else "disparity (px)"
         write_depth_png(preview, stack[0], stack[-1], label=unit, protect=protect)
+
+
+def _check_known(values, searched: str) -> None:
+    """Refuse a map whose pixels are mostly unknown: there the best match lay at a bound of
+    the search (no minimum) or nothing matched (no texture); the few left are not a map."""
+    known = float(np.isfinite(values).mean())
+    if known < MIN_KNOWN:
+        raise InputError(f"depth: only {100 * known:.1f} % of the frame found a minimum of the "
+                         f"match cost with {searched}; the rest lies at a bound of the search "
+                         "or has no texture: widen the range, or check the input")
 
 
 def _camera(path: str) -> metric.Camera:
@@ -90,6 +104,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     try:
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
+        check_fits(grey, framing.grid, grid_path, for_depth=True)
         result = lenslet.depth_map(grey, framing.grid, s=s,
                                    g_range=g_range, min_confidence=min_confidence)
     except ValueError as err:

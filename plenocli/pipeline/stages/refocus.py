@@ -7,6 +7,8 @@ import warnings
 import numpy as np
 
 from plenocli import refocus as rf
+from plenocli.depth.gridcheck import check_fits
+from plenocli.depth.lenslet import sensor_grey
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -40,11 +42,12 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
+    check_fits(sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa)), framing.grid, grid)
     if depth:
         if len(g_values) > 1:
             raise ConfigError("--depth renders one all-in-focus image: give one --g (used "
                               "where the depth is unknown), not a sweep")
-        options = {"lens_g": _lens_g(depth, framing, s)}
+        options = {"lens_g": _lens_g(depth, grid, framing, s)}
     else:
         options = {}
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
@@ -107,7 +110,8 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
                 names.append(sweep_page(label, g_value) if sweep else label)
         score = rf.sharpness(np.stack(per_g), lens_period_px=period)
         scores.append({"g": g_value, "sharpness": score})
-        log.info("refocus: g = %g  sharpness %.5g", g_value, score)
+        log.info("refocus: %s  sharpness %.5g", "g from the depth map" if "lens_g" in options
+                 else f"g = {g_value:g}", score)
         out_pages.extend(per_g)
     return out_pages, names, scores
 
@@ -128,9 +132,11 @@ def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
         return np.nanmean(chunk, axis=0)
 
 
-def _lens_g(depth: str, framing, s: float) -> tuple[np.ndarray, int, int]:
+def _lens_g(depth: str, grid: str, framing, s: float) -> tuple[np.ndarray, int, int]:
     """Each lens's g from a depth map made on the same grid and s (all-in-focus)."""
     from plenocli.depth.lenslet import lens_g_table
+    from plenocli.depth.mapcheck import depth_misfit
+    from plenocli.model.provenance import sha256_file
 
     data, meta = tiffio.read_image(depth)
     names = list(meta.get("views") or [])
@@ -141,6 +147,10 @@ def _lens_g(depth: str, framing, s: float) -> tuple[np.ndarray, int, int]:
         raise InputError(f"{depth} is {data.shape[2]} x {data.shape[1]} but refocus at s = "
                          f"{s:g} makes {expected[1]} x {expected[0]}; make the depth with the "
                          "same --grid and --s")
+    misfit = depth_misfit(data, meta, grid_sha256=sha256_file(grid), s=s,
+                          sensor_origin=framing.sensor_origin)
+    if misfit:
+        raise InputError(f"{depth} does not fit this refocus: {misfit}")
     try:
         return lens_g_table(framing.grid, framing.shape, data[names.index("g")], s)
     except ValueError as err:

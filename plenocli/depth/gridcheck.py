@@ -1,0 +1,81 @@
+"""Does a lens grid fit the frame it is used on?
+
+A grid or RayCalibData XML is a side file: it can belong to another camera, be a few per cent
+off in pitch, turned, of the other lattice kind or written in other units. Depth and refocus
+computed on such a grid are confidently wrong, so the grid is checked against what every
+lenslet frame shows, with the calibration's own fold judge
+(:mod:`plenocli.calibration.fold`): folding the frame onto the lens lattice gives a sharp mean
+micro-image; any other lattice (a relative, the other kind, a copy detuned in pitch or angle)
+gives a flat or self-repeating one. The judge is started from the grid's lattice and its other
+kind; the lattice it confirms must be the grid's kind and must not drift from the grid's by
+more than ``MAX_DRIFT`` of a pitch anywhere in the frame (the error a pitch or angle error
+makes at the frame's corners: 3 % in pitch on a 240 px frame is 0.18 pitches at the corners,
+on a 4000 px frame 3 pitches).
+
+Only the lattice (kind, pitch, angle) is checked, not the grid's offset: a uniform offset
+error shifts every micro-image alike, so it moves a refocused image but leaves neighbour
+disparities (depth) and sharpness as they are.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from plenocli.model.lensgrid import LensGrid
+
+MAX_DRIFT = 0.25      # pitches: where the grid's lattice and the frame's may part (refocus)
+MAX_DEPTH_ERROR = 0.002  # a lattice vector's error over the pitch, for depth (below)
+
+
+def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
+                   ) -> str | None:
+    """None when the frame (rows, cols; grey) shows ``grid``'s lattice, else how it disagrees.
+    Where the fold judge vouches for no lattice (a few lenses, micro-images without
+    vignetting, a crop like the R42's), nothing contradicts the grid and it is used.
+
+    Refocus needs the lattice right to a fraction of a pitch over the frame; depth reads g
+    from the shift between neighbours, so an error e in a lattice vector (over the pitch) is
+    an error of about e in 1/g (measured on the simulator: pitch +0.25 % moves g = 4 to 4.24,
+    +0.5 % to 4.9): ``for_depth`` also bounds e.
+    """
+    from plenocli.calibration.candidates import Lattice
+    from plenocli.calibration.fold import Folds, fold_judge
+
+    own = Lattice(grid.lattice, grid.pitch_px, grid.angle_rad)
+    other = Lattice("square" if own.kind == "hex" else "hex", own.pitch_px, own.angle_rad)
+    folds = Folds(np.nan_to_num(np.asarray(frame, np.float64)), own.pitch_px)
+    verdict = fold_judge([own, other], folds)
+    found = verdict.lattice
+    if found is None:   # too few lenses, or micro-images too flat, to vouch for a lattice
+        return None
+    shows = f"the frame shows a {found.describe()} lattice, the grid says {own.describe()}"
+    if found.kind != own.kind:
+        return shows
+    error = _vector_error(own, found)
+    drift = error * float(np.hypot(*frame.shape)) / 2 / own.pitch_px
+    if drift > MAX_DRIFT:
+        return f"{shows} ({drift:.2f} pitches apart at the frame's corners)"
+    if for_depth and error > MAX_DEPTH_ERROR:
+        return (f"{shows} (lattice vectors {100 * error:.2f} % apart; depth needs <= "
+                f"{100 * MAX_DEPTH_ERROR:g} %)")
+    return None
+
+
+def _vector_error(own, found) -> float:
+    """Largest |b_found - b_own| / pitch over the lattice vectors, ``found`` turned by whole
+    lattice periods onto ``own``."""
+    step = np.pi / 3 if own.kind == "hex" else np.pi / 2
+    turn = (found.angle_rad - own.angle_rad + step / 2) % step - step / 2
+    ratio = found.pitch_px / own.pitch_px
+    return float(abs(ratio * np.exp(1j * turn) - 1))
+
+
+def check_fits(frame: np.ndarray, grid: LensGrid, grid_path: str, *,
+               for_depth: bool = False) -> None:
+    """InputError saying how ``grid`` (read from ``grid_path``) disagrees with the frame."""
+    from plenocli.errors import InputError
+
+    misfit = lattice_misfit(frame, grid, for_depth=for_depth)
+    if misfit:
+        raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
+                         "`plenocli calibrate` on a white image (or these frames)")

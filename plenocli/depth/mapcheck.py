@@ -1,0 +1,56 @@
+"""Is a depth map one that ``refocus --depth`` may use on this run?
+
+A depth map is a side file: it can come from another grid, another ``--s`` or crop, or hold
+values edited by hand. It is used only when its record says ``plenocli depth`` made it from
+this very grid file (the same sha256), at this ``s`` and crop origin, and its values lie in the
+range that run searched (docs/depth.md, "All-in-focus").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from plenocli.depth.lenslet import check_range
+
+
+def depth_misfit(data: np.ndarray, meta: dict, *, grid_sha256: str, s: float,
+                 sensor_origin: tuple[int, int]) -> str | None:
+    """None when the depth map (pages, rows, cols; ``meta`` its metadata) fits a refocus run
+    on the grid with ``grid_sha256`` at ``s`` and crop ``sensor_origin``; else what is wrong."""
+    record = meta.get("provenance") or {}
+    info = meta.get("depth")
+    if record.get("stage") != "depth" or not isinstance(info, dict):
+        return "it is not a `plenocli depth` output (no depth record)"
+    grids = [i.get("sha256") for i in record.get("inputs", []) if i.get("role") == "grid"]
+    if grids != [grid_sha256]:
+        return "it was made with another grid (make it with the same --grid)"
+    made_s = [info.get("s"), (record.get("parameters") or {}).get("s")]
+    if not all(isinstance(v, (int, float)) and math.isclose(v, s, rel_tol=1e-9)
+               for v in made_s):
+        return f"it was made at s = {made_s[0]}, this refocus is at s = {s:g}"
+    origin = info.get("crop_sensor_origin")
+    if list(origin or []) != list(sensor_origin):
+        return (f"it was made on the crop at sensor origin {origin}, this refocus works on "
+                f"{list(sensor_origin)}")
+    return _values_misfit(data, list(meta.get("views") or []), info.get("g_range"))
+
+
+def _values_misfit(data: np.ndarray, names: list[str], g_range) -> str | None:
+    try:
+        lo, hi = check_range(tuple(g_range))
+    except (TypeError, ValueError) as err:
+        return f"its recorded g range {g_range!r} is not valid ({err})"
+    g = data[names.index("g")]
+    known = g[np.isfinite(g)]
+    slack = 1e-5 * max(abs(lo), abs(hi))   # float32 pages
+    outside = (known < lo - slack) | (known > hi + slack)
+    if outside.any() or np.isinf(g).any():
+        bad = known[outside][0] if outside.any() else g[np.isinf(g)][0]
+        return f"its g holds {bad:g}, outside the range {lo:g}:{hi:g} it was searched in"
+    if "confidence" in names:
+        conf = data[names.index("confidence")]
+        if not np.all((conf >= 0) & (conf <= 1)):
+            return "its confidence holds values outside 0-1 (or NaN)"
+    return None
