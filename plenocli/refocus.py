@@ -272,6 +272,9 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
     """Raise ValueError naming the first refocus option that is out of range."""
     if not (np.isfinite(s) and s > 0):
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
+    if s > 1:   # each output pixel gets 1 / s^2 sensor samples on average: below 1, holes
+        raise ValueError(f"s = {s:g} asks for more output pixels than the sensor has samples "
+                         "(1 / s^2 per output pixel): use s <= 1 (paper: 0.2)")
     if not (np.isfinite(g) and g > 0):
         raise ValueError(f"g must be a positive number (paper: 4), got {g}")
     if view not in VIEWS:

@@ -187,3 +187,11 @@ def test_an_implausible_camera_file_is_refused(lenslet, tmp_path, text, field):
     result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
                     "--camera", camera, "-o", out)
     assert result.exit_code == 1 and field in result.output and not out.exists()
+
+
+def test_refocus_refuses_more_output_pixels_than_samples(lenslet, tmp_path):
+    out = tmp_path / "r.tif"
+    for s in ("8", "50"):
+        result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                        "--s", s, "-o", out)
+        assert result.exit_code == 1 and "s <= 1" in result.output and not out.exists()
