@@ -16,6 +16,10 @@ class ConfigError(PlenocliError):
     """A pipeline configuration or a parameter value is invalid."""
 
 
+class OptionError(ConfigError):
+    """An option given where it has no effect (a usage error: exit 2)."""
+
+
 class CalibrationError(PlenocliError):
     """A calibration (lens grid, white image) cannot be estimated or does not fit the data."""
 

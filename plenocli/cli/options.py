@@ -10,7 +10,7 @@ import warnings
 
 import click
 
-from plenocli.errors import PlenocliError, Terminated, os_error_message
+from plenocli.errors import OptionError, PlenocliError, Terminated, os_error_message
 from plenocli.pipeline.params import Param
 from plenocli.pipeline.validators import Validator
 from plenocli.progress import configure, working
@@ -90,6 +90,10 @@ def stage_command(func):
                     return func(*args, **kwargs)
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
+        except OptionError as err:
+            if debug:
+                raise
+            raise click.UsageError(str(err)) from err
         except PlenocliError as err:
             if debug:
                 raise

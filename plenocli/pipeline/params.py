@@ -18,7 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, OptionError
 from plenocli.pipeline.validators import (
     TIFF,
     Flag,
@@ -181,3 +181,14 @@ def shell_words(params: Sequence[Param], values: Mapping[str, Any]) -> list[str]
     if any(word.startswith("-") for word in positional):
         return [*options, "--", *positional]
     return [*positional, *options]
+
+
+def refuse_unused(params: Sequence[Param], values: Mapping[str, Any], names: Sequence[str],
+                  reason: str) -> None:
+    """OptionError for the first of ``names`` given a value other than its default: an option
+    with no effect in this run is refused, never silently ignored."""
+    declared = {p.name: p for p in params}
+    for name in names:
+        value = values.get(name)
+        if value is not None and value != declared[name].unset:
+            raise OptionError(f"{declared[name].label} {reason}")

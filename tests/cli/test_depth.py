@@ -195,3 +195,26 @@ def test_refocus_refuses_more_output_pixels_than_samples(lenslet, tmp_path):
         result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
                         "--s", s, "-o", out)
         assert result.exit_code == 1 and "s <= 1" in result.output and not out.exists()
+
+
+@pytest.mark.parametrize("args, option", [
+    (["depth", "{views}", "--g", "2:3"], "--g"),
+    (["depth", "{views}", "--s", "0.3"], "--s"),
+    (["depth", "{views}", "--min-confidence", "0.5"], "--min-confidence"),
+    (["depth", "{frames}", "--grid", "{grid}", "--max-disparity", "8"], "--max-disparity"),
+    (["crosstalk", "{views}", "--s", "0.3"], "--s"),
+    (["crosstalk", "{views}", "--g", "3"], "--g"),
+    (["optics", "{lens}", "--mask-width", "0.1"], "--mask-width"),
+])
+def test_an_option_without_effect_is_a_usage_error(lenslet, tmp_path, args, option):
+    from pathlib import Path
+
+    simulate("dualpixel-depth", tmp_path / "dp", seed=2, pixels="96x128")
+    paths = {"views": tmp_path / "dp" / "views.tif", "frames": lenslet / "frames.tif",
+             "grid": lenslet / "grid.yaml",
+             "lens": Path(__file__).parents[2] / "configs" / "lenses" / "paper_table2.yaml"}
+    out = tmp_path / ("o.json" if args[0] == "crosstalk" else "o.tif")
+    words = [a.format(**paths) for a in args] + ([] if args[0] == "optics" else ["-o", out])
+    result = invoke(*words)
+    assert result.exit_code == 2 and option in result.output, result.output
+    assert not out.exists()

@@ -1,6 +1,6 @@
 """Parameters of ``plenocli crosstalk``."""
 
-from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param
+from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
 
 PARAMS = (
@@ -24,3 +24,9 @@ PARAMS = (
           "plenocli unmix; needs one masked white per pupil part (with --intended naming each "
           "one's open part).", role="output"),
 )
+
+
+def check(params: dict) -> None:
+    """The refocus options of the mask sweep are refused without it, not ignored."""
+    if not params.get("mask_widths"):
+        refuse_unused(PARAMS, params, ["s", "g"], "applies to the --mask-widths sweep only")

@@ -1,6 +1,6 @@
 """Parameters of ``plenocli depth``."""
 
-from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
 
 
@@ -34,3 +34,13 @@ PARAMS = (
           " adds a depth_m page (lenslet).", role="input"),
     PREVIEW,
 )
+
+
+def check(params: dict) -> None:
+    """Options of the other kind of input are refused, not ignored."""
+    if params.get("grid"):
+        refuse_unused(PARAMS, params, ["max_disparity"],
+                      "applies to dual/quad-pixel views (without --grid) only")
+    else:
+        refuse_unused(PARAMS, params, ["s", "g", "min_confidence"],
+                      "applies to lenslet frames (with --grid) only")

@@ -1,6 +1,6 @@
 """Parameters of ``plenocli optics``."""
 
-from plenocli.pipeline.params import Param, input_arg
+from plenocli.pipeline.params import Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, Flag, OutputFile
 
 PARAMS = (
@@ -21,3 +21,10 @@ PARAMS = (
     Param("prism_apex_deg", FiniteFloat(min=0, max=90, max_open=True),
           "Prism apex angle A (deg).", default=16.7),
 )
+
+
+def check(params: dict) -> None:
+    """The --crosstalk options are refused without it, not ignored."""
+    if not params.get("crosstalk"):
+        refuse_unused(PARAMS, params, ["mask_width", "pixel_um", "object_distance_mm"],
+                      "applies with --crosstalk only")
