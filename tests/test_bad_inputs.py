@@ -1055,3 +1055,27 @@ def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, st
     args = [stage, str(side / "x.tif"), "-o", "{o}/x.tif"] + (["-n", "2"] if stage == "sai"
                                                               else [])
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("holds no light levels",))
+
+
+def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_path):
+    """W5: each stage takes for each input the outputs of the stages it lists (pipeline/kinds);
+    a stage that corrects a capture refuses one it has already corrected."""
+    made = tmp_path / "made"
+    made.mkdir()
+    (made / "white.tif").write_bytes((inputs / "biased.tif").read_bytes())
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "flat", inputs / "biased.tif", "--white", made / "white.tif", "--save-gain",
+        made / "gain.tif", "-o", made / "flat.tif"]])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    cases = [
+        (["flat", made / "flat.tif", "--gain", made / "gain.tif", "-o", "{o}/x.tif"],
+         "already went through `plenocli flat`"),
+        (["flat", inputs / "biased.tif", "--white", made / "gain.tif", "-o", "{o}/x.tif"],
+         "`plenocli flat-gain` output"),
+        (["bias", inputs / "biased.tif", "-o", "{o}/x.tif"], "`plenocli bias` output"),
+    ]
+    for args, words in cases:
+        result = run_bad(inputs, out, [str(a) for a in args])
+        assert_one_line(result, 1, ())
+        assert words in result.stderr, (args, result.stderr)

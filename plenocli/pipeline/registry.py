@@ -26,6 +26,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
 from plenocli.model.provenance import RESOLVED
 from plenocli.pipeline import records
+from plenocli.pipeline.kinds import check_kinds
 from plenocli.pipeline.params import Param, names_by_role, resolve
 
 # every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
@@ -99,6 +100,7 @@ class Stage:
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
         _check_listed_once(params, self.inputs)
+        check_kinds(self.name, self.by_role(params, self.inputs))
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
         inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
