@@ -64,7 +64,7 @@ def test_bad_input_is_refused_in_one_line(lenslet, tmp_path):
     assert result.exit_code == 2 and not out.exists()
     result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
                     "--depth", lenslet / "depth.tif", "--s", 0.25, "-o", out)
-    assert result.exit_code == 1 and "same --grid and --s" in result.output
+    assert result.exit_code == 1 and "takes as depth the output of depth" in result.output
     assert not out.exists()
 
 
@@ -89,15 +89,18 @@ def test_metric_depth_on_the_simulated_camera(tmp_path):
 
 
 def test_more_refusals_leave_nothing(lenslet, tmp_path):
-    out = tmp_path / "x.tif"
+    import tifffile
+
+    out, foreign = tmp_path / "x.tif", tmp_path / "foreign.tif"
+    tifffile.imwrite(foreign, np.full((60, 80), 4.0, np.float32))
     cases = [
         (["depth", lenslet / "depth.tif", "-o", out], 1, "dual-pixel views A, B"),
         (["depth", lenslet / "frames.tif", "--camera", lenslet / "grid.yaml", "-o", out], 1,
          "needs lenslet frames and --grid"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
-          lenslet / "frames.tif", "-o", out], 1, "no page g"),
+          lenslet / "frames.tif", "-o", out], 1, "takes as depth the output of depth"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
-          lenslet / "depth.tif", "--g", "2,3", "-o", out], 1, "not a sweep"),
+          foreign, "--g", "2,3", "-o", out], 1, "not a sweep"),
     ]
     for args, code, words in cases:
         result = invoke(*args)
