@@ -25,7 +25,7 @@ from plenocli.model.lensgrid import LensGrid
 
 MAX_DRIFT = 0.25      # pitches: where the grid's lattice and the frame's may part (refocus)
 CHECK_PX = 1024         # side of the central region folded: a tenth of depth's time on 8 Mpx
-CHECK_PITCHES = 16      # and at least this many lenses across
+CHECK_PITCHES = 24      # and at least this many lenses across (16 left Boys2 unsure)
 MAX_DEPTH_ERROR = 0.002  # a lattice vector's error over the pitch, for depth (below)
 
 
