@@ -221,3 +221,28 @@ def test_an_option_without_effect_is_a_usage_error(lenslet, tmp_path, args, opti
     result = invoke(*words)
     assert result.exit_code == 2 and option in result.output, result.output
     assert not out.exists()
+
+
+def test_views_with_a_grid_are_not_lenslet_frames(lenslet, tmp_path):
+    simulate("dualpixel-depth", tmp_path / "dp", seed=2, pixels="96x128")
+    out = tmp_path / "d.tif"
+    result = invoke("depth", tmp_path / "dp" / "views.tif", "--grid", lenslet / "grid.yaml",
+                    "-o", out)
+    assert result.exit_code == 1 and "drop --grid" in result.output and not out.exists()
+
+
+def test_a_grid_of_another_camera_is_refused(lenslet, tmp_path):
+    """W2 end to end: the pitch x sqrt 3 at 30 deg (another camera's XML on this frame)."""
+    import yaml
+
+    doc = yaml.safe_load((lenslet / "grid.yaml").read_text())
+    doc["lens_grid"]["pitch_px"] *= 3 ** 0.5
+    doc["lens_grid"]["angle_rad"] += np.pi / 6
+    doc["lens_grid"].pop("angle_deg", None)
+    other, out = tmp_path / "other.yaml", tmp_path / "d.tif"
+    other.write_text(yaml.safe_dump(doc))
+    for command in ("depth", "refocus"):
+        result = invoke(command, lenslet / "frames.tif", "--grid", other, "-o", out)
+        assert result.exit_code == 1 and "does not fit the frames" in result.output, (
+            command, result.output)
+        assert "plenocli calibrate" in result.output and not out.exists()

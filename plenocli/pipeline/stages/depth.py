@@ -46,6 +46,7 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
     params = dict(grid=grid, s=s, g=g, min_confidence=min_confidence,
                   max_disparity=max_disparity, camera=camera)
     if grid:
+        _check_not_views(input, data, meta)
         pages, names, info = _lenslet(input, grid, data, meta, s, g_range, min_confidence)
         if optics is not None:
             pages.insert(1, metric.distance_m(pages[0], optics))
@@ -69,6 +70,14 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
     if preview:
         unit = "g" if grid else "disparity (px)"
         write_depth_png(preview, stack[0], stack[-1], label=unit, protect=protect)
+
+
+def _check_not_views(input, data, meta) -> None:
+    """Dual/quad-pixel views are not lenslet frames: with --grid they gave a g map."""
+    names = set(ViewNames.of(meta, data.shape[0]).pages)
+    if set(DUAL) <= names or set(QUAD) <= names:
+        raise InputError(f"{input} holds dual/quad-pixel views, not lenslet frames; drop --grid "
+                         "for their disparity")
 
 
 def _check_known(values, searched: str) -> None:
