@@ -16,20 +16,22 @@ from plenocli.errors import InputError
 
 # frames or views of one capture, as decode, bias, flat and unmix leave them (and the simulator)
 CAPTURE = ("decode", "bias", "flat", "unmix", "simulate")
-PICTURES = (*CAPTURE, "sai", "refocus", "stitch", "develop")
+# views of a capture: also the SAIs sai cuts and the (stereo) views refocus renders
+VIEWS = (*CAPTURE, "sai", "refocus")
+PICTURES = (*VIEWS, "stitch", "develop")
 
 # stage -> input role -> the producing stages it accepts
 ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "bias": {"input": ("decode", "simulate")},
     "flat": {"input": CAPTURE, "white": ("decode", "bias", "simulate"), "gain": ("flat-gain",)},
-    "unmix": {"inputs": CAPTURE, "mixing": ("crosstalk", "simulate")},
-    "crosstalk": {"inputs": CAPTURE},
+    "unmix": {"inputs": VIEWS, "mixing": ("crosstalk", "simulate")},
+    "crosstalk": {"inputs": VIEWS},
     "calibrate": {"input": CAPTURE},
     "sai": {"input": CAPTURE},
     "refocus": {"input": CAPTURE, "depth": ("depth",)},
     "depth": {"input": (*CAPTURE, "sai")},
     "develop": {"input": PICTURES, "wb_from": CAPTURE, "recover_highlights": CAPTURE},
-    "stitch": {"inputs": PICTURES},
+    "stitch": {"inputs": VIEWS},
 }
 # stages a capture goes through once: applied again they correct what is already corrected
 ONCE = ("bias", "flat", "unmix")
