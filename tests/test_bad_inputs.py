@@ -363,7 +363,7 @@ CASES = [
                          ("mask-width", "inf"), ("mask-width", "-1")]],
     ("sai-grid-hex", ["sai", "{i}/rt/frames.tif", "-n", "2", "--grid", "{i}/rt/grid.yaml", "-o",
                       "{o}/v.tif"], 1, ("square",)),
-    ("sai-of-views", ["sai", "{o}/../views.tif", "-o", "{o}/v.tif"], 1, ("already sai views",)),
+    ("sai-of-views", ["sai", "{o}/../views.tif", "-o", "{o}/v.tif"], 1, ("`plenocli sai` output",)),
     ("sai-dualpixel-views", ["sai", "{i}/biased.tif", "-o", "{o}/v.tif"], 1, ("dual-pixel",)),
     ("sai-micro-image-mono", ["sai", "{i}/f512.tif", "--cfa-layout", "micro-image", "-o",
                               "{o}/v.tif"], 1, ("no CFA",)),

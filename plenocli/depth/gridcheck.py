@@ -75,13 +75,3 @@ def _vector_error(own, found) -> float:
     ratio = found.pitch_px / own.pitch_px
     return float(abs(ratio * np.exp(1j * turn) - 1))
 
-
-def check_fits(frame: np.ndarray, grid: LensGrid, grid_path: str, *,
-               for_depth: bool = False) -> None:
-    """InputError saying how ``grid`` (read from ``grid_path``) disagrees with the frame."""
-    from plenocli.errors import InputError
-
-    misfit = lattice_misfit(frame, grid, for_depth=for_depth)
-    if misfit:
-        raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
-                         "`plenocli calibrate` on a white image (or these frames)")

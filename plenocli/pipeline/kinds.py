@@ -23,7 +23,7 @@ PICTURES = (*VIEWS, "stitch", "develop")
 # stage -> input role -> the producing stages it accepts
 ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "bias": {"input": ("decode", "simulate")},
-    "flat": {"input": CAPTURE, "white": ("decode", "bias", "simulate"), "gain": ("flat-gain",)},
+    "flat": {"input": CAPTURE, "white": ("decode", "bias", "simulate")},   # --gain: flat's own
     "unmix": {"inputs": VIEWS, "mixing": ("crosstalk", "simulate")},
     "crosstalk": {"inputs": VIEWS},
     "calibrate": {"input": CAPTURE},

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.depth import lenslet, metric, views
-from plenocli.depth.gridcheck import check_fits
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames
+from plenocli.pipeline.fits import check_fits
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]

@@ -7,7 +7,6 @@ import warnings
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.depth.gridcheck import check_fits
 from plenocli.depth.lenslet import sensor_grey
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
@@ -15,6 +14,7 @@ from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
+from plenocli.pipeline.fits import check_fits
 from plenocli.progress import log, shown
 
 
@@ -155,3 +155,4 @@ def _lens_g(depth: str, grid: str, framing, s: float) -> tuple[np.ndarray, int, 
         return lens_g_table(framing.grid, framing.shape, data[names.index("g")], s)
     except ValueError as err:
         raise InputError(f"{depth}: {err}") from err
+
