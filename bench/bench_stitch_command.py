@@ -25,6 +25,7 @@ With ``--baseline COMMIT`` the same command (and batch) by that commit's code is
 in the same run, and the largest difference of the shifts printed.
 
     PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10] [--baseline C]
+        [--views VIEWS.tif]
 """
 
 from __future__ import annotations
@@ -147,11 +148,13 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--batch", type=int, default=0)
     parser.add_argument("--baseline", default=None, help="a commit whose command is timed too")
+    parser.add_argument("--views", default=None, help="a views.tif made by capture() before "
+                        "(skips simulating one)")
     args = parser.parse_args()
     print("load:", os.getloadavg(), f"OpenCV threads {cv2.getNumThreads()}")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        views = capture(folder, args.pixels)
+        views = Path(args.views) if args.views else capture(folder, args.pixels)
         rep_file, transform = folder / "report.json", folder / "transform.json"
         t_cmd, rss = min(command(views, folder / "pano.tif", "--report", str(rep_file),
                                  "--transform-out", str(transform))

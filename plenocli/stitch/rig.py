@@ -34,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.optics import prism as optics_prism
+from plenocli.stitch.kernels import band_maps
 from plenocli.stitch.views import fill_nan_channels
 
 MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slows on thin bands)
@@ -373,7 +374,8 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     nodes = [np.where(lost, np.nan, node) for node in nodes]
     rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
     first_x, weights_x = _cubic_weights(cols, pitch)
-    along_x = [sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)) for node in nodes]
+    along_x = [np.ascontiguousarray(sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)))
+               for node in nodes]
     del nodes
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
@@ -381,29 +383,15 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         band = slice(r0, min(r0 + step, rows))
         first_y, weights_y = _cubic_weights(band.stop, pitch)
         first_y, weights_y = first_y[band], weights_y[band]
-        vx, vy = (_along_y(a, first_y, weights_y) for a in along_x)
-        exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
-        if exact.any():
+        shape_band = (band.stop - band.start, cols)
+        mx, my = np.empty(shape_band, np.float32), np.empty(shape_band, np.float32)
+        exact, bad = np.empty(shape_band, bool), np.zeros(shape_band, bool)
+        if band_maps(along_x[0], along_x[1], first_y, weights_y, first_x, rough, mx, my, exact):
             ys, xs = np.nonzero(exact)
             tx, ty = common_to_view(rig, view, gx[xs], ys + (r0 + origin_xy[1]), shape)
-            vx[ys, xs], vy[ys, xs] = tx, ty
-        bad = ~(np.isfinite(vx) & np.isfinite(vy))
-        yield (band, np.where(bad, -10, vx).astype(np.float32),
-               np.where(bad, -10, vy).astype(np.float32), bad)
-
-
-def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Rows of node values (nodes y, cols) interpolated to a band's rows (``first`` stencil node
-    and 4 weights per row, ``first`` non-decreasing): the rows sharing a stencil at once, from
-    node rows as they are (no gathered copies)."""
-    out = np.empty((len(first), along_x.shape[1]))
-    starts = np.flatnonzero(np.diff(first, prepend=first[0] - 1))
-    for lo, hi in zip(starts, np.append(starts[1:], len(first)), strict=True):
-        node, part = int(first[lo]), out[lo:hi]
-        np.multiply(weights[lo:hi, 0, None], along_x[node], out=part)
-        for j in range(1, 4):
-            part += weights[lo:hi, j, None] * along_x[node + j]
-    return out
+            bad[ys, xs] = ~(np.isfinite(tx) & np.isfinite(ty))
+            mx[ys, xs], my[ys, xs] = np.where(bad[ys, xs], -10, tx), np.where(bad[ys, xs], -10, ty)
+        yield band, mx, my, bad
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
