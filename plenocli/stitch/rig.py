@@ -261,19 +261,35 @@ def undistort_region(image: np.ndarray, rig: PrismRig, view: int, origin_xy: np.
                      region: tuple[int, int]) -> np.ndarray:
     """A (rows, cols) view in the common undistorted frame over a region of ``region`` =
     (rows', cols') pixels whose pixel (0, 0) is common pixel ``origin_xy`` (x, y): float32,
-    Lanczos-4, NaN where the view does not cover it."""
+    Lanczos-4, NaN where the view does not cover it. Only the part of the view the region's
+    maps reach (and the kernel's 4 px around it) is NaN-filled and read."""
     rows, cols = image.shape
-    valid = np.isfinite(image).astype(np.float32)
-    filled = fill_nan_channels(np.asarray(image, np.float32)[np.newaxis])[0]
-    out = np.empty(region, np.float32)
+    bands = []
+    lo, hi = np.array([cols, rows]), np.array([-1, -1])
     for band, mx, my, bad in _view_maps(rig, view, origin_xy, region, (rows, cols)):
+        # region pixels more than a pixel off the view come out NaN whatever is resampled
+        # there (they are pointed inside below: Lanczos-4's border path is slow)
+        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+        if not off_view.all():
+            on_x, on_y = mx[~off_view], my[~off_view]
+            lo = np.minimum(lo, [np.floor(on_x.min()), np.floor(on_y.min())])
+            hi = np.maximum(hi, [np.floor(on_x.max()), np.floor(on_y.max())])
+        bands.append((band, mx, my, bad, off_view))
+    x0, y0 = np.maximum(lo.astype(int) - 4, 0)
+    x1, y1 = np.minimum(hi.astype(int) + 5, [cols, rows])
+    if x1 - x0 < 9 or y1 - y0 < 9:
+        x0, y0, x1, y1 = 0, 0, cols, rows
+    crop = np.asarray(image[y0:y1, x0:x1], np.float32)
+    valid = np.isfinite(crop).astype(np.float32)
+    filled = fill_nan_channels(crop[np.newaxis])[0]
+    out = np.empty(region, np.float32)
+    for band, mx, my, bad, off_view in bands:
+        # every pixel on the view reads within the crop (exact: integer shifts of the maps)
+        mx -= np.float32(x0)
+        my -= np.float32(y0)
         cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                           borderValue=0) > 0.999
         cover &= ~bad
-        # region pixels more than a pixel off the view come out NaN whatever is resampled
-        # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its
-        # slow border path
-        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
         mx[off_view] = 4
         my[off_view] = 4
         warped = cv2.remap(filled, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
