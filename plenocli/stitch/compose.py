@@ -160,9 +160,15 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
             n_bands = vmap.n_bands(box)
             for j, (band, mx, my, lost) in enumerate(vmap.bands(box)):
                 step(f"warping view {k + 1} of {len(views)}, band {j + 1} of {n_bands}")
+                span = on_view(mx, my, lost, vmap.view_shape)
+                if span is None:
+                    continue
+                mx, my = mx[:, span], my[:, span]
+                lost = lost[:, span] if lost is not None else None
                 rows = slice(box[0].start + band.start, box[0].start + band.stop)
+                cols = slice(box[1].start + span.start, box[1].start + span.stop)
                 job = pool.submit(_band, view, mx, my, lost, vmap.view_shape, holes[k])
-                pending.append((rows, box[1], gain, job))
+                pending.append((rows, cols, gain, job))
                 while len(pending) > BLEND_WORKERS:
                     add_oldest()
         while pending:
@@ -174,6 +180,19 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
         panorama[:, rows] *= 1.0 / np.maximum(t, 1e-12)
         panorama[:, rows][:, t <= 0] = np.nan
     return panorama, total
+
+
+def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,
+            view_shape: tuple[int, int]) -> slice | None:
+    """The columns of a band whose maps reach the view (a source within a pixel of it, a ray
+    that gets through): only they can be covered; None when none does. A prism bends a view's
+    footprint, so its bands are narrower than its box (the demo rig's view A: 0.82 x)."""
+    rows, cols = view_shape
+    on = (mx >= -1) & (mx <= cols) & (my >= -1) & (my <= rows)
+    if lost is not None:
+        on &= ~lost
+    found = np.flatnonzero(on.any(axis=0))
+    return slice(int(found[0]), int(found[-1]) + 1) if found.size else None
 
 
 def _band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape,
