@@ -21,8 +21,8 @@ Memory: peak RSS of the command as a multiple of the bytes of the views (float32
 panorama (float32 RGB). Run ``uptime`` first: the ratios are meaningful on a loaded machine,
 the seconds are not.
 
-With ``--baseline COMMIT`` the same command (and batch) by that commit's code is timed after,
-in the same run, and the largest difference of the shifts printed.
+With ``--baseline COMMIT`` the same command by that commit's code is timed after, in the same
+run, and the largest difference of the shifts printed; the batch then runs both codes in turns.
 
     PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10] [--baseline C]
         [--views VIEWS.tif]
@@ -121,12 +121,16 @@ def floors(views: Path, report: dict, repeat: int) -> dict:
             "view_px": float(rows * cols)}
 
 
-def batch(views: Path, folder: Path, transform: Path, n: int,
-          root: Path = ROOT) -> tuple[float, float]:
-    """Wall and CPU seconds per capture of ``n`` commands reapplying a saved transform."""
-    runs = [command(views, folder / f"batch{k}.tif", "--transform-in", str(transform), root=root)
-            for k in range(n)]
-    return sum(r[0] for r in runs) / n, sum(r[2] for r in runs) / n
+def batch(views: Path, folder: Path, runs: list[tuple[Path, Path]],
+          n: int) -> list[tuple[float, float]]:
+    """Wall and CPU seconds per capture of ``n`` commands reapplying a saved transform, for
+    each (package root, transform) of ``runs``; the roots take turns, so they share the load."""
+    times = [[] for _ in runs]
+    for k in range(n):
+        for j, (root, transform) in enumerate(runs):
+            times[j].append(command(views, folder / f"batch{j}_{k}.tif", "--transform-in",
+                                    str(transform), root=root))
+    return [(sum(t[0] for t in ts) / n, sum(t[2] for t in ts) / n) for ts in times]
 
 
 def print_batch(label: str, n: int, per: tuple[float, float], base: dict) -> None:
@@ -145,9 +149,10 @@ def print_command(label: str, t_cmd: float, rss: float, cpu: float, base: dict,
           f"{(t_cmd - base['demosaic']) / base['footprint']:.2f} x")
 
 
-def baseline(views: Path, folder: Path, commit: str, n_batch: int, report: dict, base: dict,
-             pano_bytes: float) -> None:
-    """The same command (and batch) by the code of ``commit``, in the same run."""
+def baseline(views: Path, folder: Path, commit: str, report: dict, base: dict,
+             pano_bytes: float) -> tuple[Path, Path]:
+    """The same command by the code of ``commit``, in the same run; returns that code's root
+    and the transform it saved."""
     (folder / "baseline").mkdir()
     root = export_package(commit, folder / "baseline")
     rep_file, transform = folder / "report_baseline.json", folder / "transform_baseline.json"
@@ -157,9 +162,7 @@ def baseline(views: Path, folder: Path, commit: str, n_batch: int, report: dict,
     moved = float(np.abs(shifts - np.array(report["shifts_px"])).max())
     print_command(f"baseline {commit}", t_cmd, rss, cpu, base, pano_bytes)
     print(f"    shifts differ from this checkout's by {moved:.4f} px at most")
-    if n_batch:
-        print_batch(f"baseline {commit}", n_batch,
-                    batch(views, folder, transform, n_batch, root), base)
+    return root, transform
 
 
 def main() -> None:
@@ -190,11 +193,14 @@ def main() -> None:
               f"{base['footprint_cpu']:.2f} s): the floor")
         print(f"demosaic of A and B       {base['demosaic']:7.2f} s (inside the command)")
         print_command("this checkout", t_cmd, rss, cpu, base, pano_bytes)
-        if args.batch:
-            print_batch("this checkout", args.batch,
-                        batch(views, folder, transform, args.batch), base)
+        runs = [("this checkout", (ROOT, transform))]
         if args.baseline:
-            baseline(views, folder, args.baseline, args.batch, report, base, pano_bytes)
+            runs.append((f"baseline {args.baseline}",
+                         baseline(views, folder, args.baseline, report, base, pano_bytes)))
+        if args.batch:  # the checkout and the baseline in turns
+            for (label, _), per in zip(runs, batch(views, folder, [r for _, r in runs],
+                                                   args.batch), strict=True):
+                print_batch(label, args.batch, per, base)
         print("load:", os.getloadavg())
 
 
