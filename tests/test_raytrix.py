@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from plenocli import calibration
@@ -58,3 +59,79 @@ def test_read_grid_accepts_xml(realdata):
     assert grid.pitch_px == pytest.approx(23.202295303345)
     # offset from the centre, y up: x = W/2 + 13.04, y = H/2 + 20.35
     assert grid.offset_xy == pytest.approx((1024 + 13.040943844572, 1024 + 20.348051920159))
+
+
+@pytest.mark.parametrize("angle", [0.0, -np.pi / 2, np.pi / 3, 0.3])
+@pytest.mark.parametrize("types", [(0, 1, 2), (2, 0, 1), (1, 2, 0)])
+def test_lens_types_round_trip(angle, types):
+    """Written types are read back on the same lenses when the written base_x lies along an
+    image axis (both readings of the offsets agree there, as in every camera file), else
+    not read at all: never on other lenses."""
+    grid = LensGrid(23.2, angle, (1001.3, 1040.8), image_shape=(2048, 2000),
+                    lens_type_of_coset=types)
+    back = raytrix.grid_from_calib(raytrix.parse_calib(raytrix.format_calib(
+        raytrix.calib_from_grid(grid))), (2048, 2000))
+    if angle in (np.pi / 3, 0.3):
+        assert back.lens_type_of_coset is None
+        return
+    i, j = np.meshgrid(np.arange(-4, 5), np.arange(-4, 5))
+    x, y = grid.lattice_xy(i.ravel(), j.ravel()).T
+    assert np.array_equal(back.lens_types(*back.nearest_index(x, y)),
+                          grid.lens_types(i.ravel(), j.ravel()))
+
+
+def test_no_types_written_when_none_measured():
+    grid = LensGrid(23.2, 0.1, (1001.3, 1040.8), image_shape=(2048, 2000))
+    assert raytrix.calib_from_grid(grid)["lens_types"] == []
+
+
+def _calib(base_x, base_y, type1):
+    return {"diameter": 20.0, "offset": [0.0, 0.0], "lens_base_x": base_x,
+            "rotation": float(np.arctan2(base_x[1], base_x[0])),
+            "lens_base_y": base_y, "lens_types": [
+                {"id": 0, "offset": [0.0, 0.0], "depth_range": [1, 3]},
+                {"id": 1, "offset": type1, "depth_range": [2.8, 4]},
+                {"id": 2, "offset": [-v for v in type1], "depth_range": [3.8, 100]}]}
+
+
+def test_type_offsets_read_y_down():
+    # Fujita2's layout: base_x up; type 1 written at base_x's numbers is the lens BELOW
+    calib = _calib([0.0, 1.0], [0.8660254, 0.5], [0.0, 1.0])
+    grid = raytrix.grid_from_calib(calib, (400, 400))
+    below = grid.nearest_index(200.0, 220.0)
+    above = grid.nearest_index(200.0, 180.0)
+    assert grid.lens_types(*below) == 1 and grid.lens_types(*above) == 2
+    # base_x (-1, 0): read y down and read in the lens bases, type 1 is on different cosets
+    calib = _calib([-1.0, 0.0], [-0.5, -0.8660254], [-1.0, 0.0])
+    assert raytrix.grid_from_calib(calib, (400, 400)).lens_type_of_coset is None
+
+
+@pytest.mark.realdata
+def test_xml_types_are_the_cosets_sharpest_in_their_depth_ranges(realdata):
+    """Fujita2 with its own XML read y down: the type-2 lenses (range 3.5-100) are the
+    sharpest (relative to their neighbours) in the far third of the frame's g and gain most
+    from the near third to it, type 0 (1-3.2) loses most. Read y up, types 1 and 2 would swap
+    (measured near / far: type 0 +0.06 / -0.26, type 1 +0.17 / +0.04, type 2 +0.01 / +0.26)."""
+    import cv2
+
+    from plenocli.calibration.lenstypes import (
+        lens_sharpness,
+        lens_virtual_depth,
+        local_contrast,
+    )
+
+    folder = realdata / "raytrix" / "fujita2"
+    image = cv2.imread(str(folder / "frame0.png"))[..., :3].astype(np.float32).sum(-1)
+    grid, _ = calibration.calibrate(image)
+    xml = gridfile.read_grid(folder / "calib.xml", image_shape=image.shape)
+    assert xml.lens_type_of_coset is not None
+    flat = calibration.flatten(image, scale_px=1.5 * grid.pitch_px)
+    rows, local = local_contrast(grid.indices, lens_sharpness(flat, grid.centres_xy,
+                                                              grid.pitch_px))
+    g = lens_virtual_depth(flat, grid.indices, grid.centres_xy, grid.pitch_px)[rows]
+    types = xml.lens_types(*xml.nearest_index(*grid.centres_xy[rows].T))
+    low, high = np.nanpercentile(g, (100 / 3, 200 / 3))
+    near = [np.median(local[(types == t) & (g <= low)]) for t in range(3)]
+    far = [np.median(local[(types == t) & (g >= high)]) for t in range(3)]
+    change = np.subtract(far, near)
+    assert int(np.argmax(far)) == 2 and list(np.argsort(change)) == [0, 1, 2], (near, far)

@@ -25,7 +25,7 @@ Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenoc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -51,13 +51,14 @@ from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
 __all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
-           "moved_from_start", "refine_centres"]
+           "moved_from_start", "refine_centres", "start_types"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # a lattice read from the border repetition is used when its pitch and angle errors move the
 # frame's corner lenses by at most this share of a pitch
 CORNER_TOLERANCE = 0.05
 FEW_LENSES_ACROSS = 20  # below this many lenses across, a failure says the image is small
+KEEP_TYPES_PITCH = 0.25  # a start's lenses this close to ours (pitches) carry their types over
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,36 @@ def _with_lens_types(flat: np.ndarray, grid: LensGrid) -> tuple[LensGrid, dict |
                     indices=grid.indices, lens_type_of_coset=coset)
     return grid, {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
                   "p_value": types.p_value}
+
+
+def start_types(grid: LensGrid, start: LensGrid, report: CalibrationReport
+                ) -> tuple[LensGrid, dict | None]:
+    """The grid with the start file's lens types (a camera XML's), where they can be carried
+    over: the start's lenses must be ours (every lens within KEEP_TYPES_PITCH of ours, so
+    that the coset of its centre lens is known) and the types read from the image by depth,
+    when there are any, must agree; if they do not, no types (neither can be vouched for).
+    Returns the grid and the report's lens-type entry."""
+    measured = report.lens_types
+    if start.lens_type_of_coset is None or grid.lattice != "hex":
+        return grid, measured
+    far = compare_grids(grid, start, grid.image_shape)
+    if far["max_px"] > KEEP_TYPES_PITCH * grid.pitch_px:
+        note = (f"the start's lenses lie up to {far['max_px']:.1f} px from ours: its types "
+                "cannot be carried over")
+        return grid, {**(measured or {}), "start_types": note}
+    kept = []
+    for k in range(3):   # the start's type of the lens of ours in coset k
+        x, y = grid.lattice_xy(k, 0)
+        kept.append(int(start.lens_types(*start.nearest_index(x, y))))
+    kept = tuple(kept)
+    ours = grid.lens_type_of_coset
+    if ours is not None and ours != kept:
+        return replace(grid, lens_type_of_coset=None), {
+            **measured, "start_types": f"the start's types {list(kept)} and the image's "
+            f"{list(ours)} differ: no types written"}
+    return replace(grid, lens_type_of_coset=kept), {
+        **(measured or {}), "type_of_coset": list(kept), "source": "the start file"
+        + (" (the image's depths agree)" if ours is not None else "")}
 
 
 def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,

@@ -24,12 +24,21 @@ Conventions (checked against the real origami frame, see tests/test_raytrix.py):
   store e.g. ``(-1, -8.7e-8)`` with ``rotation = 2.5e-5``), so the lattice is turned by the small
   difference between ``rotation`` and the direction of ``lens_base_x`` (modulo 60 deg).
 - ``LensGrid.angle_rad`` is measured from +x towards +y (down): it is minus the y-up angle.
+- ``lens_type`` offsets (lens units) point from the type-0 lens to a lens of that type in image
+  directions with y DOWN, unlike ``offset`` and the bases. Every file seen writes type 1 at the
+  numbers of ``lens_base_x`` and type 2 at minus them; on origami and Fujita2 (base_x (0, 1))
+  the coset the numbers name read y down is the one sharpest at the type's XML depth range
+  (type 2, 3.5-100: sharpest at g > 4.2; read y up it would be the coset sharpest at g 3-4).
+  Read as coefficients of the lens bases the numbers name the same cosets on those files and
+  on base_x (1, 0) files, but not on base_x (-1, 0) files: there the two readings disagree, no
+  evidence settles it, and no types are read (docs/calibrate.md).
 """
 
 from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -268,8 +277,47 @@ def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     a1, a2 = np.arctan2(img1[1], img1[0]), np.arctan2(img2[1], img2[0])
     first = img1 if _wrap(a2 - a1, 2 * np.pi) > 0 else img2
     centre = (cols / 2 + float(calib["offset"][0]), rows / 2 - float(calib["offset"][1]))
-    return LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
+    grid = LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
                     offset_xy=centre, lattice=lattice, image_shape=(rows, cols))
+    types = type_of_coset(calib, grid) if lattice == "hex" else None
+    return grid if types is None else replace(grid, lens_type_of_coset=types)
+
+
+def _coset_of(grid: LensGrid, vector_px: np.ndarray) -> int | None:
+    """Coset (i - j) mod 3 of the lattice vector ``vector_px`` (image px, y down) of a hex
+    grid, or None when it is not a lattice vector (within 0.1 lens)."""
+    ij = np.linalg.solve(grid.basis().T, vector_px)
+    if np.abs(ij - np.rint(ij)).max() > 0.1:
+        return None
+    return int((np.rint(ij[0]) - np.rint(ij[1])) % 3)
+
+
+def _readings(calib: dict, grid: LensGrid, offset) -> tuple[int | None, int | None]:
+    """The coset a lens-type offset names read y down in image directions, and read as
+    coefficients of the lens bases (the two readings the real frames support)."""
+    d = float(calib["diameter"])
+    o = np.asarray(offset, float)
+    y_down = _coset_of(grid, d * o)
+    basis = o[0] * np.asarray(calib["lens_base_x"], float) + \
+        o[1] * np.asarray(calib["lens_base_y"], float)
+    return y_down, _coset_of(grid, d * np.array([basis[0], -basis[1]]))
+
+
+def type_of_coset(calib: dict, grid: LensGrid) -> tuple[int, int, int] | None:
+    """The camera's lens type of each coset (i - j) mod 3 of ``grid`` (lens (0, 0) at the
+    calibration's offset, from which the types' offsets point), or None: no three lens types,
+    or offsets whose two readings (module doc) name different cosets or do not make one type
+    per coset."""
+    types = calib.get("lens_types") or []
+    if sorted(int(t["id"]) for t in types) != [0, 1, 2]:
+        return None
+    out = [-1, -1, -1]
+    for t in types:   # offsets from the centre lens, lens (0, 0)
+        y_down, basis = _readings(calib, grid, t["offset"])
+        if y_down is None or y_down != basis:
+            return None
+        out[y_down] = int(t["id"])
+    return tuple(out) if sorted(out) == [0, 1, 2] else None
 
 
 def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
@@ -285,15 +333,9 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     base_x = [float(b[0, 0]), float(-b[0, 1])]          # y up
     base_y = [float(b[1, 0]), float(-b[1, 1])]
     tpl = template or {}
-    lens_types = [dict(lt) for lt in tpl.get("lens_types", DEFAULT_LENS_TYPES)]
-    cosets = grid.lens_type_of_coset   # types measured from the image, when known
-    for lt in lens_types:  # Raytrix: type 1 sits at +base_x, type 2 at -base_x
-        sign = {0: 0.0, 1: 1.0, 2: -1.0}.get(int(lt["id"]), 0.0)
-        if cosets is not None and int(lt["id"]) in cosets:
-            # lens (1, 0) is one coset on from lens (0, 0), lens (-1, 0) two
-            step = (cosets.index(int(lt["id"])) - cosets.index(0)) % 3
-            sign = {0: 0.0, 1: 1.0, 2: -1.0}[step]
-        lt["offset"] = [sign * base_x[0], sign * base_x[1]]
+    lens_types = _written_types(grid, tpl.get("lens_types", DEFAULT_LENS_TYPES), (i, j),
+                                {"diameter": grid.pitch_px, "lens_base_x": base_x,
+                                 "lens_base_y": base_y})
     return {
         "version": tpl.get("version", "1.0"),
         "offset": [float(x - cols / 2), float(rows / 2 - y)],
@@ -309,3 +351,30 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
         "lens_types": lens_types,
         "k_matrix": tpl.get("k_matrix"),
     }
+
+
+def _written_types(grid: LensGrid, template: list[dict], centre: tuple, bases: dict
+                   ) -> list[dict]:
+    """The lens types of a written file: the template's ids and depth ranges, each offset a
+    unit lattice vector (lens units, y down) from the centre lens to a lens of its type, one
+    that both readings of the module doc agree on where there is one. Without measured types
+    the file carries none: a guessed type gives 2/3 of the lenses the wrong depth range."""
+    cosets = grid.lens_type_of_coset
+    if cosets is None:
+        return []
+    here = int((centre[0] - centre[1]) % 3)
+    b = grid.basis() / grid.pitch_px
+    units = [(di * b[0] + dj * b[1], (di - dj) % 3)
+             for di, dj in ((1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1))]
+    out = []
+    for lt in template:
+        if int(lt["id"]) not in cosets:
+            continue
+        shift = (cosets.index(int(lt["id"])) - here) % 3
+        offset = [0.0, 0.0]
+        if shift:
+            fits = [u for u, k in units if k == shift]
+            both = [u for u in fits if len(set(_readings(bases, grid, u))) == 1]
+            offset = [float(v) for v in (both or fits)[0]]
+        out.append({**lt, "offset": offset})
+    return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -75,6 +76,9 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     if xml and grid.lattice != "hex":
         raise CalibrationError(f"{input}: the array is square; --xml writes hexagonal Raytrix "
                                "calibrations only, drop --xml")
+    if first is not None:
+        grid, types = calibration.start_types(grid, first, report)
+        report = dataclasses.replace(report, lens_types=types)
     extra: dict = {"residuals": report.to_dict()}
     template = meta.get("raytrix_calib")
     if first is not None:
@@ -85,6 +89,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
             extra["moved_from_start"]["kept"] = (
                 "lens_border, tcp, distortion, lens types' depth ranges and k_matrix of the "
                 "start file (in --xml)" if xml else "nothing (no --xml written)")
+            extra["moved_from_start"]["lens_types"] = (report.lens_types or {}).get(
+                "source") or (report.lens_types or {}).get("start_types") or "none in the file"
     if other is not None:
         extra["compare"] = {"grid": str(compare),
                             **calibration.compare_grids(grid, other, image.shape)}
