@@ -77,3 +77,28 @@ def test_a_start_files_types_are_kept_when_its_lenses_are_ours():
     far = replace(ours, offset_xy=(16.2, 7.9), lens_type_of_coset=(2, 0, 1))
     grid, info = start_types(ours, far, _Report(None))
     assert grid.lens_type_of_coset is None and "cannot be carried" in info["start_types"]
+
+
+def test_depth_matches_each_lens_against_its_own_type():
+    """A multi-focus slanted plane (g 2.5-5.5; types focused at 2.5, 4, 5.5, blurred by
+    0.8 |g - g_t| px): with the grid's types each lens is matched against lenses of its own
+    type, blurred alike. Measured RMS 0.12 with types, 0.28 without (neighbours of other
+    types, blurred differently, pull the match)."""
+    from dataclasses import replace
+
+    from plenocli.depth.lenslet import depth_map
+    from plenocli.synth.depthscene import truth_depth
+
+    shape = (360, 480)
+    out = output_shape(shape, 0.2)
+    planes = scene_planes("slanted", out)
+    grid = LensGrid(20.2, 0.0, (6.1, 7.9), "hex", image_shape=shape,
+                    lens_type_of_coset=(1, 2, 0))
+    frame = multi_focus_frame(grid, shape, planes, s=0.2, type_of_coset=(1, 2, 0), seed=2)
+    truth = truth_depth(planes, out)
+    rms = []
+    for g in (grid, replace(grid, lens_type_of_coset=None)):
+        found = depth_map(frame, g, s=0.2).g[6:-6, 6:-6]
+        assert np.isfinite(found).mean() > 0.95
+        rms.append(float(np.sqrt(np.nanmean((found - truth[6:-6, 6:-6]) ** 2))))
+    assert rms[0] < 0.18 and rms[0] < 0.6 * rms[1], rms
