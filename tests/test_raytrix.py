@@ -64,16 +64,11 @@ def test_read_grid_accepts_xml(realdata):
 @pytest.mark.parametrize("angle", [0.0, -np.pi / 2, np.pi / 3, 0.3])
 @pytest.mark.parametrize("types", [(0, 1, 2), (2, 0, 1), (1, 2, 0)])
 def test_lens_types_round_trip(angle, types):
-    """Written types are read back on the same lenses when the written base_x lies along an
-    image axis (both readings of the offsets agree there, as in every camera file), else
-    not read at all: never on other lenses."""
+    """Written types are read back on the same lenses."""
     grid = LensGrid(23.2, angle, (1001.3, 1040.8), image_shape=(2048, 2000),
                     lens_type_of_coset=types)
     back = raytrix.grid_from_calib(raytrix.parse_calib(raytrix.format_calib(
         raytrix.calib_from_grid(grid))), (2048, 2000))
-    if angle in (np.pi / 3, 0.3):
-        assert back.lens_type_of_coset is None
-        return
     i, j = np.meshgrid(np.arange(-4, 5), np.arange(-4, 5))
     x, y = grid.lattice_xy(i.ravel(), j.ravel()).T
     assert np.array_equal(back.lens_types(*back.nearest_index(x, y)),
@@ -94,24 +89,26 @@ def _calib(base_x, base_y, type1):
                 {"id": 2, "offset": [-v for v in type1], "depth_range": [3.8, 100]}]}
 
 
-def test_type_offsets_read_y_down():
-    # Fujita2's layout: base_x up; type 1 written at base_x's numbers is the lens BELOW
+def test_type_t_sits_at_minus_its_offset():
+    # Fujita2's layout: base_x up; type 1, written at base_x's numbers, is the lens BELOW
     calib = _calib([0.0, 1.0], [0.8660254, 0.5], [0.0, 1.0])
     grid = raytrix.grid_from_calib(calib, (400, 400))
-    below = grid.nearest_index(200.0, 220.0)
-    above = grid.nearest_index(200.0, 180.0)
-    assert grid.lens_types(*below) == 1 and grid.lens_types(*above) == 2
-    # base_x (-1, 0): read y down and read in the lens bases, type 1 is on different cosets
-    calib = _calib([-1.0, 0.0], [-0.5, -0.8660254], [-1.0, 0.0])
-    assert raytrix.grid_from_calib(calib, (400, 400)).lens_type_of_coset is None
+    assert grid.lens_types(*grid.nearest_index(200.0, 220.0)) == 1
+    assert grid.lens_types(*grid.nearest_index(200.0, 180.0)) == 2
+    # the R42's: base_x right; type 1 is the lens on the LEFT
+    calib = _calib([1.0, 0.0], [0.5, -0.8660254], [1.0, 0.0])
+    grid = raytrix.grid_from_calib(calib, (400, 400))
+    assert grid.lens_types(*grid.nearest_index(180.0, 200.0)) == 1
+    assert grid.lens_types(*grid.nearest_index(220.0, 200.0)) == 2
 
 
 @pytest.mark.realdata
 def test_xml_types_are_the_cosets_sharpest_in_their_depth_ranges(realdata):
-    """Fujita2 with its own XML read y down: the type-2 lenses (range 3.5-100) are the
-    sharpest (relative to their neighbours) in the far third of the frame's g and gain most
-    from the near third to it, type 0 (1-3.2) loses most. Read y up, types 1 and 2 would swap
-    (measured near / far: type 0 +0.06 / -0.26, type 1 +0.17 / +0.04, type 2 +0.01 / +0.26)."""
+    """Fujita2 with its own XML (type t at minus its offset): the type-2 lenses (range
+    3.5-100) are the sharpest (relative to their neighbours) in the far third of the frame's
+    g and gain most from the near third to it, type 0 (1-3.2) loses most. Read the other way,
+    types 1 and 2 swap (measured near / far: type 0 +0.06 / -0.26, type 1 +0.17 / +0.04,
+    type 2 +0.01 / +0.26)."""
     import cv2
 
     from plenocli.calibration.lenstypes import (

@@ -41,6 +41,7 @@ from plenocli.calibration.fit import (
     fit_grid,
     fit_lattice,
     regional_lattice,
+    reindexed,
 )
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.judges import Decision, decide
@@ -50,7 +51,7 @@ from plenocli.calibration.verify import Verdict
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
-__all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
+__all__ = ["KEPT", "CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
            "moved_from_start", "refine_centres", "start_types"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
@@ -58,6 +59,8 @@ MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # frame's corner lenses by at most this share of a pitch
 CORNER_TOLERANCE = 0.05
 FEW_LENSES_ACROSS = 20  # below this many lenses across, a failure says the image is small
+# pitch and rotation of a start grid that only the match judge confirms (judges.py)
+KEPT = "kept from the start (the micro-images repeat their neighbours' content on it)"
 KEEP_TYPES_PITCH = 0.25  # a start's lenses this close to ours (pitches) carry their types over
 
 
@@ -135,6 +138,8 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
     if lattice != "auto" and found.kind != lattice:
         raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
                                f"{found.describe()} lattice; use --lattice {found.kind} or auto")
+    if decision.judge == "match":
+        return _matched_grid(image, cfa, decision)
     border = border_lattice(found, all_views)
     sure = _corner_error(border, image.shape) <= CORNER_TOLERANCE * found.pitch_px
     pinned = "the border repetition" if sure else ""
@@ -167,11 +172,27 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
                                    lens_centre=centre, decision=decision, lattice_from=pinned)
 
 
+def _matched_grid(image, cfa, decision: Decision) -> tuple[LensGrid, CalibrationReport]:
+    """The start grid's lattice (pitch and angle kept) on the lens centre the match judge
+    measured; every centre is the lattice's (nothing on such a frame measures one lens)."""
+    found, match = decision.lattice, decision.match
+    grid = reindexed(found.pitch_px, found.angle_rad, match.offset_xy, found.kind, image.shape)
+    indices, centres = grid.lens_centres()
+    grid = replace(grid, indices=indices, centres_xy=centres)
+    fit = LatticeFit(lenses_total=len(indices), lenses_refined=0, outliers=0,
+                     residual_rms_px=0.0, residual_max_px=0.0, centres_refined=False)
+    flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
+    grid, type_info = _with_lens_types(flat, grid)
+    return grid, CalibrationReport(fit=fit, verdict=decision.border, lens_types=type_info,
+                                   decision=decision, lattice_from=KEPT)
+
+
 def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport) -> dict:
     """How far the calibration moved each part of a start grid, and what measured it: the
-    offset (the lens nearest the image centre), pitch, rotation and every centre. All four
-    are measured from the image (or the calibration is refused); what a start file holds
-    beyond the lattice (lens border, depth ranges, distortion) is the caller's to keep."""
+    offset (the lens nearest the image centre), pitch, rotation and every centre. The offset
+    is always measured; pitch and rotation too, unless only the match judge could confirm
+    the start (then they are kept, ``KEPT``); what a start file holds beyond the lattice
+    (lens border, depth ranges, distortion) is the caller's to keep."""
     shape = grid.image_shape
     far = compare_grids(grid, start, shape)
     near = start.lattice_xy(*start.nearest_index(*grid.offset_xy))
@@ -180,14 +201,16 @@ def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport)
     centres = ("each micro-image's symmetry centre" if report.fit.centres_refined else
                f"the lattice ({report.lattice_from}; a scene moves each micro-image's own "
                "centre)")
+    kept = report.lattice_from == KEPT
+    lattice = KEPT if kept else f"measured: {report.lattice_from}"
     return {**far,
-            "offset": {"source": "measured: the mean micro-image's 6-fold centre",
+            "offset": {"source": "measured: " + (
+                "the symmetry point where the micro-images repeat their neighbours' content "
+                "(match judge)" if kept else "the mean micro-image's 6-fold centre"),
                        "moved_px": [float(v) for v in np.asarray(grid.offset_xy) - near]},
-            "pitch": {"source": f"measured: {report.lattice_from}",
-                      "moved_px": float(grid.pitch_px - start.pitch_px),
+            "pitch": {"source": lattice, "moved_px": float(grid.pitch_px - start.pitch_px),
                       "moved_percent": float(100 * (grid.pitch_px / start.pitch_px - 1))},
-            "rotation": {"source": f"measured: {report.lattice_from}",
-                         "moved_deg": float(np.degrees(turn))},
+            "rotation": {"source": lattice, "moved_deg": float(np.degrees(turn))},
             "centres": {"source": f"measured: {centres}", "rms_px": far["rms_px"],
                         "max_px": far["max_px"]}}
 

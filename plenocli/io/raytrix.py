@@ -24,14 +24,15 @@ Conventions (checked against the real origami frame, see tests/test_raytrix.py):
   store e.g. ``(-1, -8.7e-8)`` with ``rotation = 2.5e-5``), so the lattice is turned by the small
   difference between ``rotation`` and the direction of ``lens_base_x`` (modulo 60 deg).
 - ``LensGrid.angle_rad`` is measured from +x towards +y (down): it is minus the y-up angle.
-- ``lens_type`` offsets (lens units) point from the type-0 lens to a lens of that type in image
-  directions with y DOWN, unlike ``offset`` and the bases. Every file seen writes type 1 at the
-  numbers of ``lens_base_x`` and type 2 at minus them; on origami and Fujita2 (base_x (0, 1))
-  the coset the numbers name read y down is the one sharpest at the type's XML depth range
-  (type 2, 3.5-100: sharpest at g > 4.2; read y up it would be the coset sharpest at g 3-4).
-  Read as coefficients of the lens bases the numbers name the same cosets on those files and
-  on base_x (1, 0) files, but not on base_x (-1, 0) files: there the two readings disagree, no
-  evidence settles it, and no types are read (docs/calibrate.md).
+- ``lens_type`` offsets (lens units, y up like the bases) point from a lens of that type to
+  the type-0 centre lens: type t sits at minus its offset. Every file seen writes type 1 at
+  the numbers of ``lens_base_x`` (type 1 at -base_x) and type 2 at minus them. Evidence: on
+  Fujita2 and origami (base_x up) the coset so named type 2 (range 3.5-100) is the sharpest
+  in the far third of the frame's g and gains most from near to far, type 0 (1-3.2) loses
+  most; on the R42 crop (base_x right, every lens at g 5-7) the coset so named type 2
+  (3.8-100) is sharper than type 1 (2.8-4), type 0 (1-3) least sharp; PlenopticToolbox 2.0
+  reads its R42 and R29 files (rotation 0) alike. Read as vectors pointing to the type, types
+  1 and 2 swap on both cameras (docs/calibrate.md).
 """
 
 from __future__ import annotations
@@ -292,31 +293,21 @@ def _coset_of(grid: LensGrid, vector_px: np.ndarray) -> int | None:
     return int((np.rint(ij[0]) - np.rint(ij[1])) % 3)
 
 
-def _readings(calib: dict, grid: LensGrid, offset) -> tuple[int | None, int | None]:
-    """The coset a lens-type offset names read y down in image directions, and read as
-    coefficients of the lens bases (the two readings the real frames support)."""
-    d = float(calib["diameter"])
-    o = np.asarray(offset, float)
-    y_down = _coset_of(grid, d * o)
-    basis = o[0] * np.asarray(calib["lens_base_x"], float) + \
-        o[1] * np.asarray(calib["lens_base_y"], float)
-    return y_down, _coset_of(grid, d * np.array([basis[0], -basis[1]]))
-
-
 def type_of_coset(calib: dict, grid: LensGrid) -> tuple[int, int, int] | None:
     """The camera's lens type of each coset (i - j) mod 3 of ``grid`` (lens (0, 0) at the
-    calibration's offset, from which the types' offsets point), or None: no three lens types,
-    or offsets whose two readings (module doc) name different cosets or do not make one type
-    per coset."""
+    calibration's offset; type t at minus its offset, module doc), or None: no three lens
+    types, or offsets that are not lattice vectors or do not make one type per coset."""
     types = calib.get("lens_types") or []
     if sorted(int(t["id"]) for t in types) != [0, 1, 2]:
         return None
+    d = float(calib["diameter"])
     out = [-1, -1, -1]
-    for t in types:   # offsets from the centre lens, lens (0, 0)
-        y_down, basis = _readings(calib, grid, t["offset"])
-        if y_down is None or y_down != basis:
+    for t in types:
+        ox, oy = (float(v) for v in t["offset"])
+        coset = _coset_of(grid, d * np.array([-ox, oy]))   # minus the y-up offset, y down
+        if coset is None:
             return None
-        out[y_down] = int(t["id"])
+        out[coset] = int(t["id"])
     return tuple(out) if sorted(out) == [0, 1, 2] else None
 
 
@@ -333,9 +324,7 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     base_x = [float(b[0, 0]), float(-b[0, 1])]          # y up
     base_y = [float(b[1, 0]), float(-b[1, 1])]
     tpl = template or {}
-    lens_types = _written_types(grid, tpl.get("lens_types", DEFAULT_LENS_TYPES), (i, j),
-                                {"diameter": grid.pitch_px, "lens_base_x": base_x,
-                                 "lens_base_y": base_y})
+    lens_types = _written_types(grid, tpl.get("lens_types", DEFAULT_LENS_TYPES), (i, j))
     return {
         "version": tpl.get("version", "1.0"),
         "offset": [float(x - cols / 2), float(rows / 2 - y)],
@@ -353,28 +342,24 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     }
 
 
-def _written_types(grid: LensGrid, template: list[dict], centre: tuple, bases: dict
-                   ) -> list[dict]:
-    """The lens types of a written file: the template's ids and depth ranges, each offset a
-    unit lattice vector (lens units, y down) from the centre lens to a lens of its type, one
-    that both readings of the module doc agree on where there is one. Without measured types
-    the file carries none: a guessed type gives 2/3 of the lenses the wrong depth range."""
+def _written_types(grid: LensGrid, template: list[dict], centre: tuple) -> list[dict]:
+    """The lens types of a written file: the template's ids and depth ranges, each offset
+    minus the y-up unit lattice vector (lens units) from the centre lens to a lens of its
+    type (module doc; along base_x where it can be, as camera files have it). Without
+    measured types the file carries none: a guessed type gives 2/3 of the lenses the wrong
+    depth range."""
     cosets = grid.lens_type_of_coset
     if cosets is None:
         return []
     here = int((centre[0] - centre[1]) % 3)
     b = grid.basis() / grid.pitch_px
-    units = [(di * b[0] + dj * b[1], (di - dj) % 3)
-             for di, dj in ((1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1))]
+    units = [(di * b[0] + dj * b[1], (di - dj) % 3)   # image vectors (y down), coset shift
+             for di, dj in ((-1, 0), (1, 0), (0, 1), (-1, 1), (0, -1), (1, -1))]
     out = []
     for lt in template:
         if int(lt["id"]) not in cosets:
             continue
         shift = (cosets.index(int(lt["id"])) - here) % 3
-        offset = [0.0, 0.0]
-        if shift:
-            fits = [u for u, k in units if k == shift]
-            both = [u for u in fits if len(set(_readings(bases, grid, u))) == 1]
-            offset = [float(v) for v in (both or fits)[0]]
-        out.append({**lt, "offset": offset})
+        u = next(u for u, k in units if k == shift) if shift else np.zeros(2)
+        out.append({**lt, "offset": [float(-u[0]) + 0.0, float(u[1]) + 0.0]})
     return out

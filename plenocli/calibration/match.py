@@ -1,0 +1,160 @@
+"""The third judge: neighbouring micro-images repeat each other's content at one shift.
+
+A scene point at virtual depth g lies in neighbouring micro-images at offsets that differ by
+their baseline times q = 1 / g (docs/depth.md): on the lens lattice, centred on the lens
+centres, each micro-image matches its first ring at one q, far better than at any other
+(``plenocli.depth.lenslet.lens_depth``: confidence 1 - best / median cost). Nothing else does:
+
+- a lattice off in pitch or angle (so that the crop's corners move by half a pitch), or one
+  centred on the holes or edge midpoints, cuts "micro-images" out of two or three real ones,
+  whose parts repeat at different shifts or not at all;
+- a relative (x2, /2, x sqrt(3), / sqrt(3)) pairs micro-images that are not neighbours, or
+  parts of one micro-image with each other;
+- a scene periodicity (a fabric, a grille) repeats at one period everywhere, but the parallax
+  between micro-images follows their borders, not the scene's period.
+
+It needs texture (a white image matches at every q and confirms nothing: then it refuses) and
+nothing else: no dark gaps, no vignetting, no sharp borders. A devignetted ("processed")
+frame, whose micro-images tile without gaps and whose only trace of the lattice is where the
+content jumps between neighbours, is judged by it as well as any other (the R42 crop:
+confidence 0.89 on its lattice, at most 0.80 elsewhere, docs/calibrate.md).
+
+It is the costliest judge (a depth match per lattice and centre, about 0.1 s each on a
+16 px-pitch view of a 1024 px crop), so it is asked last, only when a start grid is given and
+the other two judges cannot vouch for a lattice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from plenocli.calibration.candidates import Lattice
+from plenocli.calibration.centres import lens_centre
+from plenocli.calibration.flatten import border_signal, flatten
+from plenocli.model.lensgrid import LensGrid
+
+MATCH_SIDE_PX = 1024   # side of the central crop matched (full-image px)
+MATCH_PITCH_PX = 16.0  # the crop is reduced to at most this pitch (g is scale-free)
+RESIDUAL_RATIO = 2.0   # a rival's residual (1 - confidence) over the winner's, at least
+MIN_CONFIDENCE = 0.5   # the winner's median lens confidence, at least
+G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
+
+
+@dataclass(frozen=True)
+class MatchVerdict:
+    """The lattice and lens centre confirmed (None: none), the median lens confidence there,
+    the rivals with theirs, and why it refuses."""
+
+    lattice: Lattice | None
+    offset_xy: tuple[float, float] | None
+    confidence: float
+    rivals: tuple[tuple[str, float], ...] = field(default=())
+    reason: str | None = None
+
+    def to_dict(self) -> dict:
+        return {"confidence": round(self.confidence, 4), "refused": self.reason,
+                "rivals": [{"lattice": name, "confidence": round(c, 4)}
+                           for name, c in self.rivals]}
+
+
+class Matcher:
+    """The central crop of an image, reduced per pitch, and the median lens confidence of a
+    lattice with a given lens centre on it."""
+
+    def __init__(self, image: np.ndarray):
+        rows, cols = image.shape
+        self.image_radius = float(np.hypot(rows, cols)) / 2
+        side_r, side_c = min(rows, MATCH_SIDE_PX), min(cols, MATCH_SIDE_PX)
+        self.r0, self.c0 = (rows - side_r) // 2, (cols - side_c) // 2
+        self.crop = np.ascontiguousarray(image[self.r0:self.r0 + side_r,
+                                               self.c0:self.c0 + side_c], np.float32)
+        self.radius = float(np.hypot(side_r, side_c)) / 2
+        self._views: dict[float, np.ndarray] = {}
+
+    def _view(self, scale: float) -> np.ndarray:
+        if scale not in self._views:
+            self._views[scale] = self.crop if scale >= 1.0 else cv2.resize(
+                self.crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        return self._views[scale]
+
+    def confidence(self, lattice: Lattice, offset_xy: tuple[float, float]) -> float:
+        """Median lens confidence of ``lattice`` with a lens at ``offset_xy`` (full-image
+        px), the better of a Keplerian and a Galilean search; 0 where nothing can be matched."""
+        from plenocli.depth.lenslet import lens_depth
+
+        scale = round(min(1.0, MATCH_PITCH_PX / lattice.pitch_px), 4)
+        view = self._view(scale)
+        x = (offset_xy[0] - self.c0 + 0.5) * scale - 0.5
+        y = (offset_xy[1] - self.r0 + 0.5) * scale - 0.5
+        grid = LensGrid(lattice.pitch_px * scale, lattice.angle_rad, (x, y), lattice.kind,
+                        image_shape=view.shape)
+        best = 0.0
+        for bounds in G_RANGES:
+            try:
+                found = lens_depth(view, grid, g_range=bounds)
+            except ValueError:   # too few or too small micro-images on this lattice
+                continue
+            best = max(best, float(np.median(found.confidence)))
+        return best
+
+
+def symmetry_points(lattice: Lattice, centre: tuple[float, float]) -> list[tuple[str, tuple]]:
+    """The points of a lattice cell that could be lens centres, from one of them: the point
+    itself, and (hex) the two triangle centres and three edge midpoints, (square) the cell
+    centre and two edge midpoints."""
+    b1, b2 = lattice.basis()
+    shifts = ({"": (0, 0), "hole": (1 / 3, 1 / 3), "hole'": (2 / 3, 2 / 3), "edge": (0.5, 0),
+               "edge'": (0, 0.5), "edge''": (0.5, 0.5)} if lattice.kind == "hex" else
+              {"": (0, 0), "hole": (0.5, 0.5), "edge": (0.5, 0), "edge'": (0, 0.5)})
+    return [(name, tuple(float(v) for v in np.asarray(centre) + a * b1 + b * b2))
+            for name, (a, b) in shifts.items()]
+
+
+def _best_point(matcher: Matcher, lattice: Lattice, centre) -> list[tuple[str, tuple, float]]:
+    """(name, offset, confidence) of each symmetry point, best first."""
+    scored = [(name, xy, matcher.confidence(lattice, xy))
+              for name, xy in symmetry_points(lattice, centre)]
+    return sorted(scored, key=lambda t: -t[2])
+
+
+def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice]) -> MatchVerdict:
+    """Whether the micro-images of ``image`` repeat each other's content on ``lattice`` (a
+    start grid's, pitch and angle as given) and at which of its symmetry points the lenses
+    are centred; refused unless that beats every other symmetry point, the lattice's
+    relatives, its copies detuned so that the image's corners move by half a pitch, and
+    ``others`` (unrelated lattices the image proposes) by
+    RESIDUAL_RATIO in residual (1 - confidence)."""
+    matcher = Matcher(image)
+    flat = flatten(matcher.crop, scale_px=max(2 * lattice.pitch_px, 16.0))
+    centre = lens_centre(border_signal(flat),
+                         LensGrid(lattice.pitch_px, lattice.angle_rad, (0.0, 0.0),
+                                  lattice.kind)).offset_xy
+    centre = (centre[0] + matcher.c0, centre[1] + matcher.r0)
+    points = _best_point(matcher, lattice, centre)
+    name, offset, confidence = points[0]
+    rivals = [(f"{lattice.describe()} centred on its {n}", c) for n, _, c in points[1:]]
+    turn, root = (np.pi / 6, np.sqrt(3)) if lattice.kind == "hex" else (np.pi / 4, np.sqrt(2))
+    shift = 0.5 * lattice.pitch_px / matcher.image_radius   # the image's corners move by half
+    #                                                           a lens (not only the crop's)
+    relatives = [lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
+                 lattice.scaled(1 / root, turn)]
+    for other in relatives + list(others):
+        best = _best_point(matcher, other, offset)[0]
+        rivals.append((other.describe(), best[2]))
+    for detuned in (lattice.scaled(1 - shift), lattice.scaled(1 + shift),
+                    lattice.scaled(1.0, -shift), lattice.scaled(1.0, shift)):
+        rivals.append((f"{detuned.describe()} (detuned)", matcher.confidence(detuned, offset)))
+    rivals.sort(key=lambda t: -t[1])
+    reason = None
+    if confidence < MIN_CONFIDENCE:
+        reason = (f"its micro-images do not repeat each other's content (median confidence "
+                  f"{confidence:.2f})")
+    elif 1 - rivals[0][1] < RESIDUAL_RATIO * (1 - confidence):
+        reason = (f"its micro-images repeat each other's content (confidence {confidence:.2f}), "
+                  f"but nearly as well on {rivals[0][0]} ({rivals[0][1]:.2f})")
+    if reason:
+        return MatchVerdict(None, None, confidence, tuple(rivals[:3]), reason)
+    return MatchVerdict(lattice, offset, confidence, tuple(rivals[:3]))
