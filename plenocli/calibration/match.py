@@ -40,6 +40,9 @@ MATCH_SIDE_PX = 1024   # side of the central crop matched (full-image px)
 MATCH_PITCH_PX = 16.0  # the crop is reduced to at most this pitch (g is scale-free)
 RESIDUAL_RATIO = 2.0   # a rival's residual (1 - confidence) over the winner's, at least
 MIN_CONFIDENCE = 0.5   # the winner's median lens confidence, at least
+CORNER_SHARE = 0.05    # the kept pitch and angle place the image's corner lenses this close
+#                        (share of a pitch) to where the match peaks
+PEAK_REACH = 0.25      # the peak is placed from steps moving the corners by up to this share
 G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
 
 
@@ -125,27 +128,20 @@ def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice]) -> M
     start grid's, pitch and angle as given) and at which of its symmetry points the lenses
     are centred; refused unless that beats every other symmetry point, the lattice's
     relatives, its copies detuned so that the image's corners move by half a pitch, and
-    ``others`` (unrelated lattices the image proposes) by
-    RESIDUAL_RATIO in residual (1 - confidence)."""
+    ``others`` (unrelated lattices the image proposes) by RESIDUAL_RATIO in residual
+    (1 - confidence), and unless the match peaks at the start's pitch and angle (its corner
+    lenses within CORNER_SHARE of a pitch: a kept pitch must be as good as a measured one)."""
     matcher = Matcher(image)
-    flat = flatten(matcher.crop, scale_px=max(2 * lattice.pitch_px, 16.0))
-    centre = lens_centre(border_signal(flat),
-                         LensGrid(lattice.pitch_px, lattice.angle_rad, (0.0, 0.0),
-                                  lattice.kind)).offset_xy
-    centre = (centre[0] + matcher.c0, centre[1] + matcher.r0)
-    points = _best_point(matcher, lattice, centre)
-    name, offset, confidence = points[0]
-    rivals = [(f"{lattice.describe()} centred on its {n}", c) for n, _, c in points[1:]]
+    offset, confidence, rivals = _centred(matcher, lattice)
     turn, root = (np.pi / 6, np.sqrt(3)) if lattice.kind == "hex" else (np.pi / 4, np.sqrt(2))
+    for relative in (lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
+                     lattice.scaled(1 / root, turn)):   # the lens is a lattice point of each
+        rivals.append((relative.describe(), matcher.confidence(relative, offset)))
+    for other in others[:3]:
+        rivals.append((other.describe(), _best_point(matcher, other, offset)[0][2]))
     shift = 0.5 * lattice.pitch_px / matcher.image_radius   # the image's corners move by half
-    #                                                           a lens (not only the crop's)
-    relatives = [lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
-                 lattice.scaled(1 / root, turn)]
-    for other in relatives + list(others):
-        best = _best_point(matcher, other, offset)[0]
-        rivals.append((other.describe(), best[2]))
-    for detuned in (lattice.scaled(1 - shift), lattice.scaled(1 + shift),
-                    lattice.scaled(1.0, -shift), lattice.scaled(1.0, shift)):
+    for detuned in (lattice.scaled(1 - shift), lattice.scaled(1 + shift),   # a lens (not only
+                    lattice.scaled(1.0, -shift), lattice.scaled(1.0, shift)):   # the crop's)
         rivals.append((f"{detuned.describe()} (detuned)", matcher.confidence(detuned, offset)))
     rivals.sort(key=lambda t: -t[1])
     reason = None
@@ -155,6 +151,44 @@ def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice]) -> M
     elif 1 - rivals[0][1] < RESIDUAL_RATIO * (1 - confidence):
         reason = (f"its micro-images repeat each other's content (confidence {confidence:.2f}), "
                   f"but nearly as well on {rivals[0][0]} ({rivals[0][1]:.2f})")
+    else:
+        reason = _off_peak(matcher, lattice, offset, confidence)
     if reason:
         return MatchVerdict(None, None, confidence, tuple(rivals[:3]), reason)
     return MatchVerdict(lattice, offset, confidence, tuple(rivals[:3]))
+
+
+def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
+    """The lens centre of ``lattice`` among the symmetry points of the crop's mean border
+    micro-image (the point nearest the crop's middle), its confidence, and the other points
+    as rivals."""
+    flat = flatten(matcher.crop, scale_px=max(2 * lattice.pitch_px, 16.0))
+    rows, cols = flat.shape
+    middle = LensGrid(lattice.pitch_px, lattice.angle_rad, ((cols - 1) / 2, (rows - 1) / 2),
+                      lattice.kind)
+    x, y = lens_centre(border_signal(flat), middle).offset_xy
+    points = _best_point(matcher, lattice, (x + matcher.c0, y + matcher.r0))
+    name, offset, confidence = points[0]
+    rivals = [(f"{lattice.describe()} centred on its {n}", c) for n, _, c in points[1:]]
+    return offset, confidence, rivals
+
+
+def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
+    """Why the match does not peak at the lattice's pitch and angle, or None: the vertex of
+    a parabola (least squares) through the confidence at steps that move the image's corners
+    by up to PEAK_REACH of a pitch either side must lie within CORNER_SHARE of a pitch (the
+    top of the curve is flat over about a third of a pitch at the corners: only its sides
+    place it)."""
+    step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
+    at = np.linspace(-1.0, 1.0, 5) * PEAK_REACH / CORNER_SHARE * step
+    for what, move, unit in (("pitch", lambda d: lattice.scaled(1 + d), 100.0),
+                             ("rotation", lambda d: lattice.scaled(1.0, d), 180 / np.pi)):
+        values = [confidence if d == 0 else matcher.confidence(move(d), offset) for d in at]
+        curve, slope, _ = np.polyfit(at, values, 2)
+        vertex = -slope / (2 * curve) if curve < 0 else np.inf
+        if not abs(vertex) <= step:
+            where = (f"{vertex * unit:+.2f} {'%' if what == 'pitch' else 'deg'} from the "
+                     "start's" if np.isfinite(vertex) else "nowhere near the start's")
+            return (f"its micro-images repeat each other's content (confidence "
+                    f"{confidence:.2f}), best at a {what} {where}")
+    return None

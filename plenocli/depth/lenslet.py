@@ -118,11 +118,14 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
     # phase, as on an ideal lattice of whole-pixel pitch) take their neighbours' mean
     weight = ndimage.gaussian_filter(counts, 1.0)
     mean = ndimage.gaussian_filter(sums, 1.0) / np.maximum(weight, 1e-9)
-    peak = float(np.max(mean[weight > 0])) if (weight > 0).any() else 0.0
+    # the peak among bins many pixels fall in: a bin at the disc's edge that one bright pixel
+    # falls in would raise it and leave no bin usable
+    filled = weight > 0.05 * weight.max()
+    peak = float(np.max(mean[filled])) if filled.any() else 0.0
     if not peak > 0:
         raise ValueError("the micro-images hold no light (the frame is dark or NaN under the "
                          "grid); check the frames and the grid")
-    usable = (mean >= USABLE_LEVEL * peak) & (weight > 0.05 * weight.max())
+    usable = (mean >= USABLE_LEVEL * peak) & filled
     yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
     usable &= np.hypot(xx, yy) <= radius * 0.95
     # the rim of a micro-image falls off within a pixel or two: its binned mean is not the
