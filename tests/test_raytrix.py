@@ -102,6 +102,28 @@ def test_type_t_sits_at_minus_its_offset():
     assert grid.lens_types(*grid.nearest_index(220.0, 200.0)) == 2
 
 
+def _type_sharpness(image, grid, types_from):
+    """(g, relative sharpness, the start's type) of the lenses of ``grid`` with all six
+    neighbours: each lens's detail against its neighbours' (the scene cancels)."""
+    from plenocli.calibration.lenstypes import (
+        lens_sharpness,
+        lens_virtual_depth,
+        local_contrast,
+    )
+
+    flat = calibration.flatten(image, scale_px=1.5 * grid.pitch_px)
+    rows, local = local_contrast(grid.indices, lens_sharpness(flat, grid.centres_xy,
+                                                              grid.pitch_px))
+    g = lens_virtual_depth(flat, grid.indices, grid.centres_xy, grid.pitch_px)[rows]
+    return g, local, types_from.lens_types(*types_from.nearest_index(*grid.centres_xy[rows].T))
+
+
+def _image(folder, name):
+    import cv2
+
+    return cv2.imread(str(folder / name))[..., :3].astype(np.float32).sum(-1)
+
+
 @pytest.mark.realdata
 def test_xml_types_are_the_cosets_sharpest_in_their_depth_ranges(realdata):
     """Fujita2 with its own XML (type t at minus its offset): the type-2 lenses (range
@@ -109,26 +131,31 @@ def test_xml_types_are_the_cosets_sharpest_in_their_depth_ranges(realdata):
     g and gain most from the near third to it, type 0 (1-3.2) loses most. Read the other way,
     types 1 and 2 swap (measured near / far: type 0 +0.06 / -0.26, type 1 +0.17 / +0.04,
     type 2 +0.01 / +0.26)."""
-    import cv2
-
-    from plenocli.calibration.lenstypes import (
-        lens_sharpness,
-        lens_virtual_depth,
-        local_contrast,
-    )
-
     folder = realdata / "raytrix" / "fujita2"
-    image = cv2.imread(str(folder / "frame0.png"))[..., :3].astype(np.float32).sum(-1)
+    image = _image(folder, "frame0.png")
     grid, _ = calibration.calibrate(image)
     xml = gridfile.read_grid(folder / "calib.xml", image_shape=image.shape)
     assert xml.lens_type_of_coset is not None
-    flat = calibration.flatten(image, scale_px=1.5 * grid.pitch_px)
-    rows, local = local_contrast(grid.indices, lens_sharpness(flat, grid.centres_xy,
-                                                              grid.pitch_px))
-    g = lens_virtual_depth(flat, grid.indices, grid.centres_xy, grid.pitch_px)[rows]
-    types = xml.lens_types(*xml.nearest_index(*grid.centres_xy[rows].T))
+    g, local, types = _type_sharpness(image, grid, xml)
     low, high = np.nanpercentile(g, (100 / 3, 200 / 3))
     near = [np.median(local[(types == t) & (g <= low)]) for t in range(3)]
     far = [np.median(local[(types == t) & (g >= high)]) for t in range(3)]
     change = np.subtract(far, near)
     assert int(np.argmax(far)) == 2 and list(np.argsort(change)) == [0, 1, 2], (near, far)
+
+
+@pytest.mark.realdata
+def test_r42_xml_types_follow_their_depth_ranges(realdata):
+    """The R42 crop (another camera, base_x right instead of up) with the grid its XML gives
+    (`calibrate --start`, types kept): every lens sees g 5.2-7.1, beyond type 1's range
+    (2.8-4) and in type 2's (3.8-100): type 2 is the sharpest, type 0 (1-3) the least
+    (measured +0.25, +0.03, -0.27)."""
+    folder = realdata / "raytrix" / "r42_crop"
+    image = _image(folder, "sc2_klein.png")
+    xml = gridfile.read_grid(folder / "sc2_klein.xml", image_shape=image.shape)
+    grid, report = calibration.calibrate(image, start=xml)
+    assert report.lens_types["source"] == "the start file"
+    g, local, types = _type_sharpness(image, grid, grid)
+    assert np.nanpercentile(g, 10) > 4.5
+    order = [np.median(local[types == t]) for t in range(3)]
+    assert order[2] > order[1] > order[0], order

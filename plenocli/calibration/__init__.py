@@ -97,7 +97,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     lattice : "auto", "hex" or "square"; a kind that does not fit the image is refused
     black_level : DN subtracted first
     pitch_hint : approximate pitch (px), e.g. from a datasheet: only lattices within 15 %
-    start : a grid to refine (a camera calibration): its lattice is checked, not searched
+    start : a grid to refine (a camera calibration): its lattice is checked, not searched;
+        its lens types are kept where they can be (:func:`start_types`)
 
     Returns
     -------
@@ -114,9 +115,13 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     all_views = views(image, cfa)
     try:
         decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
-        return _grid(image, cfa, decision, all_views, lattice, pitch_hint)
+        grid, report = _grid(image, cfa, decision, all_views, lattice, pitch_hint)
     except CalibrationError as err:
         raise _refusal(err, image.shape, pitch_hint, start) from err
+    if start is None:
+        return grid, report
+    grid, types = start_types(grid, start, report)
+    return grid, replace(report, lens_types=types)
 
 
 def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationError:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -76,9 +75,6 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     if xml and grid.lattice != "hex":
         raise CalibrationError(f"{input}: the array is square; --xml writes hexagonal Raytrix "
                                "calibrations only, drop --xml")
-    if first is not None:
-        grid, types = calibration.start_types(grid, first, report)
-        report = dataclasses.replace(report, lens_types=types)
     extra: dict = {"residuals": report.to_dict()}
     template = meta.get("raytrix_calib")
     if first is not None:
