@@ -43,7 +43,7 @@ def test_lenslet_depth_orders_near_and_far(realdata, tmp_path, name):
     g = data[meta["views"].index("g")]
     values = [_median(g, *xy) for xy in REGIONS[name].values()]
     assert values == sorted(values, reverse=True), dict(zip(REGIONS[name], values, strict=True))
-    assert values[0] - values[-1] > 1.5  # measured 3.1 (origami), 2.3 (fujita2)
+    assert values[0] - values[-1] > 1.5  # measured 3.0 (origami), 2.1 (fujita2)
     result = runner.invoke(cli, ["refocus", str(frames), "--grid", str(folder / "calib.xml"),
                                  "--depth", str(depth), "-o", str(aif)])
     assert result.exit_code == 0, result.output
