@@ -61,6 +61,7 @@ CORNER_TOLERANCE = 0.05
 FEW_LENSES_ACROSS = 20  # below this many lenses across, a failure says the image is small
 # pitch and rotation of a start grid that only the match judge confirms (judges.py)
 KEPT = "kept from the start (the micro-images repeat their neighbours' content on it)"
+MEASURED_BY_MATCH = "the peak of the micro-images' match with their neighbours"
 KEEP_TYPES_PITCH = 0.25  # a start's lenses this close to ours (pitches) carry their types over
 
 
@@ -178,8 +179,9 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
 
 
 def _matched_grid(image, cfa, decision: Decision) -> tuple[LensGrid, CalibrationReport]:
-    """The start grid's lattice (pitch and angle kept) on the lens centre the match judge
-    measured; every centre is the lattice's (nothing on such a frame measures one lens)."""
+    """The lattice the match judge confirmed (a start's pitch and angle kept, or measured
+    near a pitch hint) on the lens centre it measured; every centre is the lattice's
+    (nothing on such a frame measures one lens)."""
     found, match = decision.lattice, decision.match
     grid = reindexed(found.pitch_px, found.angle_rad, match.offset_xy, found.kind, image.shape)
     indices, centres = grid.lens_centres()
@@ -189,7 +191,8 @@ def _matched_grid(image, cfa, decision: Decision) -> tuple[LensGrid, Calibration
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
     grid, type_info = _with_lens_types(flat, grid)
     return grid, CalibrationReport(fit=fit, verdict=decision.border, lens_types=type_info,
-                                   decision=decision, lattice_from=KEPT)
+                                   decision=decision,
+                                   lattice_from=MEASURED_BY_MATCH if match.measured else KEPT)
 
 
 def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport) -> dict:

@@ -20,13 +20,14 @@ content jumps between neighbours, is judged by it as well as any other (the R42 
 confidence 0.89 on its lattice, at most 0.80 elsewhere, docs/calibrate.md).
 
 It is the costliest judge (a depth match per lattice and centre, about 0.1 s each on a
-16 px-pitch view of a 1024 px crop), so it is asked last, only when a start grid is given and
-the other two judges cannot vouch for a lattice.
+16 px-pitch view of a 1024 px crop), so it is asked last, only when a hint is given (a start
+grid, whose pitch and angle it may keep, or a pitch, near which it measures them) and the
+other two judges cannot vouch for a lattice.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -56,6 +57,7 @@ class MatchVerdict:
     confidence: float
     rivals: tuple[tuple[str, float], ...] = field(default=())
     reason: str | None = None
+    measured: bool = False     # pitch and angle measured (near a pitch hint), not given
 
     def to_dict(self) -> dict:
         return {"confidence": round(self.confidence, 4), "refused": self.reason,
@@ -123,7 +125,8 @@ def _best_point(matcher: Matcher, lattice: Lattice, centre) -> list[tuple[str, t
     return sorted(scored, key=lambda t: -t[2])
 
 
-def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice]) -> MatchVerdict:
+def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice], *,
+                matcher: Matcher | None = None) -> MatchVerdict:
     """Whether the micro-images of ``image`` repeat each other's content on ``lattice`` (a
     start grid's, pitch and angle as given) and at which of its symmetry points the lenses
     are centred; refused unless that beats every other symmetry point, the lattice's
@@ -131,7 +134,7 @@ def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice]) -> M
     ``others`` (unrelated lattices the image proposes) by RESIDUAL_RATIO in residual
     (1 - confidence), and unless the match peaks at the start's pitch and angle (its corner
     lenses within CORNER_SHARE of a pitch: a kept pitch must be as good as a measured one)."""
-    matcher = Matcher(image)
+    matcher = matcher or Matcher(image)
     offset, confidence, rivals = _centred(matcher, lattice)
     turn, root = (np.pi / 6, np.sqrt(3)) if lattice.kind == "hex" else (np.pi / 4, np.sqrt(2))
     for relative in (lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
@@ -173,22 +176,56 @@ def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
     return offset, confidence, rivals
 
 
-def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
-    """Why the match does not peak at the lattice's pitch and angle, or None: the vertex of
-    a parabola (least squares) through the confidence at steps that move the image's corners
-    by up to PEAK_REACH of a pitch either side must lie within CORNER_SHARE of a pitch (the
-    top of the curve is flat over about a third of a pitch at the corners: only its sides
-    place it)."""
+def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
+              ) -> tuple[float, float, float]:
+    """Where the match peaks around ``lattice``: the vertices (relative pitch change, angle
+    change in rad; inf where the curve does not bend down) of parabolas (least squares)
+    through the confidence at steps that move the image's corners by up to PEAK_REACH of a
+    pitch either side (the top of the curve is flat over about a third of a pitch at the
+    corners: only its sides place it), and the step that moves them by CORNER_SHARE."""
     step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
     at = np.linspace(-1.0, 1.0, 5) * PEAK_REACH / CORNER_SHARE * step
-    for what, move, unit in (("pitch", lambda d: lattice.scaled(1 + d), 100.0),
-                             ("rotation", lambda d: lattice.scaled(1.0, d), 180 / np.pi)):
+    out = []
+    for move in (lambda d: lattice.scaled(1 + d), lambda d: lattice.scaled(1.0, d)):
         values = [confidence if d == 0 else matcher.confidence(move(d), offset) for d in at]
         curve, slope, _ = np.polyfit(at, values, 2)
-        vertex = -slope / (2 * curve) if curve < 0 else np.inf
+        out.append(-slope / (2 * curve) if curve < 0 else np.inf)
+    return out[0], out[1], step
+
+
+def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
+    """Why the match does not peak at the lattice's pitch and angle (a vertex of
+    :func:`_vertices` beyond CORNER_SHARE of a pitch at the corners), or None."""
+    pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
+    for what, vertex, unit in (("pitch", pitch, "%"), ("rotation", angle, "deg")):
         if not abs(vertex) <= step:
-            where = (f"{vertex * unit:+.2f} {'%' if what == 'pitch' else 'deg'} from the "
-                     "start's" if np.isfinite(vertex) else "nowhere near the start's")
+            value = vertex * (100.0 if unit == "%" else 180 / np.pi)
+            where = (f"{value:+.2f} {unit} from the given one" if np.isfinite(vertex)
+                     else "nowhere near the given one")
             return (f"its micro-images repeat each other's content (confidence "
                     f"{confidence:.2f}), best at a {what} {where}")
     return None
+
+
+def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lattice]
+                  ) -> MatchVerdict:
+    """The match judge where only a pitch is hinted: each candidate lattice (near the hint)
+    is moved to where the match peaks (twice: pitch and angle to the parabolas' vertices,
+    each move at most PEAK_REACH of a pitch at the corners), then judged as a start would be
+    (:func:`match_judge`); the first confirmed, else the first candidate's refusal."""
+    matcher = Matcher(image)
+    first = None
+    for lattice in candidates[:3]:
+        for _ in range(2):
+            offset, confidence, _ = _centred(matcher, lattice)
+            pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
+            reach = PEAK_REACH / CORNER_SHARE * step
+            if not (np.isfinite(pitch) and np.isfinite(angle)):
+                break
+            lattice = lattice.scaled(1 + float(np.clip(pitch, -reach, reach)),
+                                     float(np.clip(angle, -reach, reach)))
+        found = match_judge(image, lattice, others, matcher=matcher)
+        if found.lattice is not None:
+            return replace(found, measured=True)
+        first = first or found
+    return first or MatchVerdict(None, None, 0.0, reason="no lattice near the hint")
