@@ -78,6 +78,7 @@ class Matcher:
                                                self.c0:self.c0 + side_c], np.float32)
         self.radius = float(np.hypot(side_r, side_c)) / 2
         self._views: dict[float, np.ndarray] = {}
+        self.ranges = G_RANGES    # the g ranges searched: both signs until one is settled
 
     def _view(self, scale: float) -> np.ndarray:
         if scale not in self._views:
@@ -97,13 +98,22 @@ class Matcher:
         grid = LensGrid(lattice.pitch_px * scale, lattice.angle_rad, (x, y), lattice.kind,
                         image_shape=view.shape)
         best = 0.0
-        for bounds in G_RANGES:
+        for bounds in self.ranges:
             try:
                 found = lens_depth(view, grid, g_range=bounds)
             except ValueError:   # too few or too small micro-images on this lattice
                 continue
             best = max(best, float(np.median(found.confidence)))
         return best
+
+    def settle_sign(self, lattice: Lattice, offset_xy: tuple[float, float]) -> None:
+        """Search only the sign of g (Keplerian or Galilean: the camera's, not a
+        hypothesis's) that matches best on ``lattice`` from now on: halves every match."""
+        scores = []
+        for bounds in G_RANGES:
+            self.ranges = (bounds,)
+            scores.append(self.confidence(lattice, offset_xy))
+        self.ranges = (G_RANGES[int(np.argmax(scores))],)
 
 
 def symmetry_points(lattice: Lattice, centre: tuple[float, float]) -> list[tuple[str, tuple]]:
@@ -135,7 +145,9 @@ def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice], *,
     (1 - confidence), and unless the match peaks at the start's pitch and angle (its corner
     lenses within CORNER_SHARE of a pitch: a kept pitch must be as good as a measured one)."""
     matcher = matcher or Matcher(image)
+    matcher.ranges = G_RANGES
     offset, confidence, rivals = _centred(matcher, lattice)
+    matcher.settle_sign(lattice, offset)
     turn, root = (np.pi / 6, np.sqrt(3)) if lattice.kind == "hex" else (np.pi / 4, np.sqrt(2))
     for relative in (lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
                      lattice.scaled(1 / root, turn)):   # the lens is a lattice point of each
@@ -216,8 +228,10 @@ def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lat
     matcher = Matcher(image)
     first = None
     for lattice in candidates[:3]:
+        matcher.ranges = G_RANGES
         for _ in range(2):
             offset, confidence, _ = _centred(matcher, lattice)
+            matcher.settle_sign(lattice, offset)
             pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
             reach = PEAK_REACH / CORNER_SHARE * step
             if not (np.isfinite(pitch) and np.isfinite(angle)):
