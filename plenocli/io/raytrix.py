@@ -24,12 +24,22 @@ Conventions (checked against the real origami frame, see tests/test_raytrix.py):
   store e.g. ``(-1, -8.7e-8)`` with ``rotation = 2.5e-5``), so the lattice is turned by the small
   difference between ``rotation`` and the direction of ``lens_base_x`` (modulo 60 deg).
 - ``LensGrid.angle_rad`` is measured from +x towards +y (down): it is minus the y-up angle.
+- ``lens_type`` offsets (lens units, y up like the bases) point from a lens of that type to
+  the type-0 centre lens: type t sits at minus its offset. Every file seen writes type 1 at
+  the numbers of ``lens_base_x`` (type 1 at -base_x) and type 2 at minus them. Evidence: on
+  Fujita2 and origami (base_x up) the coset so named type 2 (range 3.5-100) is the sharpest
+  in the far third of the frame's g and gains most from near to far, type 0 (1-3.2) loses
+  most; on the R42 crop (base_x right, every lens at g 5-7) the coset so named type 2
+  (3.8-100) is sharper than type 1 (2.8-4), type 0 (1-3) least sharp; PlenopticToolbox 2.0
+  reads its R42 and R29 files (rotation 0) alike. Read as vectors pointing to the type, types
+  1 and 2 swap on both cameras (docs/calibrate.md).
 """
 
 from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -268,8 +278,37 @@ def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     a1, a2 = np.arctan2(img1[1], img1[0]), np.arctan2(img2[1], img2[0])
     first = img1 if _wrap(a2 - a1, 2 * np.pi) > 0 else img2
     centre = (cols / 2 + float(calib["offset"][0]), rows / 2 - float(calib["offset"][1]))
-    return LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
+    grid = LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
                     offset_xy=centre, lattice=lattice, image_shape=(rows, cols))
+    types = type_of_coset(calib, grid) if lattice == "hex" else None
+    return grid if types is None else replace(grid, lens_type_of_coset=types)
+
+
+def _coset_of(grid: LensGrid, vector_px: np.ndarray) -> int | None:
+    """Coset (i - j) mod 3 of the lattice vector ``vector_px`` (image px, y down) of a hex
+    grid, or None when it is not a lattice vector (within 0.1 lens)."""
+    ij = np.linalg.solve(grid.basis().T, vector_px)
+    if np.abs(ij - np.rint(ij)).max() > 0.1:
+        return None
+    return int((np.rint(ij[0]) - np.rint(ij[1])) % 3)
+
+
+def type_of_coset(calib: dict, grid: LensGrid) -> tuple[int, int, int] | None:
+    """The camera's lens type of each coset (i - j) mod 3 of ``grid`` (lens (0, 0) at the
+    calibration's offset; type t at minus its offset, module doc), or None: no three lens
+    types, or offsets that are not lattice vectors or do not make one type per coset."""
+    types = calib.get("lens_types") or []
+    if sorted(int(t["id"]) for t in types) != [0, 1, 2]:
+        return None
+    d = float(calib["diameter"])
+    out = [-1, -1, -1]
+    for t in types:
+        ox, oy = (float(v) for v in t["offset"])
+        coset = _coset_of(grid, d * np.array([-ox, oy]))   # minus the y-up offset, y down
+        if coset is None:
+            return None
+        out[coset] = int(t["id"])
+    return tuple(out) if sorted(out) == [0, 1, 2] else None
 
 
 def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
@@ -285,15 +324,7 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     base_x = [float(b[0, 0]), float(-b[0, 1])]          # y up
     base_y = [float(b[1, 0]), float(-b[1, 1])]
     tpl = template or {}
-    lens_types = [dict(lt) for lt in tpl.get("lens_types", DEFAULT_LENS_TYPES)]
-    cosets = grid.lens_type_of_coset   # types measured from the image, when known
-    for lt in lens_types:  # Raytrix: type 1 sits at +base_x, type 2 at -base_x
-        sign = {0: 0.0, 1: 1.0, 2: -1.0}.get(int(lt["id"]), 0.0)
-        if cosets is not None and int(lt["id"]) in cosets:
-            # lens (1, 0) is one coset on from lens (0, 0), lens (-1, 0) two
-            step = (cosets.index(int(lt["id"])) - cosets.index(0)) % 3
-            sign = {0: 0.0, 1: 1.0, 2: -1.0}[step]
-        lt["offset"] = [sign * base_x[0], sign * base_x[1]]
+    lens_types = _written_types(grid, tpl.get("lens_types", DEFAULT_LENS_TYPES), (i, j))
     return {
         "version": tpl.get("version", "1.0"),
         "offset": [float(x - cols / 2), float(rows / 2 - y)],
@@ -309,3 +340,26 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
         "lens_types": lens_types,
         "k_matrix": tpl.get("k_matrix"),
     }
+
+
+def _written_types(grid: LensGrid, template: list[dict], centre: tuple) -> list[dict]:
+    """The lens types of a written file: the template's ids and depth ranges, each offset
+    minus the y-up unit lattice vector (lens units) from the centre lens to a lens of its
+    type (module doc; along base_x where it can be, as camera files have it). Without
+    measured types the file carries none: a guessed type gives 2/3 of the lenses the wrong
+    depth range."""
+    cosets = grid.lens_type_of_coset
+    if cosets is None:
+        return []
+    here = int((centre[0] - centre[1]) % 3)
+    b = grid.basis() / grid.pitch_px
+    units = [(di * b[0] + dj * b[1], (di - dj) % 3)   # image vectors (y down), coset shift
+             for di, dj in ((-1, 0), (1, 0), (0, 1), (-1, 1), (0, -1), (1, -1))]
+    out = []
+    for lt in template:
+        if int(lt["id"]) not in cosets:
+            continue
+        shift = (cosets.index(int(lt["id"])) - here) % 3
+        u = next(u for u, k in units if k == shift) if shift else np.zeros(2)
+        out.append({**lt, "offset": [float(-u[0]) + 0.0, float(u[1]) + 0.0]})
+    return out
