@@ -24,7 +24,6 @@ import tifffile
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.model.cfa import check_pattern, is_bayer
-from plenocli.model.views import default_names
 from plenocli.progress import log
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
@@ -290,24 +289,17 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
 
 
-def _frame_pages(p: Path, tif) -> np.ndarray | list[np.ndarray]:
-    """The image of a one-page TIFF, or every full-resolution page of a multi-page one as a
-    frame (reduced-resolution previews are not frames). Pages of another size, type or with
-    colour samples are refused: keeping the first page would drop the others silently."""
+def _frame_pages(p: Path, tif) -> np.ndarray:
+    """The one full-resolution page of a TIFF (reduced-resolution previews beside it are not
+    the image). A TIFF of several such pages is refused: keeping the first would drop the
+    others silently, and a plain TIFF does not say which page is which frame."""
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
-    if len(pages) == 1:
-        return pages[0].asarray()
-    first = pages[0]
-    for k, page in enumerate(pages, 1):
-        if len(page.shape) != 2:
-            raise InputError(f"{p}: page {k} of {len(pages)} has shape {page.shape}; a "
-                             "multi-page TIFF decodes as frames of one plane each: save "
-                             "each picture on its own")
-        if (page.shape, page.dtype) != (first.shape, first.dtype):
-            raise InputError(f"{p}: page {k} is {page.shape[0]} x {page.shape[1]} {page.dtype}, "
-                             f"page 1 {first.shape[0]} x {first.shape[1]} {first.dtype}; the "
-                             "pages of a multi-page TIFF are frames of one size: split it")
-    return [page.asarray() for page in pages]
+    if len(pages) > 1:
+        shapes = sorted({" x ".join(map(str, page.shape)) for page in pages})
+        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shapes "
+                         f"{', '.join(shapes)}); decode reads a sensor image of one page: save "
+                         "each frame as its own file")
+    return pages[0].asarray()
 
 
 def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
@@ -341,9 +333,7 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
             raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")
         if data.ndim == 3:
             data = data[..., 2::-1] if data.shape[2] >= 3 else data  # BGR(A) -> RGB
-    if isinstance(data, list):
-        frames, views = np.stack(data), default_names(len(data))
-    elif data.ndim == 2:
+    if data.ndim == 2:
         frames, views = data[np.newaxis], ["raw"]
     elif data.ndim == 3 and data.shape[-1] in (3, 4):
         frames, views = np.moveaxis(data[..., :3], -1, 0), ["R", "G", "B"]
