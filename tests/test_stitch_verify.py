@@ -79,3 +79,18 @@ def test_a_transform_for_other_views_or_layout_is_refused_in_one_line(tmp_path):
                                        str(tmp_path / f"s{k}.json"), *extra])
         assert res.exit_code == 1 and words in res.output, (k, res.output)
         assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_the_true_quad_pixel_rig_passes_at_every_seam():
+    """Four seams, their ends at the panorama's corners where the canvases' edges curve."""
+    from plenocli.synth.prismcam import render_quadpixel
+
+    sensor, truth = render_quadpixel(pixels=384, seed=3)
+    views = np.stack([np.moveaxis(sensor[i::2, j::2], -1, 0) for i in range(2)
+                      for j in range(2)])
+    cam = truth["camera"]
+    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
+                   tuple(ViewOptics(tuple(v["pupil_quarter_xy"]), tuple(v["prism_towards_xy"]))
+                         for v in truth["views"]), cam["aperture_mm"], cam["object_distance_mm"])
+    _, report = stitch(views, layout="2x2", rig=rig)
+    assert max(verify.check_alignment(views, report, what="the rig")) < 0.2

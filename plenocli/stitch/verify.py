@@ -32,6 +32,9 @@ from plenocli.stitch.views import (
 TOLERANCE_PX = 0.5
 SEARCH_PX = 4  # the search reaches 4 px (8 px at half resolution); beyond, the residual is "> 4"
 MIN_CORRELATION = 0.3  # at the best shift: below it the overlap holds no common texture
+# A block mostly outside what both views cover (a corner of the panorama where the views'
+# edges curve) measures those edges, not the seam: it is left out.
+MIN_COVERED = 0.5
 BLOCK_PX = 192  # blocks of an overlap measured at full resolution: enough texture, little cost
 
 
@@ -72,6 +75,8 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
             both = (crops[0][1] > 0) & (crops[1][1] > 0)
             luma = [np.where(both, crop.mean(axis=0), np.nan) for crop, _ in crops]
             ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
+            if ok.mean() < MIN_COVERED:
+                continue
             found = _block_shift(*(highpass(v) for v in luma), ok)
             if found is not None:
                 shifts.append(found[0])
@@ -92,20 +97,22 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
 
 def _blocks(region) -> list:
     """Up to four blocks of at most BLOCK_PX x BLOCK_PX spread along an overlap ``region``
-    (canvas slices), centred across it; none without an overlap."""
+    (canvas slices), centred across it, one per BLOCK_PX / 3 of its length (a short seam is
+    still measured in places); none without an overlap."""
     if region is None:
         return []
     spans = [(r.start, r.stop) for r in region]
     long_axis = 0 if spans[0][1] - spans[0][0] >= spans[1][1] - spans[1][0] else 1
     lo, hi = spans[long_axis]
-    n = int(np.clip((hi - lo) // BLOCK_PX, 1, 4))
+    n = int(np.clip((hi - lo) // (BLOCK_PX // 3), 1, 4))
+    size = min(BLOCK_PX, (hi - lo) // n)
     across_lo, across_hi = spans[1 - long_axis]
     mid = (across_lo + across_hi) // 2
     across = slice(max(across_lo, mid - BLOCK_PX // 2), min(across_hi, mid + BLOCK_PX // 2))
     out = []
     for k in range(n):
         centre = lo + (2 * k + 1) * (hi - lo) // (2 * n)
-        along = slice(max(lo, centre - BLOCK_PX // 2), min(hi, centre + BLOCK_PX // 2))
+        along = slice(max(lo, centre - size // 2), min(hi, centre + size // 2))
         out.append((along, across) if long_axis == 0 else (across, along))
     return out
 
