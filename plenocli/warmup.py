@@ -61,8 +61,13 @@ def warm_depth() -> None:
     disparity_x(views[0], views[1])
 
 
+def warm_stitch() -> None:
+    """The stitch's kernels (compiled with explicit signatures when first imported)."""
+    import plenocli.stitch.kernels  # noqa: F401
+
+
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,
-           "depth": warm_depth}
+           "depth": warm_depth, "stitch": warm_stitch}
 
 
 def main() -> None:

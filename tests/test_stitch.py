@@ -316,3 +316,15 @@ def test_the_steps_say_what_the_stitch_is_doing():
     assert "registering views 0 and 1" in seen
     assert "measuring the overlap of views 0 and 1" in seen
     assert any(s.startswith("warping view 2 of 2, band 1 of") for s in seen)
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 3])
+def test_erode_is_scipy_binary_erosion(iterations):
+    from plenocli.stitch.views import erode
+
+    rng = np.random.default_rng(iterations)
+    mask = rng.random((97, 131)) > 0.05
+    mask[:, :9] = False
+    mask[40:60, 50:70] = False
+    assert np.array_equal(erode(mask, iterations),
+                          ndimage.binary_erosion(mask, iterations=iterations))

@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from plenocli.errors import InputError
 from plenocli.progress import step
@@ -28,6 +27,7 @@ from plenocli.stitch.views import (
     LAYOUTS,
     MODELS,
     as_view_stack,
+    erode,
     fill_nan_channels,
     highpass,
     luminance,
@@ -276,7 +276,7 @@ def _check_fit(crops: list, pairs: list, min_correlation: float) -> None:
                              "does not describe these views: register them again (without "
                              "--transform-in)")
         ha, hb = (highpass(np.where(crop[2], x.mean(axis=0), np.nan)) for x in crop[:2])
-        inner = ndimage.binary_erosion(crop[2], iterations=2)
+        inner = erode(crop[2], 2)
         corr = ncc(ha[inner], hb[inner]) if inner.sum() >= 64 else float("nan")
         if not corr >= min_correlation:
             raise InputError(f"the transform does not fit these views: views {a} and {b} "

@@ -34,6 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.optics import prism as optics_prism
+from plenocli.stitch.kernels import band_maps
 from plenocli.stitch.views import fill_nan_channels
 
 MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slows on thin bands)
@@ -260,19 +261,35 @@ def undistort_region(image: np.ndarray, rig: PrismRig, view: int, origin_xy: np.
                      region: tuple[int, int]) -> np.ndarray:
     """A (rows, cols) view in the common undistorted frame over a region of ``region`` =
     (rows', cols') pixels whose pixel (0, 0) is common pixel ``origin_xy`` (x, y): float32,
-    Lanczos-4, NaN where the view does not cover it."""
+    Lanczos-4, NaN where the view does not cover it. Only the part of the view the region's
+    maps reach (and the kernel's 4 px around it) is NaN-filled and read."""
     rows, cols = image.shape
-    valid = np.isfinite(image).astype(np.float32)
-    filled = fill_nan_channels(np.asarray(image, np.float32)[np.newaxis])[0]
-    out = np.empty(region, np.float32)
+    bands = []
+    lo, hi = np.array([cols, rows]), np.array([-1, -1])
     for band, mx, my, bad in _view_maps(rig, view, origin_xy, region, (rows, cols)):
+        # region pixels more than a pixel off the view come out NaN whatever is resampled
+        # there (they are pointed inside below: Lanczos-4's border path is slow)
+        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+        if not off_view.all():
+            on_x, on_y = mx[~off_view], my[~off_view]
+            lo = np.minimum(lo, [np.floor(on_x.min()), np.floor(on_y.min())])
+            hi = np.maximum(hi, [np.floor(on_x.max()), np.floor(on_y.max())])
+        bands.append((band, mx, my, bad, off_view))
+    x0, y0 = np.maximum(lo.astype(int) - 4, 0)
+    x1, y1 = np.minimum(hi.astype(int) + 5, [cols, rows])
+    if x1 - x0 < 9 or y1 - y0 < 9:
+        x0, y0, x1, y1 = 0, 0, cols, rows
+    crop = np.asarray(image[y0:y1, x0:x1], np.float32)
+    valid = np.isfinite(crop).astype(np.float32)
+    filled = fill_nan_channels(crop[np.newaxis])[0]
+    out = np.empty(region, np.float32)
+    for band, mx, my, bad, off_view in bands:
+        # every pixel on the view reads within the crop (exact: integer shifts of the maps)
+        mx -= np.float32(x0)
+        my -= np.float32(y0)
         cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                           borderValue=0) > 0.999
         cover &= ~bad
-        # region pixels more than a pixel off the view come out NaN whatever is resampled
-        # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its
-        # slow border path
-        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
         mx[off_view] = 4
         my[off_view] = 4
         warped = cv2.remap(filled, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
@@ -373,7 +390,8 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     nodes = [np.where(lost, np.nan, node) for node in nodes]
     rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
     first_x, weights_x = _cubic_weights(cols, pitch)
-    along_x = [sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)) for node in nodes]
+    along_x = [np.ascontiguousarray(sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)))
+               for node in nodes]
     del nodes
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
@@ -381,29 +399,15 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         band = slice(r0, min(r0 + step, rows))
         first_y, weights_y = _cubic_weights(band.stop, pitch)
         first_y, weights_y = first_y[band], weights_y[band]
-        vx, vy = (_along_y(a, first_y, weights_y) for a in along_x)
-        exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
-        if exact.any():
+        shape_band = (band.stop - band.start, cols)
+        mx, my = np.empty(shape_band, np.float32), np.empty(shape_band, np.float32)
+        exact, bad = np.empty(shape_band, bool), np.zeros(shape_band, bool)
+        if band_maps(along_x[0], along_x[1], first_y, weights_y, first_x, rough, mx, my, exact):
             ys, xs = np.nonzero(exact)
             tx, ty = common_to_view(rig, view, gx[xs], ys + (r0 + origin_xy[1]), shape)
-            vx[ys, xs], vy[ys, xs] = tx, ty
-        bad = ~(np.isfinite(vx) & np.isfinite(vy))
-        yield (band, np.where(bad, -10, vx).astype(np.float32),
-               np.where(bad, -10, vy).astype(np.float32), bad)
-
-
-def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Rows of node values (nodes y, cols) interpolated to a band's rows (``first`` stencil node
-    and 4 weights per row, ``first`` non-decreasing): the rows sharing a stencil at once, from
-    node rows as they are (no gathered copies)."""
-    out = np.empty((len(first), along_x.shape[1]))
-    starts = np.flatnonzero(np.diff(first, prepend=first[0] - 1))
-    for lo, hi in zip(starts, np.append(starts[1:], len(first)), strict=True):
-        node, part = int(first[lo]), out[lo:hi]
-        np.multiply(weights[lo:hi, 0, None], along_x[node], out=part)
-        for j in range(1, 4):
-            part += weights[lo:hi, j, None] * along_x[node + j]
-    return out
+            bad[ys, xs] = ~(np.isfinite(tx) & np.isfinite(ty))
+            mx[ys, xs], my[ys, xs] = np.where(bad[ys, xs], -10, tx), np.where(bad[ys, xs], -10, ty)
+        yield band, mx, my, bad
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,

@@ -45,9 +45,10 @@ def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
 
 
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
-    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32, their names, whether
-    any was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata.
-    Only the views wanted are demosaiced, one at a time, straight into the stack."""
+    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32 (colour channels
+    interleaved in memory), their names, whether any was a Bayer mosaic (demosaiced at full
+    resolution), and the first file's metadata. Only the views wanted are demosaiced, one at a
+    time, straight into the stack."""
     found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
@@ -78,7 +79,12 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
                             for (n, _), shape in zip(found, shapes, strict=True))
         raise InputError(f"the views differ in size or colour channels ({listing}); stitch "
                          "views of one capture, processed the same way")
-    stack = np.empty((len(found),) + shapes[0], np.float32)
+    if len(shapes[0]) == 3:  # colour: channels interleaved (as demosaiced), so the stitch
+        # resamples each pixel's channels in one pass
+        stack = np.moveaxis(np.empty((len(found),) + shapes[0][1:] + shapes[0][:1],
+                                     np.float32), -1, 1)
+    else:
+        stack = np.empty((len(found),) + shapes[0], np.float32)
     for k, (name, source) in enumerate(found):
         _fill_view(stack[k], name, *source)
     return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
@@ -103,8 +109,7 @@ def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: l
         rgb = camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
-    for c in range(3):
-        out[c] = rgb[..., c]
+    np.moveaxis(out, 0, -1)[...] = rgb
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
