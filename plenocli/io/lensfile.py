@@ -50,6 +50,14 @@ def lens_from_dict(doc: dict, *, source: str = "lens") -> Lens:
                           f"a lens file has {', '.join(sorted(LENS_KEYS))}")
     surfaces = [_surface(row, f"{source}: surface {k}")
                 for k, row in enumerate(doc["surfaces"], 1)]
+    image = doc.get("image_distance_mm")
+    try:
+        lens = Lens(tuple(surfaces), name=str(doc.get("name", source)),
+                    image_distance_mm=(None if image is None
+                                       else _number(image, "image_distance_mm")),
+                    notes=str(doc.get("notes", "")))
+    except ValueError as err:
+        raise ConfigError(f"{source}: {err}") from err
     stops = [k for k, s in enumerate(surfaces, 1) if s.stop]
     if len(stops) != 1:
         raise ConfigError(f"{source}: " + (
@@ -57,14 +65,7 @@ def lens_from_dict(doc: dict, *, source: str = "lens") -> Lens:
             "are the stop's)" if not stops else
             f"surfaces {', '.join(map(str, stops))} all have 'stop: true'; a lens has one "
             "aperture stop"))
-    image = doc.get("image_distance_mm")
-    try:
-        return Lens(tuple(surfaces), name=str(doc.get("name", source)),
-                    image_distance_mm=(None if image is None
-                                       else _number(image, "image_distance_mm")),
-                    notes=str(doc.get("notes", "")))
-    except ValueError as err:
-        raise ConfigError(f"{source}: {err}") from err
+    return lens
 
 
 def _surface(row, where: str) -> Surface:
