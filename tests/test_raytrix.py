@@ -159,3 +159,48 @@ def test_r42_xml_types_follow_their_depth_ranges(realdata):
     assert np.nanpercentile(g, 10) > 4.5
     order = [np.median(local[types == t]) for t in range(3)]
     assert order[2] > order[1] > order[0], order
+
+def _xml(**changes) -> str:
+    grid = LensGrid(23.2, 0.3, (1001.3, 1040.8), image_shape=(2048, 2000))
+    return raytrix.format_calib({**raytrix.calib_from_grid(grid), **changes})
+
+
+def test_a_rotation_in_degrees_is_converted_and_lengths_in_other_units_refused():
+    text = _xml()
+    rad = raytrix.parse_calib(text)["rotation"]
+    deg = text.replace(f'<rotation units="rad">{rad!r}',
+                       f'<rotation units="deg">{rad * 180 / 3.141592653589793!r}')
+    assert raytrix.parse_calib(deg)["rotation"] == pytest.approx(rad, abs=1e-12)
+    for tag in ("diameter", "offset", "lens_border"):
+        with pytest.raises(InputError, match=f'<{tag} units="mm">: plenocli reads {tag} in pix'):
+            raytrix.parse_calib(text.replace(f'<{tag} units="pix">', f'<{tag} units="mm">', 1))
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("</diameter>", "</diameter><diameter>40.0</diameter>", "<diameter> is given 2 times"),
+    ("</x>", "</x><x>7</x>", "<offset/x> is given 2 times"),
+    ("<function>", "<function>Brown</function><function>", "<distortion/function> is given 2"),
+])
+def test_an_element_given_twice_is_refused(old, new, words):
+    with pytest.raises(InputError, match=words):
+        raytrix.parse_calib(_xml().replace(old, new, 1))
+
+
+@pytest.mark.parametrize("distortion, words", [
+    ({"function": "Brown", "parameters": [-0.0015, 0.0007]}, "distortion .Brown -0.0015"),
+    ({"function": "spline9", "parameters": []}, "function 'spline9' is not one"),
+])
+def test_a_distortion_plenocli_does_not_apply_is_refused_not_dropped(distortion, words):
+    calib = raytrix.parse_calib(_xml(distortion={"type": "radial", "offset": [0.0, 0.0],
+                                                 **distortion}))
+    with pytest.raises(ValueError, match=words):
+        raytrix.grid_from_calib(calib, (2048, 2000))
+    none = {**calib["distortion"], "function": "Brown", "parameters": [0.0, 0.0]}
+    assert raytrix.grid_from_calib({**calib, "distortion": none}, (2048, 2000)).pitch_px == 23.2
+
+
+def test_distortion_parameters_must_be_as_many_as_counted():
+    text = _xml().replace('<parameter count="0">0</parameter>',
+                          '<parameter count="0">0.3;0.1</parameter>')
+    with pytest.raises(InputError, match="count 0 but holds 2 values"):
+        raytrix.parse_calib(text)

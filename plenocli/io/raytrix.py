@@ -55,16 +55,71 @@ DEFAULT_LENS_TYPES = [
 ]
 
 
+# The unit each field is read in, and the spellings of a unit attribute that can be converted
+# to it without knowing the camera (a length in mm would need the pixel size: refused).
+FIELD_UNITS = {"offset": "pix", "diameter": "pix", "lens_border": "pix", "rotation": "rad",
+               "distortion/offset": "pix", "tcp": "virtual_depth", "lens_base_x": "lens",
+               "lens_base_y": "lens", "sub_grid_base": "lens", "lens_type/offset": "lens"}
+UNIT_SCALES = {"pix": {"pix": 1.0, "px": 1.0, "pixel": 1.0, "pixels": 1.0},
+               "rad": {"rad": 1.0, "radian": 1.0, "radians": 1.0, "deg": np.pi / 180,
+                       "degree": np.pi / 180, "degrees": np.pi / 180},
+               "lens": {"lens": 1.0}, "virtual_depth": {"virtual_depth": 1.0}}
+
+
+def _scale(node: ET.Element, what: str) -> float:
+    """The factor from the unit ``node`` states to the one plenocli reads ``what`` in (1 when
+    it states none); a unit that cannot be converted is refused, never read as another."""
+    units, field = node.get("units"), FIELD_UNITS.get(what)
+    if units is None or field is None:
+        return 1.0
+    scale = UNIT_SCALES[field].get(units.strip().lower())
+    if scale is None:
+        raise ValueError(f'<{what} units="{units}">: plenocli reads {what} in {field} (the file '
+                         f"gives nothing to convert {units} with); write it in {field}")
+    return scale
+
+
 def _xy(node: ET.Element | None, what: str) -> list[float]:
     if node is None:
         raise ValueError(f"missing <{what}>")
-    return [_num(node.find("x"), f"{what}/x"), _num(node.find("y"), f"{what}/y")]
+    scale = _scale(node, what)
+    return [scale * _num(node.find("x"), f"{what}/x"), scale * _num(node.find("y"), f"{what}/y")]
 
 
 def _num(node: ET.Element | None, what: str) -> float:
     if node is None or node.text is None or not node.text.strip():
         raise ValueError(f"missing <{what}>")
-    return float(node.text.strip())
+    return float(node.text.strip()) * _scale(node, what)
+
+
+def _check_single(node: ET.Element, path: str = "") -> None:
+    """Refuse an element given twice where the format has one (every element but the root's
+    ``lens_type``s): a reader would keep one of them silently."""
+    tags = [child.tag for child in node]
+    for tag in dict.fromkeys(tags):
+        if tags.count(tag) > 1 and not (path == "" and tag == "lens_type"):
+            raise ValueError(f"<{path}{tag}> is given {tags.count(tag)} times; keep one")
+    for child in node:
+        _check_single(child, f"{path}{child.tag}/")
+
+
+def _distortion(dist: ET.Element | None) -> dict | None:
+    """The ``<distortion>`` element: its parameters must be as many as ``count`` says."""
+    if dist is None:
+        return None
+    param = dist.find("parameter")
+    count = int(param.get("count", "0")) if param is not None else 0
+    values = _numbers(param.text) if param is not None else []
+    if count == 0 and values in ([], [0.0]):  # "0": the placeholder of no parameters
+        values = []
+    if len(values) != count:
+        raise ValueError(f"<distortion/parameter> has count {count} but holds {len(values)} "
+                         "values")
+    off = dist.find("offset")
+    return {"type": dist.get("type", "radial"),
+            "function": (dist.findtext("function") or "constant").strip(),
+            "parameters": values,
+            "offset": _xy(off, "distortion/offset") if off is not None else [0.0, 0.0]}
 
 
 def _numbers(text: str | None) -> list[float]:
@@ -83,18 +138,8 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
         raise InputError(f"{source}: a <{root.tag}> file, not a Raytrix <RayCalibData> "
                          "calibration; plenocli reads RayCalibData XML only")
     try:
-        dist = root.find("distortion")
-        distortion = None
-        if dist is not None:
-            param = dist.find("parameter")
-            count = int(param.get("count", "0")) if param is not None else 0
-            values = _numbers(param.text) if param is not None else []
-            off = dist.find("offset")
-            distortion = {"type": dist.get("type", "radial"),
-                          "function": (dist.findtext("function") or "constant").strip(),
-                          "parameters": values[:count] if count else [],
-                          "offset": _xy(off, "distortion/offset") if off is not None
-                          else [0.0, 0.0]}
+        _check_single(root)
+        distortion = _distortion(root.find("distortion"))
         lens_types = []
         for lt in root.findall("lens_type"):
             rng = lt.find("depth_range")
@@ -127,8 +172,8 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
             "k_matrix": k_matrix,
         }
     except ValueError as err:
-        raise InputError(f"{source}: bad RayCalibData ({err}); the file may be truncated") \
-            from err
+        hint = "; the file may be truncated" if str(err).startswith("missing") else ""
+        raise InputError(f"{source}: bad RayCalibData ({err}){hint}") from err
     try:
         check_calib(calib)
     except ValueError as err:
@@ -260,8 +305,15 @@ def _wrap(angle: float, period: float) -> float:
 def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     """The lattice of a Raytrix calibration as a ``LensGrid`` of an image of ``image_shape``
     (rows, cols). Lens (0, 0) is the centre lens; b1, b2 are the Raytrix base vectors (ordered
-    so that b2 is b1 turned by +60 deg in image coordinates)."""
+    so that b2 is b1 turned by +60 deg in image coordinates).
+
+    A calibration with a lens distortion (a nonzero parameter) is refused: the lattice is
+    placed undistorted, and the file does not state the radius its polynomial is normalised by,
+    so the shift of the lens centres cannot be bounded (the real Cards2 file's k1 = -0.0015
+    moves the corner lenses by ~6 px normalised to the half-diagonal, by far more in pixels);
+    dropping it would put the lenses in the wrong place silently."""
     check_calib(calib)
+    _refuse_distortion(calib.get("distortion"))
     rows, cols = image_shape
     d = float(calib["diameter"])
     bx = np.asarray(calib["lens_base_x"], float)
@@ -309,6 +361,23 @@ def type_of_coset(calib: dict, grid: LensGrid) -> tuple[int, int, int] | None:
             return None
         out[coset] = int(t["id"])
     return tuple(out) if sorted(out) == [0, 1, 2] else None
+
+
+DISTORTION_FUNCTIONS = ("constant", "brown")  # the names RayCalibData files use
+
+
+def _refuse_distortion(distortion: dict | None) -> None:
+    function = str((distortion or {}).get("function", "constant"))
+    if function.lower() not in DISTORTION_FUNCTIONS:
+        raise ValueError(f"its distortion function {function!r} is not one plenocli knows "
+                         f"({', '.join(DISTORTION_FUNCTIONS)}); use an XML without distortion")
+    params = (distortion or {}).get("parameters") or []
+    if any(float(v) != 0.0 for v in params):
+        raise ValueError(f"its distortion ({distortion.get('function', 'constant')} "
+                         f"{', '.join(f'{float(v):g}' for v in params)}) moves the lens centres, "
+                         "and plenocli places the lattice undistorted (RayCalibData does not say "
+                         "how its radius is normalised); use the grid of plenocli calibrate on "
+                         "this camera's white image, or an XML without distortion")
 
 
 def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:

@@ -31,7 +31,7 @@ from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import CHANNELS, ViewNames
 from plenocli.progress import log, shown
-from plenocli.stitch import PrismRig
+from plenocli.stitch import PrismRig, verify
 
 
 def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
@@ -122,11 +122,18 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
     transform = load_transform(transform_in, names) if transform_in else None
+    named_after_files = names == [Path(p).stem for p in inputs]
+    if transform is not None:
+        _verified(verify.check_transform_names, transform, names, layout,
+                  named_after_files=named_after_files)
     prism_rig = load_rig(rig) if rig else None
     panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
                                       distortion_k1=distortion, transform=transform, blend=blend,
                                       rig=prism_rig, overlap=overlap,
                                       overlap_tolerance=overlap_tolerance)
+    if transform_in or rig:  # a side file may make the panorama refused, never wrong
+        _verified(verify.check_alignment, stack, result,
+                  what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
     params = dict(views=views, layout=layout, model=model, distortion=distortion,
                   transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                   overlap_tolerance=overlap_tolerance)
@@ -156,6 +163,13 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1], _alignment(rep))
+
+
+def _verified(check, *args, **kwargs) -> None:
+    try:
+        check(*args, **kwargs)
+    except ValueError as err:
+        raise InputError(str(err)) from err
 
 
 def _alignment(rep: dict) -> str:
