@@ -40,10 +40,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_distinct
+from plenocli.io.yamlfile import DocumentError, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
 
 TOP_KEYS = ("description", "steps", "out")
@@ -169,14 +168,22 @@ class Template:
 def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     """Read and check a config's structure; placeholders are kept (see :class:`Template`)."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise ConfigError(f"{p}: no such config file")
+    if not p.is_file():
+        raise ConfigError(f"{p}: not a regular file; give a YAML config file")
     try:
-        doc = yaml.load(p.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{p}: not valid YAML (not UTF-8 text, byte {err.start})") from err
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read the config ({err.strerror})") from err
+    try:
+        doc = load_yaml(text)
+    except DocumentError as err:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
-                if _PLACEHOLDER.search(p.read_text(encoding="utf-8", errors="replace")) else "")
-        raise ConfigError(f"{p}: not valid YAML ({yaml_problem(err)}){hint}") from err
+                if _PLACEHOLDER.search(text) else "")
+        raise ConfigError(f"{p}: not valid YAML ({err}){hint}") from err
     if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict) or not doc["steps"]:
         raise ConfigError(f"{p}: a config needs a 'steps:' mapping of step names to stages")
     for key in doc:
@@ -200,34 +207,6 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     template = Template(p, raw_steps, out)
     _check_per_capture_outputs(template)
     return template
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
-    silently: a step or a parameter written twice would run with only one of them)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            if key_node.tag == "tag:yaml.org,2002:merge":
-                continue  # '<<: *base': the base's keys may be given again (YAML's merge)
-            key = self.construct_object(key_node, deep=True)
-            if not isinstance(key, (str, int, float, bool)):
-                continue  # an unhashable key: the base loader reports it
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"key {key!r} is given twice in one mapping; keep one",
-                    key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-def yaml_problem(err: Exception) -> str:
-    """A YAML error in a few words: where and what (PyYAML's own text spans several lines)."""
-    mark = getattr(err, "problem_mark", None)
-    problem = getattr(err, "problem", None) or str(err)
-    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-    return where + " ".join(str(problem).split())
 
 
 def _unflow(value):
@@ -328,10 +307,10 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
             raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
         try:  # an empty value is the empty word, as --smooth= in the shell
-            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else ""
-        except yaml.YAMLError as err:
-            raise ConfigError(f"--set {item!r}: the value is not valid YAML "
-                              f"({yaml_problem(err)}); quote it") from err
+            steps[step][param] = _unflow(load_yaml(value)) if value != "" else ""
+        except DocumentError as err:
+            raise ConfigError(f"--set {item!r}: the value is not valid YAML ({err}); "
+                              "quote it") from err
 
 
 def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> Step:
