@@ -48,6 +48,7 @@ from plenocli.pipeline.registry import Stage, get_stages
 TOP_KEYS = ("description", "steps", "out")
 PER_CAPTURE = ("capture", "name")  # placeholders that make a step run once per capture
 _PLACEHOLDER = re.compile(r"\{(capture|name|out)\}")
+_ANY_PLACEHOLDER = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,7 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
+    _check_placeholder_names(p, raw_steps)
     template = Template(p, raw_steps, out)
     _check_per_capture_outputs(template)
     return template
@@ -215,6 +217,20 @@ def _unflow(value):
             and next(iter(value)) in ("capture", "name", "out")):
         return "{" + next(iter(value)) + "}"
     return value
+
+
+def _check_placeholder_names(path: Path, raw_steps: dict) -> None:
+    """A placeholder other than {capture}, {name}, {out} would be written literally into a
+    file name (a file named '{foo}.tif')."""
+    known = ("capture", "name", "out")
+    for name, body in raw_steps.items():
+        for key, value in body.items():
+            unknown = [w for v in _flat(value) if isinstance(v, str)
+                       for w in _ANY_PLACEHOLDER.findall(v) if w not in known]
+            if unknown:
+                raise ConfigError(f"{path}: step {name!r}: {key}: unknown placeholder "
+                                  f"{{{unknown[0]}}}{closest(unknown[0], known)}; the "
+                                  "placeholders are {capture}, {name} and {out}")
 
 
 def _placeholders(value) -> set[str]:
@@ -278,6 +294,12 @@ def _check_files(path: Path, steps: list[Step]) -> None:
             writer[key] = k
     folders = {os.path.abspath(f): k for k, step in enumerate(steps)
                for f in step.stage.paths(step.params, step.stage.folder_outputs)}
+    for key, k in writer.items():
+        under = [f for f in Path(key).parents if str(f) in writer and str(f) not in folders]
+        if under:
+            raise ConfigError(f"{path}: step {steps[k].name!r} writes {key} under {under[0]}, "
+                              f"the output file of step {steps[writer[str(under[0])]].name!r} "
+                              "(a file cannot hold a folder); write it elsewhere")
     for key, k in writer.items():
         inside = [folders[str(f)] for f in Path(key).parents if folders.get(str(f), k) != k]
         if inside:
