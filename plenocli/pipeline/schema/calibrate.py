@@ -20,3 +20,6 @@ PARAMS = (
           "XML).", role="input"),
     PREVIEW,
 )
+
+# the grid a calibration starts from may be the one it is compared with (how far it moved)
+SHARED_INPUTS = (("start", "compare"),)
