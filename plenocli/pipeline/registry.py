@@ -6,7 +6,9 @@ declaration of its parameters, ``PARAMS`` in ``plenocli.pipeline.schema.<name>``
 and ``--set`` are resolved with it, and its roles say which parameters are files the stage
 reads or writes, which is what the make-style runner and the output checks need. A schema
 module may also define ``check(params)``: a check across parameters (ConfigError), run on
-the resolved parameters before the stage, whichever path they came from.
+the resolved parameters before the stage, whichever path they came from; and
+``shared_inputs(params)``: the pairs of input roles that may name one file (any other file
+given twice among the inputs is refused).
 """
 
 from __future__ import annotations
@@ -98,7 +100,8 @@ class Stage:
         stage succeeded (nothing is left behind otherwise), each output with its record.
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
-        _check_inputs_apart(params, self.params, getattr(self.schema, "SHARED_INPUTS", ()))
+        shared = getattr(self.schema, "shared_inputs", None)
+        _check_inputs_apart(params, self.params, shared(params) if shared else ())
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
         inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
@@ -130,7 +133,7 @@ def _check_inputs_apart(params: dict[str, Any], declared: tuple[Param, ...],
     """A file given twice among a stage's inputs, in one list (one masked white given for two
     pupil parts: measured as two captures) or in two roles (``flat in.tif --white in.tif``: an
     image flat-fielded by itself), as the same name, ``./name``, a symbolic or a hard link, is
-    a mistake; only the role pairs the schema lists in ``SHARED_INPUTS`` may share a file."""
+    a mistake; only the role pairs the schema's ``shared_inputs(params)`` lists may share one."""
     seen: dict[tuple, tuple[Param, str]] = {}
     for param in declared:
         if param.role != "input" or params.get(param.name) is None:

@@ -21,5 +21,8 @@ PARAMS = (
     PREVIEW,
 )
 
-# the grid a calibration starts from may be the one it is compared with (how far it moved)
-SHARED_INPUTS = (("start", "compare"),)
+
+def shared_inputs(params) -> tuple[tuple[str, str], ...]:
+    """The grid a calibration starts from may be the one it is compared with (how far the
+    calibration moved it)."""
+    return (("start", "compare"),)
