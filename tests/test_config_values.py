@@ -25,9 +25,12 @@ from plenocli.pipeline.registry import get_stage
 ROOT = Path(__file__).resolve().parents[1]
 
 # words as a user types them after --OPTION, or after KEY: in a config, or after --set S.K=
+# (a YAML list stands for the comma-separated word)
 WORDS = ["010", "+5", "-0", "1_0", "0x3", "0o7", "1e3", "3.0", "2:6", "1:30", "yes", "on",
-         "1e30", ".5", "2024-01-01"]
-OPTIONS = [("bias", "smooth"), ("flat", "floor"), ("develop", "quality"), ("stitch", "overlap")]
+         "1e30", ".5", "0.50", "2024-01-01", "00", "2:6:1",
+         ("[2, 1, 1.50]", "2,1,1.50"), ("[02, 1, 1]", "02,1,1")]  # (YAML, the shell's word)
+OPTIONS = [("bias", "smooth"), ("flat", "floor"), ("develop", "quality"), ("stitch", "overlap"),
+           ("refocus", "g"), ("develop", "view"), ("develop", "wb")]
 
 
 def _outcome(convert, value):
@@ -38,7 +41,8 @@ def _outcome(convert, value):
 
 
 def _through_config(tmp_path: Path, stage: str, key: str, word: str, via_set: bool):
-    extra = {"develop": "    view: S\n"}.get(stage, "")
+    extra = {"develop": "" if key == "view" else "    view: S\n",
+             "refocus": "    grid: g.yaml\n"}.get(stage, "")
     inputs = "inputs" if stage == "stitch" else "input"
     out = "out.jpg" if stage == "develop" else "out.tif"
     text = f"steps:\n  {stage}:\n    {inputs}: in.tif\n    output: {out}\n{extra}"
@@ -51,8 +55,9 @@ def _through_config(tmp_path: Path, stage: str, key: str, word: str, via_set: bo
 @pytest.mark.parametrize("stage,key", OPTIONS)
 def test_a_word_means_the_same_in_the_shell_yaml_and_set(tmp_path, stage, key):
     validator = next(p.type for p in get_stage(stage).params if p.name == key)
-    for word in WORDS:
-        shell = _outcome(validator.convert, word)   # what click's adapter does with the word
+    for item in WORDS:
+        word, shell_word = item if isinstance(item, tuple) else (item, item)
+        shell = _outcome(validator.convert, shell_word)   # what click's adapter does
         for via_set in (False, True):
             got = _outcome(lambda w, s=via_set: _through_config(tmp_path, stage, key, w, s), word)
             assert got == shell, (stage, key, word, "--set" if via_set else "YAML", got, shell)
@@ -221,3 +226,13 @@ def test_a_write_cut_short_by_a_file_size_limit_names_the_file(tmp_path):
     assert result.returncode == 1, result.stderr
     assert "could not be written whole" in result.stderr and "white.tif" in result.stderr
     assert not (tmp_path / "s").exists()
+
+
+def test_every_yaml_and_json_file_is_read_by_the_one_reader():
+    """A reader of its own would bring back YAML 1.1 numbers or last-wins keys."""
+    import re
+
+    pattern = re.compile(r"yaml\.(safe_)?load\(|yaml\.load_all\(|json\.loads?\((?!json\.dumps)")
+    offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "plenocli").rglob("*.py")
+                 if p.name != "yamlfile.py" and pattern.search(p.read_text())]
+    assert offenders == []

@@ -51,15 +51,39 @@ class JsonError(DocumentError, json.JSONDecodeError):
         return self.msg
 
 
-def _number(kind):
+class IntWord(int):
+    """A whole number that keeps the word it was written as (``010``, ``+5``)."""
+
+    def __str__(self) -> str:
+        return self.word
+
+
+class FloatWord(float):
+    """A number that keeps the word it was written as (``1e3``, ``0.50``)."""
+
+    def __str__(self) -> str:
+        return self.word
+
+
+def _special(kind, text: str, node):
+    if text.lower().lstrip("+-") in (".inf", ".nan"):
+        return kind(text.replace(".", "", 1))
+    raise yaml.constructor.ConstructorError(
+        None, None, f"{text!r} is not a {kind.__name__}", node.start_mark)
+
+
+def _number(kind, word_kind=None):
     def construct(loader, node):
         text = loader.construct_scalar(node)
         try:
-            return kind(text.replace(".", "", 1) if text.lower().lstrip("+-") in (".inf", ".nan")
-                        else text)
+            value = kind(text)
         except ValueError:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"{text!r} is not a {kind.__name__}", node.start_mark) from None
+            value = _special(kind, text, node)   # .inf, .nan: Python's inf, nan
+        if word_kind is None:
+            return value
+        word = word_kind(value)
+        word.word = text if text[-1:].isdigit() or text[-1:] == "." else str(value)
+        return word
     return construct
 
 
@@ -79,13 +103,13 @@ def _unique_mapping(self, node, deep=False):
     return yaml.constructor.SafeConstructor.construct_mapping(self, node, deep=deep)
 
 
-def _loader(base: type) -> type:
+def _loader(base: type, *, words: bool = False) -> type:
     cls = type(f"Core{base.__name__}", (base,), {
         "yaml_implicit_resolvers": {}, "construct_mapping": _unique_mapping})
     for tag, pattern, first in _RESOLVERS:
         cls.add_implicit_resolver(f"tag:yaml.org,2002:{tag}", pattern, list(first))
-    cls.add_constructor("tag:yaml.org,2002:int", _number(int))
-    cls.add_constructor("tag:yaml.org,2002:float", _number(float))
+    cls.add_constructor("tag:yaml.org,2002:int", _number(int, IntWord if words else None))
+    cls.add_constructor("tag:yaml.org,2002:float", _number(float, FloatWord if words else None))
     return cls
 
 
@@ -93,6 +117,9 @@ def _loader(base: type) -> type:
 # resolvers and constructors above are Python in both
 Loader = _loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader))
 PyLoader = _loader(yaml.SafeLoader)
+# for stage parameters: a number also keeps its word, so a text parameter (a view named 00, a
+# g list) gets exactly what the shell would pass, and a number parameter its value
+WordLoader = _loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader), words=True)
 
 
 def yaml_problem(err: Exception) -> str:
@@ -103,10 +130,11 @@ def yaml_problem(err: Exception) -> str:
     return where + " ".join(str(problem).split())
 
 
-def load_yaml(text: str) -> Any:
-    """One YAML document; :class:`DocumentError` says what is wrong with it."""
+def load_yaml(text: str, *, words: bool = False) -> Any:
+    """One YAML document; :class:`DocumentError` says what is wrong with it. ``words``: numbers
+    are :class:`IntWord`/:class:`FloatWord`, printing as written (stage parameters)."""
     try:
-        return yaml.load(text, Loader=Loader)  # noqa: S506 (a safe loader)
+        return yaml.load(text, Loader=WordLoader if words else Loader)  # noqa: S506 (safe)
     except yaml.YAMLError as err:
         raise YamlError(yaml_problem(err)) from err
 

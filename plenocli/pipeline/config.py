@@ -180,7 +180,7 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     except OSError as err:
         raise ConfigError(f"{p}: cannot read the config ({err.strerror})") from err
     try:
-        doc = load_yaml(text)
+        doc = load_yaml(text, words=True)
     except DocumentError as err:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
                 if _PLACEHOLDER.search(text) else "")
@@ -329,7 +329,7 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
             raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
         try:  # an empty value is the empty word, as --smooth= in the shell
-            steps[step][param] = _unflow(load_yaml(value)) if value != "" else ""
+            steps[step][param] = _unflow(load_yaml(value, words=True)) if value != "" else ""
         except DocumentError as err:
             raise ConfigError(f"--set {item!r}: the value is not valid YAML ({err}); "
                               "quote it") from err
