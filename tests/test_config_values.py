@@ -236,3 +236,16 @@ def test_every_yaml_and_json_file_is_read_by_the_one_reader():
     offenders = [str(p.relative_to(ROOT)) for p in (ROOT / "plenocli").rglob("*.py")
                  if p.name != "yamlfile.py" and pattern.search(p.read_text())]
     assert offenders == []
+
+
+def test_one_parameter_given_twice_in_a_step_or_by_set_is_refused(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("steps:\n  flat:\n    input: in.tif\n    white: w.tif\n"
+                    "    save-gain: a.tif\n    save_gain: b.tif\n    output: o.tif\n")
+    with pytest.raises(ConfigError, match="save-gain is given twice"):
+        load_config(path)
+    path.write_text(BASE)
+    with pytest.raises(ConfigError, match="already set"):
+        load_config(path, ["bias.smooth=5", "bias.smooth=7"])
+    steps = load_config(path, ["bias.smooth=5"])  # --set replaces the config's value
+    assert steps[1].params["smooth"] == 5

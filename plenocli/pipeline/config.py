@@ -317,6 +317,9 @@ def _check_files(path: Path, steps: list[Step]) -> None:
 
 
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
+    """``--set STEP.PARAM=VALUE``: each replaces the config's key however it is spelled
+    (``save-gain`` or ``save_gain``); one parameter set twice is refused (which one holds?)."""
+    given: dict[tuple[str, str], str] = {}
     for item in overrides:
         target, sep, value = item.partition("=")
         step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
@@ -328,6 +331,13 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if param == "stage":
             raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
+        norm = param.replace("-", "_")
+        if (step, norm) in given:
+            raise ConfigError(f"--set {item!r}: {step}.{param} is already set by --set "
+                              f"{given[step, norm]!r}; keep one")
+        given[step, norm] = item
+        for key in [k for k in steps[step] if str(k).replace("-", "_") == norm]:
+            del steps[step][key]
         try:  # an empty value is the empty word, as --smooth= in the shell
             steps[step][param] = _unflow(load_yaml(value, words=True)) if value != "" else ""
         except DocumentError as err:
@@ -345,6 +355,9 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
     given: dict[str, Any] = {}
     for key, value in body.items():
         norm = str(key).replace("-", "_")
+        if norm in given:
+            raise ConfigError(f"{path}: step {name!r}: {norm.replace('_', '-')} is given twice "
+                              "(as KEY-NAME and KEY_NAME); keep one")
         if norm not in valid:
             options = [k.replace("_", "-") for k in valid]
             raise ConfigError(f"{path}: step {name!r}: unknown key {key!r} for stage "
