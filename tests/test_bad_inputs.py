@@ -122,6 +122,7 @@ def inputs(tmp_path_factory) -> Path:
     _plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
     _plain_tiff(d / "nan_plain.tif", np.full((16, 16), np.nan, np.float32))
     good = (d / "biased.tif").read_bytes()
+    (d / "biased_copy.tif").write_bytes(good)  # another file with the same views
     (d / "truncated.tif").write_bytes(good[: len(good) * 2 // 3])
     _huge_header_tiff(d / "huge.tif")
     meta = tiffio.read_meta(d / "frames.tif")
@@ -335,12 +336,14 @@ CASES = [
     ("decode-cfa-bad", ["decode", "{i}/f512.tif", "--cfa", "RRGB", "-o", "{o}/d.tif"], 2,
      ("'--cfa'",)),
     # flat
+    # (a white flat-fielded by itself only with --save-gain: one file given twice otherwise)
     ("flat-median-huge", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
-                          "100001", "-o", "{o}/f.tif"], 1, ("median",)),
+                          "100001", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
+     ("median",)),
     ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
-                          "4", "-o", "{o}/f.tif"], 1, ("median",)),
-    ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif"], 1,
-     ("no valid pixel",)),
+                          "4", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1, ("median",)),
+    ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif",
+                        "--save-gain", "{o}/g.tif"], 1, ("no valid pixel",)),
     ("flat-truncated-white", ["flat", "{i}/biased.tif", "--white", "{i}/truncated.tif", "-o",
                               "{o}/f.tif"], 1, ("truncated",)),
     ("flat-percentile-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif",
@@ -349,10 +352,11 @@ CASES = [
     ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
                         "-o", "{o}/f.tif"], 2, ("floor",)),
     ("flat-not-bias-corrected", ["flat", "{i}/frames.tif", "--white", "{i}/frames.tif", "-o",
-                                 "{o}/f.tif"], 1, ("run plenocli bias first",)),
+                                 "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
+     ("run plenocli bias first",)),
     ("flat-white-not-bias-corrected", ["flat", "{i}/biased.tif", "--white", "{i}/frames.tif",
                                        "-o", "{o}/f.tif"], 1, ("run plenocli bias first",)),
-    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "-o",
+    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased_copy.tif", "-o",
                             "{o}/f.tif"], 1, ("not a gain",)),
     ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
                                "{o}/f.tif"], 1, ("white image",)),

@@ -19,9 +19,8 @@ import math
 import os
 from pathlib import Path
 
-import yaml
-
 from plenocli.errors import ConfigError, InputError
+from plenocli.io.yamlfile import DocumentError, read_yaml
 from plenocli.optics.glass import refractive_index
 from plenocli.optics.lens import Lens, Surface
 
@@ -104,8 +103,7 @@ def read_lens(path: str | os.PathLike) -> Lens:
     if not p.is_file():
         raise InputError(f"{p}: no such lens file")
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{p}: not a YAML lens prescription "
-                          f"({' '.join(str(err).split())})") from err
+        doc = read_yaml(p)
+    except DocumentError as err:
+        raise ConfigError(f"{p}: not a YAML lens prescription ({err})") from err
     return lens_from_dict(doc, source=str(p))

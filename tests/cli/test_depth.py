@@ -90,12 +90,16 @@ def test_metric_depth_on_the_simulated_camera(tmp_path):
 
 def test_more_refusals_leave_nothing(lenslet, tmp_path):
     out = tmp_path / "x.tif"
+    other = tmp_path / "frames_copy.tif"  # frames given as a depth map: another file
+    other.write_bytes((lenslet / "frames.tif").read_bytes())
     cases = [
         (["depth", lenslet / "depth.tif", "-o", out], 1, "dual-pixel views A, B"),
         (["depth", lenslet / "frames.tif", "--camera", lenslet / "grid.yaml", "-o", out], 1,
          "needs lenslet frames and --grid"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
-          lenslet / "frames.tif", "-o", out], 1, "no page g"),
+          other, "-o", out], 1, "no page g"),
+        (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
+          lenslet / "frames.tif", "-o", out], 1, "give each its own file"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
           lenslet / "depth.tif", "--g", "2,3", "-o", out], 1, "not a sweep"),
     ]

@@ -27,6 +27,7 @@ from plenocli.io.atomic import write_text
 from plenocli.io.framing import active_area
 from plenocli.io.preview import write_png
 from plenocli.io.views import check_named_once
+from plenocli.io.yamlfile import load_json, load_yaml
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import CHANNELS, ViewNames
@@ -191,7 +192,7 @@ def load_transform(path: str, names: list[str]) -> dict:
     if not file.is_file():
         raise InputError(f"{file}: no such file (the --transform-in JSON)")
     try:
-        data = json.loads(file.read_text(encoding="utf-8"))
+        data = load_json(file.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
                          "--transform-out") from err
@@ -221,7 +222,7 @@ def load_rig(path: str) -> PrismRig:
     if not file.is_file():
         raise InputError(f"{file}: no such file (the --rig YAML)")
     try:
-        data = yaml.safe_load(file.read_text(encoding="utf-8"))
+        data = load_yaml(file.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError) as err:
         raise InputError(f"{file}: not a YAML rig ({err})") from err
     if isinstance(data, dict) and isinstance(data.get("rig"), dict):
