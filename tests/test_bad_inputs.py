@@ -448,7 +448,7 @@ CASES = [
     ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
                                      "g_true=-1"], 1, ("g_true must be > 0",)),
     ("simulate-noise-negative", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "noise=-5"],
-     1, ("noise must be >= 0", "got -5")),
+     1, ("noise must be in [0, 65535]", "got -5")),
     ("simulate-crosstalk-one", ["simulate", "dualpixel-prism", "-o", "{o}/s", "--pixels", "48",
                                 "--param", "crosstalk=1"], 1, ("crosstalk must be in [0, 1)",)),
     ("simulate-param-unknown", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "nosie=1"],
@@ -541,7 +541,7 @@ def test_simulate_params_from_yaml_are_checked_like_flags(inputs, tmp_path):
         "stage": "simulate", "kind": "dualpixel", "output": "{out}/s",
         "param": ["noise=-5"]}}}))
     result = run_bad(inputs, out, ["run", str(config)])
-    assert_one_line(result, 1, ("noise must be >= 0", "got -5"))
+    assert_one_line(result, 1, ("noise must be in [0, 65535]", "got -5"))
 
 
 @pytest.mark.parametrize("args,words", [

@@ -50,8 +50,9 @@ PARAMS: dict[str, Param] = {
     "cols": Param("sensor columns, pixels", 16),
     "size": Param("sensor side, pixels", 16),
     "view_shape": Param("[ROWS, COLS] of each view, pixels", 32),
-    "noise": Param("read noise, DN, or relative to the mean level", 0),
-    "noise_dn": Param("read noise, DN", 0),
+    # a read noise of more than the 16-bit range leaves nothing but noise in any capture
+    "noise": Param("read noise, DN, or relative to the mean level", 0, 65535),
+    "noise_dn": Param("read noise, DN", 0, 65535),
     "jitter_px": Param("random displacement of the lenses, pixels", 0),
     "edge_blur_px": Param("blur of the micro-image edges, pixels", 0),
     "crosstalk": Param("cross-talk ratio r", **_FRACTION),
