@@ -61,8 +61,19 @@ def warm_depth() -> None:
     disparity_x(views[0], views[1])
 
 
+def warm_stitch() -> None:
+    """The photometric refinement's resampling kernel (float32 images, with and without
+    no-data pixels)."""
+    from plenocli.stitch.kernels import warp_bspline
+
+    points = np.zeros(4, np.float32)
+    for bad in (np.zeros((0, 0), bool), np.zeros((8, 8), bool)):
+        warp_bspline(np.ones((8, 8), np.float32), np.eye(3), points, points, bad,
+                     np.empty(4, np.float32), np.empty(4, bool))
+
+
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,
-           "depth": warm_depth}
+           "depth": warm_depth, "stitch": warm_stitch}
 
 
 def main() -> None:

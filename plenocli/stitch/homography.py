@@ -11,44 +11,60 @@ from scipy import ndimage
 from plenocli.errors import InputError
 from plenocli.stitch.photometric import refine_homography
 from plenocli.stitch.quality import aligned_correlation
-from plenocli.stitch.views import fill_nan, highpass
+from plenocli.stitch.views import (
+    HIGHPASS_SIGMA_PX,
+    corners_xy,
+    fill_nan,
+    highpass,
+    translation_matrix,
+)
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
-    img = fill_nan(image)
-    lo, hi = np.percentile(img, [0.5, 99.5])
-    return np.clip(255 * (img - lo) / max(hi - lo, 1e-12), 0, 255).astype(np.uint8)
+    lo, hi = np.percentile(image, [0.5, 99.5])
+    return np.clip(255 * (image - lo) / max(hi - lo, 1e-12), 0, 255).astype(np.uint8)
 
 
-def _data_mask(view: np.ndarray) -> np.ndarray | None:
-    """Where features may lie: not on the edges of no-data regions (None: everywhere)."""
-    valid = np.isfinite(view)
-    return None if valid.all() else ndimage.binary_erosion(valid, iterations=4).astype(np.uint8)
-
-
-def features(image: np.ndarray) -> tuple:
-    """SIFT keypoints (N, 2) float32 (x, y, view pixels) and descriptors of a view, its no-data
-    edges left out; views over FEATURE_SIDE_PX are searched at half size (the photometric
-    refinement, full size, sets the result; the start need only be within its reach)."""
-    sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=0.01)
-    factor = 2 if max(image.shape) > FEATURE_SIDE_PX else 1
-    img, mask = _to_uint8(image), _data_mask(image)
+def _reduced(image: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """The view reduced ``factor`` times (area average, NaN filled), 8-bit, and where features
+    may lie: not on the edges of no-data regions (None: everywhere)."""
+    valid = np.isfinite(image)
+    img = np.asarray(fill_nan(image), np.float32)
+    mask = None if valid.all() else ndimage.binary_erosion(valid, iterations=4).astype(np.uint8)
     if factor > 1:
         size = (image.shape[1] // factor, image.shape[0] // factor)
         img = cv2.resize(img[:size[1] * factor, :size[0] * factor], size,
                          interpolation=cv2.INTER_AREA)
         mask = None if mask is None else cv2.resize(
             mask[:size[1] * factor, :size[0] * factor], size, interpolation=cv2.INTER_NEAREST)
+    return _to_uint8(img), mask
+
+
+def features(image: np.ndarray) -> tuple:
+    """Keypoints (N, 2) float32 (x, y, view pixels) and descriptors of a view, its no-data
+    edges left out; views over FEATURE_SIDE_PX are searched reduced by a power of 2 (the
+    photometric refinement, full size, sets the result; the start need only be within its
+    reach)."""
+    factor = 1
+    while max(image.shape) > FEATURE_SIDE_PX * factor:
+        factor *= 2
+    img, mask = _reduced(image, factor)
+    sift = cv2.SIFT_create(nfeatures=MAX_FEATURES, contrastThreshold=0.01)
     keys, desc = sift.detectAndCompute(img, mask)
     pts = np.float32([k.pt for k in keys]).reshape(-1, 2)
     return (pts + 0.5) * factor - 0.5, desc
 
 
-# the RANSAC start only needs to be within the photometric refinement's reach; the refinement
-# over the whole overlap sets the result (8000 features at full size took 4 x the detection
-# and 16 x the matching for the same corners within 0.001 px on the bench's 2 x 2)
-MAX_FEATURES = 3000
-FEATURE_SIDE_PX = 1200
+# the RANSAC start only needs to be within the photometric refinement's reach (its coarse
+# level converges from a pixel or two); the refinement over the whole overlap sets the result.
+# On the bench's 2 x 2 of 1500 px views, 1000 features on views reduced 4x start the refinement
+# 0.2-1.1 px from the truth and end where 3000 on views reduced 2x do (0.1-0.4 px; SIFT there
+# took 4 x the time, the matching 9 x)
+MAX_FEATURES = 1000
+FEATURE_SIDE_PX = 600
+# the full-size photometric fit stops after an update under this (px at the overlap's corners):
+# each step leaves about a tenth of the previous, below the noise of 400 000 points
+REFINE_TOL_PX = 5e-3
 
 
 def _feature_matches(a: np.ndarray, b: np.ndarray, *, direction: str, min_inliers: int,
@@ -116,19 +132,17 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     pa, pb = _feature_matches(a, b, direction=direction, min_inliers=min_inliers, prior=prior,
                               tolerance_px=tolerance_px, found=found)
     h, inl = _ransac(pa, pb, ransac_px=ransac_px, min_inliers=min_inliers)
-    ha, hb = highpass(a), highpass(b)
-    before = aligned_correlation(ha, hb, h, a, b)
     refined, method, photometric = h, "ransac", {}
+    correlation = overlap_correlation(a, b, h)
     try:
-        candidate, photometric = refine_homography(a, b, h)
-        after = aligned_correlation(ha, hb, candidate, a, b)
-        if np.isfinite(after) and after >= before - 0.01:
-            refined, method = candidate, "photometric"
+        candidate, photometric = refine_homography(a, b, h, tol_px=REFINE_TOL_PX)
+        after = overlap_correlation(a, b, candidate)
+        if np.isfinite(after) and not after < correlation - 0.01:
+            refined, method, correlation = candidate, "photometric", after
     except ValueError:
         pass
     proj = cv2.perspectiveTransform(pb[inl].reshape(-1, 1, 2).astype(np.float64), refined)
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - pa[inl]) ** 2, axis=1))))
-    correlation = aligned_correlation(ha, hb, refined, a, b)
     if not np.isfinite(correlation) or correlation < min_correlation:
         raise InputError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
@@ -138,6 +152,38 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
             "correlation": correlation, "refinement": method, "overlap_fraction": overlap,
             **photometric}
     return refined, info
+
+
+def _box(points: np.ndarray, shape: tuple[int, int], margin: int) -> tuple[slice, slice] | None:
+    """(row, column) slices of a (rows, cols) image around ``points`` (x, y) plus ``margin``."""
+    if not np.isfinite(points).all():
+        return None
+    x0, y0 = np.maximum(np.floor(points.min(axis=0)).astype(int) - margin, 0)
+    x1, y1 = np.ceil(points.max(axis=0)).astype(int) + margin + 1
+    x1, y1 = min(x1, shape[1]), min(y1, shape[0])
+    return (slice(y0, y1), slice(x0, x1)) if x1 > x0 and y1 > y0 else None
+
+
+def overlap_correlation(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray) -> float:
+    """:func:`plenocli.stitch.quality.aligned_correlation` of the high-passed views, computed on
+    crops holding b's footprint on a plus the high-pass's reach (4 sigma) and the warp's
+    kernel: the same value without high-passing and warping the whole views."""
+    margin = int(4 * HIGHPASS_SIGMA_PX) + 4
+    box_a = _box(cv2.perspectiveTransform(corners_xy(b.shape), h_ab).reshape(-1, 2), a.shape,
+                 margin)
+    if box_a is None:
+        return float("nan")
+    (ys, xs) = box_a
+    corners = np.float64([[xs.start, ys.start], [xs.stop - 1, ys.start],
+                          [xs.stop - 1, ys.stop - 1], [xs.start, ys.stop - 1]])
+    box_b = _box(cv2.perspectiveTransform(corners.reshape(-1, 1, 2), np.linalg.inv(h_ab))
+                 .reshape(-1, 2), b.shape, margin)
+    if box_b is None:
+        return float("nan")
+    ca, cb = a[box_a], b[box_b]
+    h_crop = (translation_matrix(-ys.start, -xs.start) @ h_ab
+              @ translation_matrix(box_b[0].start, box_b[1].start))
+    return aligned_correlation(highpass(ca), highpass(cb), h_crop, ca, cb)
 
 
 def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,
