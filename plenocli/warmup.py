@@ -62,14 +62,18 @@ def warm_depth() -> None:
 
 
 def warm_stitch() -> None:
-    """The photometric refinement's resampling kernel (float32 images, with and without
-    no-data pixels)."""
-    from plenocli.stitch.kernels import warp_bspline
+    """The photometric refinement's kernels: a small textured pair, with and without no-data
+    pixels."""
+    from scipy import ndimage
 
-    points = np.zeros(4, np.float32)
-    for bad in (np.zeros((0, 0), bool), np.zeros((8, 8), bool)):
-        warp_bspline(np.ones((8, 8), np.float32), np.eye(3), points, points, bad,
-                     np.empty(4, np.float32), np.empty(4, bool))
+    from plenocli.stitch import refine_homography
+
+    scene = ndimage.gaussian_filter(np.random.default_rng(0).random((64, 112)), 2.0) + 1.0
+    a, b = scene[:, :64].astype(np.float32), scene[:, 48:].astype(np.float32)
+    shift = np.array([[1.0, 0.0, 48.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    refine_homography(a, b, shift)
+    b[30:34, 4:8] = np.nan
+    refine_homography(a, b, shift)
 
 
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,

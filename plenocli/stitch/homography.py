@@ -133,10 +133,11 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                               tolerance_px=tolerance_px, found=found)
     h, inl = _ransac(pa, pb, ransac_px=ransac_px, min_inliers=min_inliers)
     refined, method, photometric = h, "ransac", {}
-    correlation = overlap_correlation(a, b, h)
+    overlap_correlation = OverlapCorrelation(a, b)
+    correlation = overlap_correlation(h)
     try:
         candidate, photometric = refine_homography(a, b, h, tol_px=REFINE_TOL_PX)
-        after = overlap_correlation(a, b, candidate)
+        after = overlap_correlation(candidate)
         if np.isfinite(after) and not after < correlation - 0.01:
             refined, method, correlation = candidate, "photometric", after
     except ValueError:
@@ -160,30 +161,52 @@ def _box(points: np.ndarray, shape: tuple[int, int], margin: int) -> tuple[slice
         return None
     x0, y0 = np.maximum(np.floor(points.min(axis=0)).astype(int) - margin, 0)
     x1, y1 = np.ceil(points.max(axis=0)).astype(int) + margin + 1
-    x1, y1 = min(x1, shape[1]), min(y1, shape[0])
+    x1, y1 = min(x1, shape[1]), min(shape[0], y1)
     return (slice(y0, y1), slice(x0, x1)) if x1 > x0 and y1 > y0 else None
 
 
-def overlap_correlation(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray) -> float:
-    """:func:`plenocli.stitch.quality.aligned_correlation` of the high-passed views, computed on
-    crops holding b's footprint on a plus the high-pass's reach (4 sigma) and the warp's
-    kernel: the same value without high-passing and warping the whole views."""
-    margin = int(4 * HIGHPASS_SIGMA_PX) + 4
-    box_a = _box(cv2.perspectiveTransform(corners_xy(b.shape), h_ab).reshape(-1, 2), a.shape,
-                 margin)
-    if box_a is None:
-        return float("nan")
-    (ys, xs) = box_a
-    corners = np.float64([[xs.start, ys.start], [xs.stop - 1, ys.start],
-                          [xs.stop - 1, ys.stop - 1], [xs.start, ys.stop - 1]])
-    box_b = _box(cv2.perspectiveTransform(corners.reshape(-1, 1, 2), np.linalg.inv(h_ab))
-                 .reshape(-1, 2), b.shape, margin)
-    if box_b is None:
-        return float("nan")
-    ca, cb = a[box_a], b[box_b]
-    h_crop = (translation_matrix(-ys.start, -xs.start) @ h_ab
-              @ translation_matrix(box_b[0].start, box_b[1].start))
-    return aligned_correlation(highpass(ca), highpass(cb), h_crop, ca, cb)
+def _inside(inner: tuple[slice, slice], outer: tuple[slice, slice]) -> bool:
+    return all(o.start <= i.start and i.stop <= o.stop for i, o in zip(inner, outer, strict=True))
+
+
+class OverlapCorrelation:
+    """:func:`plenocli.stitch.quality.aligned_correlation` of the high-passed views a and b
+    under a homography, computed on crops that hold b's footprint on a plus the high-pass's
+    reach (4 sigma) and the warp's kernel: the value of the whole views without high-passing
+    and warping them. The crops are high-passed once, with room for the refinement's moves,
+    and made again only for a homography that leaves them."""
+
+    REACH_PX = int(4 * HIGHPASS_SIGMA_PX) + 4
+    ROOM_PX = 16
+
+    def __init__(self, a: np.ndarray, b: np.ndarray):
+        self.a, self.b, self.crops = a, b, None
+
+    def _boxes(self, h_ab: np.ndarray, margin: int):
+        box_a = _box(cv2.perspectiveTransform(corners_xy(self.b.shape), h_ab).reshape(-1, 2),
+                     self.a.shape, margin)
+        if box_a is None:
+            return None
+        ys, xs = box_a
+        corners = np.float64([[xs.start, ys.start], [xs.stop - 1, ys.start],
+                              [xs.stop - 1, ys.stop - 1], [xs.start, ys.stop - 1]])
+        box_b = _box(cv2.perspectiveTransform(corners.reshape(-1, 1, 2), np.linalg.inv(h_ab))
+                     .reshape(-1, 2), self.b.shape, margin)
+        return None if box_b is None else (box_a, box_b)
+
+    def __call__(self, h_ab: np.ndarray) -> float:
+        need = self._boxes(h_ab, self.REACH_PX)
+        if need is None:
+            return float("nan")
+        if self.crops is None or not all(_inside(n, c) for n, c in zip(need, self.crops[0],
+                                                                         strict=True)):
+            boxes = self._boxes(h_ab, self.REACH_PX + self.ROOM_PX)
+            ca, cb = self.a[boxes[0]], self.b[boxes[1]]
+            self.crops = boxes, ca, cb, highpass(ca), highpass(cb)
+        (box_a, box_b), ca, cb, ha, hb = self.crops
+        h_crop = (translation_matrix(-box_a[0].start, -box_a[1].start) @ h_ab
+                  @ translation_matrix(box_b[0].start, box_b[1].start))
+        return aligned_correlation(ha, hb, h_crop, ca, cb)
 
 
 def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from plenocli.stitch.kernels import warp_bspline
+from plenocli.stitch.kernels import huber_residual, warp_bspline
 from plenocli.stitch.views import MODELS, corners_xy, fill_nan, translation_matrix
 
 
@@ -38,18 +38,12 @@ def match_photometry(template: np.ndarray, other: np.ndarray, mask: np.ndarray,
 
 
 def _polynomial_terms(xn: np.ndarray, yn: np.ndarray, degree: int) -> np.ndarray:
-    """(N, terms) monomials xn^i yn^j with i + j <= degree (coordinates in [-1, 1])."""
+    """(terms, N) monomials xn^i yn^j with i + j <= degree (coordinates in [-1, 1])."""
     xp, yp = [np.ones_like(xn)], [np.ones_like(yn)]
     for _ in range(degree):
         xp.append(xp[-1] * xn)
         yp.append(yp[-1] * yn)
-    out = np.empty((xn.size, (degree + 1) * (degree + 2) // 2), xn.dtype)
-    k = 0
-    for i in range(degree + 1):
-        for j in range(degree + 1 - i):
-            np.multiply(xp[i], yp[j], out=out[:, k])
-            k += 1
-    return out
+    return np.stack([xp[i] * yp[j] for i in range(degree + 1) for j in range(degree + 1 - i)])
 
 
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
@@ -65,7 +59,8 @@ def _template(a: np.ndarray, valid_a: np.ndarray | None, valid_b: np.ndarray | N
               b_shape: tuple[int, int], h_ab: np.ndarray, max_points: int):
     """The overlap pixels of a used as the template: their values, the normalising map
     (normalised template coordinates -> a pixels), their normalised coordinates and the
-    steepest-descent images of the inverse-compositional homography update at identity."""
+    steepest-descent images (8, N) of the inverse-compositional homography update at
+    identity."""
     rows, cols = a.shape
     src = np.ones(b_shape, np.uint8) if valid_b is None else valid_b.astype(np.uint8)
     cover = cv2.warpPerspective(src * np.uint8(255), h_ab, (cols, rows),
@@ -79,43 +74,37 @@ def _template(a: np.ndarray, valid_a: np.ndarray | None, valid_b: np.ndarray | N
     if ys.size > max_points:  # a fixed random subset (a regular subgrid biased the shift)
         keep = np.random.default_rng(0).random(ys.size) < max_points / ys.size
         ys, xs = ys[keep], xs[keep]
-    grad_y, grad_x = np.gradient(a[y0 - 1:y1 + 1, x0 - 1:x1 + 1])
     # normalised template coordinates (centre of the overlap, half its longer side) keep the
     # Gauss-Newton system well conditioned
     cx, cy, scale = (x0 + x1 - 1) / 2, (y0 + y1 - 1) / 2, max(x1 - x0, y1 - y0) / 2
     from_norm = np.array([[scale, 0.0, cx], [0.0, scale, cy], [0.0, 0.0, 1.0]])
     xn, yn = ((xs - cx) / scale).astype(np.float32), ((ys - cy) / scale).astype(np.float32)
-    gx = grad_x[ys - y0 + 1, xs - x0 + 1] * np.float32(scale)
-    gy = grad_y[ys - y0 + 1, xs - x0 + 1] * np.float32(scale)
+    half = np.float32(scale / 2)  # central differences (the points lie 3 px inside the crop)
+    gx = (a[ys, xs + 1] - a[ys, xs - 1]) * half
+    gy = (a[ys + 1, xs] - a[ys - 1, xs]) * half
     radial = gx * xn + gy * yn
     steepest = np.stack([gx * xn, gx * yn, gx, gy * xn, gy * yn, gy, -xn * radial,
-                         -yn * radial], axis=1)
+                         -yn * radial])
     return a[ys, xs], from_norm, xn, yn, steepest
 
 
-def _photometric_fit(warped: np.ndarray, template: np.ndarray, inside: np.ndarray,
-                     poly: np.ndarray, sample: slice, err: np.ndarray) -> float:
+def _photometric_fit(warped: np.ndarray, template: np.ndarray, poly: np.ndarray
+                     ) -> tuple[np.ndarray, float]:
     """The photometric model a ~ p(x, y) * b + offset (p the smooth ratio of the views' gains
-    and vignetting over the overlap, a linear least-squares fit on the points of ``sample``):
-    its residual into ``err``; returns the residual's robust scale (1.4826 MAD)."""
-    ok = inside[sample]
-    used = poly[sample][ok] * warped[sample][ok, None]  # the offset's column is all ones
-    target = template[sample][ok]
-    normal = np.empty((poly.shape[1] + 1,) * 2)
-    normal[:-1, :-1] = used.T @ used
-    normal[-1, :-1] = normal[:-1, -1] = used.sum(axis=0, dtype=np.float64)
-    normal[-1, -1] = len(target)
-    rhs = np.append(used.T @ target, target.sum(dtype=np.float64))
+    and vignetting over the overlap) fitted by linear least squares on sample points (``poly``:
+    their monomials, (terms, n)): the coefficients (the offset last) and the robust scale
+    (1.4826 MAD) of the residual in b's units (see :func:`_refine_level`)."""
+    used = poly * warped  # the offset's row is all ones
+    normal = np.empty((poly.shape[0] + 1,) * 2)
+    normal[:-1, :-1] = used @ used.T
+    normal[-1, :-1] = normal[:-1, -1] = used.sum(axis=1, dtype=np.float64)
+    normal[-1, -1] = len(template)
+    rhs = np.append(np.einsum("ij,j->i", used, template), template.sum(dtype=np.float64))
     coef = np.linalg.lstsq(normal, rhs, rcond=None)[0]
-    ratio = poly @ coef[:-1].astype(np.float32)
-    np.multiply(ratio, warped, out=err)
-    err += np.float32(coef[-1]) - template
-    # in b's units: the steepest-descent images are a's gradients, which b shows divided by
-    # the ratio (left in a's units, a gain of 0.85 shortened every step by 15 %: linear
-    # convergence at that rate)
-    err /= np.where(np.abs(ratio) > 1e-6, ratio, np.float32(1.0))
-    err[~inside] = 0.0
-    return 1.4826 * float(np.median(np.abs(err[sample][ok]))) + 1e-12
+    ratio = np.einsum("i,ij->j", coef[:-1].astype(np.float32), poly)
+    ratio[np.abs(ratio) < 1e-6] = 1.0
+    err = (ratio * warped + coef[-1] - template) / ratio
+    return coef, 1.4826 * float(np.median(np.abs(err))) + 1e-12
 
 
 # the photometric ratio's 15 coefficients and the residual's scale are fixed by this many
@@ -135,38 +124,46 @@ def _refine_level(a: np.ndarray, b: np.ndarray, valid_a: np.ndarray | None,
                   iterations: int, degree: int, tol_px: float, motion: str
                   ) -> tuple[np.ndarray, dict]:
     """One pyramid level of :func:`refine_homography` (float32 images, NaN already filled;
-    validity masks None where everything is valid)."""
+    validity masks None where everything is valid). Each step fits the photometric ratio and
+    the residual's scale on every k-th point (PHOTOMETRIC_POINTS), then resamples b at all
+    points, with their residuals and Huber weights, in one pass
+    (:mod:`plenocli.stitch.kernels`), and solves the normal equations of the geometry.
+    The residual is taken in b's units: the steepest-descent images are a's gradients, which
+    b shows divided by the ratio (in a's units a gain of 0.85 shortened every step by 15 %,
+    a linear convergence at that rate)."""
     template, from_norm, xn, yn, steepest = _template(a, valid_a, valid_b, b.shape, h_ab,
                                                       max_points)
     scale = from_norm[0, 0]
     if motion == "translation":
-        steepest = steepest[:, [2, 5]]
-    poly = _polynomial_terms(xn, yn, degree)
-    sample = slice(None, None, max(1, len(xn) // PHOTOMETRIC_POINTS))
+        steepest = steepest[[2, 5]]
+    every = max(1, len(xn) // PHOTOMETRIC_POINTS)
+    sample_x, sample_y = xn[::every].copy(), yn[::every].copy()
+    sample_t = template[::every].copy()
+    poly = _polynomial_terms(sample_x, sample_y, degree)
     coeffs = ndimage.spline_filter(b, order=3, output=np.float32)
     bad_b = np.zeros((0, 0), bool) if valid_b is None else ~_erode(valid_b, 2)
     g = np.linalg.inv(h_ab) @ from_norm  # normalised template coordinates -> b pixels
-    step_px = np.inf
-    err = np.zeros_like(template)
-    warped = np.empty_like(template)
-    inside = use = np.ones(template.shape, bool)
-    done = 0
+    warped, inside = np.empty_like(sample_t), np.empty(sample_t.shape, bool)
+    err, weight = np.empty_like(template), np.empty_like(template)
+    full_hess = (steepest @ steepest.T).astype(np.float64)
+    step_px, done = np.inf, 0
     while done < iterations:
         done += 1
-        warp_bspline(coeffs, g, xn, yn, bad_b, warped, inside)
-        if np.count_nonzero(inside) < 256:
+        warp_bspline(coeffs, g, sample_x, sample_y, bad_b, warped, inside)
+        if np.count_nonzero(inside) < 16 * len(poly):
             raise ValueError("the refinement left the overlap")
-        sigma = _photometric_fit(warped, template, inside, poly, sample, err)
-        use = inside
-        # Huber weights: occlusions, ghosts or clipped pixels do not pull the fit
-        weight = np.abs(err)
-        np.maximum(weight, np.float32(1e-30), out=weight)
-        np.divide(np.float32(3.0 * sigma), weight, out=weight)
-        np.minimum(weight, np.float32(1.0), out=weight)
-        weight[~inside] = 0.0
-        weighted = steepest * weight[:, None]
-        dp = np.linalg.solve((weighted.T @ steepest).astype(np.float64),
-                             (weighted.T @ err).astype(np.float64))
+        coef, sigma = _photometric_fit(warped[inside], sample_t[inside], poly[:, inside])
+        # Huber weights (cut at 3 sigma): occlusions, ghosts or clipped pixels do not pull
+        huber_residual(coeffs, g, xn, yn, template, bad_b, coef, degree, 3.0 * sigma, err,
+                       weight)
+        # the Hessian of all points at weight 1 less that of the few down-weighted or outside
+        low = np.flatnonzero(weight < 1)
+        less = steepest[:, low]
+        hess = full_hess - ((less * (1 - weight[low])) @ less.T).astype(np.float64)
+        # products of a matrix and a vector by einsum: OpenBLAS's threads cost more than
+        # these sums on a loaded machine
+        grad = np.einsum("ij,j->i", steepest, weight * err).astype(np.float64)
+        dp = np.linalg.solve(hess, grad)
         if motion == "translation":
             dp = np.array([0.0, 0.0, dp[0], 0.0, 0.0, dp[1], 0.0, 0.0])
         update = np.array([[1 + dp[0], dp[1], dp[2]], [dp[3], 1 + dp[4], dp[5]],
@@ -177,9 +174,10 @@ def _refine_level(a: np.ndarray, b: np.ndarray, valid_a: np.ndarray | None,
         if step_px < tol_px:
             break
     h_new = from_norm @ np.linalg.inv(g)
+    count = int(np.count_nonzero(weight))
     info = {"photometric_iterations": done, "photometric_step_px": step_px,
-            "photometric_rms": float(np.sqrt(np.mean(err[use] ** 2))),
-            "photometric_points": int(use.sum())}
+            "photometric_rms": float(np.sqrt(np.dot(err, err) / max(count, 1))),
+            "photometric_points": count}
     return h_new / h_new[2, 2], info
 
 
