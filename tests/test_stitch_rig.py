@@ -10,9 +10,9 @@ import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
-from plenocli.errors import InputError
 from plenocli.stitch import (
     PrismRig,
+    StitchError,
     ViewOptics,
     common_to_view,
     estimate_translation,
@@ -148,14 +148,14 @@ def test_periodic_scene_is_refused_not_ghosted():
     tile = ndimage.gaussian_filter(rng.random((40, 40)), 2.0, mode="wrap")
     scene = np.tile(tile, (4, 12))  # period 40 px in both directions
     a, b = scene[:, :260], scene[:, 200:460]
-    with pytest.raises(InputError, match="ambiguous"):
+    with pytest.raises(StitchError, match="ambiguous"):
         estimate_translation(a, b, direction="h")
 
 
 def test_homography_on_the_quadpixel_chart_without_a_rig_is_refused_not_ghosted():
     """The chart's grid lets SIFT lay every view on top of the others; that must be an error."""
     views, _, _ = quad(512)
-    with pytest.raises(InputError, match="false match|ambiguous|no reliable"):
+    with pytest.raises(StitchError, match="false match|ambiguous|no reliable"):
         stitch(views, layout="2x2", model="homography")
 
 

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from plenocli.errors import InputError
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.photometric import refine_homography
 from plenocli.stitch.quality import aligned_correlation
 from plenocli.stitch.views import (
@@ -75,7 +75,7 @@ def _feature_matches(a: np.ndarray, b: np.ndarray, *, direction: str, min_inlier
     views' :func:`features`, when already detected."""
     (ka, da), (kb, db) = found if found is not None else (features(a), features(b))
     if da is None or db is None or len(ka) < min_inliers or len(kb) < min_inliers:
-        raise InputError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
+        raise StitchError(f"too few features ({len(ka)} and {len(kb)}) to fit a homography; the "
                          "views have no texture; try --model translation")
     knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(db, da, k=2)
     good = [m for m, *rest in knn if rest and m.distance < 0.75 * rest[0].distance]
@@ -89,7 +89,7 @@ def _feature_matches(a: np.ndarray, b: np.ndarray, *, direction: str, min_inlier
         ahead &= (np.abs(shift[:, 0] - prior[1]) <= tol) & (np.abs(shift[:, 1] - prior[0]) <= tol)
     pa, pb = pa[ahead], pb[ahead]
     if len(pa) < min_inliers:
-        raise InputError(f"only {len(pa)} feature matches in the expected overlap direction; the "
+        raise StitchError(f"only {len(pa)} feature matches in the expected overlap direction; the "
                          "views may not overlap or have no texture")
     return pa, pb
 
@@ -100,7 +100,7 @@ def _ransac(pa: np.ndarray, pb: np.ndarray, *, ransac_px: float, min_inliers: in
     h, inl = cv2.findHomography(pb, pa, cv2.RANSAC, ransac_px, maxIters=5000, confidence=0.999)
     if h is None or inl is None or int(inl.sum()) < min_inliers:
         n_in = 0 if inl is None else int(inl.sum())
-        raise InputError(f"only {n_in} RANSAC inliers (need {min_inliers}); the views may not "
+        raise StitchError(f"only {n_in} RANSAC inliers (need {min_inliers}); the views may not "
                          "overlap or have no texture")
     inl = inl.ravel().astype(bool)
     h_ls, _ = cv2.findHomography(pb[inl], pa[inl], 0)
@@ -145,7 +145,7 @@ def estimate_homography(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     proj = cv2.perspectiveTransform(pb[inl].reshape(-1, 1, 2).astype(np.float64), refined)
     rms = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - pa[inl]) ** 2, axis=1))))
     if not np.isfinite(correlation) or correlation < min_correlation:
-        raise InputError(f"no reliable overlap found between the views (normalised correlation "
+        raise StitchError(f"no reliable overlap found between the views (normalised correlation "
                          f"{correlation:.2f} < {min_correlation} after the homography fit)")
     overlap = None if max_overlap is None else check_overlap(refined, a.shape, direction,
                                                              max_overlap)
@@ -220,7 +220,7 @@ def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,
     step = float(cv2.perspectiveTransform(centre, h_ab)[0, 0, axis] - centre[0, 0, axis])
     overlap = 1.0 - step / size
     if not 0 < overlap <= max_overlap:
-        raise InputError(f"the homography lays one view {100 * overlap:.0f} % over the other "
+        raise StitchError(f"the homography lays one view {100 * overlap:.0f} % over the other "
                          f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "
                          "periodic scene gives; use --overlap or --rig")
     return overlap

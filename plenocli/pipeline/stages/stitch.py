@@ -118,10 +118,13 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     stack, names, bayer, meta = load_views(inputs, views)
     transform = load_transform(transform_in, names) if transform_in else None
     prism_rig = load_rig(rig) if rig else None
-    panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
-                                      distortion_k1=distortion, transform=transform, blend=blend,
-                                      rig=prism_rig, overlap=overlap,
-                                      overlap_tolerance=overlap_tolerance)
+    try:
+        panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
+                                          distortion_k1=distortion, transform=transform,
+                                          blend=blend, rig=prism_rig, overlap=overlap,
+                                          overlap_tolerance=overlap_tolerance)
+    except stitch_lib.StitchError as err:
+        raise InputError(str(err)) from err
     params = dict(views=views, layout=layout, model=model, distortion=distortion,
                   transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                   overlap_tolerance=overlap_tolerance)
