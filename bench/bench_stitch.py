@@ -162,7 +162,10 @@ def run_case(name: str, layout: str, n_rows: int, n_cols: int, size: int, model:
 SHARP_RUNNER = """
 import json, sys, time
 import numpy as np
-from plenocli.pipeline.stages.stitch import load_rig
+try:
+    from plenocli.io.rigfile import read_rig as load_rig
+except ImportError:  # a baseline commit from before the rig file moved to io/
+    from plenocli.pipeline.stages.stitch import load_rig
 from plenocli.stitch import stitch
 start = time.perf_counter()
 pano, rep = stitch(np.load(sys.argv[1]), layout=sys.argv[4], rig=load_rig(sys.argv[2]))
@@ -175,7 +178,7 @@ print(json.dumps({"seconds": seconds, "origin": rep.origin_px, "canvas": rep.can
 
 def sharpness(baseline: str, rig_name: str, layout: str, pixels: int) -> None:
     """Error against the analytic scene of the rig's panorama, this checkout vs ``baseline``."""
-    from plenocli.pipeline.stages.stitch import load_rig
+    from plenocli.io.rigfile import read_rig as load_rig
     from plenocli.stitch import view_to_common
 
     rig_file = ROOT / "configs" / "rigs" / f"{rig_name}.yaml"

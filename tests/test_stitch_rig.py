@@ -210,10 +210,10 @@ def test_rig_panorama_matches_the_analytic_scene():
     off the rig's prediction: each panorama pixel is one Lanczos resampling of a view: RMS
     7.0e-4 of a 0.15-std scene here (the former undistort-then-place, two resamplings: 8.2e-4,
     which this test refuses; docs/stitch.md)."""
-    from plenocli.pipeline.stages.stitch import load_rig
+    from plenocli.io.rigfile import read_rig
     from plenocli.synth.rig import random_scene
 
-    rig = load_rig(str(Path(__file__).resolve().parents[1] / "configs" / "rigs"
+    rig = read_rig(str(Path(__file__).resolve().parents[1] / "configs" / "rigs"
                        / "quadpixel_pyramid.yaml"))
     scene = random_scene(seed=5, min_period_px=8.0)
     shape = (384, 384)

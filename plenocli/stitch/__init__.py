@@ -20,12 +20,13 @@ fit. Geometry convention: see :mod:`plenocli.stitch.views`. Views, a rig or a tr
 stitch cannot vouch for raise :class:`StitchError` (a ValueError) with a one-line message.
 """
 
+from plenocli.model.rig import PrismRig, ViewOptics
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.homography import estimate_homography
 from plenocli.stitch.ncc import masked_ncc_surface, masked_ncc_window, search_shift
 from plenocli.stitch.panorama import StitchReport, stitch
 from plenocli.stitch.photometric import refine_homography
-from plenocli.stitch.rig import PrismRig, ViewOptics, common_to_view, view_to_common
+from plenocli.stitch.rig import common_to_view, view_to_common
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import BLENDS, LAYOUTS, MODELS, VIEW_NAMES, as_view_stack, undistort
 
