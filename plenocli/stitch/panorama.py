@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from threadpoolctl import threadpool_limits
 
 from plenocli.progress import step
 from plenocli.stitch import compose
@@ -73,6 +74,10 @@ class StitchReport:
     coverage_fraction: float
 
 
+# BLAS on one thread: the stitch's products are small or tall and thin (normal equations,
+# phase correlations), where OpenBLAS's second thread costs more than it gives on a shared
+# machine (the bench's 2 x 2 homography: a third less CPU and wall time)
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            model: str = "translation", distortion_k1: float = 0.0,
            transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
