@@ -62,8 +62,19 @@ def warm_depth() -> None:
 
 
 def warm_stitch() -> None:
-    """The stitch's kernels (compiled with explicit signatures when first imported)."""
+    """The photometric refinement's kernels: a small textured pair, with and without no-data
+    pixels, and the rig maps' and blend's kernels."""
+    from scipy import ndimage
+
     import plenocli.stitch.kernels  # noqa: F401
+    from plenocli.stitch import refine_homography
+
+    scene = ndimage.gaussian_filter(np.random.default_rng(0).random((64, 112)), 2.0) + 1.0
+    a, b = scene[:, :64].astype(np.float32), scene[:, 48:].astype(np.float32)
+    shift = np.array([[1.0, 0.0, 48.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    refine_homography(a, b, shift)
+    b[30:34, 4:8] = np.nan
+    refine_homography(a, b, shift)
 
 
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,

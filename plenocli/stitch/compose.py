@@ -16,8 +16,8 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from plenocli.errors import InputError
 from plenocli.progress import step
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.kernels import accumulate
 from plenocli.stitch.quality import bounding_box, overlap_residual
 from plenocli.stitch.registration import difference_row
@@ -40,7 +40,7 @@ def place(frame_to_ref: list[np.ndarray], view_shape: tuple[int, int], *, k1: fl
     x1, y1 = np.floor(pts.max(axis=0) + COVER_EPS_PX)
     shape = (int(y1 - y0) + 1, int(x1 - x0) + 1)
     if shape[0] * shape[1] > 16 * view_shape[0] * view_shape[1] * len(maps):
-        raise InputError(f"the transforms spread the views over {shape[1]} x {shape[0]} px; the "
+        raise StitchError(f"the transforms spread the views over {shape[1]} x {shape[0]} px; the "
                          "registration failed (views without a true overlap?)")
     offset = translation_matrix(-y0, -x0)
     back = np.linalg.inv(offset)

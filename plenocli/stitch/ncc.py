@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from plenocli.errors import InputError
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.views import highpass, valid_eroded
 
 
@@ -248,7 +248,7 @@ def search_shift(a: np.ndarray, b: np.ndarray, *, dy_range: tuple[int, int],
     dy_range = (max(dy_range[0], 1 - rows_b), min(dy_range[1], a.shape[0] - 1))
     dx_range = (max(dx_range[0], 1 - cols_b), min(dx_range[1], a.shape[1] - 1))
     if dy_range[1] < dy_range[0] or dx_range[1] < dx_range[0]:
-        raise InputError("the expected overlap lies outside the views; check --layout and "
+        raise StitchError("the expected overlap lies outside the views; check --layout and "
                          "--overlap")
     return search_highpassed(highpass(a), highpass(b), valid_eroded(a), valid_eroded(b),
                               dy_range=dy_range, dx_range=dx_range, min_pixels=min_pixels,

@@ -27,12 +27,12 @@ inverse traces the ray back through the prism (exact, no iteration).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
+from plenocli.model.rig import PrismRig, ViewOptics
 from plenocli.optics import prism as optics_prism
 from plenocli.stitch.kernels import band_maps
 from plenocli.stitch.views import fill_nan_channels
@@ -41,139 +41,6 @@ MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slow
 TRACE_BAND_PIXELS = 1 << 18  # rays traced at a time (float64 temporaries of a few tens of MB)
 MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
 MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
-
-
-@dataclass(frozen=True)
-class ViewOptics:
-    """One view of the rig: ``pupil`` = (sx, sy) the pupil part it sees (each -1, 0 or +1: the
-    half or quarter on that side, 0 = the whole extent on that axis); ``prism`` = (sx, sy) the
-    direction the prism over that part deviates towards (its thin edge), or None."""
-
-    pupil: tuple[int, int] = (0, 0)
-    prism: tuple[int, int] | None = None
-
-
-@dataclass(frozen=True)
-class PrismRig:
-    """Main lens + prisms at its stop. Lengths in mm, angles in degrees.
-
-    ``sensor_mm`` is the width of the sensor area a view images (the view's pixel pitch is
-    ``sensor_mm / cols``, so the rig holds for views of any resolution). ``aperture_mm`` sets the
-    pupil parts' centroids (parallax for a near object; 0 = rays through the pupil centre).
-    ``object_distance_mm`` = inf maps directions (scene at infinity).
-    """
-
-    focal_mm: float
-    sensor_mm: float
-    prism_n: float
-    prism_apex_deg: float
-    views: tuple[ViewOptics, ...] = field(default_factory=tuple)
-    aperture_mm: float = 0.0
-    object_distance_mm: float = math.inf
-
-    def __post_init__(self):
-        for name in ("focal_mm", "sensor_mm", "prism_n"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"rig {name} must be a positive number, got {value}")
-        if not 0 <= self.prism_apex_deg < 90:
-            raise ValueError(f"rig prism_apex_deg must be in [0, 90), got {self.prism_apex_deg}")
-        if not self.object_distance_mm > self.focal_mm:
-            raise ValueError(f"rig object_distance_mm {self.object_distance_mm} must exceed the "
-                             f"focal length {self.focal_mm}")
-        if self.aperture_mm < 0:
-            raise ValueError(f"rig aperture_mm must be >= 0, got {self.aperture_mm}")
-        for k, v in enumerate(self.views):
-            sides = list(v.pupil) + (list(v.prism) if v.prism is not None else [])
-            if len(v.pupil) != 2 or (v.prism is not None and len(v.prism) != 2) \
-                    or any(s not in (-1, 0, 1) for s in sides):
-                raise ValueError(f"rig view {k}: pupil and prism are [sx, sy] with -1, 0 or 1, "
-                                 f"got pupil {v.pupil}, prism {v.prism}")
-
-    @property
-    def image_distance_mm(self) -> float:
-        """D: the sensor's distance behind the thin lens (focused on the object plane)."""
-        return optics_prism.image_distance_mm(self.focal_mm, self.object_distance_mm)
-
-    def with_apex(self, apex_deg: float) -> PrismRig:
-        """The same rig with another prism apex angle (for fitting it to data)."""
-        return PrismRig(self.focal_mm, self.sensor_mm, self.prism_n, apex_deg, self.views,
-                        self.aperture_mm, self.object_distance_mm)
-
-    def to_dict(self) -> dict:
-        return {"focal_mm": self.focal_mm, "sensor_mm": self.sensor_mm,
-                "prism_n": self.prism_n, "prism_apex_deg": self.prism_apex_deg,
-                "aperture_mm": self.aperture_mm,
-                "object_distance_mm": (None if math.isinf(self.object_distance_mm)
-                                       else self.object_distance_mm),
-                "views": [{"pupil": list(v.pupil),
-                           "prism": list(v.prism) if v.prism is not None else None}
-                          for v in self.views]}
-
-    @classmethod
-    def from_dict(cls, data: dict) -> PrismRig:
-        """A rig from its dict (YAML/JSON; see :meth:`to_dict`). Raises ValueError naming the
-        missing, unknown or bad key."""
-        if not isinstance(data, dict):
-            raise ValueError("a rig is a mapping with focal_mm, sensor_mm, prism_n, "
-                             "prism_apex_deg and views")
-        unknown = sorted(set(map(str, data)) - RIG_KEYS)
-        if unknown:
-            raise ValueError(f"the rig has an unknown key {unknown[0]!r} (keys: "
-                             f"{', '.join(sorted(RIG_KEYS))})")
-        try:
-            views = tuple(ViewOptics(_sides(v, "pupil", (0, 0)), _sides(v, "prism", None))
-                          for v in data["views"])
-            dist = data.get("object_distance_mm")
-            rig = cls(_number(data, "focal_mm"), _number(data, "sensor_mm"),
-                      _number(data, "prism_n"), _number(data, "prism_apex_deg"), views,
-                      _number(data, "aperture_mm", 0.0),
-                      math.inf if dist is None else _number(data, "object_distance_mm"))
-        except KeyError as err:
-            raise ValueError(f"the rig has no {err.args[0]!r} key") from err
-        except TypeError as err:
-            raise ValueError(f"the rig has a malformed entry ({err})") from err
-        if rig.prism_n <= 1 or rig.prism_n > 4:
-            raise ValueError(f"rig prism_n {rig.prism_n} is not a glass's refractive index "
-                             "(1 < n <= 4)")
-        if not math.isfinite(rig.aperture_mm) or rig.aperture_mm > 2 * rig.focal_mm:
-            raise ValueError(f"rig aperture_mm {rig.aperture_mm} must be finite and at most "
-                             f"twice focal_mm (f/0.5)")
-        if len(set(rig.views)) != len(rig.views):
-            raise ValueError("two rig views have the same pupil part and prism: each view sees "
-                             "its own part of the pupil")
-        return rig
-
-
-RIG_KEYS = {"focal_mm", "sensor_mm", "prism_n", "prism_apex_deg", "aperture_mm",
-            "object_distance_mm", "views"}
-
-
-def _number(data: dict, key: str, default: float | None = None) -> float:
-    """A finite or infinite real number of the rig (NaN, text and booleans refused)."""
-    value = data.get(key, default) if default is not None else data[key]
-    if value is None and default is not None:
-        value = default
-    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-        raise ValueError(f"rig {key} must be a number, got {value!r}")
-    return float(value)
-
-
-def _sides(view, key: str, default):
-    """A view's [sx, sy] entry: two of -1, 0, 1 (integers), or ``default`` when absent/null."""
-    if not isinstance(view, dict):
-        raise ValueError(f"a rig view is a mapping with pupil and prism, got {view!r}")
-    unknown = set(map(str, view)) - {"pupil", "prism"}
-    if unknown:
-        raise ValueError(f"a rig view has an unknown key {sorted(unknown)[0]!r} (keys: pupil, "
-                         "prism)")
-    value = view.get(key)
-    if value is None:
-        return default
-    if not isinstance(value, list | tuple) or len(value) != 2 or any(
-            isinstance(s, bool) or not isinstance(s, int) or s not in (-1, 0, 1) for s in value):
-        raise ValueError(f"rig view {key} is [sx, sy] with each -1, 0 or 1, got {value!r}")
-    return tuple(value)
 
 
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
@@ -205,7 +72,8 @@ def _through_prism(rig: PrismRig, view: int, x, y, shape: tuple[int, int], *,
     pix = rig.sensor_mm / cols
     s = np.stack([((np.asarray(x, np.float64) + 0.5) - cols / 2) * pix,
                   ((np.asarray(y, np.float64) + 0.5) - rows / 2) * pix], axis=-1).reshape(-1, 2)
-    z, dist = rig.object_distance_mm, rig.image_distance_mm
+    z = rig.object_distance_mm
+    dist = optics_prism.image_distance_mm(rig.focal_mm, z)
     hits = optics_prism.scene_hits(
         s, optics_prism.pupil_centroid_mm(rig.aperture_mm, v.pupil), image_distance_mm=dist,
         object_distance_mm=z, prism=(rig.prism_n, rig.prism_apex_deg), towards=v.prism,
@@ -421,7 +289,7 @@ def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.n
     shift = -origins[0] + [offset[1, 2], offset[0, 2]]  # common -> panorama (view 0 reference)
     axis = np.array([(rows - 1) / 2, (cols - 1) / 2]) + shift
     pix = rig.sensor_mm / cols
-    dist = rig.image_distance_mm
+    dist = optics_prism.image_distance_mm(rig.focal_mm, rig.object_distance_mm)
     field_deg: dict = {"x": None, "y": None}
     for k in range(len(rig.views)):
         cx, cy = view_to_common(rig, k, np.array([(cols - 1) / 2]), np.array([(rows - 1) / 2]),
