@@ -99,9 +99,9 @@ def _rig_twice() -> str:
     ("camera.yaml", CAMERA, lambda p: __import__(
         "plenocli.pipeline.stages.depth", fromlist=["x"])._camera(str(p))),
     ("rig.yaml", _rig_twice(), lambda p: __import__(
-        "plenocli.pipeline.stages.stitch", fromlist=["x"]).load_rig(str(p))),
+        "plenocli.io.rigfile", fromlist=["x"]).read_rig(str(p))),
     ("t.json", '{"model": "translation", "model": "homography"}', lambda p: __import__(
-        "plenocli.pipeline.stages.stitch", fromlist=["x"]).load_transform(str(p), ["A", "B"])),
+        "plenocli.io.transformfile", fromlist=["x"]).read_transform(str(p), ["A", "B"])),
     ("info.json", '{"a": 1, "b": {"c": 1, "c": 2}}', lambda p: __import__(
         "plenocli.io.info", fromlist=["x"]).describe(p)),
 ])
