@@ -23,8 +23,8 @@ import numpy as np
 from bench.timing import best_time
 from plenocli.colour.demosaic import demosaic
 from plenocli.io import tiffio
+from plenocli.io.rigfile import read_rig as load_rig
 from plenocli.model.cfa import half_size_rgb, shift_pattern
-from plenocli.pipeline.stages.stitch import load_rig
 from plenocli.stitch import stitch
 
 ROOT = Path(__file__).resolve().parents[1]

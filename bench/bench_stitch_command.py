@@ -21,10 +21,11 @@ Memory: peak RSS of the command as a multiple of the bytes of the views (float32
 panorama (float32 RGB). Run ``uptime`` first: the ratios are meaningful on a loaded machine,
 the seconds are not.
 
-With ``--baseline COMMIT`` the same command (and batch) by that commit's code is timed after,
-in the same run, and the largest difference of the shifts printed.
+With ``--baseline COMMIT`` the same command by that commit's code is timed after, in the same
+run, and the largest difference of the shifts printed; the batch then runs both codes in turns.
 
     PYTHONPATH=. python bench/bench_stitch_command.py [--pixels 3072] [--batch 10] [--baseline C]
+        [--views VIEWS.tif]
 """
 
 from __future__ import annotations
@@ -59,9 +60,10 @@ def capture(folder: Path, pixels: int) -> Path:
     return folder / "views.tif"
 
 
-def command(views: Path, out: Path, *extra: str, root: Path = ROOT) -> tuple[float, float]:
-    """Wall seconds and peak RSS (bytes) of one ``plenocli stitch`` child process (the package
-    under ``root``)."""
+def command(views: Path, out: Path, *extra: str,
+            root: Path = ROOT) -> tuple[float, float, float]:
+    """Wall seconds, peak RSS (bytes) and CPU seconds (user + system, every thread) of one
+    ``plenocli stitch`` child process (the package under ``root``)."""
     argv = [sys.executable, "-m", "plenocli", "stitch", str(views), "--views", "A,B", "--rig",
             str(RIG), "-o", str(out), *extra]
     start = time.perf_counter()
@@ -72,7 +74,7 @@ def command(views: Path, out: Path, *extra: str, root: Path = ROOT) -> tuple[flo
     err = proc.stderr.read().decode()
     if status:
         raise RuntimeError(f"plenocli stitch failed:\n{err}")
-    return seconds, usage.ru_maxrss * 1024.0
+    return seconds, usage.ru_maxrss * 1024.0, usage.ru_utime + usage.ru_stime
 
 
 def floors(views: Path, report: dict, repeat: int) -> dict:
@@ -111,34 +113,56 @@ def floors(views: Path, report: dict, repeat: int) -> dict:
                 cv2.remap(plane, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
 
     t_six, _ = best_time(lambda: remap(0), repeat)
+    cpu = time.process_time()
     t_foot, _ = best_time(lambda: remap(1), repeat)
-    return {"six": t_six, "footprint": t_foot, "demosaic": t_demosaic,
+    cpu_foot = (time.process_time() - cpu) / repeat
+    return {"six": t_six, "footprint": t_foot, "footprint_cpu": cpu_foot, "demosaic": t_demosaic,
             "views_bytes": 4.0 * 6 * rows * cols, "footprint_px": footprint_px,
             "view_px": float(rows * cols)}
 
 
-def batch(views: Path, folder: Path, transform: Path, n: int, root: Path = ROOT) -> float:
-    """Seconds per capture of ``n`` commands reapplying a saved transform."""
-    start = time.perf_counter()
+def batch(views: Path, folder: Path, runs: list[tuple[Path, Path]],
+          n: int) -> list[tuple[float, float]]:
+    """Wall and CPU seconds per capture of ``n`` commands reapplying a saved transform, for
+    each (package root, transform) of ``runs``; the roots take turns, so they share the load."""
+    times = [[] for _ in runs]
     for k in range(n):
-        command(views, folder / f"batch{k}.tif", "--transform-in", str(transform), root=root)
-    return (time.perf_counter() - start) / n
+        for j, (root, transform) in enumerate(runs):
+            times[j].append(command(views, folder / f"batch{j}_{k}.tif", "--transform-in",
+                                    str(transform), root=root))
+    return [(sum(t[0] for t in ts) / n, sum(t[2] for t in ts) / n) for ts in times]
 
 
-def baseline(views: Path, folder: Path, commit: str, n_batch: int, report: dict) -> None:
-    """The same command (and batch) by the code of ``commit``, in the same run."""
+def print_batch(label: str, n: int, per: tuple[float, float], base: dict) -> None:
+    print(f"{label} batch of {n} with --transform-in: {per[0]:.2f} s per capture (CPU "
+          f"{per[1]:.2f} s) = {per[0] / base['footprint']:.2f} x the footprint floor, "
+          f"{(per[0] - base['demosaic']) / base['footprint']:.2f} x without the demosaic")
+
+
+def print_command(label: str, t_cmd: float, rss: float, cpu: float, base: dict,
+                  pano_bytes: float) -> None:
+    print(f"{label} command {t_cmd:7.2f} s (CPU {cpu:6.2f} s)  peak RSS {rss / 2**20:6.0f} MiB = "
+          f"{rss / (base['views_bytes'] + pano_bytes):.2f} x (views + panorama)")
+    print(f"    / six remaps {t_cmd / base['six']:.2f} x; / footprint floor "
+          f"{t_cmd / base['footprint']:.2f} x (CPU {cpu / base['footprint_cpu']:.2f} x); "
+          f"(command - demosaic) / footprint floor "
+          f"{(t_cmd - base['demosaic']) / base['footprint']:.2f} x")
+
+
+def baseline(views: Path, folder: Path, commit: str, report: dict, base: dict,
+             pano_bytes: float) -> tuple[Path, Path]:
+    """The same command by the code of ``commit``, in the same run; returns that code's root
+    and the transform it saved."""
     (folder / "baseline").mkdir()
     root = export_package(commit, folder / "baseline")
     rep_file, transform = folder / "report_baseline.json", folder / "transform_baseline.json"
-    t_cmd, rss = command(views, folder / "pano_baseline.tif", "--report", str(rep_file),
-                         "--transform-out", str(transform), root=root)
+    t_cmd, rss, cpu = command(views, folder / "pano_baseline.tif", "--report", str(rep_file),
+                              "--transform-out", str(transform), root=root)
     shifts = np.array(json.loads(rep_file.read_text())["shifts_px"])
     moved = float(np.abs(shifts - np.array(report["shifts_px"])).max())
-    print(f"baseline {commit} command  {t_cmd:7.2f} s   peak RSS {rss / 2**20:6.0f} MiB; "
-          f"shifts differ by {moved:.4f} px at most")
-    if n_batch:
-        print(f"baseline batch            {batch(views, folder, transform, n_batch, root):7.2f}"
-              " s per capture")
+    print_command(f"baseline {commit}", t_cmd, rss, cpu, base, pano_bytes)
+    print(f"    shifts differ from this checkout's by {moved:.4f} px at most")
+    return root, transform
 
 
 def main() -> None:
@@ -147,36 +171,36 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--batch", type=int, default=0)
     parser.add_argument("--baseline", default=None, help="a commit whose command is timed too")
+    parser.add_argument("--views", default=None, help="a views.tif made by capture() before "
+                        "(skips simulating one)")
     args = parser.parse_args()
     print("load:", os.getloadavg(), f"OpenCV threads {cv2.getNumThreads()}")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        views = capture(folder, args.pixels)
+        views = Path(args.views) if args.views else capture(folder, args.pixels)
         rep_file, transform = folder / "report.json", folder / "transform.json"
-        t_cmd, rss = min(command(views, folder / "pano.tif", "--report", str(rep_file),
-                                 "--transform-out", str(transform))
-                         for _ in range(args.repeat))
+        t_cmd, rss, cpu = min(command(views, folder / "pano.tif", "--report", str(rep_file),
+                                      "--transform-out", str(transform))
+                              for _ in range(args.repeat))
         report = json.loads(rep_file.read_text())
         base = floors(views, report, args.repeat)
         pano_bytes = 4.0 * 3 * np.prod(report["panorama_shape"])
         print(f"views {report['view_shape'][1]} x {report['view_shape'][0]}, panorama "
               f"{report['panorama_shape'][1]} x {report['panorama_shape'][0]}, footprint boxes "
               f"{base['footprint_px'] / base['view_px']:.2f} x the view (mean of A, B)")
-        print(f"plenocli stitch (command) {t_cmd:7.2f} s   peak RSS {rss / 2**20:6.0f} MiB = "
-              f"{rss / (base['views_bytes'] + pano_bytes):.2f} x (views + panorama)")
         print(f"six remaps (view size)    {base['six']:7.2f} s")
-        print(f"footprint remaps          {base['footprint']:7.2f} s")
+        print(f"footprint remaps          {base['footprint']:7.2f} s (CPU "
+              f"{base['footprint_cpu']:.2f} s): the floor")
         print(f"demosaic of A and B       {base['demosaic']:7.2f} s (inside the command)")
-        print(f"ratio command / six remaps = {t_cmd / base['six']:.2f} x; command / footprint "
-              f"floor = {t_cmd / base['footprint']:.2f} x; (command - demosaic) / footprint "
-              f"floor = {(t_cmd - base['demosaic']) / base['footprint']:.2f} x")
-        if args.batch:
-            per = batch(views, folder, transform, args.batch)
-            print(f"batch of {args.batch} with --transform-in: {per:.2f} s per capture = "
-                  f"{per / base['footprint']:.2f} x the footprint floor, "
-                  f"{(per - base['demosaic']) / base['footprint']:.2f} x without the demosaic")
+        print_command("this checkout", t_cmd, rss, cpu, base, pano_bytes)
+        runs = [("this checkout", (ROOT, transform))]
         if args.baseline:
-            baseline(views, folder, args.baseline, args.batch, report)
+            runs.append((f"baseline {args.baseline}",
+                         baseline(views, folder, args.baseline, report, base, pano_bytes)))
+        if args.batch:  # the checkout and the baseline in turns
+            for (label, _), per in zip(runs, batch(views, folder, [r for _, r in runs],
+                                                   args.batch), strict=True):
+                print_batch(label, args.batch, per, base)
         print("load:", os.getloadavg())
 
 

@@ -27,7 +27,10 @@ from bench.timing import ROOT, export_package, run_python
 RUNNER = """
 import json, sys, time, tracemalloc
 import numpy as np
-from plenocli.pipeline.stages.stitch import load_rig
+try:
+    from plenocli.io.rigfile import read_rig as load_rig
+except ImportError:  # a baseline commit from before the rig file moved to io/
+    from plenocli.pipeline.stages.stitch import load_rig
 from plenocli.stitch import stitch
 stack = np.load(sys.argv[1])
 rig = load_rig(sys.argv[2])

@@ -36,6 +36,8 @@ _OS_HINTS = {
     errno.EROFS: "read-only file system; choose another folder",
     errno.ENOSPC: "no space left on the device; free some space or write elsewhere",
     errno.EDQUOT: "disk quota exceeded; free some space or write elsewhere",
+    errno.EFBIG: ("the output could not be written whole (a file size limit, see ulimit -f, "
+                  "or a full disk); raise the limit or write elsewhere"),
     errno.ENAMETOOLONG: "file name too long; shorten it",
     errno.ENOTDIR: "a part of the path is a file, not a folder",
     errno.EISDIR: "it is a folder; give a file name",

@@ -61,8 +61,24 @@ def warm_depth() -> None:
     disparity_x(views[0], views[1])
 
 
+def warm_stitch() -> None:
+    """The photometric refinement's kernels: a small textured pair, with and without no-data
+    pixels, and the rig maps' and blend's kernels."""
+    from scipy import ndimage
+
+    import plenocli.stitch.kernels  # noqa: F401
+    from plenocli.stitch import refine_homography
+
+    scene = ndimage.gaussian_filter(np.random.default_rng(0).random((64, 112)), 2.0) + 1.0
+    a, b = scene[:, :64].astype(np.float32), scene[:, 48:].astype(np.float32)
+    shift = np.array([[1.0, 0.0, 48.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    refine_homography(a, b, shift)
+    b[30:34, 4:8] = np.nan
+    refine_homography(a, b, shift)
+
+
 WARMERS = {"refocus": warm_refocus, "calibrate": warm_calibrate, "develop": warm_develop,
-           "depth": warm_depth}
+           "depth": warm_depth, "stitch": warm_stitch}
 
 
 def main() -> None:

@@ -122,6 +122,7 @@ def inputs(tmp_path_factory) -> Path:
     _plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
     _plain_tiff(d / "nan_plain.tif", np.full((16, 16), np.nan, np.float32))
     good = (d / "biased.tif").read_bytes()
+    (d / "biased_copy.tif").write_bytes(good)  # another file with the same views
     (d / "truncated.tif").write_bytes(good[: len(good) * 2 // 3])
     _huge_header_tiff(d / "huge.tif")
     meta = tiffio.read_meta(d / "frames.tif")
@@ -335,12 +336,14 @@ CASES = [
     ("decode-cfa-bad", ["decode", "{i}/f512.tif", "--cfa", "RRGB", "-o", "{o}/d.tif"], 2,
      ("'--cfa'",)),
     # flat
+    # (a white flat-fielded by itself only with --save-gain: one file given twice otherwise)
     ("flat-median-huge", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
-                          "100001", "-o", "{o}/f.tif"], 1, ("median",)),
+                          "100001", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
+     ("median",)),
     ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
-                          "4", "-o", "{o}/f.tif"], 1, ("median",)),
-    ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif"], 1,
-     ("no valid pixel",)),
+                          "4", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1, ("median",)),
+    ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif",
+                        "--save-gain", "{o}/g.tif"], 1, ("no valid pixel",)),
     ("flat-truncated-white", ["flat", "{i}/biased.tif", "--white", "{i}/truncated.tif", "-o",
                               "{o}/f.tif"], 1, ("truncated",)),
     ("flat-percentile-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif",
@@ -349,10 +352,11 @@ CASES = [
     ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
                         "-o", "{o}/f.tif"], 2, ("floor",)),
     ("flat-not-bias-corrected", ["flat", "{i}/frames.tif", "--white", "{i}/frames.tif", "-o",
-                                 "{o}/f.tif"], 1, ("run plenocli bias first",)),
+                                 "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
+     ("run plenocli bias first",)),
     ("flat-white-not-bias-corrected", ["flat", "{i}/biased.tif", "--white", "{i}/frames.tif",
                                        "-o", "{o}/f.tif"], 1, ("run plenocli bias first",)),
-    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "-o",
+    ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased_copy.tif", "-o",
                             "{o}/f.tif"], 1, ("not a gain",)),
     ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
                                "{o}/f.tif"], 1, ("white image",)),
@@ -444,7 +448,7 @@ CASES = [
     ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
                                      "g_true=-1"], 1, ("g_true must be > 0",)),
     ("simulate-noise-negative", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "noise=-5"],
-     1, ("noise must be >= 0", "got -5")),
+     1, ("noise must be in [0, 65535]", "got -5")),
     ("simulate-crosstalk-one", ["simulate", "dualpixel-prism", "-o", "{o}/s", "--pixels", "48",
                                 "--param", "crosstalk=1"], 1, ("crosstalk must be in [0, 1)",)),
     ("simulate-param-unknown", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "nosie=1"],
@@ -537,7 +541,7 @@ def test_simulate_params_from_yaml_are_checked_like_flags(inputs, tmp_path):
         "stage": "simulate", "kind": "dualpixel", "output": "{out}/s",
         "param": ["noise=-5"]}}}))
     result = run_bad(inputs, out, ["run", str(config)])
-    assert_one_line(result, 1, ("noise must be >= 0", "got -5"))
+    assert_one_line(result, 1, ("noise must be in [0, 65535]", "got -5"))
 
 
 @pytest.mark.parametrize("args,words", [

@@ -50,3 +50,55 @@ def test_a_large_pitch_is_typed_alike_at_a_reduced_scale():
     assert found is not None
     coset = (indices[:, 0] - indices[:, 1]) % 3
     assert np.array_equal(found.types, np.asarray((1, 2, 0))[coset])
+
+
+class _Report:
+    def __init__(self, lens_types):
+        self.lens_types = lens_types
+
+
+def test_a_start_files_types_are_kept_when_its_lenses_are_ours():
+    from dataclasses import replace
+
+    from plenocli.calibration import start_types
+
+    ours = LensGrid(20.2, 0.0, (6.1, 7.9), "hex", image_shape=SHAPE)
+    start = replace(ours, offset_xy=(7.2, 7.2), lens_type_of_coset=(2, 0, 1))  # 0.06 pitch off
+    grid, info = start_types(ours, start, _Report(None))
+    assert grid.lens_type_of_coset == (2, 0, 1) and info["source"] == "the start file"
+    # the image's depths agree: kept; they disagree: no types at all
+    measured = {"type_of_coset": [2, 0, 1]}
+    grid, _ = start_types(replace(ours, lens_type_of_coset=(2, 0, 1)), start, _Report(measured))
+    assert grid.lens_type_of_coset == (2, 0, 1)
+    grid, info = start_types(replace(ours, lens_type_of_coset=(0, 1, 2)), start,
+                             _Report({"type_of_coset": [0, 1, 2]}))
+    assert grid.lens_type_of_coset is None and "differ" in info["start_types"]
+    # a start half a lens away (an offset for another crop of the sensor): nothing carried
+    far = replace(ours, offset_xy=(16.2, 7.9), lens_type_of_coset=(2, 0, 1))
+    grid, info = start_types(ours, far, _Report(None))
+    assert grid.lens_type_of_coset is None and "cannot be carried" in info["start_types"]
+
+
+def test_depth_matches_each_lens_against_its_own_type():
+    """A multi-focus slanted plane (g 2.5-5.5; types focused at 2.5, 4, 5.5, blurred by
+    0.8 |g - g_t| px): with the grid's types each lens is matched against lenses of its own
+    type, blurred alike. Measured RMS 0.12 with types, 0.28 without (neighbours of other
+    types, blurred differently, pull the match)."""
+    from dataclasses import replace
+
+    from plenocli.depth.lenslet import depth_map
+    from plenocli.synth.depthscene import truth_depth
+
+    shape = (360, 480)
+    out = output_shape(shape, 0.2)
+    planes = scene_planes("slanted", out)
+    grid = LensGrid(20.2, 0.0, (6.1, 7.9), "hex", image_shape=shape,
+                    lens_type_of_coset=(1, 2, 0))
+    frame = multi_focus_frame(grid, shape, planes, s=0.2, type_of_coset=(1, 2, 0), seed=2)
+    truth = truth_depth(planes, out)
+    rms = []
+    for g in (grid, replace(grid, lens_type_of_coset=None)):
+        found = depth_map(frame, g, s=0.2).g[6:-6, 6:-6]
+        assert np.isfinite(found).mean() > 0.95
+        rms.append(float(np.sqrt(np.nanmean((found - truth[6:-6, 6:-6]) ** 2))))
+    assert rms[0] < 0.18 and rms[0] < 0.6 * rms[1], rms

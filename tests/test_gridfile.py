@@ -7,7 +7,7 @@ import pytest
 import yaml
 
 from plenocli.errors import InputError
-from plenocli.io import gridfile
+from plenocli.io import gridfile, yamlfile
 from plenocli.model.lensgrid import LensGrid
 
 
@@ -22,8 +22,10 @@ def _grid(seed: int = 0) -> LensGrid:
 
 
 def _plain(path) -> LensGrid:
-    """The reference: the whole file through PyYAML's pure-Python safe loader."""
-    return LensGrid.from_dict(yaml.load(path.read_text(), Loader=yaml.SafeLoader)["lens_grid"])
+    """The reference: the whole file through PyYAML's pure-Python parser (with plenocli's YAML
+    1.2 scalars: 020 is twenty, as the shell reads it)."""
+    doc = yaml.load(path.read_text(), Loader=yamlfile.PyLoader)  # noqa: S506 (a safe loader)
+    return LensGrid.from_dict(doc["lens_grid"])
 
 
 def _same(a: LensGrid, b: LensGrid) -> None:
@@ -56,7 +58,7 @@ def _edit_row(text: str, k: int, new: str) -> str:
 # rows edited to a lens not in the table (20, 16; 8, 16): a grid lists each lens once
 EDITS = {
     "exponent": lambda t: _edit_row(t, 3, "    - [20, 16, 1.5e+2, 2.0]"),
-    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [010, 16, 1.5, 2.0]"),
+    "leading_zero_int": lambda t: _edit_row(t, 3, "    - [020, 16, 1.5, 2.0]"),
     "block_row": lambda t: _edit_row(t, 3, "    - - 20\n      - 16\n      - 1.5\n      - 2.0"),
     "comment_inside": lambda t: _edit_row(t, 3, "    # checked by hand\n    - [20, 16, 1.5, 2.0]"),
     "blank_inside": lambda t: _edit_row(t, 3, "\n    - [20, 16, 1.5, 2.0]"),
@@ -73,7 +75,9 @@ def test_hand_edited_grid_falls_back_to_yaml(tmp_path, edit):
     text = EDITS[edit](path.read_text())
     path.write_bytes(text.encode())
     assert gridfile._fast_load(path.read_text()) is None
-    _same(gridfile.read_grid(path), _plain(path))
+    got = gridfile.read_grid(path)
+    _same(got, _plain(path))
+    assert edit == "rows_indented" or [20, 16] in got.indices.tolist()  # the edited row
 
 
 def test_crlf_file_reads_the_same(tmp_path):

@@ -191,3 +191,43 @@ def test_impossible_surfaces_are_refused(surface, match):
         Lens((Surface(**surface),))
     with pytest.raises(ValueError, match="image_distance_mm"):
         Lens((Surface(),), image_distance_mm=math.nan)
+
+
+def _table2_doc():
+    import yaml
+
+    from tests.conftest import ROOT
+
+    return yaml.safe_load((ROOT / "configs" / "lenses" / "paper_table2.yaml").read_text())
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda d: d["surfaces"][1].__setitem__("radius", 0.0), r"surface 2: radius 0 is no surface"),
+    (lambda d: d["surfaces"].pop(0), "no surface has 'stop: true'"),
+    (lambda d: d["surfaces"][3].__setitem__("stop", True), "surfaces 1, 4 all have 'stop"),
+    (lambda d: d["surfaces"][0].__setitem__("stop", "no"), "stop 'no' must be true or false"),
+    (lambda d: d.__setitem__("focal", 6.0), "unknown key.s. focal"),
+    (lambda d: d["surfaces"][1].__setitem__("glass", 7.0), "surface 2: refractive index 7.0"),
+])
+def test_a_lens_file_that_is_no_prescription_is_refused(change, match):
+    from plenocli.errors import ConfigError
+    from plenocli.io.lensfile import lens_from_dict
+
+    doc = _table2_doc()
+    change(doc)
+    with pytest.raises(ConfigError, match=match):
+        lens_from_dict(doc)
+
+
+def test_a_near_afocal_lens_has_no_focal_length():
+    """Radii of 1e12 mm leave a y-nu slope of rounding: EFL 7e23 mm for an 8.7 mm lens."""
+    from plenocli.io.lensfile import lens_from_dict
+
+    doc = _table2_doc()
+    for row in doc["surfaces"][1:]:
+        row["radius"] = 1e12
+    with pytest.raises(ValueError, match="afocal.*1e.04 times its size"):
+        paraxial(lens_from_dict(doc))
+    weak = Lens((Surface(5000.0, 2.0, "N-BK7", 25.0, stop=True), Surface(math.inf, 0.0, "air")),
+                image_distance_mm=9000.0)
+    assert paraxial(weak)["efl_mm"] == pytest.approx(5000.0 / (N_BK7 - 1), rel=1e-3)

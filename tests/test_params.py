@@ -152,8 +152,14 @@ def test_simulate_params_are_checked_alike_from_the_shell_and_yaml(tmp_path):
     with pytest.raises(ConfigError) as from_yaml:  # at load: before any step runs
         load_config(config)
     assert str(from_yaml.value).endswith(shell_message)
-    assert "noise must be >= 0" in shell_message
+    assert "noise must be in [0, 65535]" in shell_message
     assert not list(tmp_path.glob("s*"))
+
+
+def test_simulate_refuses_a_noise_beyond_the_sample_range(tmp_path):
+    result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "s"),
+                                      "--param", "noise=1e30"])
+    assert result.exit_code == 1 and "noise must be in [0, 65535]" in result.output
 
 
 @pytest.mark.parametrize("stage, extra, words", [

@@ -174,3 +174,26 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
         (tmp_path / "damaged.dng").write_bytes(bytes(data))
         with pytest.raises(InputError, match="damaged"):
             rawio.decode(tmp_path / "damaged.dng")
+
+
+@pytest.mark.parametrize("second, words", [
+    (np.zeros((12, 40), np.uint16), "2 full-size pages .page shapes 12 x 40, 24 x 40"),
+    (np.zeros((24, 40), np.float32), "2 full-size pages"),
+    (np.zeros((24, 40, 3), np.uint16), "page shapes 24 x 40, 24 x 40 x 3"),
+    (np.ones((24, 40), np.uint16), "2 full-size pages .page shapes 24 x 40."),
+])
+def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, second, words):
+    with tifffile.TiffWriter(tmp_path / "two.tif") as tif:
+        tif.write(np.ones((24, 40), np.uint16))
+        tif.write(second)
+    with pytest.raises(InputError, match=words):
+        rawio.decode(tmp_path / "two.tif")
+
+
+def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_path):
+    image = np.random.default_rng(4).integers(0, 4000, (24, 40)).astype(np.uint16)
+    with tifffile.TiffWriter(tmp_path / "one.tif") as tif:
+        tif.write(image[::4, ::4], subfiletype=1)
+        tif.write(image)
+    frames, _ = rawio.decode(tmp_path / "one.tif")
+    np.testing.assert_array_equal(frames[0], image)

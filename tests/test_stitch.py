@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from plenocli.errors import InputError
-from plenocli.stitch import estimate_translation, refine_homography, stitch, undistort
+from plenocli.stitch import StitchError, estimate_translation, refine_homography, stitch, undistort
 from plenocli.synth.rig import make_rig
 
 
@@ -149,7 +148,7 @@ def test_transform_reapplied_to_a_later_capture():
     pano2, report2 = stitch(later, transform=report.transform)
     assert report2.transform_source == "given"
     assert report2.shifts_px == report.shifts_px
-    with pytest.raises(InputError, match="register them again"):
+    with pytest.raises(StitchError, match="register them again"):
         stitch(views[:, :100, :200], transform=report.transform)
 
 
@@ -182,7 +181,7 @@ def test_views_without_overlap_are_refused():
                            seed=9)
     # overlap 0: view 1 starts exactly where view 0 ends; shift it 40 px further away
     far, _, _ = make_rig(layout="1x2", view_shape=(200, 260), overlap=0.0, seed=10)
-    with pytest.raises(InputError, match="no reliable overlap|no overlap") as refused:
+    with pytest.raises(StitchError, match="no reliable overlap|no overlap") as refused:
         stitch(np.stack([views[0], far[1]]), layout="1x2")
     # views through prisms can hide their overlap: the refusal says what to pass
     assert "prism" in str(refused.value) and "--rig RIG.yaml" in str(refused.value)
@@ -190,12 +189,12 @@ def test_views_without_overlap_are_refused():
 
 def test_views_without_texture_are_refused():
     flat = np.full((2, 200, 260), 0.5, np.float32)
-    with pytest.raises(InputError, match="no texture"):
+    with pytest.raises(StitchError, match="no texture"):
         stitch(flat, layout="1x2")
     noise = np.random.default_rng(0).normal(0.5, 0.01, (2, 200, 260)).astype(np.float32)
-    with pytest.raises(InputError, match="no reliable overlap|no overlap"):
+    with pytest.raises(StitchError, match="no reliable overlap|no overlap"):
         stitch(noise, layout="1x2")
-    with pytest.raises(InputError, match="no texture|too few features|RANSAC|only"):
+    with pytest.raises(StitchError, match="no texture|too few features|RANSAC|only"):
         stitch(noise, layout="1x2", model="homography")
 
 
@@ -205,7 +204,7 @@ def test_views_without_texture_are_refused():
     ([np.zeros((100, 120))] * 3, "2 or 4 views"),
 ])
 def test_mismatched_views_rejected(views, match):
-    with pytest.raises(InputError, match=match):
+    with pytest.raises(StitchError, match=match):
         stitch(views)
 
 
@@ -215,7 +214,7 @@ def test_bad_parameters_named():
         stitch(views, model="affine")
     with pytest.raises(ValueError, match="blend"):
         stitch(views, blend="max")
-    with pytest.raises(InputError, match="needs 4 views"):
+    with pytest.raises(StitchError, match="needs 4 views"):
         stitch(views, layout="2x2")
 
 
@@ -290,7 +289,7 @@ def test_a_two_by_two_whose_pairs_do_not_close_is_refused(monkeypatch):
     assert closure < 1e-9
     monkeypatch.setattr(registration, "_measure_pair",
                         measured({**true, (2, 3): (0.0, 117.0)}))
-    with pytest.raises(InputError, match="do not close"):
+    with pytest.raises(StitchError, match="do not close"):
         registration.register(images, 4, (120, 160), "2x2", "translation", {}, expected)
 
 
@@ -316,3 +315,15 @@ def test_the_steps_say_what_the_stitch_is_doing():
     assert "registering views 0 and 1" in seen
     assert "measuring the overlap of views 0 and 1" in seen
     assert any(s.startswith("warping view 2 of 2, band 1 of") for s in seen)
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 3])
+def test_erode_is_scipy_binary_erosion(iterations):
+    from plenocli.stitch.views import erode
+
+    rng = np.random.default_rng(iterations)
+    mask = rng.random((97, 131)) > 0.05
+    mask[:, :9] = False
+    mask[40:60, 50:70] = False
+    assert np.array_equal(erode(mask, iterations),
+                          ndimage.binary_erosion(mask, iterations=iterations))

@@ -19,7 +19,7 @@ def test_every_generator_parameter_is_declared():
 
 
 @pytest.mark.parametrize("kind, params, words", [
-    ("dualpixel", {"noise": -5.0}, "noise must be >= 0 (read noise, DN"),
+    ("dualpixel", {"noise": -5.0}, "noise must be in [0, 65535] (read noise, DN"),
     ("dualpixel-prism", {"crosstalk": 1.0}, "crosstalk must be in [0, 1)"),
     ("raytrix-scene", {"s": 0.0}, "s must be in (0, 1]"),
     ("stereo-rig", {"view_shape": [200, 8]}, "view_shape must be >= 32"),

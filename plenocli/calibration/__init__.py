@@ -25,7 +25,7 @@ Coordinates: x = column, y = row (down), pixel centres at integers; see ``plenoc
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,6 +41,7 @@ from plenocli.calibration.fit import (
     fit_grid,
     fit_lattice,
     regional_lattice,
+    reindexed,
 )
 from plenocli.calibration.flatten import flatten
 from plenocli.calibration.judges import Decision, decide
@@ -50,14 +51,18 @@ from plenocli.calibration.verify import Verdict
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LATTICES, LensGrid
 
-__all__ = ["CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
-           "moved_from_start", "refine_centres"]
+__all__ = ["KEPT", "CalibrationReport", "calibrate", "compare_grids", "fit_lattice", "flatten",
+           "moved_from_start", "refine_centres", "start_types"]
 
 MIN_SIDE_PX = 48       # smaller images cannot hold a lattice worth fitting
 # a lattice read from the border repetition is used when its pitch and angle errors move the
 # frame's corner lenses by at most this share of a pitch
 CORNER_TOLERANCE = 0.05
 FEW_LENSES_ACROSS = 20  # below this many lenses across, a failure says the image is small
+# pitch and rotation of a start grid that only the match judge confirms (judges.py)
+KEPT = "kept from the start (the micro-images repeat their neighbours' content on it)"
+MEASURED_BY_MATCH = "the peak of the micro-images' match with their neighbours"
+KEEP_TYPES_PITCH = 0.25  # a start's lenses this close to ours (pitches) carry their types over
 
 
 @dataclass(frozen=True)
@@ -93,7 +98,8 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     lattice : "auto", "hex" or "square"; a kind that does not fit the image is refused
     black_level : DN subtracted first
     pitch_hint : approximate pitch (px), e.g. from a datasheet: only lattices within 15 %
-    start : a grid to refine (a camera calibration): its lattice is checked, not searched
+    start : a grid to refine (a camera calibration): its lattice is checked, not searched;
+        its lens types are kept where they can be (:func:`start_types`)
 
     Returns
     -------
@@ -110,9 +116,13 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     all_views = views(image, cfa)
     try:
         decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
-        return _grid(image, cfa, decision, all_views, lattice, pitch_hint)
+        grid, report = _grid(image, cfa, decision, all_views, lattice, pitch_hint)
     except CalibrationError as err:
         raise _refusal(err, image.shape, pitch_hint, start) from err
+    if start is None:
+        return grid, report
+    grid, types = start_types(grid, start, report)
+    return grid, replace(report, lens_types=types)
 
 
 def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationError:
@@ -134,6 +144,8 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
     if lattice != "auto" and found.kind != lattice:
         raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
                                f"{found.describe()} lattice; use --lattice {found.kind} or auto")
+    if decision.judge == "match":
+        return _matched_grid(image, cfa, decision)
     border = border_lattice(found, all_views)
     sure = _corner_error(border, image.shape) <= CORNER_TOLERANCE * found.pitch_px
     pinned = "the border repetition" if sure else ""
@@ -166,11 +178,29 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
                                    lens_centre=centre, decision=decision, lattice_from=pinned)
 
 
+def _matched_grid(image, cfa, decision: Decision) -> tuple[LensGrid, CalibrationReport]:
+    """The lattice the match judge confirmed (a start's pitch and angle kept, or measured
+    near a pitch hint) on the lens centre it measured; every centre is the lattice's
+    (nothing on such a frame measures one lens)."""
+    found, match = decision.lattice, decision.match
+    grid = reindexed(found.pitch_px, found.angle_rad, match.offset_xy, found.kind, image.shape)
+    indices, centres = grid.lens_centres()
+    grid = replace(grid, indices=indices, centres_xy=centres)
+    fit = LatticeFit(lenses_total=len(indices), lenses_refined=0, outliers=0,
+                     residual_rms_px=0.0, residual_max_px=0.0, centres_refined=False)
+    flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
+    grid, type_info = _with_lens_types(flat, grid)
+    return grid, CalibrationReport(fit=fit, verdict=decision.border, lens_types=type_info,
+                                   decision=decision,
+                                   lattice_from=MEASURED_BY_MATCH if match.measured else KEPT)
+
+
 def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport) -> dict:
     """How far the calibration moved each part of a start grid, and what measured it: the
-    offset (the lens nearest the image centre), pitch, rotation and every centre. All four
-    are measured from the image (or the calibration is refused); what a start file holds
-    beyond the lattice (lens border, depth ranges, distortion) is the caller's to keep."""
+    offset (the lens nearest the image centre), pitch, rotation and every centre. The offset
+    is always measured; pitch and rotation too, unless only the match judge could confirm
+    the start (then they are kept, ``KEPT``); what a start file holds beyond the lattice
+    (lens border, depth ranges, distortion) is the caller's to keep."""
     shape = grid.image_shape
     far = compare_grids(grid, start, shape)
     near = start.lattice_xy(*start.nearest_index(*grid.offset_xy))
@@ -179,14 +209,16 @@ def moved_from_start(grid: LensGrid, start: LensGrid, report: CalibrationReport)
     centres = ("each micro-image's symmetry centre" if report.fit.centres_refined else
                f"the lattice ({report.lattice_from}; a scene moves each micro-image's own "
                "centre)")
+    kept = report.lattice_from == KEPT
+    lattice = KEPT if kept else f"measured: {report.lattice_from}"
     return {**far,
-            "offset": {"source": "measured: the mean micro-image's 6-fold centre",
+            "offset": {"source": "measured: " + (
+                "the symmetry point where the micro-images repeat their neighbours' content "
+                "(match judge)" if kept else "the mean micro-image's 6-fold centre"),
                        "moved_px": [float(v) for v in np.asarray(grid.offset_xy) - near]},
-            "pitch": {"source": f"measured: {report.lattice_from}",
-                      "moved_px": float(grid.pitch_px - start.pitch_px),
+            "pitch": {"source": lattice, "moved_px": float(grid.pitch_px - start.pitch_px),
                       "moved_percent": float(100 * (grid.pitch_px / start.pitch_px - 1))},
-            "rotation": {"source": f"measured: {report.lattice_from}",
-                         "moved_deg": float(np.degrees(turn))},
+            "rotation": {"source": lattice, "moved_deg": float(np.degrees(turn))},
             "centres": {"source": f"measured: {centres}", "rms_px": far["rms_px"],
                         "max_px": far["max_px"]}}
 
@@ -204,6 +236,36 @@ def _with_lens_types(flat: np.ndarray, grid: LensGrid) -> tuple[LensGrid, dict |
                     indices=grid.indices, lens_type_of_coset=coset)
     return grid, {"type_of_coset": list(coset), "sharpness": list(types.sharpness),
                   "p_value": types.p_value}
+
+
+def start_types(grid: LensGrid, start: LensGrid, report: CalibrationReport
+                ) -> tuple[LensGrid, dict | None]:
+    """The grid with the start file's lens types (a camera XML's), where they can be carried
+    over: the start's lenses must be ours (every lens within KEEP_TYPES_PITCH of ours, so
+    that the coset of its centre lens is known) and the types read from the image by depth,
+    when there are any, must agree; if they do not, no types (neither can be vouched for).
+    Returns the grid and the report's lens-type entry."""
+    measured = report.lens_types
+    if start.lens_type_of_coset is None or grid.lattice != "hex":
+        return grid, measured
+    far = compare_grids(grid, start, grid.image_shape)
+    if far["max_px"] > KEEP_TYPES_PITCH * grid.pitch_px:
+        note = (f"the start's lenses lie up to {far['max_px']:.1f} px from ours: its types "
+                "cannot be carried over")
+        return grid, {**(measured or {}), "start_types": note}
+    kept = []
+    for k in range(3):   # the start's type of the lens of ours in coset k
+        x, y = grid.lattice_xy(k, 0)
+        kept.append(int(start.lens_types(*start.nearest_index(x, y))))
+    kept = tuple(kept)
+    ours = grid.lens_type_of_coset
+    if ours is not None and ours != kept:
+        return replace(grid, lens_type_of_coset=None), {
+            **measured, "start_types": f"the start's types {list(kept)} and the image's "
+            f"{list(ours)} differ: no types written"}
+    return replace(grid, lens_type_of_coset=kept), {
+        **(measured or {}), "type_of_coset": list(kept), "source": "the start file"
+        + (" (the image's depths agree)" if ours is not None else "")}
 
 
 def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,

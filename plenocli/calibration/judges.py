@@ -21,6 +21,7 @@ import numpy as np
 
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.fold import Folds, FoldVerdict, fold_judge, nested_pairs, settle_fold
+from plenocli.calibration.match import MatchVerdict, match_judge, match_measure
 from plenocli.calibration.search import (
     border_lattice,
     find_lattice,
@@ -47,13 +48,21 @@ class Decision:
     judge: str
     border: Verdict
     fold: FoldVerdict | None = None
+    match: MatchVerdict | None = None
 
     def to_dict(self) -> dict:
         return {"judge": self.judge, **self.border.to_dict(),
-                "fold": self.fold.to_dict() if self.fold else None}
+                "fold": self.fold.to_dict() if self.fold else None,
+                "match": self.match.to_dict() if self.match else None}
 
     def describe(self) -> str:
         """Which judge decided and how close the rivals came."""
+        if self.judge == "match":
+            rival = self.match.rivals[0] if self.match.rivals else None
+            return (f"match judge (border contrast only {self.border.contrast:.3f}, no sharp "
+                    f"fold): the micro-images repeat their neighbours' content with "
+                    f"median confidence {self.match.confidence:.3f}"
+                    + (f", best rival {rival[0]} at {rival[1]:.3f}" if rival else ""))
         if self.judge == "border":
             rival = self.border.rivals[0] if self.border.rivals else None
             return (f"border judge: contrast {self.border.contrast:.3f}, control "
@@ -81,7 +90,12 @@ def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = Non
     reason = doubt(verdict)
     decision = Decision(verdict.lattice, "border", verdict)
     if reason:
-        decision = _fold_decision(image, verdict, extra, all_views, reason)
+        try:
+            decision = _fold_decision(image, verdict, extra, all_views, reason)
+        except CalibrationError as err:
+            if own is None and pitch_hint is None:
+                raise
+            decision = _match_decision(image, verdict, own, pitch_hint, str(err))
     else:   # the fold judge checks the border judge's choice among nested relatives
         decision = cross_checked(image, decision, all_views) or decision
     _check_hints(decision, pitch_hint, own)
@@ -134,6 +148,32 @@ def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> De
     border = Verdict(fold.lattice, contrast, verdict.rivals, control,
                      considered=verdict.considered)
     return Decision(fold.lattice, "fold", border, fold)
+
+
+def _match_decision(image, verdict: Verdict, own: Lattice | None, pitch_hint: float | None,
+                    reason: str) -> Decision:
+    """The match judge's decision where neither other judge has one: on a start grid's
+    lattice (its pitch and angle kept, its lens centre measured) or, with a pitch hint only,
+    on the lattices near the hint (pitch, angle and centre measured); or CalibrationError."""
+    ranked = [lat for lat, c in sorted((t for t in verdict.considered if np.isfinite(t[1])),
+                                       key=lambda t: -t[1])]
+    if own is not None:
+        others = [lat for lat in ranked[:FOLD_CANDIDATES]
+                  if not lat.same_as(own, rel=0.01, angle=0.01) and nested(own, lat) is None]
+        found = match_judge(image, own, others)
+        what = f"the start grid ({own.describe()})"
+    else:
+        near = [lat for lat in ranked
+                if 1 / HINT_RANGE <= lat.pitch_px / pitch_hint <= HINT_RANGE]
+        if not near:
+            raise CalibrationError(reason)
+        others = [lat for lat in ranked[:FOLD_CANDIDATES] if lat not in near]
+        found = match_measure(image, near, others)
+        what = f"a lattice near the hinted pitch ({pitch_hint:g} px)"
+    if found.lattice is None:
+        raise CalibrationError(f"{reason}; nor does the match judge confirm {what}: "
+                               f"{found.reason}")
+    return Decision(found.lattice, "match", verdict, None, found)
 
 
 def _related(lattice: Lattice, other: Lattice, all_views) -> bool:

@@ -32,6 +32,9 @@ def run(config, force, dry_run, overrides, out, print_make, patterns):
     """
     from plenocli.pipeline.config import load_config, read_template
 
+    if print_make and (dry_run or force):
+        raise click.UsageError(f"--print-make prints the rules and runs nothing; leave out "
+                               f"{'--dry-run' if dry_run else '--force'}")
     if patterns and not print_make:
         raise click.UsageError("--inputs goes with --print-make; to run a batch of captures "
                                "use plenocli batch CONFIG --inputs ...")

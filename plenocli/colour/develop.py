@@ -25,6 +25,7 @@ from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic, gr
 from plenocli.colour.highlights import rebuild_partly_clipped
 from plenocli.io.photo import encode
 from plenocli.model.colour import srgb_to_space
+from plenocli.model.views import CHANNELS, split_colour_page, split_sweep
 
 BAND_ROWS = 256  # rows per matrix product: bounds the temporaries to a few MB per band
 
@@ -57,14 +58,17 @@ def colour_views(names: list[str], *, cfa: str | None = None,
     if cfa:
         pattern = check_pattern(cfa)
         return [ColourView(n, (k,), pattern) for k, n in enumerate(names)]
-    by_prefix: dict[str, dict[str, int]] = {}
+    by_view: dict[str, dict[str, int]] = {}
     for k, name in enumerate(names):
-        base, at, tag = name.partition("@")  # refocus sweeps: R@g4, left.R@g4, ...
-        prefix, _, channel = base.rpartition(".")
-        by_prefix.setdefault((prefix or "RGB") + at + tag, {})[channel] = k
-    if by_prefix and all(set(ch) == set("RGB") for ch in by_prefix.values()):
-        return [ColourView(view, tuple(ch[c] for c in "RGB"), None)
-                for view, ch in by_prefix.items()]
+        label, tag = split_sweep(name)  # refocus sweeps: R@g4, left.R@g4, ...
+        split = ("", label) if label in CHANNELS else split_colour_page(label)
+        if split is None:  # a page of no colour: the views carry none
+            by_view = {}
+            break
+        by_view.setdefault((split[0] or "RGB") + tag, {})[split[1]] = k
+    if by_view and all(set(ch) == set(CHANNELS) for ch in by_view.values()):
+        return [ColourView(view, tuple(ch[c] for c in CHANNELS), None)
+                for view, ch in by_view.items()]
     raise ValueError(f"views {', '.join(names)} carry no colour (no CFA pattern and no R, G, B "
                      "pages): a monochrome capture cannot be developed in colour")
 

@@ -118,11 +118,14 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
     # phase, as on an ideal lattice of whole-pixel pitch) take their neighbours' mean
     weight = ndimage.gaussian_filter(counts, 1.0)
     mean = ndimage.gaussian_filter(sums, 1.0) / np.maximum(weight, 1e-9)
-    peak = float(np.max(mean[weight > 0])) if (weight > 0).any() else 0.0
+    # the peak among bins many pixels fall in: a bin at the disc's edge that one bright pixel
+    # falls in would raise it and leave no bin usable
+    filled = weight > 0.05 * weight.max()
+    peak = float(np.max(mean[filled])) if filled.any() else 0.0
     if not peak > 0:
         raise ValueError("the micro-images hold no light (the frame is dark or NaN under the "
                          "grid); check the frames and the grid")
-    usable = (mean >= USABLE_LEVEL * peak) & (weight > 0.05 * weight.max())
+    usable = (mean >= USABLE_LEVEL * peak) & filled
     yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
     usable &= np.hypot(xx, yy) <= radius * 0.95
     # the rim of a micro-image falls off within a pixel or two: its binned mean is not the
@@ -165,7 +168,8 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     """g and confidence of every lens of ``grid`` on ``frame`` (2-D, NaN pixels unused).
 
     ``g_range`` (min, max) bounds the search; a Galilean (inverted) camera has negative g,
-    e.g. (-8, -2). Both bounds share one sign and |g| > 1.
+    e.g. (-8, -2). Both bounds share one sign and |g| > 1. A grid with lens types (a
+    multi-focus array) matches each lens against its own type only.
     """
     gmin, gmax = check_range(g_range)
     img = np.ascontiguousarray(frame, np.float32)
@@ -178,16 +182,21 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     flat = np.full(img.shape, np.nan, np.float32)
     kn.normalise(img, cx, cy, profile, gain, half, flat)
     ring1, ring2 = RINGS[grid.lattice]
+    coarse, fine, baseline = ring1[:len(ring1) // 2], ring1[::2] + ring2[::2], 1.0
+    if grid.lens_type_of_coset is not None:
+        # a multi-focus array: each lens against lenses of its own type (the second ring, one
+        # coset), blurred alike at every depth, so the match is not pulled by a blur difference
+        coarse, fine, baseline = ring2[:len(ring2) // 2], ring2, math.sqrt(3)
     q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
-    n_q = max(3, int(math.ceil((q_hi - q_lo) * grid.pitch_px / SHIFT_STEP_PX)) + 1)
+    n_q = max(3, int(math.ceil((q_hi - q_lo) * baseline * grid.pitch_px / SHIFT_STEP_PX)) + 1)
     qs = np.linspace(q_lo, q_hi, n_q)
-    ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, ring1[:len(ring1) // 2]),
+    ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, coarse),
                               profile, half, qs, COARSE_STRIDE)
     min_samples = 0.1 * math.pi * r_use ** 2 / COARSE_STRIDE
     with np.errstate(invalid="ignore", divide="ignore"):
         cost = np.where(cnt >= min_samples, ssd / cnt, np.nan)
     q0, confidence = _coarse(cost, qs)
-    q = kn.refine_q(flat, cx, cy, neighbours(indices, ring1[::2] + ring2[::2]), profile, half, q0,
+    q = kn.refine_q(flat, cx, cy, neighbours(indices, fine), profile, half, q0,
                     q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))

@@ -131,6 +131,9 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         tmp.unlink(missing_ok=True)
         if full:  # numpy and tifffile report a short write without errno
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(dest)) from err
+        if err.errno is None or (err.errno == errno.EFBIG and err.filename is None):
+            # a short write with space left: a file size limit (ulimit -f), or a full disk
+            raise OSError(errno.EFBIG, os.strerror(errno.EFBIG), str(dest)) from err
         raise
     except BaseException:
         tmp.unlink(missing_ok=True)

@@ -11,12 +11,12 @@ import yaml
 
 from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
+from plenocli.io.yamlfile import DocumentError, load_yaml
 from plenocli.model.lensgrid import LensGrid
 from plenocli.model.provenance import json_safe
 
-# libyaml's emitter and parser when PyYAML was built with it (10-50x faster)
+# libyaml's emitter when PyYAML was built with it (10-50x faster; io/yamlfile reads)
 _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
@@ -77,8 +77,8 @@ def _fast_load(text: str) -> dict | None:
     if fast is None:
         return None
     try:
-        doc = yaml.load(fast[0], Loader=_LOADER)
-    except yaml.YAMLError:
+        doc = load_yaml(fast[0])
+    except DocumentError:
         return None
     grid = doc.get("lens_grid") if isinstance(doc, dict) else None
     lenses = grid.get("lenses") if isinstance(grid, dict) else None
@@ -114,10 +114,10 @@ def read_grid(path: str | os.PathLike, *,
         text = p.read_text(encoding="utf-8")
         doc = _fast_load(text)
         if doc is None:
-            doc = yaml.load(text, Loader=_LOADER)
+            doc = load_yaml(text)
         return LensGrid.from_dict(doc["lens_grid"])
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        reason = " ".join(str(err).replace('"<unicode string>", ', "").split())
+    except (DocumentError, UnicodeDecodeError) as err:
+        reason = " ".join(str(err).split())
         raise InputError(f"{p}: not a YAML lens grid ({reason})") from err
     except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
         raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "

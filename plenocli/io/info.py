@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import raw as raw_io
 from plenocli.io.tiffio import open_tiff, read_meta
+from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
 from plenocli.model.lensgrid import LensGrid
 
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
@@ -88,9 +88,9 @@ def _describe_image(p: Path) -> dict:
 
 def _describe_yaml(p: Path) -> dict:
     try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{p}: not valid YAML ({str(err).splitlines()[0]})") from err
+        doc = read_yaml(p)
+    except DocumentError as err:
+        raise InputError(f"{p}: not valid YAML ({err})") from err
     if isinstance(doc, dict) and isinstance(doc.get("lens_grid"), dict):
         try:  # a grid no stage would accept is said so, not described
             LensGrid.from_dict(doc["lens_grid"])
@@ -154,8 +154,8 @@ def _xml_children(elem: ET.Element) -> dict[str, Any]:
 
 def _describe_json(p: Path) -> dict:
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        doc = read_json(p)
+    except DocumentError as err:
         raise InputError(f"{p}: not valid JSON ({err})") from err
     if not isinstance(doc, dict):
         return {"kind": "json", "keys": None}

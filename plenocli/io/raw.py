@@ -289,6 +289,19 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
 
 
+def _frame_pages(p: Path, tif) -> np.ndarray:
+    """The one full-resolution page of a TIFF (reduced-resolution previews beside it are not
+    the image). A TIFF of several such pages is refused: keeping the first would drop the
+    others silently, and a plain TIFF does not say which page is which frame."""
+    pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
+    if len(pages) > 1:
+        shapes = sorted({" x ".join(map(str, page.shape)) for page in pages})
+        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shapes "
+                         f"{', '.join(shapes)}); decode reads a sensor image of one page: save "
+                         "each frame as its own file")
+    return pages[0].asarray()
+
+
 def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
     p = Path(path)
     data = None
@@ -298,7 +311,7 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
                     tiffio.check_light_levels(p, page)
-                data = tif.asarray()
+                data = _frame_pages(p, tif)
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "
                                             "truncated") from err

@@ -24,12 +24,22 @@ Conventions (checked against the real origami frame, see tests/test_raytrix.py):
   store e.g. ``(-1, -8.7e-8)`` with ``rotation = 2.5e-5``), so the lattice is turned by the small
   difference between ``rotation`` and the direction of ``lens_base_x`` (modulo 60 deg).
 - ``LensGrid.angle_rad`` is measured from +x towards +y (down): it is minus the y-up angle.
+- ``lens_type`` offsets (lens units, y up like the bases) point from a lens of that type to
+  the type-0 centre lens: type t sits at minus its offset. Every file seen writes type 1 at
+  the numbers of ``lens_base_x`` (type 1 at -base_x) and type 2 at minus them. Evidence: on
+  Fujita2 and origami (base_x up) the coset so named type 2 (range 3.5-100) is the sharpest
+  in the far third of the frame's g and gains most from near to far, type 0 (1-3.2) loses
+  most; on the R42 crop (base_x right, every lens at g 5-7) the coset so named type 2
+  (3.8-100) is sharper than type 1 (2.8-4), type 0 (1-3) least sharp; PlenopticToolbox 2.0
+  reads its R42 and R29 files (rotation 0) alike. Read as vectors pointing to the type, types
+  1 and 2 swap on both cameras (docs/calibrate.md).
 """
 
 from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -45,16 +55,71 @@ DEFAULT_LENS_TYPES = [
 ]
 
 
+# The unit each field is read in, and the spellings of a unit attribute that can be converted
+# to it without knowing the camera (a length in mm would need the pixel size: refused).
+FIELD_UNITS = {"offset": "pix", "diameter": "pix", "lens_border": "pix", "rotation": "rad",
+               "distortion/offset": "pix", "tcp": "virtual_depth", "lens_base_x": "lens",
+               "lens_base_y": "lens", "sub_grid_base": "lens", "lens_type/offset": "lens"}
+UNIT_SCALES = {"pix": {"pix": 1.0, "px": 1.0, "pixel": 1.0, "pixels": 1.0},
+               "rad": {"rad": 1.0, "radian": 1.0, "radians": 1.0, "deg": np.pi / 180,
+                       "degree": np.pi / 180, "degrees": np.pi / 180},
+               "lens": {"lens": 1.0}, "virtual_depth": {"virtual_depth": 1.0}}
+
+
+def _scale(node: ET.Element, what: str) -> float:
+    """The factor from the unit ``node`` states to the one plenocli reads ``what`` in (1 when
+    it states none); a unit that cannot be converted is refused, never read as another."""
+    units, field = node.get("units"), FIELD_UNITS.get(what)
+    if units is None or field is None:
+        return 1.0
+    scale = UNIT_SCALES[field].get(units.strip().lower())
+    if scale is None:
+        raise ValueError(f'<{what} units="{units}">: plenocli reads {what} in {field} (the file '
+                         f"gives nothing to convert {units} with); write it in {field}")
+    return scale
+
+
 def _xy(node: ET.Element | None, what: str) -> list[float]:
     if node is None:
         raise ValueError(f"missing <{what}>")
-    return [_num(node.find("x"), f"{what}/x"), _num(node.find("y"), f"{what}/y")]
+    scale = _scale(node, what)
+    return [scale * _num(node.find("x"), f"{what}/x"), scale * _num(node.find("y"), f"{what}/y")]
 
 
 def _num(node: ET.Element | None, what: str) -> float:
     if node is None or node.text is None or not node.text.strip():
         raise ValueError(f"missing <{what}>")
-    return float(node.text.strip())
+    return float(node.text.strip()) * _scale(node, what)
+
+
+def _check_single(node: ET.Element, path: str = "") -> None:
+    """Refuse an element given twice where the format has one (every element but the root's
+    ``lens_type``s): a reader would keep one of them silently."""
+    tags = [child.tag for child in node]
+    for tag in dict.fromkeys(tags):
+        if tags.count(tag) > 1 and not (path == "" and tag == "lens_type"):
+            raise ValueError(f"<{path}{tag}> is given {tags.count(tag)} times; keep one")
+    for child in node:
+        _check_single(child, f"{path}{child.tag}/")
+
+
+def _distortion(dist: ET.Element | None) -> dict | None:
+    """The ``<distortion>`` element: its parameters must be as many as ``count`` says."""
+    if dist is None:
+        return None
+    param = dist.find("parameter")
+    count = int(param.get("count", "0")) if param is not None else 0
+    values = _numbers(param.text) if param is not None else []
+    if count == 0 and values in ([], [0.0]):  # "0": the placeholder of no parameters
+        values = []
+    if len(values) != count:
+        raise ValueError(f"<distortion/parameter> has count {count} but holds {len(values)} "
+                         "values")
+    off = dist.find("offset")
+    return {"type": dist.get("type", "radial"),
+            "function": (dist.findtext("function") or "constant").strip(),
+            "parameters": values,
+            "offset": _xy(off, "distortion/offset") if off is not None else [0.0, 0.0]}
 
 
 def _numbers(text: str | None) -> list[float]:
@@ -73,18 +138,8 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
         raise InputError(f"{source}: a <{root.tag}> file, not a Raytrix <RayCalibData> "
                          "calibration; plenocli reads RayCalibData XML only")
     try:
-        dist = root.find("distortion")
-        distortion = None
-        if dist is not None:
-            param = dist.find("parameter")
-            count = int(param.get("count", "0")) if param is not None else 0
-            values = _numbers(param.text) if param is not None else []
-            off = dist.find("offset")
-            distortion = {"type": dist.get("type", "radial"),
-                          "function": (dist.findtext("function") or "constant").strip(),
-                          "parameters": values[:count] if count else [],
-                          "offset": _xy(off, "distortion/offset") if off is not None
-                          else [0.0, 0.0]}
+        _check_single(root)
+        distortion = _distortion(root.find("distortion"))
         lens_types = []
         for lt in root.findall("lens_type"):
             rng = lt.find("depth_range")
@@ -117,8 +172,8 @@ def parse_calib(text: str, *, source: str = "XML") -> dict:
             "k_matrix": k_matrix,
         }
     except ValueError as err:
-        raise InputError(f"{source}: bad RayCalibData ({err}); the file may be truncated") \
-            from err
+        hint = "; the file may be truncated" if str(err).startswith("missing") else ""
+        raise InputError(f"{source}: bad RayCalibData ({err}){hint}") from err
     try:
         check_calib(calib)
     except ValueError as err:
@@ -250,8 +305,15 @@ def _wrap(angle: float, period: float) -> float:
 def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     """The lattice of a Raytrix calibration as a ``LensGrid`` of an image of ``image_shape``
     (rows, cols). Lens (0, 0) is the centre lens; b1, b2 are the Raytrix base vectors (ordered
-    so that b2 is b1 turned by +60 deg in image coordinates)."""
+    so that b2 is b1 turned by +60 deg in image coordinates).
+
+    A calibration with a lens distortion (a nonzero parameter) is refused: the lattice is
+    placed undistorted, and the file does not state the radius its polynomial is normalised by,
+    so the shift of the lens centres cannot be bounded (the real Cards2 file's k1 = -0.0015
+    moves the corner lenses by ~6 px normalised to the half-diagonal, by far more in pixels);
+    dropping it would put the lenses in the wrong place silently."""
     check_calib(calib)
+    _refuse_distortion(calib.get("distortion"))
     rows, cols = image_shape
     d = float(calib["diameter"])
     bx = np.asarray(calib["lens_base_x"], float)
@@ -268,8 +330,54 @@ def grid_from_calib(calib: dict, image_shape: tuple[int, int]) -> LensGrid:
     a1, a2 = np.arctan2(img1[1], img1[0]), np.arctan2(img2[1], img2[0])
     first = img1 if _wrap(a2 - a1, 2 * np.pi) > 0 else img2
     centre = (cols / 2 + float(calib["offset"][0]), rows / 2 - float(calib["offset"][1]))
-    return LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
+    grid = LensGrid(pitch_px=d, angle_rad=float(np.arctan2(first[1], first[0])),
                     offset_xy=centre, lattice=lattice, image_shape=(rows, cols))
+    types = type_of_coset(calib, grid) if lattice == "hex" else None
+    return grid if types is None else replace(grid, lens_type_of_coset=types)
+
+
+def _coset_of(grid: LensGrid, vector_px: np.ndarray) -> int | None:
+    """Coset (i - j) mod 3 of the lattice vector ``vector_px`` (image px, y down) of a hex
+    grid, or None when it is not a lattice vector (within 0.1 lens)."""
+    ij = np.linalg.solve(grid.basis().T, vector_px)
+    if np.abs(ij - np.rint(ij)).max() > 0.1:
+        return None
+    return int((np.rint(ij[0]) - np.rint(ij[1])) % 3)
+
+
+def type_of_coset(calib: dict, grid: LensGrid) -> tuple[int, int, int] | None:
+    """The camera's lens type of each coset (i - j) mod 3 of ``grid`` (lens (0, 0) at the
+    calibration's offset; type t at minus its offset, module doc), or None: no three lens
+    types, or offsets that are not lattice vectors or do not make one type per coset."""
+    types = calib.get("lens_types") or []
+    if sorted(int(t["id"]) for t in types) != [0, 1, 2]:
+        return None
+    d = float(calib["diameter"])
+    out = [-1, -1, -1]
+    for t in types:
+        ox, oy = (float(v) for v in t["offset"])
+        coset = _coset_of(grid, d * np.array([-ox, oy]))   # minus the y-up offset, y down
+        if coset is None:
+            return None
+        out[coset] = int(t["id"])
+    return tuple(out) if sorted(out) == [0, 1, 2] else None
+
+
+DISTORTION_FUNCTIONS = ("constant", "brown")  # the names RayCalibData files use
+
+
+def _refuse_distortion(distortion: dict | None) -> None:
+    function = str((distortion or {}).get("function", "constant"))
+    if function.lower() not in DISTORTION_FUNCTIONS:
+        raise ValueError(f"its distortion function {function!r} is not one plenocli knows "
+                         f"({', '.join(DISTORTION_FUNCTIONS)}); use an XML without distortion")
+    params = (distortion or {}).get("parameters") or []
+    if any(float(v) != 0.0 for v in params):
+        raise ValueError(f"its distortion ({distortion.get('function', 'constant')} "
+                         f"{', '.join(f'{float(v):g}' for v in params)}) moves the lens centres, "
+                         "and plenocli places the lattice undistorted (RayCalibData does not say "
+                         "how its radius is normalised); use the grid of plenocli calibrate on "
+                         "this camera's white image, or an XML without distortion")
 
 
 def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
@@ -285,15 +393,7 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
     base_x = [float(b[0, 0]), float(-b[0, 1])]          # y up
     base_y = [float(b[1, 0]), float(-b[1, 1])]
     tpl = template or {}
-    lens_types = [dict(lt) for lt in tpl.get("lens_types", DEFAULT_LENS_TYPES)]
-    cosets = grid.lens_type_of_coset   # types measured from the image, when known
-    for lt in lens_types:  # Raytrix: type 1 sits at +base_x, type 2 at -base_x
-        sign = {0: 0.0, 1: 1.0, 2: -1.0}.get(int(lt["id"]), 0.0)
-        if cosets is not None and int(lt["id"]) in cosets:
-            # lens (1, 0) is one coset on from lens (0, 0), lens (-1, 0) two
-            step = (cosets.index(int(lt["id"])) - cosets.index(0)) % 3
-            sign = {0: 0.0, 1: 1.0, 2: -1.0}[step]
-        lt["offset"] = [sign * base_x[0], sign * base_x[1]]
+    lens_types = _written_types(grid, tpl.get("lens_types", DEFAULT_LENS_TYPES), (i, j))
     return {
         "version": tpl.get("version", "1.0"),
         "offset": [float(x - cols / 2), float(rows / 2 - y)],
@@ -309,3 +409,26 @@ def calib_from_grid(grid: LensGrid, *, template: dict | None = None) -> dict:
         "lens_types": lens_types,
         "k_matrix": tpl.get("k_matrix"),
     }
+
+
+def _written_types(grid: LensGrid, template: list[dict], centre: tuple) -> list[dict]:
+    """The lens types of a written file: the template's ids and depth ranges, each offset
+    minus the y-up unit lattice vector (lens units) from the centre lens to a lens of its
+    type (module doc; along base_x where it can be, as camera files have it). Without
+    measured types the file carries none: a guessed type gives 2/3 of the lenses the wrong
+    depth range."""
+    cosets = grid.lens_type_of_coset
+    if cosets is None:
+        return []
+    here = int((centre[0] - centre[1]) % 3)
+    b = grid.basis() / grid.pitch_px
+    units = [(di * b[0] + dj * b[1], (di - dj) % 3)   # image vectors (y down), coset shift
+             for di, dj in ((-1, 0), (1, 0), (0, 1), (-1, 1), (0, -1), (1, -1))]
+    out = []
+    for lt in template:
+        if int(lt["id"]) not in cosets:
+            continue
+        shift = (cosets.index(int(lt["id"])) - here) % 3
+        u = next(u for u, k in units if k == shift) if shift else np.zeros(2)
+        out.append({**lt, "offset": [float(-u[0]) + 0.0, float(u[1]) + 0.0]})
+    return out

@@ -39,6 +39,7 @@ from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used 
     check_real_dtype,
     check_segments,
 )
+from plenocli.io.yamlfile import DocumentError, load_json
 from plenocli.model.cfa import is_bayer
 from plenocli.progress import log
 
@@ -346,10 +347,10 @@ def plenocli_meta(path, description: str | None) -> dict:
     if not description:
         return {}
     try:
-        parsed = json.loads(description)
-    except json.JSONDecodeError as err:
+        parsed = load_json(description)
+    except DocumentError as err:
         if description.lstrip().startswith(f'{{"{FORMAT_KEY}"'):
-            raise InputError(f"{path}: its plenocli metadata is damaged (not JSON: {err.msg}); "
+            raise InputError(f"{path}: its plenocli metadata is damaged (not JSON: {err}); "
                              "write the file again") from err
         return {}
     if not isinstance(parsed, dict) or FORMAT_KEY not in parsed:

@@ -16,6 +16,18 @@ from plenocli.optics.glass import D_LINE_UM
 from plenocli.optics.lens import Lens, trace
 from plenocli.optics.prism import prism_deviation_deg
 
+# A focal length this many times the lens's size (track to the image plane or largest clear
+# aperture) is no lens: real objectives have |EFL| within ~0.1-20 x their length, and a single
+# weak element focusing on its own image plane stays far below; beyond it the y-nu slope is the
+# rounding left of surface powers that cancel (afocal), and every figure would be noise.
+MAX_EFL_PER_SIZE = 1e4
+
+
+def lens_size_mm(lens: Lens) -> float:
+    """The lens's size (mm): its track to the image plane or its largest clear aperture."""
+    diameters = [s.diameter_mm for s in lens.surfaces if math.isfinite(s.diameter_mm)]
+    return max([lens.image_z_mm, *diameters])
+
 
 def _ynu(lens: Lens, y: float, u: float, *, first: int = 0, wavelength_um: float = D_LINE_UM
          ) -> tuple[float, float]:
@@ -53,8 +65,11 @@ def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
     configured image plane), ``diameter_mm``}.
     """
     y_last, u_last = _ynu(lens, 1.0, 0.0, wavelength_um=wavelength_um)
-    if u_last == 0:
-        raise ValueError("the lens is afocal (no focal length)")
+    size = lens_size_mm(lens)
+    if u_last == 0 or (size > 0 and abs(u_last) * MAX_EFL_PER_SIZE * size < 1.0):
+        efl = math.inf if u_last == 0 else -1.0 / u_last
+        raise ValueError(f"the lens is afocal: its focal length {efl:.3g} mm is more than "
+                         f"{MAX_EFL_PER_SIZE:.0e} times its size ({size:.3g} mm); check the radii")
     efl = -1.0 / u_last
     bfd = -y_last / u_last
     stop = lens.stop_index

@@ -55,19 +55,27 @@ class Surface:
             return np.where(root >= 0, c * r2 / (1.0 + np.sqrt(np.maximum(root, 0.0))), np.nan)
 
 
+# Refractive indices of real media at optical wavelengths: vacuum/air to germanium (~4 in the IR).
+MIN_INDEX, MAX_INDEX = 1.0, 4.0
+
+
 def _check_surface(k: int, s: Surface) -> None:
-    """Refuse values no ray can be traced through (NaN anywhere, a negative or infinite
-    thickness, an index below 1): the lens would give numbers, all wrong."""
+    """Refuse values no ray can be traced through (NaN anywhere, a zero radius, a negative or
+    infinite thickness, an index outside real media): the lens would give numbers, all wrong."""
     if not (math.isfinite(s.thickness_mm) and s.thickness_mm >= 0):
         raise ValueError(f"surface {k}: thickness_mm {s.thickness_mm} must be a finite number "
                          ">= 0 (surfaces are listed in the order light meets them)")
     for name in ("radius_mm", "diameter_mm", "conic"):
         if math.isnan(getattr(s, name)):
             raise ValueError(f"surface {k}: {name} is NaN; give a number")
+    if s.radius_mm == 0:
+        raise ValueError(f"surface {k}: radius_mm 0 is no surface; give a signed radius, or inf "
+                         "for a flat surface")
     if not math.isfinite(s.conic):
         raise ValueError(f"surface {k}: conic {s.conic} must be finite")
-    if not isinstance(s.glass, str) and not (math.isfinite(s.glass) and s.glass >= 1):
-        raise ValueError(f"surface {k}: refractive index {s.glass} must be a finite number >= 1")
+    if not isinstance(s.glass, str) and not MIN_INDEX <= s.glass <= MAX_INDEX:
+        raise ValueError(f"surface {k}: refractive index {s.glass} must be in "
+                         f"[{MIN_INDEX}, {MAX_INDEX}]")
 
 
 @dataclass(frozen=True)
@@ -87,7 +95,7 @@ class Lens:
     def __post_init__(self):
         if not self.surfaces:
             raise ValueError("a lens needs at least one surface")
-        for k, s in enumerate(self.surfaces):
+        for k, s in enumerate(self.surfaces, 1):  # counted as a prescription lists them
             _check_surface(k, s)
         if self.image_distance_mm is not None and not (math.isfinite(self.image_distance_mm)
                                                        and self.image_distance_mm >= 0):
@@ -98,7 +106,7 @@ class Lens:
             positions.append(z)
             z += s.thickness_mm
         object.__setattr__(self, "vertex_z_mm", tuple(positions))
-        for k, s in enumerate(self.surfaces):
+        for k, s in enumerate(self.surfaces, 1):
             if s.diameter_mm <= 0:
                 raise ValueError(f"surface {k}: diameter_mm {s.diameter_mm} must be > 0")
             c, h = s.curvature, 0.5 * s.diameter_mm

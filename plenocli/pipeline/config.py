@@ -40,15 +40,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_distinct
+from plenocli.io.yamlfile import DocumentError, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
 
 TOP_KEYS = ("description", "steps", "out")
 PER_CAPTURE = ("capture", "name")  # placeholders that make a step run once per capture
 _PLACEHOLDER = re.compile(r"\{(capture|name|out)\}")
+_ANY_PLACEHOLDER = re.compile(r"\{([A-Za-z_][A-Za-z0-9_]*)\}")
 
 
 @dataclass(frozen=True)
@@ -169,14 +169,22 @@ class Template:
 def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     """Read and check a config's structure; placeholders are kept (see :class:`Template`)."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise ConfigError(f"{p}: no such config file")
+    if not p.is_file():
+        raise ConfigError(f"{p}: not a regular file; give a YAML config file")
     try:
-        doc = yaml.load(p.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)  # noqa: S506
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{p}: not valid YAML (not UTF-8 text, byte {err.start})") from err
+    except OSError as err:
+        raise ConfigError(f"{p}: cannot read the config ({err.strerror})") from err
+    try:
+        doc = load_yaml(text, words=True)
+    except DocumentError as err:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
-                if _PLACEHOLDER.search(p.read_text(encoding="utf-8", errors="replace")) else "")
-        raise ConfigError(f"{p}: not valid YAML ({yaml_problem(err)}){hint}") from err
+                if _PLACEHOLDER.search(text) else "")
+        raise ConfigError(f"{p}: not valid YAML ({err}){hint}") from err
     if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict) or not doc["steps"]:
         raise ConfigError(f"{p}: a config needs a 'steps:' mapping of step names to stages")
     for key in doc:
@@ -197,37 +205,10 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
+    _check_placeholder_names(p, raw_steps)
     template = Template(p, raw_steps, out)
     _check_per_capture_outputs(template)
     return template
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing a key given twice in one mapping (PyYAML keeps the last
-    silently: a step or a parameter written twice would run with only one of them)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            if key_node.tag == "tag:yaml.org,2002:merge":
-                continue  # '<<: *base': the base's keys may be given again (YAML's merge)
-            key = self.construct_object(key_node, deep=True)
-            if not isinstance(key, (str, int, float, bool)):
-                continue  # an unhashable key: the base loader reports it
-            if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"key {key!r} is given twice in one mapping; keep one",
-                    key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-def yaml_problem(err: Exception) -> str:
-    """A YAML error in a few words: where and what (PyYAML's own text spans several lines)."""
-    mark = getattr(err, "problem_mark", None)
-    problem = getattr(err, "problem", None) or str(err)
-    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
-    return where + " ".join(str(problem).split())
 
 
 def _unflow(value):
@@ -236,6 +217,20 @@ def _unflow(value):
             and next(iter(value)) in ("capture", "name", "out")):
         return "{" + next(iter(value)) + "}"
     return value
+
+
+def _check_placeholder_names(path: Path, raw_steps: dict) -> None:
+    """A placeholder other than {capture}, {name}, {out} would be written literally into a
+    file name (a file named '{foo}.tif')."""
+    known = ("capture", "name", "out")
+    for name, body in raw_steps.items():
+        for key, value in body.items():
+            unknown = [w for v in _flat(value) if isinstance(v, str)
+                       for w in _ANY_PLACEHOLDER.findall(v) if w not in known]
+            if unknown:
+                raise ConfigError(f"{path}: step {name!r}: {key}: unknown placeholder "
+                                  f"{{{unknown[0]}}}{closest(unknown[0], known)}; the "
+                                  "placeholders are {capture}, {name} and {out}")
 
 
 def _placeholders(value) -> set[str]:
@@ -300,6 +295,12 @@ def _check_files(path: Path, steps: list[Step]) -> None:
     folders = {os.path.abspath(f): k for k, step in enumerate(steps)
                for f in step.stage.paths(step.params, step.stage.folder_outputs)}
     for key, k in writer.items():
+        under = [f for f in Path(key).parents if str(f) in writer and str(f) not in folders]
+        if under:
+            raise ConfigError(f"{path}: step {steps[k].name!r} writes {key} under {under[0]}, "
+                              f"the output file of step {steps[writer[str(under[0])]].name!r} "
+                              "(a file cannot hold a folder); write it elsewhere")
+    for key, k in writer.items():
         inside = [folders[str(f)] for f in Path(key).parents if folders.get(str(f), k) != k]
         if inside:
             raise ConfigError(f"{path}: step {steps[k].name!r} writes {key} inside the folder "
@@ -316,6 +317,9 @@ def _check_files(path: Path, steps: list[Step]) -> None:
 
 
 def _apply_overrides(path: Path, steps: dict, overrides) -> None:
+    """``--set STEP.PARAM=VALUE``: each replaces the config's key however it is spelled
+    (``save-gain`` or ``save_gain``); one parameter set twice is refused (which one holds?)."""
+    given: dict[tuple[str, str], str] = {}
     for item in overrides:
         target, sep, value = item.partition("=")
         step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
@@ -327,11 +331,18 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if param == "stage":
             raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
+        norm = param.replace("-", "_")
+        if (step, norm) in given:
+            raise ConfigError(f"--set {item!r}: {step}.{param} is already set by --set "
+                              f"{given[step, norm]!r}; keep one")
+        given[step, norm] = item
+        for key in [k for k in steps[step] if str(k).replace("-", "_") == norm]:
+            del steps[step][key]
         try:  # an empty value is the empty word, as --smooth= in the shell
-            steps[step][param] = _unflow(yaml.safe_load(value)) if value != "" else ""
-        except yaml.YAMLError as err:
-            raise ConfigError(f"--set {item!r}: the value is not valid YAML "
-                              f"({yaml_problem(err)}); quote it") from err
+            steps[step][param] = _unflow(load_yaml(value, words=True)) if value != "" else ""
+        except DocumentError as err:
+            raise ConfigError(f"--set {item!r}: the value is not valid YAML ({err}); "
+                              "quote it") from err
 
 
 def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> Step:
@@ -344,6 +355,9 @@ def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> S
     given: dict[str, Any] = {}
     for key, value in body.items():
         norm = str(key).replace("-", "_")
+        if norm in given:
+            raise ConfigError(f"{path}: step {name!r}: {norm.replace('_', '-')} is given twice "
+                              "(as KEY-NAME and KEY_NAME); keep one")
         if norm not in valid:
             options = [k.replace("_", "-") for k in valid]
             raise ConfigError(f"{path}: step {name!r}: unknown key {key!r} for stage "

@@ -24,6 +24,7 @@ from typing import Any
 
 from plenocli import __version__
 from plenocli.io.atomic import short_name, write_text
+from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe
 
 SUFFIX = ".plenocli.json"
@@ -81,7 +82,7 @@ def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Ro
 def read_record(output: str | os.PathLike) -> dict | None:
     """The record of ``output``, or None when there is none or it cannot be read."""
     try:
-        doc = json.loads(record_path(output).read_text(encoding="utf-8"))
+        doc = read_json(record_path(output))
     except (OSError, ValueError):
         return None
     shape = {"stage": str, "role": str, "parameters": dict, "inputs": dict, "output": dict}

@@ -6,7 +6,9 @@ declaration of its parameters, ``PARAMS`` in ``plenocli.pipeline.schema.<name>``
 and ``--set`` are resolved with it, and its roles say which parameters are files the stage
 reads or writes, which is what the make-style runner and the output checks need. A schema
 module may also define ``check(params)``: a check across parameters (ConfigError), run on
-the resolved parameters before the stage, whichever path they came from.
+the resolved parameters before the stage, whichever path they came from; and
+``shared_inputs(params)``: the pairs of input roles that may name one file (any other file
+given twice among the inputs is refused).
 """
 
 from __future__ import annotations
@@ -99,7 +101,8 @@ class Stage:
         stage succeeded (nothing is left behind otherwise), each output with its record.
         """
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
-        _check_listed_once(params, self.inputs)
+        shared = getattr(self.schema, "shared_inputs", None)
+        _check_inputs_apart(params, self.params, shared(params) if shared else ())
         check_kinds(self.name, self.by_role(params, self.inputs))
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
@@ -127,19 +130,43 @@ class Stage:
                                  self.by_role(params, self.outputs))
 
 
-def _check_listed_once(params: dict[str, Any], roles: tuple[str, ...]) -> None:
-    """A file listed twice in one list of inputs (e.g. one masked white given for two pupil
-    parts) is a mistake: it would be measured as two captures."""
-    for name in roles:
-        value = params.get(name)
-        if not isinstance(value, (list, tuple)):
+def _check_inputs_apart(params: dict[str, Any], declared: tuple[Param, ...],
+                        shared: tuple[tuple[str, str], ...] = ()) -> None:
+    """A file given twice among a stage's inputs, in one list (one masked white given for two
+    pupil parts: measured as two captures) or in two roles (``flat in.tif --white in.tif``: an
+    image flat-fielded by itself), as the same name, ``./name``, a symbolic or a hard link, is
+    a mistake; only the role pairs the schema's ``shared_inputs(params)`` lists may share one."""
+    seen: dict[tuple, tuple[Param, str]] = {}
+    for param in declared:
+        if param.role != "input" or params.get(param.name) is None:
             continue
-        seen: dict[str, str] = {}
-        for item in value:
-            key = os.path.realpath(item)
-            if key in seen:
-                raise InputError(f"{item} is given twice as {name.upper()}; give each file once")
-            seen[key] = item
+        value = params[param.name]
+        for item in value if isinstance(value, (list, tuple)) else [value]:
+            key = _identity(item)
+            if key not in seen:
+                seen[key] = (param, item)
+                continue
+            first, first_item = seen[key]
+            if first is param:
+                raise InputError(f"{item} is given twice as {param.name.upper()}; give each "
+                                 "file once")
+            if (first.name, param.name) not in shared and (param.name, first.name) not in shared:
+                same = "" if first_item == item else f" (the same file as {first_item})"
+                raise InputError(f"{item} is given as {_shown(param)}{same} and as "
+                                 f"{_shown(first)}; give each its own file")
+
+
+def _identity(path: str) -> tuple:
+    """What makes two names one file: device and inode when it exists (hard links too)."""
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return ("path", os.path.realpath(path))
+    return ("inode", st.st_dev, st.st_ino)
+
+
+def _shown(param: Param) -> str:
+    return param.name.upper() if param.positional else param.flags[-1]
 
 
 _STAGES = {name: Stage(name) for name in NAMES}

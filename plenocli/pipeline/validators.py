@@ -62,7 +62,7 @@ class Int(Validator):
 
     def convert(self, value: Any) -> int:
         if isinstance(value, int) and not isinstance(value, bool):
-            number = value
+            number = int(value)  # a plain int (a YAML number may print as its word, 010)
         else:
             try:
                 number = int(shell_text(value))

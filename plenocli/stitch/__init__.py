@@ -16,18 +16,22 @@ method on one page):
 - ``panorama``: :func:`stitch` and its :class:`StitchReport`.
 
 Both models work on high-passed images, so slow vignetting and gain differences do not pull the
-fit. Geometry convention: see :mod:`plenocli.stitch.views`.
+fit. Geometry convention: see :mod:`plenocli.stitch.views`. Views, a rig or a transform the
+stitch cannot vouch for raise :class:`StitchError` (a ValueError) with a one-line message.
 """
 
+from plenocli.model.rig import PrismRig, ViewOptics
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.homography import estimate_homography
 from plenocli.stitch.ncc import masked_ncc_surface, masked_ncc_window, search_shift
 from plenocli.stitch.panorama import StitchReport, stitch
 from plenocli.stitch.photometric import refine_homography
-from plenocli.stitch.rig import PrismRig, ViewOptics, common_to_view, view_to_common
+from plenocli.stitch.rig import common_to_view, view_to_common
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import BLENDS, LAYOUTS, MODELS, VIEW_NAMES, as_view_stack, undistort
 
-__all__ = ["BLENDS", "LAYOUTS", "MODELS", "VIEW_NAMES", "PrismRig", "StitchReport", "ViewOptics",
+__all__ = ["BLENDS", "LAYOUTS", "MODELS", "VIEW_NAMES", "PrismRig", "StitchError", "StitchReport",
+           "ViewOptics",
            "as_view_stack", "common_to_view", "estimate_homography", "estimate_translation",
            "masked_ncc_surface", "masked_ncc_window", "refine_homography", "search_shift",
            "stitch", "undistort", "view_to_common"]

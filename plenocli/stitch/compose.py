@@ -16,8 +16,9 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from plenocli.errors import InputError
 from plenocli.progress import step
+from plenocli.stitch.errors import StitchError
+from plenocli.stitch.kernels import accumulate
 from plenocli.stitch.quality import bounding_box, overlap_residual
 from plenocli.stitch.registration import difference_row
 from plenocli.stitch.views import translation_matrix
@@ -39,7 +40,7 @@ def place(frame_to_ref: list[np.ndarray], view_shape: tuple[int, int], *, k1: fl
     x1, y1 = np.floor(pts.max(axis=0) + COVER_EPS_PX)
     shape = (int(y1 - y0) + 1, int(x1 - x0) + 1)
     if shape[0] * shape[1] > 16 * view_shape[0] * view_shape[1] * len(maps):
-        raise InputError(f"the transforms spread the views over {shape[1]} x {shape[0]} px; the "
+        raise StitchError(f"the transforms spread the views over {shape[1]} x {shape[0]} px; the "
                          "registration failed (views without a true overlap?)")
     offset = translation_matrix(-y0, -x0)
     back = np.linalg.inv(offset)
@@ -140,29 +141,34 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
     edge.
 
     The maps of a band are computed here while worker threads resample the bands before it
-    (numpy and OpenCV release the GIL); the bands are added in their order, so the sums are
-    those of a serial loop."""
+    (numpy, OpenCV and the compiled kernels release the GIL); the bands are weighted and added
+    in their order by one compiled pass, so the sums are those of a serial loop."""
     n_chan = views[0].shape[0]
     panorama = np.zeros((n_chan,) + shape, np.float32)
     total = np.zeros(shape, np.float32)
     pending: deque = deque()
 
     def add_oldest() -> None:
-        rows, cols, job = pending.popleft()
+        rows, cols, gain, job = pending.popleft()
         img, weight = job.result()
-        panorama[:, rows, cols] += img
-        total[rows, cols] += weight
+        accumulate(panorama[:, rows, cols], total[rows, cols], img, weight, gain,
+                   bool((gain != 1).any()))
 
     with ThreadPoolExecutor(max_workers=BLEND_WORKERS) as pool:
         for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
-            gain = gains[k].astype(np.float32)[:, None, None]
+            gain = gains[k].astype(np.float32)
             n_bands = vmap.n_bands(box)
             for j, (band, mx, my, lost) in enumerate(vmap.bands(box)):
                 step(f"warping view {k + 1} of {len(views)}, band {j + 1} of {n_bands}")
+                span = on_view(mx, my, lost, vmap.view_shape)
+                if span is None:
+                    continue
+                mx, my = mx[:, span], my[:, span]
+                lost = lost[:, span] if lost is not None else None
                 rows = slice(box[0].start + band.start, box[0].start + band.stop)
-                job = pool.submit(_weighted_band, view, mx, my, lost, vmap.view_shape,
-                                  holes[k], gain)
-                pending.append((rows, box[1], job))
+                cols = slice(box[1].start + span.start, box[1].start + span.stop)
+                job = pool.submit(_band, view, mx, my, lost, vmap.view_shape, holes[k])
+                pending.append((rows, cols, gain, job))
                 while len(pending) > BLEND_WORKERS:
                     add_oldest()
         while pending:
@@ -176,16 +182,23 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], ho
     return panorama, total
 
 
-def _weighted_band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape,
-                   hole, gain: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A band of a view resampled at its maps, times its gains and feather weight; the
-    weight."""
-    weight = feather(mx, my, view_shape, lost, hole)
-    img = resample(view, mx, my)
-    if (gain != 1).any():
-        img *= gain
-    img *= weight
-    return img, weight
+def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,
+            view_shape: tuple[int, int]) -> slice | None:
+    """The columns of a band whose maps reach the view (a source within a pixel of it, a ray
+    that gets through): only they can be covered; None when none does. A prism bends a view's
+    footprint, so its bands are narrower than its box (the demo rig's view A: 0.82 x)."""
+    rows, cols = view_shape
+    on = (mx >= -1) & (mx <= cols) & (my >= -1) & (my <= rows)
+    if lost is not None:
+        on &= ~lost
+    found = np.flatnonzero(on.any(axis=0))
+    return slice(int(found[0]), int(found[-1]) + 1) if found.size else None
+
+
+def _band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape,
+          hole) -> tuple[np.ndarray, np.ndarray]:
+    """A band of a view resampled at its maps, and its feather weight."""
+    return resample(view, mx, my), feather(mx, my, view_shape, lost, hole)
 
 
 def multiband_blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],

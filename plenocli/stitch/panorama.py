@@ -14,11 +14,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+from threadpoolctl import threadpool_limits
 
-from plenocli.errors import InputError
 from plenocli.progress import step
 from plenocli.stitch import compose
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
 from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
@@ -28,6 +28,7 @@ from plenocli.stitch.views import (
     LAYOUTS,
     MODELS,
     as_view_stack,
+    erode,
     fill_nan_channels,
     highpass,
     luminance,
@@ -73,6 +74,10 @@ class StitchReport:
     coverage_fraction: float
 
 
+# BLAS on one thread: the stitch's products are small or tall and thin (normal equations,
+# phase correlations), where OpenBLAS's second thread costs more than it gives on a shared
+# machine (the bench's 2 x 2 homography: a third less CPU and wall time)
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            model: str = "translation", distortion_k1: float = 0.0,
            transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
@@ -210,9 +215,9 @@ def _prism_hint(rig: PrismRig | None):
     """Without a rig, an overlap not found gets the way out for views seen through prisms."""
     try:
         yield
-    except InputError as err:
+    except StitchError as err:
         if rig is None and ("no reliable overlap" in str(err) or "no overlap" in str(err)):
-            raise InputError(f"{err}; views seen through prisms can hide their overlap (the "
+            raise StitchError(f"{err}; views seen through prisms can hide their overlap (the "
                              "prisms' distortion bends it): pass the rig (--rig RIG.yaml, see "
                              "configs/rigs/)") from err
         raise
@@ -226,7 +231,7 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
         along, size = (dx, frame_shape[1]) if direction == "h" else (dy, frame_shape[0])
         if not 0 < along < size:
             where = "right of" if direction == "h" else "below"
-            raise InputError(f"the rig puts view {b} {along:.0f} px from view {a} along the "
+            raise StitchError(f"the rig puts view {b} {along:.0f} px from view {a} along the "
                              f"layout {layout} (views {size} px long), so not {where} it with an "
                              "overlap; list the views in the rig's order (--views) or fix the "
                              "rig's prisms and pupils")
@@ -260,7 +265,7 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
         del total
     box = bounding_box(covered)
     if box is None:
-        raise InputError("the views cover no pixel of the panorama; check the transform")
+        raise StitchError("the views cover no pixel of the panorama; check the transform")
     if (box[0].stop - box[0].start, box[1].stop - box[1].start) != covered.shape:
         panorama, covered = panorama[(slice(None),) + box], covered[box]
         offset = translation_matrix(-box[0].start, -box[1].start) @ offset
@@ -272,14 +277,14 @@ def _check_fit(crops: list, pairs: list, min_correlation: float) -> None:
     for another rig or capture, or it lies."""
     for (a, b, _), crop in zip(pairs, crops, strict=True):
         if crop is None:
-            raise InputError(f"the transform places views {a} and {b} without an overlap; it "
+            raise StitchError(f"the transform places views {a} and {b} without an overlap; it "
                              "does not describe these views: register them again (without "
                              "--transform-in)")
         ha, hb = (highpass(np.where(crop[2], x.mean(axis=0), np.nan)) for x in crop[:2])
-        inner = ndimage.binary_erosion(crop[2], iterations=2)
+        inner = erode(crop[2], 2)
         corr = ncc(ha[inner], hb[inner]) if inner.sum() >= 64 else float("nan")
         if not corr >= min_correlation:
-            raise InputError(f"the transform does not fit these views: views {a} and {b} "
+            raise StitchError(f"the transform does not fit these views: views {a} and {b} "
                              f"correlate {corr:.2f} over the overlap it gives (at least "
                              f"{min_correlation}); register them again (without --transform-in)")
 
@@ -295,7 +300,7 @@ def _check_options(n_views: int, *, layout: str, model: str, blend: str,
     if layout != "auto" and layout not in LAYOUTS:
         raise ValueError(f"layout must be 'auto' or one of {sorted(LAYOUTS)}, got {layout!r}")
     if layout != "auto" and LAYOUTS[layout][0] * LAYOUTS[layout][1] != n_views:
-        raise InputError(f"layout {layout} needs {LAYOUTS[layout][0] * LAYOUTS[layout][1]} views, "
+        raise StitchError(f"layout {layout} needs {LAYOUTS[layout][0] * LAYOUTS[layout][1]} views, "
                          f"got {n_views}")
     if overlap is not None and not 0 < overlap < 1:
         raise ValueError(f"overlap must be in (0, 1), got {overlap}")
@@ -310,9 +315,9 @@ def _rig_of(rig: PrismRig | None, transform: dict | None, n_views: int) -> Prism
         try:
             rig = PrismRig.from_dict(transform["rig"])
         except ValueError as err:
-            raise InputError(f"the transform's rig is not valid ({err})") from err
+            raise StitchError(f"the transform's rig is not valid ({err})") from err
     if rig is not None and len(rig.views) != n_views:
-        raise InputError(f"the rig describes {len(rig.views)} views but {n_views} are "
+        raise StitchError(f"the rig describes {len(rig.views)} views but {n_views} are "
                          "given; list one rig view per input view, in order")
     return rig
 
@@ -323,7 +328,7 @@ def _rig_canvases(rig: PrismRig, shape: tuple[int, int], layout: str, n_views: i
     try:
         origins, size = canvases(rig, shape)
     except ValueError as err:
-        raise InputError(f"the rig does not fit these views: {err}") from err
+        raise StitchError(f"the rig does not fit these views: {err}") from err
     if layout == "auto":
         d = origins[1] - origins[0]
         layout = "2x2" if n_views == 4 else ("1x2" if abs(d[1]) >= abs(d[0]) else "2x1")

@@ -5,10 +5,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from plenocli.stitch.ncc import ncc
-from plenocli.stitch.views import highpass
+from plenocli.stitch.views import erode, highpass
 
 
 def aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray,
@@ -23,7 +22,7 @@ def aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray,
                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0.999
     if a is not None:
         cover &= np.isfinite(a)
-    cover = ndimage.binary_erosion(cover, iterations=2)
+    cover = erode(cover, 2)
     if cover.sum() < 64:
         return float("nan")
     return ncc(ha[cover], warped[cover])

@@ -6,8 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from plenocli.errors import InputError
 from plenocli.progress import step
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.homography import check_overlap, estimate_homography, features
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import LAYOUTS, corners_xy, neighbour_pairs, translation_matrix
@@ -70,13 +70,13 @@ def auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
         try:
             _, _, info = estimate_translation(luma[0], luma[1], direction=direction, prior=prior,
                                               tolerance_px=tol, **search)
-        except InputError as err:
+        except StitchError as err:
             errors.append(str(err))
             continue
         if info["correlation"] > best_corr:
             best, best_corr = layout, info["correlation"]
     if best is None:
-        raise InputError(f"no overlap found side by side nor one above the other ({errors[0]})")
+        raise StitchError(f"no overlap found side by side nor one above the other ({errors[0]})")
     return best
 
 
@@ -117,8 +117,8 @@ def _measure_pair(images, a: int, b: int, direction: str, model: str, search: di
         info["overlap_fraction"] = check_overlap(h, shape, direction, search["max_overlap"])
         info["homography"] = h.tolist()
         return h, info
-    except InputError as err:
-        raise InputError(f"views {a} and {b}: {err}") from err
+    except StitchError as err:
+        raise StitchError(f"views {a} and {b}: {err}") from err
 
 
 def _chain_homographies(measured: dict, n_views: int, shape: tuple[int, int]):
@@ -164,7 +164,7 @@ def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, mod
         advice = ("check that --rig or --overlap describes these views (the search looked "
                   "near the shifts they predict)") if guided else (
             "pass --rig or --overlap so the search looks near the expected shifts")
-        raise InputError(f"the pair registrations do not close around the 2 x 2 loop (closure "
+        raise StitchError(f"the pair registrations do not close around the 2 x 2 loop (closure "
                          f"{closure:.1f} px, at most {MAX_CLOSURE_PX:g}): one pair matched the "
                          f"wrong place; {advice}")
     return transforms, pair_info, closure
@@ -173,7 +173,7 @@ def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, mod
 def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model: str, *,
                     k1: float = 0.0, rig=None, frame_shape: tuple[int, int] | None = None,
                     max_overlap: float = 0.7):
-    """The view transforms and layout of a saved transform, refused (InputError, one line)
+    """The view transforms and layout of a saved transform, refused (StitchError, one line)
     unless it fits the views: its model, layout, view size, distortion and rig as given, finite
     matrices, view 0 the reference, and every neighbour pair overlapping along its direction
     by at most ``max_overlap`` (in ``frame_shape``: the rig's canvases, else the views)."""
@@ -184,34 +184,34 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
         view_shape = tuple(int(v) for v in transform["view_shape"])
         saved_k1 = float(transform.get("distortion_k1") or 0.0)
     except (KeyError, TypeError, ValueError, AttributeError) as err:
-        raise InputError(f"the transform is not a plenocli stitch transform (missing or bad "
+        raise StitchError(f"the transform is not a plenocli stitch transform (missing or bad "
                          f"{err}); save one with --transform-out") from err
     if layout not in LAYOUTS or LAYOUTS[layout][0] * LAYOUTS[layout][1] != len(mats):
-        raise InputError(f"the transform's layout {layout!r} does not fit its {len(mats)} view "
+        raise StitchError(f"the transform's layout {layout!r} does not fit its {len(mats)} view "
                          f"transforms; {again}")
     if len(mats) != n_views or any(m.shape != (3, 3) for m in mats):
-        raise InputError(f"the transform holds {len(mats)} view transforms for {n_views} views")
+        raise StitchError(f"the transform holds {len(mats)} view transforms for {n_views} views")
     if view_shape != tuple(shape):
-        raise InputError(f"the transform was made for views of {view_shape[-1]} x "
+        raise StitchError(f"the transform was made for views of {view_shape[-1]} x "
                          f"{view_shape[0]} px, these are {shape[1]} x {shape[0]}; {again}")
     if transform.get("model", model) != model:
-        raise InputError(f"the transform is a {transform.get('model')} model but --model is "
+        raise StitchError(f"the transform is a {transform.get('model')} model but --model is "
                          f"{model}; pass --model {transform.get('model')}")
     if saved_k1 != k1:
-        raise InputError(f"the transform was made with --distortion {saved_k1:g}, not {k1:g}; "
+        raise StitchError(f"the transform was made with --distortion {saved_k1:g}, not {k1:g}; "
                          f"pass --distortion {saved_k1:g} or {again}")
     saved_rig = transform.get("rig")
     if (saved_rig is None) != (rig is None) or (rig is not None and saved_rig != rig.to_dict()):
         made = "without a rig" if saved_rig is None else "with another rig than --rig gives"
-        raise InputError(f"the transform was made {made}; pass the rig it was made with or "
+        raise StitchError(f"the transform was made {made}; pass the rig it was made with or "
                          f"{again}")
     _check_matrices(mats, model, frame_shape or tuple(shape))
     for a, b, direction in neighbour_pairs(layout):
         h_ab = np.linalg.inv(mats[a]) @ mats[b]
         try:
             check_overlap(h_ab / h_ab[2, 2], frame_shape or tuple(shape), direction, max_overlap)
-        except InputError as err:
-            raise InputError(f"the transform does not fit these views (views {a} and {b}: "
+        except StitchError as err:
+            raise StitchError(f"the transform does not fit these views (views {a} and {b}: "
                              f"{err}); {again}") from err
     return mats, layout, "given"
 
@@ -221,19 +221,19 @@ def _check_matrices(mats: list[np.ndarray], model: str, shape: tuple[int, int]) 
     keep a view's corners within a view of where a shift would put them (no fold, no blow-up)."""
     if not all(np.isfinite(m).all() for m in mats) or not np.allclose(mats[0], np.eye(3),
                                                                       atol=1e-9):
-        raise InputError("the transform's matrices are not finite, or view 0's is not the "
+        raise StitchError("the transform's matrices are not finite, or view 0's is not the "
                          "identity; save a transform with --transform-out")
     corners = corners_xy(shape)
     for k, m in enumerate(mats[1:], 1):
         shift_only = np.allclose(m[:2, :2], np.eye(2), atol=0) and np.allclose(m[2], [0, 0, 1],
                                                                              atol=0)
         if model == "translation" and not shift_only:
-            raise InputError(f"the transform's view {k} is not a translation though its model "
+            raise StitchError(f"the transform's view {k} is not a translation though its model "
                              "says so; save a transform with --transform-out")
         moved = cv2.perspectiveTransform(corners, m / m[2, 2]).reshape(-1, 2)
         warp = moved - (corners.reshape(-1, 2) + [m[0, 2] / m[2, 2], m[1, 2] / m[2, 2]])
         if not np.isfinite(moved).all() or np.abs(warp).max() > 0.25 * max(shape) \
                 or np.linalg.det(m[:2, :2] / m[2, 2]) <= 0:
-            raise InputError(f"the transform's view {k} folds or stretches the view (corners "
+            raise StitchError(f"the transform's view {k} folds or stretches the view (corners "
                              f"moved {np.abs(warp).max():.0f} px past a shift); it does not "
                              "describe a rig of overlapping views: register them again")

@@ -27,152 +27,20 @@ inverse traces the ray back through the prism (exact, no iteration).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
+from plenocli.model.rig import PrismRig, ViewOptics
 from plenocli.optics import prism as optics_prism
+from plenocli.stitch.kernels import band_maps
 from plenocli.stitch.views import fill_nan_channels
 
 MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slows on thin bands)
 TRACE_BAND_PIXELS = 1 << 18  # rays traced at a time (float64 temporaries of a few tens of MB)
 MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
 MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
-
-
-@dataclass(frozen=True)
-class ViewOptics:
-    """One view of the rig: ``pupil`` = (sx, sy) the pupil part it sees (each -1, 0 or +1: the
-    half or quarter on that side, 0 = the whole extent on that axis); ``prism`` = (sx, sy) the
-    direction the prism over that part deviates towards (its thin edge), or None."""
-
-    pupil: tuple[int, int] = (0, 0)
-    prism: tuple[int, int] | None = None
-
-
-@dataclass(frozen=True)
-class PrismRig:
-    """Main lens + prisms at its stop. Lengths in mm, angles in degrees.
-
-    ``sensor_mm`` is the width of the sensor area a view images (the view's pixel pitch is
-    ``sensor_mm / cols``, so the rig holds for views of any resolution). ``aperture_mm`` sets the
-    pupil parts' centroids (parallax for a near object; 0 = rays through the pupil centre).
-    ``object_distance_mm`` = inf maps directions (scene at infinity).
-    """
-
-    focal_mm: float
-    sensor_mm: float
-    prism_n: float
-    prism_apex_deg: float
-    views: tuple[ViewOptics, ...] = field(default_factory=tuple)
-    aperture_mm: float = 0.0
-    object_distance_mm: float = math.inf
-
-    def __post_init__(self):
-        for name in ("focal_mm", "sensor_mm", "prism_n"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"rig {name} must be a positive number, got {value}")
-        if not 0 <= self.prism_apex_deg < 90:
-            raise ValueError(f"rig prism_apex_deg must be in [0, 90), got {self.prism_apex_deg}")
-        if not self.object_distance_mm > self.focal_mm:
-            raise ValueError(f"rig object_distance_mm {self.object_distance_mm} must exceed the "
-                             f"focal length {self.focal_mm}")
-        if self.aperture_mm < 0:
-            raise ValueError(f"rig aperture_mm must be >= 0, got {self.aperture_mm}")
-        for k, v in enumerate(self.views):
-            sides = list(v.pupil) + (list(v.prism) if v.prism is not None else [])
-            if len(v.pupil) != 2 or (v.prism is not None and len(v.prism) != 2) \
-                    or any(s not in (-1, 0, 1) for s in sides):
-                raise ValueError(f"rig view {k}: pupil and prism are [sx, sy] with -1, 0 or 1, "
-                                 f"got pupil {v.pupil}, prism {v.prism}")
-
-    @property
-    def image_distance_mm(self) -> float:
-        """D: the sensor's distance behind the thin lens (focused on the object plane)."""
-        return optics_prism.image_distance_mm(self.focal_mm, self.object_distance_mm)
-
-    def with_apex(self, apex_deg: float) -> PrismRig:
-        """The same rig with another prism apex angle (for fitting it to data)."""
-        return PrismRig(self.focal_mm, self.sensor_mm, self.prism_n, apex_deg, self.views,
-                        self.aperture_mm, self.object_distance_mm)
-
-    def to_dict(self) -> dict:
-        return {"focal_mm": self.focal_mm, "sensor_mm": self.sensor_mm,
-                "prism_n": self.prism_n, "prism_apex_deg": self.prism_apex_deg,
-                "aperture_mm": self.aperture_mm,
-                "object_distance_mm": (None if math.isinf(self.object_distance_mm)
-                                       else self.object_distance_mm),
-                "views": [{"pupil": list(v.pupil),
-                           "prism": list(v.prism) if v.prism is not None else None}
-                          for v in self.views]}
-
-    @classmethod
-    def from_dict(cls, data: dict) -> PrismRig:
-        """A rig from its dict (YAML/JSON; see :meth:`to_dict`). Raises ValueError naming the
-        missing, unknown or bad key."""
-        if not isinstance(data, dict):
-            raise ValueError("a rig is a mapping with focal_mm, sensor_mm, prism_n, "
-                             "prism_apex_deg and views")
-        unknown = sorted(set(map(str, data)) - RIG_KEYS)
-        if unknown:
-            raise ValueError(f"the rig has an unknown key {unknown[0]!r} (keys: "
-                             f"{', '.join(sorted(RIG_KEYS))})")
-        try:
-            views = tuple(ViewOptics(_sides(v, "pupil", (0, 0)), _sides(v, "prism", None))
-                          for v in data["views"])
-            dist = data.get("object_distance_mm")
-            rig = cls(_number(data, "focal_mm"), _number(data, "sensor_mm"),
-                      _number(data, "prism_n"), _number(data, "prism_apex_deg"), views,
-                      _number(data, "aperture_mm", 0.0),
-                      math.inf if dist is None else _number(data, "object_distance_mm"))
-        except KeyError as err:
-            raise ValueError(f"the rig has no {err.args[0]!r} key") from err
-        except TypeError as err:
-            raise ValueError(f"the rig has a malformed entry ({err})") from err
-        if rig.prism_n <= 1 or rig.prism_n > 4:
-            raise ValueError(f"rig prism_n {rig.prism_n} is not a glass's refractive index "
-                             "(1 < n <= 4)")
-        if not math.isfinite(rig.aperture_mm) or rig.aperture_mm > 2 * rig.focal_mm:
-            raise ValueError(f"rig aperture_mm {rig.aperture_mm} must be finite and at most "
-                             f"twice focal_mm (f/0.5)")
-        if len(set(rig.views)) != len(rig.views):
-            raise ValueError("two rig views have the same pupil part and prism: each view sees "
-                             "its own part of the pupil")
-        return rig
-
-
-RIG_KEYS = {"focal_mm", "sensor_mm", "prism_n", "prism_apex_deg", "aperture_mm",
-            "object_distance_mm", "views"}
-
-
-def _number(data: dict, key: str, default: float | None = None) -> float:
-    """A finite or infinite real number of the rig (NaN, text and booleans refused)."""
-    value = data.get(key, default) if default is not None else data[key]
-    if value is None and default is not None:
-        value = default
-    if isinstance(value, bool) or not isinstance(value, int | float) or math.isnan(value):
-        raise ValueError(f"rig {key} must be a number, got {value!r}")
-    return float(value)
-
-
-def _sides(view, key: str, default):
-    """A view's [sx, sy] entry: two of -1, 0, 1 (integers), or ``default`` when absent/null."""
-    if not isinstance(view, dict):
-        raise ValueError(f"a rig view is a mapping with pupil and prism, got {view!r}")
-    unknown = set(map(str, view)) - {"pupil", "prism"}
-    if unknown:
-        raise ValueError(f"a rig view has an unknown key {sorted(unknown)[0]!r} (keys: pupil, "
-                         "prism)")
-    value = view.get(key)
-    if value is None:
-        return default
-    if not isinstance(value, list | tuple) or len(value) != 2 or any(
-            isinstance(s, bool) or not isinstance(s, int) or s not in (-1, 0, 1) for s in value):
-        raise ValueError(f"rig view {key} is [sx, sy] with each -1, 0 or 1, got {value!r}")
-    return tuple(value)
 
 
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
@@ -204,7 +72,8 @@ def _through_prism(rig: PrismRig, view: int, x, y, shape: tuple[int, int], *,
     pix = rig.sensor_mm / cols
     s = np.stack([((np.asarray(x, np.float64) + 0.5) - cols / 2) * pix,
                   ((np.asarray(y, np.float64) + 0.5) - rows / 2) * pix], axis=-1).reshape(-1, 2)
-    z, dist = rig.object_distance_mm, rig.image_distance_mm
+    z = rig.object_distance_mm
+    dist = optics_prism.image_distance_mm(rig.focal_mm, z)
     hits = optics_prism.scene_hits(
         s, optics_prism.pupil_centroid_mm(rig.aperture_mm, v.pupil), image_distance_mm=dist,
         object_distance_mm=z, prism=(rig.prism_n, rig.prism_apex_deg), towards=v.prism,
@@ -260,19 +129,35 @@ def undistort_region(image: np.ndarray, rig: PrismRig, view: int, origin_xy: np.
                      region: tuple[int, int]) -> np.ndarray:
     """A (rows, cols) view in the common undistorted frame over a region of ``region`` =
     (rows', cols') pixels whose pixel (0, 0) is common pixel ``origin_xy`` (x, y): float32,
-    Lanczos-4, NaN where the view does not cover it."""
+    Lanczos-4, NaN where the view does not cover it. Only the part of the view the region's
+    maps reach (and the kernel's 4 px around it) is NaN-filled and read."""
     rows, cols = image.shape
-    valid = np.isfinite(image).astype(np.float32)
-    filled = fill_nan_channels(np.asarray(image, np.float32)[np.newaxis])[0]
-    out = np.empty(region, np.float32)
+    bands = []
+    lo, hi = np.array([cols, rows]), np.array([-1, -1])
     for band, mx, my, bad in _view_maps(rig, view, origin_xy, region, (rows, cols)):
+        # region pixels more than a pixel off the view come out NaN whatever is resampled
+        # there (they are pointed inside below: Lanczos-4's border path is slow)
+        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
+        if not off_view.all():
+            on_x, on_y = mx[~off_view], my[~off_view]
+            lo = np.minimum(lo, [np.floor(on_x.min()), np.floor(on_y.min())])
+            hi = np.maximum(hi, [np.floor(on_x.max()), np.floor(on_y.max())])
+        bands.append((band, mx, my, bad, off_view))
+    x0, y0 = np.maximum(lo.astype(int) - 4, 0)
+    x1, y1 = np.minimum(hi.astype(int) + 5, [cols, rows])
+    if x1 - x0 < 9 or y1 - y0 < 9:
+        x0, y0, x1, y1 = 0, 0, cols, rows
+    crop = np.asarray(image[y0:y1, x0:x1], np.float32)
+    valid = np.isfinite(crop).astype(np.float32)
+    filled = fill_nan_channels(crop[np.newaxis])[0]
+    out = np.empty(region, np.float32)
+    for band, mx, my, bad, off_view in bands:
+        # every pixel on the view reads within the crop (exact: integer shifts of the maps)
+        mx -= np.float32(x0)
+        my -= np.float32(y0)
         cover = cv2.remap(valid, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                           borderValue=0) > 0.999
         cover &= ~bad
-        # region pixels more than a pixel off the view come out NaN whatever is resampled
-        # there: pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its
-        # slow border path
-        off_view = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
         mx[off_view] = 4
         my[off_view] = 4
         warped = cv2.remap(filled, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
@@ -373,7 +258,8 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     nodes = [np.where(lost, np.nan, node) for node in nodes]
     rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
     first_x, weights_x = _cubic_weights(cols, pitch)
-    along_x = [sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)) for node in nodes]
+    along_x = [np.ascontiguousarray(sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)))
+               for node in nodes]
     del nodes
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
@@ -381,29 +267,15 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
         band = slice(r0, min(r0 + step, rows))
         first_y, weights_y = _cubic_weights(band.stop, pitch)
         first_y, weights_y = first_y[band], weights_y[band]
-        vx, vy = (_along_y(a, first_y, weights_y) for a in along_x)
-        exact = ~(np.isfinite(vx) & np.isfinite(vy)) | rough[first_y][:, first_x]
-        if exact.any():
+        shape_band = (band.stop - band.start, cols)
+        mx, my = np.empty(shape_band, np.float32), np.empty(shape_band, np.float32)
+        exact, bad = np.empty(shape_band, bool), np.zeros(shape_band, bool)
+        if band_maps(along_x[0], along_x[1], first_y, weights_y, first_x, rough, mx, my, exact):
             ys, xs = np.nonzero(exact)
             tx, ty = common_to_view(rig, view, gx[xs], ys + (r0 + origin_xy[1]), shape)
-            vx[ys, xs], vy[ys, xs] = tx, ty
-        bad = ~(np.isfinite(vx) & np.isfinite(vy))
-        yield (band, np.where(bad, -10, vx).astype(np.float32),
-               np.where(bad, -10, vy).astype(np.float32), bad)
-
-
-def _along_y(along_x: np.ndarray, first: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Rows of node values (nodes y, cols) interpolated to a band's rows (``first`` stencil node
-    and 4 weights per row, ``first`` non-decreasing): the rows sharing a stencil at once, from
-    node rows as they are (no gathered copies)."""
-    out = np.empty((len(first), along_x.shape[1]))
-    starts = np.flatnonzero(np.diff(first, prepend=first[0] - 1))
-    for lo, hi in zip(starts, np.append(starts[1:], len(first)), strict=True):
-        node, part = int(first[lo]), out[lo:hi]
-        np.multiply(weights[lo:hi, 0, None], along_x[node], out=part)
-        for j in range(1, 4):
-            part += weights[lo:hi, j, None] * along_x[node + j]
-    return out
+            bad[ys, xs] = ~(np.isfinite(tx) & np.isfinite(ty))
+            mx[ys, xs], my[ys, xs] = np.where(bad[ys, xs], -10, tx), np.where(bad[ys, xs], -10, ty)
+        yield band, mx, my, bad
 
 
 def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.ndarray,
@@ -417,7 +289,7 @@ def rig_axis_and_field(rig: PrismRig, view_shape: tuple[int, int], origins: np.n
     shift = -origins[0] + [offset[1, 2], offset[0, 2]]  # common -> panorama (view 0 reference)
     axis = np.array([(rows - 1) / 2, (cols - 1) / 2]) + shift
     pix = rig.sensor_mm / cols
-    dist = rig.image_distance_mm
+    dist = optics_prism.image_distance_mm(rig.focal_mm, rig.object_distance_mm)
     field_deg: dict = {"x": None, "y": None}
     for k in range(len(rig.views)):
         cx, cy = view_to_common(rig, k, np.array([(cols - 1) / 2]), np.array([(rows - 1) / 2]),

@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from plenocli.errors import InputError
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import search_highpassed
 from plenocli.stitch.photometric import match_photometry, refine_homography
 from plenocli.stitch.quality import aligned_correlation
@@ -42,13 +42,13 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     max_cross_px : largest shift across the stitching direction searched (default 10 % of the
         view's other side).
     min_correlation : below this normalised cross-correlation over the overlap the views are
-        declared not to overlap (``InputError``).
+        declared not to overlap (``StitchError``).
     prior : expected shift (dy, dx) px, e.g. from a rig model or an expected overlap; the
         search is then restricted to ``tolerance_px`` (default 5 % of the view, >= 8 px)
         around it instead of the whole range above.
     max_ambiguity : the best whole-overlap correlation elsewhere (outside 6 px of the match)
         must stay below this fraction of the match's, else the match is ambiguous (a periodic
-        scene, or too little overlap) and ``InputError`` is raised instead of a ghosted result.
+        scene, or too little overlap) and ``StitchError`` is raised instead of a ghosted result.
 
     Returns
     -------
@@ -69,7 +69,7 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
     ha, hb = highpass(a), highpass(b)
     for name, h in (("a", ha), ("b", hb)):
         if float(h.std()) <= 1e-6 * max(float(np.nanmax(np.abs(a))), 1e-12):
-            raise InputError(f"view {name} has no texture (flat image); stitching needs "
+            raise StitchError(f"view {name} has no texture (flat image); stitching needs "
                              "structure in the overlap")
     dy_range, dx_range, min_pixels = _search_ranges(
         a.shape, b.shape, max_overlap=max_overlap, min_overlap_px=min_overlap_px,
@@ -78,11 +78,11 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                                                dy_range=dy_range, dx_range=dx_range,
                                                min_pixels=min_pixels, exclusion_px=6)
     if best < min_correlation:
-        raise InputError(f"no reliable overlap found between the views (best normalised "
+        raise StitchError(f"no reliable overlap found between the views (best normalised "
                          f"correlation {best:.2f} < {min_correlation}); the views may not "
                          "overlap, or the overlap has no texture")
     if second >= max_ambiguity * best:
-        raise InputError(f"ambiguous overlap: shifts correlating {best:.2f} and {second:.2f} "
+        raise StitchError(f"ambiguous overlap: shifts correlating {best:.2f} and {second:.2f} "
                          "(a periodic scene?); give the expected overlap (--overlap) or the "
                          "rig (--rig)")
     ty, tx, method = _ecc_subpixel(a, b, dy0, dx0)
@@ -93,7 +93,7 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
             "overlap_fraction": float(overlap_px / a.shape[1]), "refinement": method,
             "runner_up_correlation": second}
     if not np.isfinite(correlation) or correlation < min_correlation:
-        raise InputError(f"no reliable overlap found between the views (best normalised "
+        raise StitchError(f"no reliable overlap found between the views (best normalised "
                          f"correlation {correlation:.2f} < {min_correlation}); the views may not "
                          "overlap, or the overlap has no texture")
     return float(dy), float(dx), info
@@ -123,7 +123,7 @@ def _search_ranges(shape_a: tuple[int, int], shape_b: tuple[int, int], *, max_ov
     dy_range = (max(dy_range[0], 1 - rows_b), min(dy_range[1], rows - 1))
     dx_range = (max(dx_range[0], 1 - cols_b), min(dx_range[1], cols - 1))
     if dy_range[1] < dy_range[0] or dx_range[1] < dx_range[0]:
-        raise InputError("the expected overlap lies outside the views; check --layout and "
+        raise StitchError("the expected overlap lies outside the views; check --layout and "
                          "--overlap")
     return dy_range, dx_range, min_pixels
 
@@ -134,7 +134,7 @@ def _ecc_subpixel(a: np.ndarray, b: np.ndarray, dy0: int, dx0: int) -> tuple[flo
     offset, and the raw views resample without the bias a high-pass would add."""
     crops = _overlap_crops(a, b, dy0, dx0)
     if crops is None:
-        raise InputError("no overlap found between the views; check the layout (--layout) and "
+        raise StitchError("no overlap found between the views; check the layout (--layout) and "
                          "that the views overlap")
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         return 0.0, 0.0, "template"

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from plenocli.errors import InputError
+from plenocli.stitch.errors import StitchError
 
 LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
 VIEW_NAMES = {"1x2": ("L", "R"), "2x1": ("T", "B"), "2x2": ("S00", "S01", "S10", "S11")}
@@ -49,16 +49,16 @@ def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray,
     else:
         arrays = [np.asarray(v) for v in views]
     if len(arrays) not in (2, 4):
-        raise InputError(f"stitch needs 2 or 4 views, got {len(arrays)}; select views with "
+        raise StitchError(f"stitch needs 2 or 4 views, got {len(arrays)}; select views with "
                          "--views (e.g. --views A,B)")
     first = arrays[0].shape
     for k, a in enumerate(arrays):
         if a.ndim not in (2, 3):
-            raise InputError(f"view {k} has shape {a.shape}; a view is (rows, cols) or "
+            raise StitchError(f"view {k} has shape {a.shape}; a view is (rows, cols) or "
                              "(channels, rows, cols)")
         if a.shape != first:
             what = "channel count" if a.ndim != len(first) or a.shape[-2:] == first[-2:] else "size"
-            raise InputError(f"view {k} has shape {a.shape} but view 0 has {first} (different "
+            raise StitchError(f"view {k} has shape {a.shape} but view 0 has {first} (different "
                              f"{what}); stitch needs views of one size and one channel count")
     colour = len(first) == 3
     if isinstance(views, np.ndarray) and views.dtype == np.float32:
@@ -68,7 +68,7 @@ def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray,
         for k, a in enumerate(arrays):
             stack[k] = a
     if min(stack.shape[-2:]) < 32:
-        raise InputError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
+        raise StitchError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
                          "register; need at least 32 x 32")
     return stack, colour
 
@@ -86,7 +86,9 @@ def luminance(stack: np.ndarray) -> np.ndarray:
                 for r0 in range(0, rows, step):
                     band = stack[k, :, r0:r0 + step]
                     out = luma[k, r0:r0 + step]
-                    np.add.reduce(band, axis=0, out=out)
+                    np.add(band[0], band[1], out=out)  # the channels in order, whatever
+                    for channel in band[2:]:  # their layout in memory (interleaved RGB too)
+                        out += channel
                     out *= np.float32(1.0 / n_chan)
                     if not np.isfinite(out).all():  # a channel without data: the others' mean
                         out[...] = np.nanmean(band, axis=0)
@@ -95,9 +97,9 @@ def luminance(stack: np.ndarray) -> np.ndarray:
     for k in range(len(luma)):
         lo, hi = np.fmin.reduce(luma[k], axis=None), np.fmax.reduce(luma[k], axis=None)
         if not np.isfinite(hi):
-            raise InputError(f"view {k} holds no data (all NaN)")
+            raise StitchError(f"view {k} holds no data (all NaN)")
         if lo == hi:
-            raise InputError(f"view {k} has no texture (constant image); stitching needs "
+            raise StitchError(f"view {k} has no texture (constant image); stitching needs "
                              "structure in the overlap")
     return luma
 
@@ -175,11 +177,19 @@ def highpass(image: np.ndarray) -> np.ndarray:
     return np.where(valid, img - blur, 0).astype(np.float32)
 
 
+def erode(mask: np.ndarray, iterations: int) -> np.ndarray:
+    """``scipy.ndimage.binary_erosion(mask, iterations=...)`` (the 4-neighbour cross, outside
+    the array False), by OpenCV: the same pixels, ten times faster."""
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    return cv2.erode(np.ascontiguousarray(mask).view(np.uint8), cross, iterations=iterations,
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
+
+
 def valid_eroded(view: np.ndarray) -> np.ndarray:
     """Pixels with data, eroded by 2 px (the view's border counts as no data)."""
     finite = np.isfinite(view)
     if not finite.all():
-        return ndimage.binary_erosion(finite, iterations=2)
+        return erode(finite, 2)
     finite[:2], finite[-2:], finite[:, :2], finite[:, -2:] = False, False, False, False
     return finite
 

@@ -111,7 +111,9 @@ def distort(x: np.ndarray, y: np.ndarray, k1: float, shape: tuple[int, int]):
 
 
 def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
-    """(C, h, w) float32: the view's channels (C, rows, cols; no NaN) at the maps (Lanczos-4)."""
+    """(C, h, w) float32: the view's channels (C, rows, cols; no NaN) at the maps (Lanczos-4).
+    Channels interleaved in memory (``np.moveaxis(rgb, -1, 0)`` of a (rows, cols, C) image) come
+    out interleaved too."""
     rows, cols = channels.shape[1:]
     # pixels more than a pixel off the view are not covered whatever is resampled there:
     # pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its slow border
@@ -119,6 +121,12 @@ def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray
     off = (mx < -1) | (mx > cols) | (my < -1) | (my > rows)
     if off.any():
         mx, my = np.where(off, np.float32(4), mx), np.where(off, np.float32(4), my)
+    pixels = np.moveaxis(channels, 0, -1)
+    if 1 < len(channels) <= 4 and pixels.flags.c_contiguous:
+        # channels interleaved in memory (a demosaiced view): one remap for all of them, each
+        # pixel's kernel weights computed once (about 0.8 x the time of a remap per plane)
+        out = cv2.remap(pixels, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        return np.moveaxis(out, -1, 0)
     out = np.empty((len(channels),) + mx.shape, np.float32)
     for c, channel in enumerate(channels):
         out[c] = cv2.remap(channel, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
@@ -150,7 +158,9 @@ def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.nda
 def holes_of(view: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """For a view (C, rows, cols) with no-data pixels: (valid as float32, distance (px) to the
     nearest no-data pixel); None when every pixel has data."""
-    valid = np.isfinite(view).all(axis=0)
+    valid = np.isfinite(view[0])
+    for channel in view[1:]:  # channel by channel: fast whatever their layout in memory
+        valid &= np.isfinite(channel)
     if valid.all():
         return None
     distance = cv2.distanceTransform(valid.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)

@@ -27,6 +27,7 @@ class Param:
     high: float = INF
     open_low: bool = False
     open_high: bool = False
+    text: bool = False  # names, kept as written: 00 is the quarter "00", not the number 0
 
     def contains(self, value: float) -> bool:
         above = value > self.low if self.open_low else value >= self.low
@@ -49,8 +50,9 @@ PARAMS: dict[str, Param] = {
     "cols": Param("sensor columns, pixels", 16),
     "size": Param("sensor side, pixels", 16),
     "view_shape": Param("[ROWS, COLS] of each view, pixels", 32),
-    "noise": Param("read noise, DN, or relative to the mean level", 0),
-    "noise_dn": Param("read noise, DN", 0),
+    # a read noise of more than the 16-bit range leaves nothing but noise in any capture
+    "noise": Param("read noise, DN, or relative to the mean level", 0, 65535),
+    "noise_dn": Param("read noise, DN", 0, 65535),
     "jitter_px": Param("random displacement of the lenses, pixels", 0),
     "edge_blur_px": Param("blur of the micro-image edges, pixels", 0),
     "crosstalk": Param("cross-talk ratio r", **_FRACTION),
@@ -66,12 +68,12 @@ PARAMS: dict[str, Param] = {
     "angle_deg": Param("lattice rotation, degrees", -180, 180),
     "no_prisms": Param("leave the prisms out"),
     "cross_mask": Param("cross mask in the stop"),
-    "cfa": Param("Bayer pattern"),
-    "lattice": Param("micro-lens lattice"),
-    "model": Param("view transform model"),
-    "open_halves": Param("open pupil halves"),
-    "open_quarters": Param("open pupil quarters"),
-    "scene": Param("scene"),
+    "cfa": Param("Bayer pattern", text=True),
+    "lattice": Param("micro-lens lattice", text=True),
+    "model": Param("view transform model", text=True),
+    "open_halves": Param("open pupil halves", text=True),
+    "open_quarters": Param("open pupil quarters", text=True),
+    "scene": Param("scene", text=True),
     "g": Param("refocus parameter g of the scene (negative: Galilean)", -100, 100),
     "distance_m": Param("distance of the plane, metres (0: placed by g)", 0),
     "disparities": Param("disparity of each band, pixels", -32, 32),
@@ -90,7 +92,46 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> No
                              f"{', '.join(accepted)}")
         _check_type(kind, key, value, accepted[key].default)
         _check_range(kind, key, value)
+        if key in RULES and value is not None:
+            problem = RULES[key](value)
+            if problem:
+                raise ValueError(f"simulate {kind}: {key} = {value!r}: {problem}")
     _check_size(kind, params)
+
+
+def _cfa(value) -> str | None:
+    from plenocli.model.cfa import check_pattern
+
+    try:
+        check_pattern(value)
+    except ValueError as err:
+        return str(err).removeprefix(f"cfa {value!r} ")
+    return None
+
+
+def _names(allowed: tuple[str, ...]):
+    def problem(value) -> str | None:
+        names = [n.strip() for n in str(value).split(",")]
+        if set(names) - set(allowed) or len(set(names)) != len(names):
+            return f"give distinct names from {', '.join(allowed)} separated by commas"
+        return None
+    return problem
+
+
+def _g(value) -> str | None:
+    # |g| <= 1 images no plane through the lenses (g = 1 is the lens plane itself); depth and
+    # refocus refuse it, so a truth there could never be measured
+    return "|g| must be > 1 (g = 1 is the micro-lens plane)" if abs(value) <= 1 else None
+
+
+# what a range cannot say: the choices of a text, the planes no camera images
+RULES: dict[str, Callable[[object], str | None]] = {
+    "cfa": _cfa,
+    "open_quarters": _names(("00", "01", "10", "11")),
+    "open_halves": _names(("A", "B")),
+    "g": _g,
+    "g_true": _g,
+}
 
 
 def _check_range(kind: str, key: str, value) -> None:

@@ -97,8 +97,9 @@ def test_start_and_lens_types_in_yaml_and_xml(tmp_path):
     # the scene's types differ in blur at every depth: no depth decides, so no types
     assert doc["lens_grid"].get("lens_type_of_coset") is None
     assert doc["residuals"]["confidence"]["contrast"] > 0
-    types = {lt["id"]: lt["offset"] for lt in raytrix.read_calib(xml)["lens_types"]}
-    assert types[0] == [0.0, 0.0] and types[1] == [-v for v in types[2]]
+    # ... and the XML carries none either (a guessed type gives 2/3 of the lenses the wrong
+    # depth range)
+    assert raytrix.read_calib(xml)["lens_types"] == []
 
 
 def test_a_pitch_hint_the_image_contradicts_is_refused_in_one_line(tmp_path):

@@ -93,12 +93,16 @@ def test_more_refusals_leave_nothing(lenslet, tmp_path):
 
     out, foreign = tmp_path / "x.tif", tmp_path / "foreign.tif"
     tifffile.imwrite(foreign, np.full((60, 80), 4.0, np.float32))
+    other = tmp_path / "frames_copy.tif"  # frames given as a depth map: another file
+    other.write_bytes((lenslet / "frames.tif").read_bytes())
     cases = [
         (["depth", lenslet / "depth.tif", "-o", out], 1, "dual-pixel views A, B"),
         (["depth", lenslet / "frames.tif", "--camera", lenslet / "grid.yaml", "-o", out], 1,
          "needs lenslet frames and --grid"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
-          lenslet / "frames.tif", "-o", out], 1, "takes as depth the output of depth"),
+          other, "-o", out], 1, "takes as depth the output of depth"),
+        (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
+          lenslet / "frames.tif", "-o", out], 1, "give each its own file"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
           foreign, "--g", "2,3", "-o", out], 1, "not a sweep"),
     ]

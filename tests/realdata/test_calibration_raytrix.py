@@ -178,6 +178,35 @@ def test_r42_crop_right_or_refused(realdata):
     assert abs(grid.pitch_px / xml.pitch_px - 1) <= 0.0005
 
 
+def test_r42_crop_with_its_xml_is_right(realdata):
+    """The R42 crop is devignetted (no gaps, no vignetting): only where the content jumps
+    between micro-images shows the lattice. Its XML's pitch and rotation are confirmed by the
+    match judge (confidence 0.90, rivals at most 0.65; the match peaks within 0.1 % of the
+    XML's pitch) and kept; the lens centre is measured 2.8 px from the XML's (the crop is the
+    sensor's middle: the XML offset nearly applies; the holes are 20 px away)."""
+    image, xml = _frame(realdata, "r42_crop")
+    grid, report = calibration.calibrate(image, start=xml)
+    assert report.decision.judge == "match" and grid.pitch_px == xml.pitch_px
+    assert calibration.compare_grids(grid, xml, image.shape)["max_px"] <= 0.1 * xml.pitch_px
+    # another R42's XML (35.01 px, 0.4 % off: corner lenses 0.08 pitch out) is refused
+    other = realdata / "raytrix" / "xml_only" / "UnicornLinearCam__calib.xml"
+    start = raytrix.grid_from_calib(raytrix.read_calib(other), image.shape)
+    with pytest.raises(CalibrationError, match="best at a pitch -0.[3-6]"):
+        calibration.calibrate(image, start=start)
+
+
+
+def test_r42_crop_with_its_nominal_pitch_is_right(realdata):
+    """--pitch 34.86: the match judge measures pitch and rotation near the hint (the vertex
+    of its peak, twice) and the lens centre: 34.883 px (+0.05 % from the XML), 0.04 deg;
+    every lens within 0.1 pitch of the XML's lattice (measured max 3.4 px, the offset 2.9)."""
+    image, xml = _frame(realdata, "r42_crop")
+    grid, report = calibration.calibrate(image, pitch_hint=34.86)
+    assert report.decision.judge == "match" and report.lattice_from != calibration.KEPT
+    assert abs(grid.pitch_px / xml.pitch_px - 1) <= 0.003
+    assert calibration.compare_grids(grid, xml, image.shape)["max_px"] <= 0.1 * xml.pitch_px
+
+
 @pytest.mark.parametrize("name", ["origami", "fujita2"])
 def test_start_from_xml_lands_on_the_symmetry_centres(realdata, name):
     image, xml = _frame(realdata, name)

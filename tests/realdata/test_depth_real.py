@@ -43,10 +43,53 @@ def test_lenslet_depth_orders_near_and_far(realdata, tmp_path, name):
     g = data[meta["views"].index("g")]
     values = [_median(g, *xy) for xy in REGIONS[name].values()]
     assert values == sorted(values, reverse=True), dict(zip(REGIONS[name], values, strict=True))
-    assert values[0] - values[-1] > 1.5  # measured 3.1 (origami), 2.3 (fujita2)
+    assert values[0] - values[-1] > 1.5  # measured 3.0 (origami), 2.1 (fujita2)
     result = runner.invoke(cli, ["refocus", str(frames), "--grid", str(folder / "calib.xml"),
                                  "--depth", str(depth), "-o", str(aif)])
     assert result.exit_code == 0, result.output
+
+
+def test_galilean_boys2_faces_are_nearer_than_the_backdrop(realdata, tmp_path):
+    """Boys2 (Galilean: g < 0, nearer = less negative) with the grid `calibrate` finds with no
+    hint: both faces (left (265, 165), right (550, 160)) lie in front of the backdrop right of
+    the right boy ((750, 250), (720, 130)); measured -4.13, -4.17 against -4.39, -4.40. The
+    scene spans little depth: the left backdrop measures like the faces (-4.18) and the teddy
+    like the hoodie behind it, so only this ordering is checked (docs/depth.md)."""
+    folder = realdata / "raytrix" / "boys2_galilean"
+    frames, grid, depth = tmp_path / "f.tif", tmp_path / "g.yaml", tmp_path / "d.tif"
+    runner = CliRunner()
+    for args in (["decode", str(folder / "frame0.png"), "-o", str(frames)],
+                 ["calibrate", str(frames), "-o", str(grid)],
+                 ["depth", str(frames), "--grid", str(grid), "--g", "-8:-2", "-o", str(depth)]):
+        result = runner.invoke(cli, args)
+        assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(depth)
+    g = data[meta["views"].index("g")]
+    faces = [_median(g, *xy) for xy in ((265, 165), (550, 160))]
+    backdrop = [_median(g, *xy) for xy in ((750, 250), (720, 130))]
+    assert min(faces) > max(backdrop) + 0.1, (faces, backdrop)
+
+
+def test_r42_crop_band_in_front_of_the_knit(realdata, tmp_path):
+    """The R42 crop with the grid `calibrate --start sc2_klein.xml` gives (pitch and rotation
+    of the XML, lens centre measured; types kept: each lens matched against its own type):
+    the blue band ((62, 75), (120, 105) on the 193 x 134 map) covers the knitted fabric
+    ((112, 57), (60, 25)), so it is nearer; measured g 6.3-6.4 against 5.1-5.2. The green
+    surface top right measures like the knit (5.2-5.3: the knit lies on it): not checked."""
+    folder = realdata / "raytrix" / "r42_crop"
+    frames, grid, depth = tmp_path / "f.tif", tmp_path / "g.yaml", tmp_path / "d.tif"
+    runner = CliRunner()
+    for args in (["decode", str(folder / "sc2_klein.png"), "-o", str(frames)],
+                 ["calibrate", str(frames), "-o", str(grid), "--start",
+                  str(folder / "sc2_klein.xml")],
+                 ["depth", str(frames), "--grid", str(grid), "--g", "2:12", "-o", str(depth)]):
+        result = runner.invoke(cli, args)
+        assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(depth)
+    g = data[meta["views"].index("g")]
+    band = [_median(g, x, y, 6) for x, y in ((62, 75), (120, 105))]
+    knit = [_median(g, x, y, 6) for x, y in ((112, 57), (60, 25))]
+    assert min(band) > max(knit) + 0.5, (band, knit)
 
 
 def test_pixel4_disparity_grows_away_from_the_focused_label(realdata):

@@ -20,3 +20,9 @@ PARAMS = (
           "XML).", role="input"),
     PREVIEW,
 )
+
+
+def shared_inputs(params) -> tuple[tuple[str, str], ...]:
+    """The grid a calibration starts from may be the one it is compared with (how far the
+    calibration moved it)."""
+    return (("start", "compare"),)

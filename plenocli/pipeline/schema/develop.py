@@ -62,3 +62,8 @@ PARAMS = (
           "TIFF (R, G, B pages).", role="output"),
     PREVIEW,
 )
+
+
+def shared_inputs(params) -> tuple[tuple[str, str], ...]:
+    """One white image may give both the white balance and the highlight recovery."""
+    return (("wb_from", "recover_highlights"),)

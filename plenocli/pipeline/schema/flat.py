@@ -22,3 +22,10 @@ PARAMS = (
           role="output"),
     PREVIEW,
 )
+
+
+def shared_inputs(params) -> tuple[tuple[str, str], ...]:
+    """A white image flat-fielded by itself only makes sense to make its gain (--save-gain; the
+    output then shows how flat the white came out): without it, one file as the frames and the
+    white is a mistake."""
+    return (("input", "white"),) if params.get("save_gain") else ()

@@ -37,10 +37,14 @@ PARAMS = (
           multiple=True, metavar="KEY=VALUE"),
 )
 
+OWN_OPTIONS = tuple(p.name for p in PARAMS if p.name not in ("kind", "output", "param"))
+
 
 def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
-    """The keyword arguments of the kind's generator that ``params`` ask for."""
-    import yaml
+    """The keyword arguments of the kind's generator that ``params`` ask for; a value given
+    twice (a key repeated, or one that has its own option) is refused: one would be dropped."""
+    from plenocli.io.yamlfile import DocumentError, load_yaml
+    from plenocli.synth.params import PARAMS as SYNTH_PARAMS
 
     kwargs: dict[str, Any] = {"seed": params["seed"]}
     pixels = params.get("pixels")
@@ -52,13 +56,23 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
         kwargs["rays"] = params["rays"]
     if params.get("no_prisms"):
         kwargs["no_prisms"] = True
+    given: dict[str, Any] = {}
     for item in params.get("param", ()):
         key, _, value = item.partition("=")
+        name = key.strip().replace("-", "_")
+        if name in OWN_OPTIONS:
+            raise ConfigError(f"--param {item!r}: {name} has its own option; give "
+                              f"--{name.replace('_', '-')} instead")
+        if name in given:
+            raise ConfigError(f"--param {item!r}: {name} is given twice; keep one")
         try:
-            kwargs[key.strip().replace("-", "_")] = yaml.safe_load(value)
-        except yaml.YAMLError as err:
-            raise ConfigError(f"--param {item!r}: the value is not valid YAML; quote it") \
-                from err
+            parsed = load_yaml(value)
+            text = name in SYNTH_PARAMS and SYNTH_PARAMS[name].text
+            kwargs[name] = given[name] = value.strip() if text and not isinstance(
+                parsed, str) else parsed
+        except DocumentError as err:
+            raise ConfigError(f"--param {item!r}: the value is not valid YAML ({err}); "
+                              "quote it") from err
     return kwargs
 
 

@@ -85,6 +85,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
             extra["moved_from_start"]["kept"] = (
                 "lens_border, tcp, distortion, lens types' depth ranges and k_matrix of the "
                 "start file (in --xml)" if xml else "nothing (no --xml written)")
+            extra["moved_from_start"]["lens_types"] = (report.lens_types or {}).get(
+                "source") or (report.lens_types or {}).get("start_types") or "none in the file"
     if other is not None:
         extra["compare"] = {"grid": str(compare),
                             **calibration.compare_grids(grid, other, image.shape)}
@@ -103,6 +105,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
                            protect=protect)
     fit = report.fit
     centres = (f"residual RMS {fit.residual_rms_px:.4f} px" if fit.centres_refined else
+               "centres from the start's lattice on the lens centre the match judge measured"
+               if report.lattice_from == calibration.KEPT else
                f"a scene: centres from the lattice of {report.lattice_from} (pitch "
                f"+-{fit.pitch_se_px:.4f} px); "
                f"the content moves the micro-images' own centres by {fit.residual_rms_px:.2f} "
@@ -115,9 +119,9 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         log.info("calibrate: lattice decided by the %s", report.decision.describe())
     if first is not None:
         m = extra["moved_from_start"]
-        log.info("moved from the start grid: offset (%.3f, %.3f) px, pitch %+.4f px, rotation "
-                 "%+.4f deg, all measured (%s)", *m["offset"]["moved_px"], m["pitch"]["moved_px"],
-                 m["rotation"]["moved_deg"], report.lattice_from)
+        log.info("moved from the start grid: offset (%.3f, %.3f) px (measured), pitch %+.4f "
+                 "px, rotation %+.4f deg (%s)", *m["offset"]["moved_px"], m["pitch"]["moved_px"],
+                 m["rotation"]["moved_deg"], m["pitch"]["source"])
     for key in ("moved_from_start", "compare"):
         if key in extra:
             c = extra[key]

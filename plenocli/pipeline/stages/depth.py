@@ -91,14 +91,13 @@ def _check_known(values, searched: str) -> None:
 
 
 def _camera(path: str) -> metric.Camera:
-    import yaml
+    from plenocli.io.yamlfile import DocumentError, read_yaml
 
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = yaml.safe_load(fh)
+        doc = read_yaml(path)
     except FileNotFoundError as err:
         raise InputError(f"{path}: no such camera file") from err
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+    except (OSError, DocumentError) as err:
         raise InputError(f"{path}: not a readable YAML camera file ({err})") from err
     try:
         return metric.camera_from_dict(doc)

@@ -85,6 +85,12 @@ def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:
                          f"{views.shape[2]}x{views.shape[1]}; use a {what} processed with the "
                          "same bias/crop settings")
     if ref_meta.get("cfa") != meta.get("cfa"):
+        for file, cfa, other, other_cfa in ((path, meta.get("cfa"), ref_path, ref_meta.get("cfa")),
+                                            (ref_path, ref_meta.get("cfa"), path, meta.get("cfa"))):
+            if cfa is None:  # the file without one is the odd one: no or damaged plenocli metadata
+                raise InputError(f"{file}: no CFA in its plenocli metadata (not a plenocli TIFF, "
+                                 f"or its description was lost) but {other} has {other_cfa}; "
+                                 "use the output of plenocli bias")
         raise InputError(f"{ref_path}: {what} has CFA {ref_meta.get('cfa')} but {path} has "
                          f"{meta.get('cfa')}; they must come from the same sensor and crop")
     if ref_meta.get("origin", [0, 0]) != meta.get("origin", [0, 0]):

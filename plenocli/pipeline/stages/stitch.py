@@ -26,12 +26,14 @@ from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.framing import active_area
 from plenocli.io.preview import write_png
+from plenocli.io.rigfile import read_rig
+from plenocli.io.transformfile import read_transform, write_transform
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import CHANNELS, ViewNames
 from plenocli.progress import log, shown
-from plenocli.stitch import PrismRig
+from plenocli.stitch import verify
 
 
 def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
@@ -45,9 +47,10 @@ def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
 
 
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
-    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32, their names, whether
-    any was a Bayer mosaic (demosaiced at full resolution), and the first file's metadata.
-    Only the views wanted are demosaiced, one at a time, straight into the stack."""
+    """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32 (colour channels
+    interleaved in memory), their names, whether any was a Bayer mosaic (demosaiced at full
+    resolution), and the first file's metadata. Only the views wanted are demosaiced, one at a
+    time, straight into the stack."""
     found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
@@ -78,7 +81,12 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
                             for (n, _), shape in zip(found, shapes, strict=True))
         raise InputError(f"the views differ in size or colour channels ({listing}); stitch "
                          "views of one capture, processed the same way")
-    stack = np.empty((len(found),) + shapes[0], np.float32)
+    if len(shapes[0]) == 3:  # colour: channels interleaved (as demosaiced), so the stitch
+        # resamples each pixel's channels in one pass
+        stack = np.moveaxis(np.empty((len(found),) + shapes[0][1:] + shapes[0][:1],
+                                     np.float32), -1, 1)
+    else:
+        stack = np.empty((len(found),) + shapes[0], np.float32)
     for k, (name, source) in enumerate(found):
         _fill_view(stack[k], name, *source)
     return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
@@ -103,8 +111,7 @@ def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: l
         rgb = camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
-    for c in range(3):
-        out[c] = rgb[..., c]
+    np.moveaxis(out, 0, -1)[...] = rgb
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
@@ -116,12 +123,19 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
-    transform = load_transform(transform_in, names) if transform_in else None
-    prism_rig = load_rig(rig) if rig else None
-    panorama, result = stitch_lib.stitch(stack, layout=layout, model=model,
-                                      distortion_k1=distortion, transform=transform, blend=blend,
-                                      rig=prism_rig, overlap=overlap,
-                                      overlap_tolerance=overlap_tolerance)
+    transform = read_transform(transform_in, names) if transform_in else None
+    named_after_files = names == [Path(p).stem for p in inputs]
+    if transform is not None:
+        _verified(verify.check_transform_names, transform, names, layout,
+                  named_after_files=named_after_files)
+    prism_rig = read_rig(rig) if rig else None
+    panorama, result = _verified(stitch_lib.stitch, stack, layout=layout, model=model,
+                                 distortion_k1=distortion, transform=transform, blend=blend,
+                                 rig=prism_rig, overlap=overlap,
+                                 overlap_tolerance=overlap_tolerance)
+    if transform_in or rig:  # a side file may make the panorama refused, never wrong
+        _verified(verify.check_alignment, stack, result,
+                  what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
     params = dict(views=views, layout=layout, model=model, distortion=distortion,
                   transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                   overlap_tolerance=overlap_tolerance)
@@ -141,16 +155,21 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
     if transform_out:
-        saved = {**rep["transform"], "views": names}
-        write_text(transform_out, json.dumps(json_safe({"transform": saved,
-                                                     "provenance": record}), indent=2),
-                   protect=protect)
+        write_transform(transform_out, rep["transform"], names, record, protect=protect)
     if preview:
         image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
         write_png(preview, image, protect=protect, colour=meta.get("colour"))
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1], _alignment(rep))
+
+
+def _verified(call, *args, **kwargs):
+    """``call``'s result; the library's ValueError (a refusal) as the one-line user error."""
+    try:
+        return call(*args, **kwargs)
+    except ValueError as err:
+        raise InputError(str(err)) from err
 
 
 def _alignment(rep: dict) -> str:
@@ -162,52 +181,3 @@ def _alignment(rep: dict) -> str:
         return (f"loop closure {rep['closure_px']:.3f} px (overlaps too narrow for a "
                 "residual)")
     return "overlaps too narrow to measure a residual"
-
-
-def load_transform(path: str, names: list[str]) -> dict:
-    """A transform saved by ``--transform-out`` (the JSON, or its ``transform`` key), refused
-    unless it is a mapping, and, when it names its views, unless they are distinct names in the
-    order of these views (views named after other files are not compared)."""
-    file = Path(path)
-    if not file.is_file():
-        raise InputError(f"{file}: no such file (the --transform-in JSON)")
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
-                         "--transform-out") from err
-    transform = data.get("transform", data) if isinstance(data, dict) else None
-    if not isinstance(transform, dict):
-        raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "
-                         "--transform-out")
-    saved = transform.get("views")
-    if saved is not None:
-        if not isinstance(saved, list) or not all(isinstance(n, str) for n in saved) \
-                or len(set(saved)) != len(saved):
-            raise InputError(f"{file}: the transform's views must be distinct names, got "
-                             f"{saved!r}; save one with --transform-out")
-        if saved != names and set(saved) & set(names):  # other names: other files, can't tell
-            raise InputError(f"{file}: the transform was made for views {','.join(saved)}, "
-                             f"these are {','.join(names)}; pass --views {','.join(saved)} or "
-                             "register them again (without --transform-in)")
-    return transform
-
-
-def load_rig(path: str) -> PrismRig:
-    """A prism rig from a YAML or JSON file (keys of :meth:`PrismRig.to_dict`; a ``rig`` key
-    holding them is also accepted, e.g. a stitch report)."""
-    import yaml
-
-    file = Path(path)
-    if not file.is_file():
-        raise InputError(f"{file}: no such file (the --rig YAML)")
-    try:
-        data = yaml.safe_load(file.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        raise InputError(f"{file}: not a YAML rig ({err})") from err
-    if isinstance(data, dict) and isinstance(data.get("rig"), dict):
-        data = data["rig"]
-    try:
-        return PrismRig.from_dict(data)
-    except ValueError as err:
-        raise InputError(f"{file}: {err}; see configs/rigs/ for examples") from err

@@ -1,0 +1,245 @@
+"""The third judge: neighbouring micro-images repeat each other's content at one shift.
+
+A scene point at virtual depth g lies in neighbouring micro-images at offsets that differ by
+their baseline times q = 1 / g (docs/depth.md): on the lens lattice, centred on the lens
+centres, each micro-image matches its first ring at one q, far better than at any other
+(``plenocli.depth.lenslet.lens_depth``: confidence 1 - best / median cost). Nothing else does:
+
+- a lattice off in pitch or angle (so that the crop's corners move by half a pitch), or one
+  centred on the holes or edge midpoints, cuts "micro-images" out of two or three real ones,
+  whose parts repeat at different shifts or not at all;
+- a relative (x2, /2, x sqrt(3), / sqrt(3)) pairs micro-images that are not neighbours, or
+  parts of one micro-image with each other;
+- a scene periodicity (a fabric, a grille) repeats at one period everywhere, but the parallax
+  between micro-images follows their borders, not the scene's period.
+
+It needs texture (a white image matches at every q and confirms nothing: then it refuses) and
+nothing else: no dark gaps, no vignetting, no sharp borders. A devignetted ("processed")
+frame, whose micro-images tile without gaps and whose only trace of the lattice is where the
+content jumps between neighbours, is judged by it as well as any other (the R42 crop:
+confidence 0.89 on its lattice, at most 0.80 elsewhere, docs/calibrate.md).
+
+It is the costliest judge (a depth match per lattice and centre, about 0.1 s each on a
+16 px-pitch view of a 1024 px crop), so it is asked last, only when a hint is given (a start
+grid, whose pitch and angle it may keep, or a pitch, near which it measures them) and the
+other two judges cannot vouch for a lattice.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+
+from plenocli.calibration.candidates import Lattice
+from plenocli.calibration.centres import lens_centre
+from plenocli.calibration.flatten import border_signal, flatten
+from plenocli.model.lensgrid import LensGrid
+
+MATCH_SIDE_PX = 1024   # side of the central crop matched (full-image px)
+MATCH_PITCH_PX = 16.0  # the crop is reduced to at most this pitch (g is scale-free)
+RESIDUAL_RATIO = 2.0   # a rival's residual (1 - confidence) over the winner's, at least
+MIN_CONFIDENCE = 0.5   # the winner's median lens confidence, at least
+CORNER_SHARE = 0.05    # the kept pitch and angle place the image's corner lenses this close
+#                        (share of a pitch) to where the match peaks
+PEAK_REACH = 0.25      # the peak is placed from steps moving the corners by up to this share
+G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
+
+
+@dataclass(frozen=True)
+class MatchVerdict:
+    """The lattice and lens centre confirmed (None: none), the median lens confidence there,
+    the rivals with theirs, and why it refuses."""
+
+    lattice: Lattice | None
+    offset_xy: tuple[float, float] | None
+    confidence: float
+    rivals: tuple[tuple[str, float], ...] = field(default=())
+    reason: str | None = None
+    measured: bool = False     # pitch and angle measured (near a pitch hint), not given
+
+    def to_dict(self) -> dict:
+        return {"confidence": round(self.confidence, 4), "refused": self.reason,
+                "rivals": [{"lattice": name, "confidence": round(c, 4)}
+                           for name, c in self.rivals]}
+
+
+class Matcher:
+    """The central crop of an image, reduced per pitch, and the median lens confidence of a
+    lattice with a given lens centre on it."""
+
+    def __init__(self, image: np.ndarray):
+        rows, cols = image.shape
+        self.image_radius = float(np.hypot(rows, cols)) / 2
+        side_r, side_c = min(rows, MATCH_SIDE_PX), min(cols, MATCH_SIDE_PX)
+        self.r0, self.c0 = (rows - side_r) // 2, (cols - side_c) // 2
+        self.crop = np.ascontiguousarray(image[self.r0:self.r0 + side_r,
+                                               self.c0:self.c0 + side_c], np.float32)
+        self.radius = float(np.hypot(side_r, side_c)) / 2
+        self._views: dict[float, np.ndarray] = {}
+        self.ranges = G_RANGES    # the g ranges searched: both signs until one is settled
+
+    def _view(self, scale: float) -> np.ndarray:
+        if scale not in self._views:
+            self._views[scale] = self.crop if scale >= 1.0 else cv2.resize(
+                self.crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        return self._views[scale]
+
+    def confidence(self, lattice: Lattice, offset_xy: tuple[float, float]) -> float:
+        """Median lens confidence of ``lattice`` with a lens at ``offset_xy`` (full-image
+        px), the better of a Keplerian and a Galilean search; 0 where nothing can be matched."""
+        from plenocli.depth.lenslet import lens_depth
+
+        scale = round(min(1.0, MATCH_PITCH_PX / lattice.pitch_px), 4)
+        view = self._view(scale)
+        x = (offset_xy[0] - self.c0 + 0.5) * scale - 0.5
+        y = (offset_xy[1] - self.r0 + 0.5) * scale - 0.5
+        grid = LensGrid(lattice.pitch_px * scale, lattice.angle_rad, (x, y), lattice.kind,
+                        image_shape=view.shape)
+        best = 0.0
+        for bounds in self.ranges:
+            try:
+                found = lens_depth(view, grid, g_range=bounds)
+            except ValueError:   # too few or too small micro-images on this lattice
+                continue
+            best = max(best, float(np.median(found.confidence)))
+        return best
+
+    def settle_sign(self, lattice: Lattice, offset_xy: tuple[float, float]) -> None:
+        """Search only the sign of g (Keplerian or Galilean: the camera's, not a
+        hypothesis's) that matches best on ``lattice`` from now on: halves every match."""
+        scores = []
+        for bounds in G_RANGES:
+            self.ranges = (bounds,)
+            scores.append(self.confidence(lattice, offset_xy))
+        self.ranges = (G_RANGES[int(np.argmax(scores))],)
+
+
+def symmetry_points(lattice: Lattice, centre: tuple[float, float]) -> list[tuple[str, tuple]]:
+    """The points of a lattice cell that could be lens centres, from one of them: the point
+    itself, and (hex) the two triangle centres and three edge midpoints, (square) the cell
+    centre and two edge midpoints."""
+    b1, b2 = lattice.basis()
+    shifts = ({"": (0, 0), "hole": (1 / 3, 1 / 3), "hole'": (2 / 3, 2 / 3), "edge": (0.5, 0),
+               "edge'": (0, 0.5), "edge''": (0.5, 0.5)} if lattice.kind == "hex" else
+              {"": (0, 0), "hole": (0.5, 0.5), "edge": (0.5, 0), "edge'": (0, 0.5)})
+    return [(name, tuple(float(v) for v in np.asarray(centre) + a * b1 + b * b2))
+            for name, (a, b) in shifts.items()]
+
+
+def _best_point(matcher: Matcher, lattice: Lattice, centre) -> list[tuple[str, tuple, float]]:
+    """(name, offset, confidence) of each symmetry point, best first."""
+    scored = [(name, xy, matcher.confidence(lattice, xy))
+              for name, xy in symmetry_points(lattice, centre)]
+    return sorted(scored, key=lambda t: -t[2])
+
+
+def match_judge(image: np.ndarray, lattice: Lattice, others: list[Lattice], *,
+                matcher: Matcher | None = None) -> MatchVerdict:
+    """Whether the micro-images of ``image`` repeat each other's content on ``lattice`` (a
+    start grid's, pitch and angle as given) and at which of its symmetry points the lenses
+    are centred; refused unless that beats every other symmetry point, the lattice's
+    relatives, its copies detuned so that the image's corners move by half a pitch, and
+    ``others`` (unrelated lattices the image proposes) by RESIDUAL_RATIO in residual
+    (1 - confidence), and unless the match peaks at the start's pitch and angle (its corner
+    lenses within CORNER_SHARE of a pitch: a kept pitch must be as good as a measured one)."""
+    matcher = matcher or Matcher(image)
+    matcher.ranges = G_RANGES
+    offset, confidence, rivals = _centred(matcher, lattice)
+    matcher.settle_sign(lattice, offset)
+    turn, root = (np.pi / 6, np.sqrt(3)) if lattice.kind == "hex" else (np.pi / 4, np.sqrt(2))
+    for relative in (lattice.scaled(2), lattice.scaled(0.5), lattice.scaled(root, turn),
+                     lattice.scaled(1 / root, turn)):   # the lens is a lattice point of each
+        rivals.append((relative.describe(), matcher.confidence(relative, offset)))
+    for other in others[:3]:
+        rivals.append((other.describe(), _best_point(matcher, other, offset)[0][2]))
+    shift = 0.5 * lattice.pitch_px / matcher.image_radius   # the image's corners move by half
+    for detuned in (lattice.scaled(1 - shift), lattice.scaled(1 + shift),   # a lens (not only
+                    lattice.scaled(1.0, -shift), lattice.scaled(1.0, shift)):   # the crop's)
+        rivals.append((f"{detuned.describe()} (detuned)", matcher.confidence(detuned, offset)))
+    rivals.sort(key=lambda t: -t[1])
+    reason = None
+    if confidence < MIN_CONFIDENCE:
+        reason = (f"its micro-images do not repeat each other's content (median confidence "
+                  f"{confidence:.2f})")
+    elif 1 - rivals[0][1] < RESIDUAL_RATIO * (1 - confidence):
+        reason = (f"its micro-images repeat each other's content (confidence {confidence:.2f}), "
+                  f"but nearly as well on {rivals[0][0]} ({rivals[0][1]:.2f})")
+    else:
+        reason = _off_peak(matcher, lattice, offset, confidence)
+    if reason:
+        return MatchVerdict(None, None, confidence, tuple(rivals[:3]), reason)
+    return MatchVerdict(lattice, offset, confidence, tuple(rivals[:3]))
+
+
+def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
+    """The lens centre of ``lattice`` among the symmetry points of the crop's mean border
+    micro-image (the point nearest the crop's middle), its confidence, and the other points
+    as rivals."""
+    flat = flatten(matcher.crop, scale_px=max(2 * lattice.pitch_px, 16.0))
+    rows, cols = flat.shape
+    middle = LensGrid(lattice.pitch_px, lattice.angle_rad, ((cols - 1) / 2, (rows - 1) / 2),
+                      lattice.kind)
+    x, y = lens_centre(border_signal(flat), middle).offset_xy
+    points = _best_point(matcher, lattice, (x + matcher.c0, y + matcher.r0))
+    name, offset, confidence = points[0]
+    rivals = [(f"{lattice.describe()} centred on its {n}", c) for n, _, c in points[1:]]
+    return offset, confidence, rivals
+
+
+def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
+              ) -> tuple[float, float, float]:
+    """Where the match peaks around ``lattice``: the vertices (relative pitch change, angle
+    change in rad; inf where the curve does not bend down) of parabolas (least squares)
+    through the confidence at steps that move the image's corners by up to PEAK_REACH of a
+    pitch either side (the top of the curve is flat over about a third of a pitch at the
+    corners: only its sides place it), and the step that moves them by CORNER_SHARE."""
+    step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
+    at = np.linspace(-1.0, 1.0, 5) * PEAK_REACH / CORNER_SHARE * step
+    out = []
+    for move in (lambda d: lattice.scaled(1 + d), lambda d: lattice.scaled(1.0, d)):
+        values = [confidence if d == 0 else matcher.confidence(move(d), offset) for d in at]
+        curve, slope, _ = np.polyfit(at, values, 2)
+        out.append(-slope / (2 * curve) if curve < 0 else np.inf)
+    return out[0], out[1], step
+
+
+def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
+    """Why the match does not peak at the lattice's pitch and angle (a vertex of
+    :func:`_vertices` beyond CORNER_SHARE of a pitch at the corners), or None."""
+    pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
+    for what, vertex, unit in (("pitch", pitch, "%"), ("rotation", angle, "deg")):
+        if not abs(vertex) <= step:
+            value = vertex * (100.0 if unit == "%" else 180 / np.pi)
+            where = (f"{value:+.2f} {unit} from the given one" if np.isfinite(vertex)
+                     else "nowhere near the given one")
+            return (f"its micro-images repeat each other's content (confidence "
+                    f"{confidence:.2f}), best at a {what} {where}")
+    return None
+
+
+def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lattice]
+                  ) -> MatchVerdict:
+    """The match judge where only a pitch is hinted: each candidate lattice (near the hint)
+    is moved to where the match peaks (twice: pitch and angle to the parabolas' vertices,
+    each move at most PEAK_REACH of a pitch at the corners), then judged as a start would be
+    (:func:`match_judge`); the first confirmed, else the first candidate's refusal."""
+    matcher = Matcher(image)
+    first = None
+    for lattice in candidates[:3]:
+        matcher.ranges = G_RANGES
+        for _ in range(2):
+            offset, confidence, _ = _centred(matcher, lattice)
+            matcher.settle_sign(lattice, offset)
+            pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
+            reach = PEAK_REACH / CORNER_SHARE * step
+            if not (np.isfinite(pitch) and np.isfinite(angle)):
+                break
+            lattice = lattice.scaled(1 + float(np.clip(pitch, -reach, reach)),
+                                     float(np.clip(angle, -reach, reach)))
+        found = match_judge(image, lattice, others, matcher=matcher)
+        if found.lattice is not None:
+            return replace(found, measured=True)
+        first = first or found
+    return first or MatchVerdict(None, None, 0.0, reason="no lattice near the hint")

@@ -1,0 +1,32 @@
+"""A prism rig file (``--rig RIG.yaml``): YAML or JSON with the keys of
+:meth:`plenocli.model.rig.PrismRig.to_dict` (or a ``rig`` key holding them, e.g. a stitch
+report), checked as the rig is made (known keys, numbers, a glass's index, an aperture of at
+most f/0.5, pupil and prism sides of -1, 0 or 1, no two views alike). Ready-made rigs:
+configs/rigs/."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from plenocli.errors import InputError
+from plenocli.io.yamlfile import load_yaml
+from plenocli.model.rig import PrismRig
+
+
+def read_rig(path: str | Path) -> PrismRig:
+    """The rig of a file, refused in one line naming the file and the key otherwise."""
+    import yaml
+
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"{file}: no such file (the --rig YAML)")
+    try:
+        data = load_yaml(file.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise InputError(f"{file}: not a YAML rig ({err})") from err
+    if isinstance(data, dict) and isinstance(data.get("rig"), dict):
+        data = data["rig"]
+    try:
+        return PrismRig.from_dict(data)
+    except ValueError as err:
+        raise InputError(f"{file}: {err}; see configs/rigs/ for examples") from err

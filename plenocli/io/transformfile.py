@@ -1,0 +1,52 @@
+"""A saved stitch transform (``--transform-out`` / ``--transform-in``): JSON ``{"transform":
+{model, layout, view_shape, distortion_k1, rig, views, view_to_reference}, "provenance"}``.
+Read, it is checked against the views it is given by name (distinct names, in the order of
+these views); the stitch then checks it against the views themselves (model, layout, size,
+rig, matrices, overlaps: :func:`plenocli.stitch.registration.check_transform`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from plenocli.errors import InputError
+from plenocli.io.atomic import write_text
+from plenocli.io.yamlfile import load_json
+from plenocli.model.provenance import json_safe
+
+
+def read_transform(path: str | Path, names: list[str]) -> dict:
+    """A transform saved by ``--transform-out`` (the JSON, or its ``transform`` key), refused
+    unless it is a mapping, and, when it names its views, unless they are distinct names in the
+    order of ``names`` (views named after other files are not compared)."""
+    file = Path(path)
+    if not file.is_file():
+        raise InputError(f"{file}: no such file (the --transform-in JSON)")
+    try:
+        data = load_json(file.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
+                         "--transform-out") from err
+    transform = data.get("transform", data) if isinstance(data, dict) else None
+    if not isinstance(transform, dict):
+        raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "
+                         "--transform-out")
+    saved = transform.get("views")
+    if saved is not None:
+        if not isinstance(saved, list) or not all(isinstance(n, str) for n in saved) \
+                or len(set(saved)) != len(saved):
+            raise InputError(f"{file}: the transform's views must be distinct names, got "
+                             f"{saved!r}; save one with --transform-out")
+        if saved != names and set(saved) & set(names):  # other names: other files, can't tell
+            raise InputError(f"{file}: the transform was made for views {','.join(saved)}, "
+                             f"these are {','.join(names)}; pass --views {','.join(saved)} or "
+                             "register them again (without --transform-in)")
+    return transform
+
+
+def write_transform(path: str | Path, transform: dict, names: list[str], record: dict, *,
+                    protect: tuple = ()) -> None:
+    """The transform of a stitch (its report's ``transform``) with the views' names and the
+    provenance ``record``."""
+    write_text(path, json.dumps(json_safe({"transform": {**transform, "views": names},
+                                           "provenance": record}), indent=2), protect=protect)

@@ -1,0 +1,177 @@
+"""The one reader of YAML and JSON text: configs, ``--set`` and ``--param`` values, side files.
+
+Scalars follow YAML 1.2's core schema in its decimal forms, which are the words a shell option
+takes: ``10``, ``010`` (ten, not YAML 1.1's octal eight), ``-3``, ``0.5``, ``1e30`` (a number,
+not YAML 1.1's text), ``.inf``, ``.nan``, ``true``/``false``, ``null``/``~``/empty.
+Everything else is text: ``2:6`` (not YAML 1.1's base-60 126), ``yes``/``on``, dates, ``0x10``
+and ``0o10`` (the shell's int() refuses them: left out of the core schema here so that both say
+the same); a validator then reads that text exactly as it reads the shell's word, so a value
+means the same wherever it is written. A key given twice in one mapping or object is refused
+(PyYAML and ``json`` keep the last one silently: a file would be read with one of two values
+it states).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from typing import Any
+
+import yaml
+
+_INT = re.compile(r"^[-+]?[0-9]+$")
+_FLOAT = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+                    r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
+_RESOLVERS = (  # (tag, pattern, first characters); the first match wins
+    ("bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), "tTfF"),
+    ("int", _INT, "-+0123456789"),
+    ("float", _FLOAT, "-+0123456789."),
+    ("null", re.compile(r"^(?:~|null|Null|NULL|)$"), ["~", "n", "N", ""]),
+    ("merge", re.compile(r"^(?:<<)$"), "<"),   # '<<: *base' in configs
+)
+
+
+class DocumentError(ValueError):
+    """A YAML or JSON document that cannot be read, in one line: where and what."""
+
+
+class YamlError(DocumentError, yaml.YAMLError):
+    """Also a YAMLError, for readers that catch PyYAML's errors."""
+
+
+class JsonError(DocumentError, json.JSONDecodeError):
+    """Also a JSONDecodeError, for readers that catch the json module's errors."""
+
+    def __init__(self, message: str, doc: str = "", pos: int = 0):
+        json.JSONDecodeError.__init__(self, message, doc, pos)
+        self.args = (message,)
+
+    def __str__(self) -> str:
+        return self.msg
+
+
+class IntWord(int):
+    """A whole number that keeps the word it was written as (``010``, ``+5``)."""
+
+    def __str__(self) -> str:
+        return self.word
+
+
+class FloatWord(float):
+    """A number that keeps the word it was written as (``1e3``, ``0.50``)."""
+
+    def __str__(self) -> str:
+        return self.word
+
+
+def _special(kind, text: str, node):
+    if text.lower().lstrip("+-") in (".inf", ".nan"):
+        return kind(text.replace(".", "", 1))
+    raise yaml.constructor.ConstructorError(
+        None, None, f"{text!r} is not a {kind.__name__}", node.start_mark)
+
+
+def _number(kind, word_kind=None):
+    def construct(loader, node):
+        text = loader.construct_scalar(node)
+        try:
+            value = kind(text)
+        except ValueError:
+            value = _special(kind, text, node)   # .inf, .nan: Python's inf, nan
+        if word_kind is None:
+            return value
+        word = word_kind(value)
+        word.word = text if text[-1:].isdigit() or text[-1:] == "." else str(value)
+        return word
+    return construct
+
+
+def _unique_mapping(self, node, deep=False):
+    seen = set()
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue  # '<<: *base': the base's keys may be given again (YAML's merge)
+        key = self.construct_object(key_node, deep=True)
+        if not isinstance(key, (str, int, float, bool)):
+            continue  # an unhashable key: the base loader reports it
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key {key!r} is given twice in one mapping; keep one",
+                key_node.start_mark)
+        seen.add(key)
+    return yaml.constructor.SafeConstructor.construct_mapping(self, node, deep=deep)
+
+
+def _loader(base: type, *, words: bool = False) -> type:
+    cls = type(f"Core{base.__name__}", (base,), {
+        "yaml_implicit_resolvers": {}, "construct_mapping": _unique_mapping})
+    for tag, pattern, first in _RESOLVERS:
+        cls.add_implicit_resolver(f"tag:yaml.org,2002:{tag}", pattern, list(first))
+    cls.add_constructor("tag:yaml.org,2002:int", _number(int, IntWord if words else None))
+    cls.add_constructor("tag:yaml.org,2002:float", _number(float, FloatWord if words else None))
+    return cls
+
+
+# libyaml's parser when PyYAML was built with it (grids of 100k lenses: 10-50x faster); the
+# resolvers and constructors above are Python in both
+Loader = _loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+PyLoader = _loader(yaml.SafeLoader)
+# for stage parameters: a number also keeps its word, so a text parameter (a view named 00, a
+# g list) gets exactly what the shell would pass, and a number parameter its value
+WordLoader = _loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader), words=True)
+
+
+def yaml_problem(err: Exception) -> str:
+    """A YAML error in a few words: where and what (PyYAML's own text spans several lines)."""
+    mark = getattr(err, "problem_mark", None)
+    problem = getattr(err, "problem", None) or str(err)
+    where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+    return where + " ".join(str(problem).split())
+
+
+def load_yaml(text: str, *, words: bool = False) -> Any:
+    """One YAML document; :class:`DocumentError` says what is wrong with it. ``words``: numbers
+    are :class:`IntWord`/:class:`FloatWord`, printing as written (stage parameters)."""
+    try:
+        return yaml.load(text, Loader=WordLoader if words else Loader)  # noqa: S506 (safe)
+    except yaml.YAMLError as err:
+        raise YamlError(yaml_problem(err)) from err
+
+
+def _unique_pairs(pairs: list) -> dict:
+    doc = {}
+    for key, value in pairs:
+        if key in doc:
+            raise JsonError(f"key {key!r} is given twice in one object; keep one")
+        doc[key] = value
+    return doc
+
+
+def load_json(text: str) -> Any:
+    """One JSON document; :class:`DocumentError` says what is wrong with it."""
+    try:
+        return json.loads(text, object_pairs_hook=_unique_pairs)
+    except JsonError:
+        raise
+    except json.JSONDecodeError as err:
+        raise JsonError(f"line {err.lineno}, column {err.colno}: {err.msg}", text,
+                        err.pos) from err
+
+
+def _text(path: str | os.PathLike) -> str:
+    try:
+        with open(path, encoding="utf-8") as fh:
+            return fh.read()
+    except UnicodeDecodeError as err:
+        raise DocumentError(f"not UTF-8 text (byte {err.start})") from err
+
+
+def read_yaml(path: str | os.PathLike) -> Any:
+    """A YAML file (OSError when it cannot be read, DocumentError when it is not YAML)."""
+    return load_yaml(_text(path))
+
+
+def read_json(path: str | os.PathLike) -> Any:
+    """A JSON file (OSError when it cannot be read, DocumentError when it is not JSON)."""
+    return load_json(_text(path))

@@ -1,0 +1,61 @@
+"""Compiled (numba, ``nogil``) loops of the stitch's per-pixel work that numpy would do in many
+passes over whole bands: the rig maps interpolated between node rows, and a view's weighted band
+added into the panorama. Each does exactly the float operations of the numpy expressions it
+replaces, in the same order (no fast-math), so the panorama is bit for bit the same; without
+the GIL the main thread runs them while worker threads resample the next bands."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+# explicit signatures (any layout): compiled once, into numba's cache, whatever views and bands
+# a stitch passes
+@numba.njit("i8(f8[:, :], f8[:, :], i8[:], f8[:, :], i8[:], b1[:, :], f4[:, :], f4[:, :], "
+            "b1[:, :])", cache=True, nogil=True, fastmath=False)
+def band_maps(along_x: np.ndarray, along_y: np.ndarray, first_y: np.ndarray,
+              weights_y: np.ndarray, first_x: np.ndarray, rough: np.ndarray,
+              map_x: np.ndarray, map_y: np.ndarray, exact: np.ndarray) -> int:
+    """The float32 remap maps of a band of rows: node rows ``along_x``/``along_y`` (node rows,
+    cols; float64) interpolated by each row's 4-point stencil (``first_y`` first node,
+    ``weights_y`` (rows, 4)); ``exact`` marks the pixels to trace instead (no value, or a
+    ``rough`` cell (cells y, cells x) at (first_y, first_x)). Returns how many are marked."""
+    count = 0
+    for r in range(map_x.shape[0]):
+        node = first_y[r]
+        w0, w1, w2, w3 = weights_y[r, 0], weights_y[r, 1], weights_y[r, 2], weights_y[r, 3]
+        for c in range(map_x.shape[1]):
+            vx = w0 * along_x[node, c]
+            vx += w1 * along_x[node + 1, c]
+            vx += w2 * along_x[node + 2, c]
+            vx += w3 * along_x[node + 3, c]
+            vy = w0 * along_y[node, c]
+            vy += w1 * along_y[node + 1, c]
+            vy += w2 * along_y[node + 2, c]
+            vy += w3 * along_y[node + 3, c]
+            mark = not (np.isfinite(vx) and np.isfinite(vy)) or rough[node, first_x[c]]
+            exact[r, c] = mark
+            count += mark
+            map_x[r, c] = np.float32(vx)
+            map_y[r, c] = np.float32(vy)
+    return count
+
+
+@numba.njit("void(f4[:, :, :], f4[:, :], f4[:, :, :], f4[:, :], f4[:], b1)", cache=True,
+            nogil=True, fastmath=False)
+def accumulate(panorama: np.ndarray, total: np.ndarray, image: np.ndarray, weight: np.ndarray,
+               gain: np.ndarray, scaled: bool) -> None:
+    """``panorama += image * gain * weight`` (channel by channel; the gain only when ``scaled``)
+    and ``total += weight`` over a band, in float32 as the numpy expressions round."""
+    for r in range(weight.shape[0]):
+        for c in range(weight.shape[1]):
+            w = weight[r, c]
+            total[r, c] += w
+            if w == 0:
+                continue
+            for k in range(image.shape[0]):
+                v = image[k, r, c]
+                if scaled:
+                    v = v * gain[k]
+                panorama[k, r, c] += v * w

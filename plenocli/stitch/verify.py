@@ -1,0 +1,153 @@
+"""Side files checked against the views: a saved transform or a rig may make a panorama
+refused, never wrong.
+
+A transform (``--transform-in``) or a rig (``--rig``) claims where each view lies. The claim is
+checked where it can be seen: in every neighbour pair's overlap, the two views warped by the
+applied transform must line up. Up to four blocks of at most ``BLOCK_PX`` square, spread along
+each overlap, are warped at full resolution; in each block the shift that best aligns the two
+warped views is found by normalised cross-correlation over whole-pixel shifts within
+``SEARCH_PX`` and a parabola through the peak, on the high-passed luminance (exposure and
+vignetting do not move the peak). The RMS of the block shifts is the residual; beyond
+``TOLERANCE_PX`` the side file does not describe these views. Blocks along the seam (not one
+shift for the whole strip) also catch a rig whose distortion model is wrong: its misfit changes
+along the seam. This works on overlaps down to ~20 px wide, where the report's residual is not
+measured, and costs a few warps of small blocks whatever the view size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from plenocli.stitch import compose
+from plenocli.stitch.rig import PrismRig
+from plenocli.stitch.views import (
+    as_view_stack,
+    highpass,
+    neighbour_pairs,
+    translation_matrix,
+)
+
+# A seam error under half a pixel is invisible after blending; a transform 1 px off shows.
+TOLERANCE_PX = 0.5
+SEARCH_PX = 4  # the search reaches 4 px (8 px at half resolution); beyond, the residual is "> 4"
+MIN_CORRELATION = 0.3  # at the best shift: below it the overlap holds no common texture
+# A block mostly outside what both views cover (a corner of the panorama where the views'
+# edges curve) measures those edges, not the seam: it is left out.
+MIN_COVERED = 0.5
+BLOCK_PX = 192  # blocks of an overlap measured at full resolution: enough texture, little cost
+
+
+def check_transform_names(transform: dict, names: list[str], layout: str, *,
+                          named_after_files: bool) -> None:
+    """Refuse a saved transform whose view names are not these views' (unless the views are
+    named after their files: another capture's files have other names) or whose layout a
+    ``layout`` other than "auto" contradicts."""
+    saved = transform.get("views")
+    if saved is not None and not named_after_files and list(saved) != list(names):
+        raise ValueError(f"the transform was made for views {','.join(map(str, saved))}, these "
+                         f"are {','.join(names)}; pass --views {','.join(map(str, saved))} or "
+                         "register them again (without --transform-in)")
+    if layout != "auto" and transform.get("layout") not in (None, layout):
+        raise ValueError(f"--layout {layout} contradicts the transform's layout "
+                         f"{transform.get('layout')}; drop --layout (the transform sets it)")
+
+
+def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
+    """Refuse a panorama whose applied transform (``report.transform``, with its rig canvases)
+    does not line the views of ``stack`` (V, C, rows, cols) or (V, rows, cols) up within
+    ``TOLERANCE_PX`` in every overlap. ``what`` names the side file in the message. Returns
+    each pair's residual (px)."""
+    stack = as_view_stack(stack)[0]
+    rig = PrismRig.from_dict(report.rig) if report.rig else None
+    transforms = [np.asarray(m, dtype=np.float64) for m in report.transform["view_to_reference"]]
+    if rig is not None:
+        transforms = [m @ translation_matrix(-o[0], -o[1])
+                      for m, o in zip(transforms, report.canvas_origins_px, strict=True)]
+    maps, boxes, _, _ = compose.place(transforms, stack.shape[-2:], k1=report.distortion_k1,
+                                      rig=rig)
+    out = []
+    for a, b, _ in neighbour_pairs(report.layout):
+        region = compose.intersect(boxes[a], boxes[b])
+        shifts, corrs = [], []
+        for block in _blocks(region):
+            crops = [compose.warp_region(stack[k], maps[k], block) for k in (a, b)]
+            both = (crops[0][1] > 0) & (crops[1][1] > 0)
+            luma = [np.where(both, crop.mean(axis=0), np.nan) for crop, _ in crops]
+            ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
+            if ok.mean() < MIN_COVERED:
+                continue
+            found = _block_shift(*(highpass(v) for v in luma), ok)
+            if found is not None:
+                shifts.append(found[0])
+                corrs.append(found[1])
+        if not shifts:
+            raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
+                             "(about 20 x 20 px); it cannot be vouched for: register the views "
+                             "without it")
+        residual = float(np.sqrt(np.mean(np.sum(np.square(shifts), axis=1))))
+        if not min(corrs) >= MIN_CORRELATION or residual > TOLERANCE_PX:
+            shown = f"> {SEARCH_PX}" if residual > SEARCH_PX else f"{residual:.2f}"
+            raise ValueError(f"{what} does not describe these views: views {a} and {b} are "
+                             f"{shown} px apart in its overlap (correlation {min(corrs):.2f}; at "
+                             f"most {TOLERANCE_PX} px): register the views without it")
+        out.append(residual)
+    return out
+
+
+def _blocks(region) -> list:
+    """Up to four blocks of at most BLOCK_PX x BLOCK_PX spread along an overlap ``region``
+    (canvas slices), centred across it, one per BLOCK_PX / 3 of its length (a short seam is
+    still measured in places); none without an overlap."""
+    if region is None:
+        return []
+    spans = [(r.start, r.stop) for r in region]
+    long_axis = 0 if spans[0][1] - spans[0][0] >= spans[1][1] - spans[1][0] else 1
+    lo, hi = spans[long_axis]
+    n = int(np.clip((hi - lo) // (BLOCK_PX // 3), 1, 4))
+    size = min(BLOCK_PX, (hi - lo) // n)
+    across_lo, across_hi = spans[1 - long_axis]
+    mid = (across_lo + across_hi) // 2
+    across = slice(max(across_lo, mid - BLOCK_PX // 2), min(across_hi, mid + BLOCK_PX // 2))
+    out = []
+    for k in range(n):
+        centre = lo + (2 * k + 1) * (hi - lo) // (2 * n)
+        along = slice(max(lo, centre - size // 2), min(hi, centre + size // 2))
+        out.append((along, across) if long_axis == 0 else (across, along))
+    return out
+
+
+def _block_shift(a: np.ndarray, b: np.ndarray, ok: np.ndarray
+                 ) -> tuple[np.ndarray, float] | None:
+    """The sub-pixel shift (dy, dx) that best aligns ``b`` to ``a`` within SEARCH_PX and its
+    correlation; None when the block holds too few pixels."""
+    s = SEARCH_PX
+    rows, cols = a.shape
+    if rows < 2 * s + 12 or cols < 2 * s + 12:
+        return None
+    core = (slice(s, rows - s), slice(s, cols - s))
+    valid = ok[core] & ok[:rows - 2 * s, :cols - 2 * s] & ok[2 * s:, 2 * s:]
+    if valid.sum() < 256:
+        return None
+    x = a[core][valid]
+    x = x - x.mean()
+    nx = np.sqrt((x * x).sum())
+    scores = np.full((2 * s + 1, 2 * s + 1), -1.0)
+    for dy in range(-s, s + 1):
+        for dx in range(-s, s + 1):
+            y = b[s + dy:rows - s + dy, s + dx:cols - s + dx][valid]
+            y = y - y.mean()
+            den = nx * np.sqrt((y * y).sum())
+            scores[dy + s, dx + s] = (x * y).sum() / den if den > 0 else 0.0
+    iy, ix = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    shift = np.array([_vertex(scores[:, ix], iy), _vertex(scores[iy, :], ix)]) - s
+    return shift, float(scores[iy, ix])
+
+
+def _vertex(values: np.ndarray, k: int) -> float:
+    """Sub-pixel peak position by a parabola through ``values[k-1:k+2]`` (the edge: beyond)."""
+    if k == 0 or k == len(values) - 1:
+        return float(k) + (0.5 if k else -0.5)  # the peak lies beyond the search
+    lo, mid, hi = values[k - 1], values[k], values[k + 1]
+    den = lo - 2 * mid + hi
+    return float(k) + (0.5 * (lo - hi) / den if den < 0 else 0.0)

@@ -1,0 +1,96 @@
+"""A saved transform or a rig is checked against the views it is applied to (right or refused).
+
+Ground truth: the generator's shifts (plenocli.synth.rig) and the prism camera's own rig
+(plenocli.synth.prismcam); the check measures shifts with its own correlation search.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.pipeline.stages.simulate import simulate
+from plenocli.stitch import stitch, verify
+from plenocli.stitch.rig import PrismRig, ViewOptics
+from plenocli.synth.prismcam import Camera, render_dualpixel
+from plenocli.synth.rig import make_rig
+
+
+def _true_transform(truth: dict) -> dict:
+    return {"model": "translation", "layout": "1x2", "view_shape": truth["view_shape"],
+            "distortion_k1": 0.0, "rig": None,
+            "view_to_reference": [np.asarray(m).tolist() for m in truth["relative"]]}
+
+
+@pytest.mark.parametrize("overlap", [0.1, 0.3])  # 0.1: a 24 px seam, too narrow for the report
+def test_the_residual_of_a_transform_off_by_a_known_shift_is_that_shift(overlap):
+    views, _, truth = make_rig(view_shape=(160, 240), overlap=overlap, vignetting=0.1,
+                               noise=0.003, seed=4)
+    for off, refused in ((0.0, False), (0.3, False), (0.8, True), (3.0, True)):
+        t = _true_transform(truth)
+        t["view_to_reference"][1][0][2] += off
+        _, report = stitch(views, transform=t)
+        if refused:
+            with pytest.raises(ValueError, match="does not describe these views") as err:
+                verify.check_alignment(views, report, what="the transform")
+            measured = float(re.search(r"are ([0-9.]+) px apart", str(err.value)).group(1))
+            assert measured == pytest.approx(off, abs=0.1)
+        else:
+            assert verify.check_alignment(views, report, what="t") == [pytest.approx(off, abs=0.1)]
+
+
+def test_a_rig_with_the_wrong_focal_length_is_refused():
+    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
+    views = np.stack([np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)])
+    cam = truth["camera"]
+    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
+    for focal, refused in ((cam["focal_mm"], False), (8.0, True)):
+        rig = PrismRig(focal, cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"], optics,
+                       cam["aperture_mm"], cam["object_distance_mm"])
+        _, report = stitch(views, rig=rig)
+        if refused:
+            with pytest.raises(ValueError, match="rig does not describe these views"):
+                verify.check_alignment(views, report, what="the rig")
+        else:
+            assert verify.check_alignment(views, report, what="the rig")[0] < 0.2
+
+
+def test_a_transform_for_other_views_or_layout_is_refused_in_one_line(tmp_path):
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(128, 160), seed=0)
+    views = tmp_path / "rig" / "views.tif"
+    saved = tmp_path / "t.json"
+    assert CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "p.tif"),
+                                    "--transform-out", str(saved)]).exit_code == 0
+    t = json.loads(saved.read_text())["transform"]
+    shifted = json.loads(json.dumps(t))
+    shifted["view_to_reference"][1][0][2] += 3.0
+    cases = [({**t, "views": ["A", "B"]}, [], "made for views A,B"),
+             (t, ["--layout", "2x1"], "--layout 2x1 contradicts"),
+             (shifted, [], "does not describe these views")]
+    for k, (side, extra, words) in enumerate(cases):
+        (tmp_path / f"s{k}.json").write_text(json.dumps({"transform": side}))
+        out = tmp_path / f"o{k}.tif"
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(out), "--transform-in",
+                                       str(tmp_path / f"s{k}.json"), *extra])
+        assert res.exit_code == 1 and words in res.output, (k, res.output)
+        assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_the_true_quad_pixel_rig_passes_at_every_seam():
+    """Four seams, their ends at the panorama's corners where the canvases' edges curve."""
+    from plenocli.synth.prismcam import render_quadpixel
+
+    sensor, truth = render_quadpixel(pixels=384, seed=3)
+    views = np.stack([np.moveaxis(sensor[i::2, j::2], -1, 0) for i in range(2)
+                      for j in range(2)])
+    cam = truth["camera"]
+    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
+                   tuple(ViewOptics(tuple(v["pupil_quarter_xy"]), tuple(v["prism_towards_xy"]))
+                         for v in truth["views"]), cam["aperture_mm"], cam["object_distance_mm"])
+    _, report = stitch(views, layout="2x2", rig=rig)
+    assert max(verify.check_alignment(views, report, what="the rig")) < 0.2
