@@ -37,3 +37,23 @@ def test_the_ends_of_a_range():
     assert fraction.contains(0.0) and fraction.contains(0.999) and not fraction.contains(1.0)
     positive = Param("g", 0.0, open_low=True)
     assert not positive.contains(0.0) and positive.contains(1e-9) and positive.describe() == "> 0"
+
+
+def test_a_whole_number_where_the_default_is_a_fraction_is_that_fraction(tmp_path):
+    """``--param overlap=0`` (YAML reads 0 as a whole number) is the overlap 0.0."""
+    from plenocli.pipeline.stages.simulate import simulate
+
+    assert check_params("stereo-rig", generator("stereo-rig"), {"overlap": 0}) == \
+        {"overlap": 0.0}
+    truth = simulate("stereo-rig", tmp_path / "s", overlap=0, view_shape=[64, 96])
+    assert truth["overlap"] == 0.0
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"pitch_px": 1e6}, "leaves fewer than 4 micro-images across"),
+    ({"distance_m": 3.0}, "distance_m places the plane scene; give scene=plane"),
+    ({"distance_m": 0.01, "scene": "plane"}, "inside the main lens's focal length"),
+])
+def test_lenslet_depth_refuses_what_it_cannot_render(params, words):
+    with pytest.raises(ValueError, match=re.escape(words)):
+        generator("lenslet-depth")(**params)

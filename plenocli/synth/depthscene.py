@@ -154,9 +154,21 @@ def simulate_lenslet_depth(*, seed: int = 0, pixels: str | int | None = None,
     from plenocli.refocus import output_shape
 
     if distance_m > 0:
+        if scene != "plane":
+            raise ValueError(f"distance_m places the plane scene; give scene=plane (scene is "
+                             f"{scene!r})")
+        if 1000.0 * distance_m <= CAMERA["focal_length_mm"]:
+            raise ValueError(f"distance_m = {distance_m} m is inside the main lens's focal "
+                             f"length ({CAMERA['focal_length_mm']:g} mm): nothing is imaged")
         g = virtual_depth(distance_m)
+        if not 1.0 < abs(g) <= 100.0:
+            raise ValueError(f"distance_m = {distance_m} m gives g = {g:.3g}; the simulated "
+                             "camera images planes with 1 < |g| <= 100")
 
     rows, cols = _size(pixels, (480, 640))
+    if pitch_px > min(rows, cols) / 4:
+        raise ValueError(f"pitch_px = {pitch_px} leaves fewer than 4 micro-images across the "
+                         f"{rows} x {cols} sensor; give at most {min(rows, cols) / 4:g}")
     rng = np.random.default_rng(seed)
     grid = LensGrid(pitch_px=float(pitch_px), angle_rad=0.0,
                     offset_xy=tuple(float(v) for v in rng.uniform(0, pitch_px, 2)),

@@ -81,10 +81,11 @@ PARAMS: dict[str, Param] = {
 }
 
 
-def check_params(kind: str, generate: Callable[..., object], params: dict) -> None:
-    """ValueError (one line naming the parameter) unless every value of ``params`` is one
-    ``generate`` takes, of its default's type, in its declared range, and the sensor and rays
-    fit a machine."""
+def check_params(kind: str, generate: Callable[..., object], params: dict) -> dict:
+    """``params`` as ``generate`` takes them (a whole number given where the default is a
+    fraction made a float, as the shell's ``0`` means ``0.0``); ValueError (one line naming the
+    parameter) unless every value is one ``generate`` takes, of its default's type, in its
+    declared range, and the sensor and rays fit a machine."""
     accepted = inspect.signature(generate).parameters
     for key, value in params.items():
         if key not in accepted:
@@ -97,6 +98,15 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> No
             if problem:
                 raise ValueError(f"simulate {kind}: {key} = {value!r}: {problem}")
     _check_size(kind, params)
+    return {key: _as_default(value, accepted[key].default) for key, value in params.items()}
+
+
+def _as_default(value, default):
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(default, (tuple, list)) and isinstance(value, (tuple, list)):
+        return type(value)(_as_default(v, d) for v, d in zip(value, default, strict=True))
+    return value
 
 
 def _cfa(value) -> str | None:

@@ -85,7 +85,7 @@ def _view_homographies(layout: str, view_shape: tuple[int, int], overlap: float,
     homographies = []
     for k in range(n_rows * n_cols):
         i, j = divmod(k, n_cols)
-        shift = np.array([j * cols * (1 - overlap), i * rows * (1 - overlap)])
+        shift = np.array([j * cols * (1 - overlap), i * rows * (1 - overlap)], dtype=float)
         if k:
             shift += rng.uniform(-jitter_px, jitter_px, 2)
         h = np.eye(3)

@@ -41,7 +41,7 @@ def simulate(kind: str, output: str | os.PathLike, **params) -> dict:
         raise ConfigError(f"simulate: unknown kind {kind!r}; use one of {', '.join(KIND_NAMES)}")
     generate = generator(kind)
     try:
-        check_params(kind, generate, params)
+        params = check_params(kind, generate, params)
     except ValueError as err:
         raise ConfigError(str(err)) from err
     try:
