@@ -36,7 +36,8 @@ PARAMS = (
     Param("min_weight", FiniteFloat(0, 1),
           "Pixels with less than this fraction of the typical weight become NaN.", default=0.25),
     Param("depth", InputFile(), "Depth map (`plenocli depth` on the same grid and --s): each "
-          "lens at its own g, the all-in-focus image; --g only where the depth is unknown.",
+          "lens at its own g, the all-in-focus image (lenses of unknown depth at the map's "
+          "median g; --g is not used).",
           role="input"),
     PREVIEW,
 )

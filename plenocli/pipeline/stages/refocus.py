@@ -24,7 +24,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         preview: str | None = None, depth: str | None = None) -> None:
     """Refocus every page of ``input`` at each g; one output page per (g, channel). With
     ``depth`` (a ``plenocli depth`` output on this grid), each lens at its own g
-    (all-in-focus); ``g`` is then used only where the depth is unknown."""
+    (all-in-focus); lenses of unknown depth take the map's median g, ``g`` is not used."""
     try:
         g_values = rf.parse_g(g)
     except ValueError as err:
@@ -45,8 +45,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     check_fits(sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa)), framing.grid, grid)
     if depth:
         if len(g_values) > 1:
-            raise ConfigError("--depth renders one all-in-focus image: give one --g (used "
-                              "where the depth is unknown), not a sweep")
+            raise ConfigError("--depth renders one all-in-focus image, each lens at the g of "
+                              "the map: leave out the --g sweep (not a sweep)")
         options = {"lens_g": _lens_g(depth, grid, framing, s)}
     else:
         options = {}
