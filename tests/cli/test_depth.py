@@ -103,13 +103,16 @@ def test_more_refusals_leave_nothing(lenslet, tmp_path):
           other, "-o", out], 1, "takes as depth the output of depth"),
         (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
           lenslet / "frames.tif", "-o", out], 1, "give each its own file"),
-        (["refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--depth",
-          foreign, "--g", "2,3", "-o", out], 1, "not a sweep"),
     ]
     for args, code, words in cases:
         result = invoke(*args)
         assert result.exit_code == code and words in result.output, (args, result.output)
         assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+    for g in ("5", "2,3"):  # each lens takes its g from the map: a --g would be ignored
+        result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+                        "--depth", foreign, "--g", g, "-o", out)
+        assert result.exit_code == 2 and "--g is not used with --depth" in result.output
+        assert not out.exists()
 
 
 def test_bayer_frames_of_the_refocus_simulator(tmp_path):

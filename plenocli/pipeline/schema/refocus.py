@@ -1,7 +1,7 @@
 """Parameters of ``plenocli refocus``."""
 
 from plenocli.model.focus import KERNELS, VIEWS, parse_g
-from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
 
 
@@ -41,3 +41,10 @@ PARAMS = (
           role="input"),
     PREVIEW,
 )
+
+
+def check(params: dict) -> None:
+    """With a depth map every lens takes its g from the map: a --g would be ignored."""
+    if params.get("depth"):
+        refuse_unused(PARAMS, params, ["g"], "is not used with --depth (each lens takes its g "
+                      "from the map)")

@@ -44,9 +44,6 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     cfa = framing.cfa
     check_fits(sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa)), framing.grid, grid)
     if depth:
-        if len(g_values) > 1:
-            raise ConfigError("--depth renders one all-in-focus image, each lens at the g of "
-                              "the map: leave out the --g sweep (not a sweep)")
         options = {"lens_g": _lens_g(depth, grid, framing, s)}
     else:
         options = {}
