@@ -14,6 +14,9 @@ WRONG = {
     "pitch +0.5 %": dict(pitch_factor=1.005),
     "pitch +3 %": dict(pitch_factor=1.03),
     "turned 2 deg": dict(turn=np.radians(2)),
+    "turned 20 deg": dict(turn=np.radians(20)),
+    "turned 30 deg (half the hex period)": dict(turn=np.radians(30)),
+    "turned 35 deg": dict(turn=np.radians(35)),
     "square on hex": dict(lattice="square"),
     "another camera (x sqrt 3)": dict(pitch_factor=np.sqrt(3), turn=np.pi / 6),
 }

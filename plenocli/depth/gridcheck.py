@@ -2,15 +2,16 @@
 
 A grid or RayCalibData XML is a side file: it can belong to another camera, be a few per cent
 off in pitch, turned, of the other lattice kind or written in other units. Depth and refocus
-computed on such a grid are confidently wrong, so the grid is checked against what every
-lenslet frame shows, with the calibration's own fold judge
-(:mod:`plenocli.calibration.fold`): folding the frame onto the lens lattice gives a sharp mean
-micro-image; any other lattice (a relative, the other kind, a copy detuned in pitch or angle)
-gives a flat or self-repeating one. The judge is started from the grid's lattice and its other
-kind; the lattice it confirms must be the grid's kind and must not drift from the grid's by
-more than ``MAX_DRIFT`` of a pitch anywhere in the frame (the error a pitch or angle error
-makes at the frame's corners: 3 % in pitch on a 240 px frame is 0.18 pitches at the corners,
-on a 4000 px frame 3 pitches).
+computed on such a grid are confidently wrong, so the grid is checked against what every lenslet
+frame shows, with the calibration's own fold judge (:mod:`plenocli.calibration.fold`): folding
+the frame onto the lens lattice gives a sharp mean micro-image; any other lattice (a relative,
+the other kind, a copy detuned in pitch or angle) gives a flat or self-repeating one. The judge
+is started from the grid's lattice and its other kind, and, when neither folds sharply, from the
+grid's lattice turned by eighths of its symmetry period (7.5 deg for hex: a fold climbs back a
+few degrees, not 30); the lattice it confirms must be the grid's kind and must not drift from
+the grid's by more than ``MAX_DRIFT`` of a pitch anywhere in the frame (the error a pitch or
+angle error makes at the frame's corners: 3 % in pitch on a 240 px frame is 0.18 pitches at the
+corners, on a 4000 px frame 3 pitches).
 
 Only the lattice (kind, pitch, angle) is checked, not the grid's offset: a uniform offset
 error shifts every micro-image alike, so it moves a refocused image but leaves neighbour
@@ -27,6 +28,7 @@ MAX_DRIFT = 0.25      # pitches: where the grid's lattice and the frame's may pa
 CHECK_PX = 1024         # side of the central region folded: a tenth of depth's time on 8 Mpx
 CHECK_PITCHES = 24      # and at least this many lenses across (16 left Boys2 unsure)
 MAX_DEPTH_ERROR = 0.002  # a lattice vector's error over the pitch, for depth (below)
+TURN_STARTS = 8         # starts per symmetry period when the grid's own angle folds to nothing
 
 
 def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
@@ -50,8 +52,12 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
     top, left = max(0, (rows - side) // 2), max(0, (cols - side) // 2)
     centre = np.asarray(frame[top:top + side, left:left + side], np.float64)
     folds = Folds(np.nan_to_num(centre), own.pitch_px)
-    verdict = fold_judge([own, other], folds)
-    found = verdict.lattice
+    found = fold_judge([own, other], folds).lattice
+    if found is None:  # a grid turned too far for the fold to climb back: start from turns
+        step = np.pi / 3 if own.kind == "hex" else np.pi / 2
+        turns = [Lattice(own.kind, own.pitch_px, own.angle_rad + k * step / TURN_STARTS)
+                 for k in range(1, TURN_STARTS)]
+        found = fold_judge(turns, folds).lattice
     if found is None:   # too few lenses, or micro-images too flat, to vouch for a lattice
         return None
     shows = f"the frame shows a {found.describe()} lattice, the grid says {own.describe()}"
