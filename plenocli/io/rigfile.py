@@ -9,20 +9,18 @@ from __future__ import annotations
 from pathlib import Path
 
 from plenocli.errors import InputError
-from plenocli.io.yamlfile import load_yaml
+from plenocli.io.yamlfile import DocumentError, read_yaml
 from plenocli.model.rig import PrismRig
 
 
 def read_rig(path: str | Path) -> PrismRig:
     """The rig of a file, refused in one line naming the file and the key otherwise."""
-    import yaml
-
     file = Path(path)
     if not file.is_file():
         raise InputError(f"{file}: no such file (the --rig YAML)")
     try:
-        data = load_yaml(file.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        data = read_yaml(file)
+    except DocumentError as err:
         raise InputError(f"{file}: not a YAML rig ({err})") from err
     if isinstance(data, dict) and isinstance(data.get("rig"), dict):
         data = data["rig"]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from plenocli.errors import InputError
 from plenocli.io.atomic import write_text
-from plenocli.io.yamlfile import load_json
+from plenocli.io.yamlfile import DocumentError, read_json
 from plenocli.model.provenance import json_safe
 
 
@@ -23,8 +23,8 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
     if not file.is_file():
         raise InputError(f"{file}: no such file (the --transform-in JSON)")
     try:
-        data = load_json(file.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        data = read_json(file)
+    except DocumentError as err:
         raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
                          "--transform-out") from err
     transform = data.get("transform", data) if isinstance(data, dict) else None

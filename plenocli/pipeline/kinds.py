@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from plenocli.errors import InputError
+from plenocli.pipeline.validators import TIFF
 
 # frames or views of one capture, as decode, bias, flat and unmix leave them (and the simulator)
 CAPTURE = ("decode", "bias", "flat", "unmix", "simulate")
@@ -35,7 +36,6 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
 }
 # stages a capture goes through once: applied again they correct what is already corrected
 ONCE = ("bias", "flat", "unmix")
-TIFF = (".tif", ".tiff")
 
 
 def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
