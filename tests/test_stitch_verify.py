@@ -44,6 +44,26 @@ def test_the_residual_of_a_transform_off_by_a_known_shift_is_that_shift(overlap)
             assert verify.check_alignment(views, report, what="t") == [pytest.approx(off, abs=0.1)]
 
 
+def test_a_textureless_stretch_of_the_seam_measures_nothing_and_is_left_out():
+    """Sky or a wall across part of the seam: the true transform passes, a wrong one is still
+    refused by the textured stretch."""
+    views, _, truth = make_rig(view_shape=(160, 240), overlap=0.3, vignetting=0.1,
+                               noise=0.003, seed=4)
+    flat = views.copy()
+    noise = np.random.default_rng(1).normal(0.0, 0.003, (2, 80, 100)).astype(np.float32)
+    flat[0, :80, 140:] = 0.5 + noise[0]
+    flat[1, :80, :100] = 0.5 + noise[1]
+    for off, refused in ((0.0, False), (1.5, True)):
+        t = _true_transform(truth)
+        t["view_to_reference"][1][0][2] += off
+        _, report = stitch(flat, transform=t)
+        if refused:
+            with pytest.raises(ValueError, match="does not describe these views"):
+                verify.check_alignment(flat, report, what="the transform")
+        else:
+            assert verify.check_alignment(flat, report, what="t")[0] < 0.1
+
+
 def test_a_rig_with_the_wrong_focal_length_is_refused():
     a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
     views = np.stack([np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)])

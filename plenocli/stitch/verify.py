@@ -10,7 +10,8 @@ warped views is found by normalised cross-correlation over whole-pixel shifts wi
 vignetting do not move the peak). The RMS of the block shifts is the residual; beyond
 ``TOLERANCE_PX`` the side file does not describe these views. Blocks along the seam (not one
 shift for the whole strip) also catch a rig whose distortion model is wrong: its misfit changes
-along the seam. This works on overlaps down to ~20 px wide, where the report's residual is not
+along the seam. A block of nearly no texture (under ``FLAT_FRACTION`` of the seam's most
+textured block) that does not correlate is left out: it measures nothing. This works on overlaps down to ~20 px wide, where the report's residual is not
 measured, and costs a few warps of small blocks whatever the view size.
 """
 
@@ -36,6 +37,10 @@ MIN_CORRELATION = 0.3  # at the best shift: below it the overlap holds no common
 # edges curve) measures those edges, not the seam: it is left out.
 MIN_COVERED = 0.5
 BLOCK_PX = 192  # blocks of an overlap measured at full resolution: enough texture, little cost
+# A block whose texture is under this fraction of the seam's most textured block holds mostly
+# noise (sky, a wall): with no correlation there it measures nothing, and a seam there is
+# invisible, so it is left out rather than counted as misaligned.
+FLAT_FRACTION = 0.1
 
 
 def check_transform_names(transform: dict, names: list[str], layout: str, *,
@@ -69,7 +74,7 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
     out = []
     for a, b, _ in neighbour_pairs(report.layout):
         region = compose.intersect(boxes[a], boxes[b])
-        shifts, corrs = [], []
+        found_blocks = []
         for block in _blocks(region):
             crops = [compose.warp_region(stack[k], maps[k], block) for k in (a, b)]
             both = (crops[0][1] > 0) & (crops[1][1] > 0)
@@ -77,10 +82,14 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
             ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
             if ok.mean() < MIN_COVERED:
                 continue
-            found = _block_shift(*(highpass(v) for v in luma), ok)
+            texture = [highpass(v) for v in luma]
+            found = _block_shift(*texture, ok)
             if found is not None:
-                shifts.append(found[0])
-                corrs.append(found[1])
+                found_blocks.append((*found, min(float(np.std(t[ok])) for t in texture)))
+        strongest = max((t for _, _, t in found_blocks), default=0.0)
+        kept = [(s, c) for s, c, t in found_blocks
+                if c >= MIN_CORRELATION or t >= FLAT_FRACTION * strongest]
+        shifts, corrs = [s for s, _ in kept], [c for _, c in kept]
         if not shifts:
             raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
                              "(about 20 x 20 px); it cannot be vouched for: register the views "
