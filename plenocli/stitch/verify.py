@@ -11,8 +11,9 @@ vignetting do not move the peak). The RMS of the block shifts is the residual; b
 ``TOLERANCE_PX`` the side file does not describe these views. Blocks along the seam (not one
 shift for the whole strip) also catch a rig whose distortion model is wrong: its misfit changes
 along the seam. A block of nearly no texture (under ``FLAT_FRACTION`` of the seam's most
-textured block) that does not correlate is left out: it measures nothing. This works on overlaps down to ~20 px wide, where the report's residual is not
-measured, and costs a few warps of small blocks whatever the view size.
+textured block) that does not correlate is left out: it measures nothing. This works on
+overlaps down to ~20 px wide, where the report's residual is not measured, and costs a few
+warps of small blocks whatever the view size.
 """
 
 from __future__ import annotations
