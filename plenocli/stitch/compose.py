@@ -9,9 +9,11 @@ view's weight is its alone, so the normalisation leaves it as resampled.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -79,10 +81,28 @@ def warp_region(view: np.ndarray, vmap: ViewMap, region: Box, holes=None,
     return out, weight
 
 
-def overlap_crops(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
-                  holes: list, pairs: list[tuple[int, int, str]]) -> list:
-    """Per neighbour pair: (crop of view a, crop of view b, pixels both cover) over the box of
-    their overlap, or None where they do not overlap."""
+# An overlap is measured (exposure gains, residual shifts) on up to MEASURE_BLOCKS blocks spread
+# along the seam, together at most MEASURE_PIXELS: means and local shifts settle long before the
+# whole overlap of a full-size view (10 Mpx at the 5D Mark IV's size) is resampled a second time.
+MEASURE_PIXELS = 1 << 21
+MEASURE_BLOCKS = 4
+MIN_BLOCK_PX = 64
+
+
+@dataclass(frozen=True)
+class Overlap:
+    """A neighbour pair's overlap as measured: ``pieces`` (crop of view a (C, h, w), crop of
+    view b, pixels both cover (h, w)) of its blocks, in order along the seam, the seam's long
+    axis (0: rows) and ``area``, the pixels both views cover in the whole overlap."""
+
+    pieces: list
+    long_axis: int
+    area: int
+
+
+def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
+                     holes: list, pairs: list[tuple[int, int, str]]) -> list[Overlap | None]:
+    """Per neighbour pair: its :class:`Overlap`, or None where the views do not overlap."""
     out = []
     for a, b, _ in pairs:
         region = intersect(boxes[a], boxes[b])
@@ -90,27 +110,71 @@ def overlap_crops(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[
             out.append(None)
             continue
         step(f"measuring the overlap of views {a} and {b}")
-        crop_a, weight_a = warp_region(views[a], maps[a], region, holes[a])
-        crop_b, weight_b = warp_region(views[b], maps[b], region, holes[b])
-        both = (weight_a > 0) & (weight_b > 0)
-        box = bounding_box(both)
-        if box is None:
-            out.append(None)
-            continue
-        out.append((crop_a[(slice(None),) + box], crop_b[(slice(None),) + box], both[box]))
+        long_axis, pieces = _long_axis(region), []
+        for block in _measure_blocks(region, long_axis):
+            crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a])
+            crop_b, weight_b = warp_region(views[b], maps[b], block, holes[b])
+            both = (weight_a > 0) & (weight_b > 0)
+            box = bounding_box(both)
+            if box is not None:
+                pieces.append((crop_a[(slice(None),) + box], crop_b[(slice(None),) + box],
+                               both[box]))
+        area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
+        out.append(Overlap(pieces, long_axis, area) if pieces else None)
     return out
 
 
-def match_gains(crops: list, pairs: list[tuple[int, int, str]], n_views: int,
+def _covered_by_both(map_a: ViewMap, map_b: ViewMap, region: Box, holes_a, holes_b) -> int:
+    """How many pixels of ``region`` both views cover (their maps only: nothing resampled)."""
+    count = 0
+    for (_, mx_a, my_a, lost_a), (_, mx_b, my_b, lost_b) in zip(
+            map_a.bands(region), map_b.bands(region), strict=True):
+        count += int(np.count_nonzero(
+            (feather(mx_a, my_a, map_a.view_shape, lost_a, holes_a) > 0)
+            & (feather(mx_b, my_b, map_b.view_shape, lost_b, holes_b) > 0)))
+    return count
+
+
+def _long_axis(region: Box) -> int:
+    rows, cols = _shape(region)
+    return 0 if rows >= cols else 1
+
+
+def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
+    """The blocks of an overlap ``region`` that are measured: MEASURE_BLOCKS segments along its
+    long axis (fewer on a seam shorter than MEASURE_BLOCKS * MIN_BLOCK_PX), each whole or, past
+    the budget, a window centred in it, as square as the overlap allows (a local shift is
+    measured alike along and across)."""
+    length, width = _shape(region)[long_axis], _shape(region)[1 - long_axis]
+    n = max(1, min(MEASURE_BLOCKS, length // MIN_BLOCK_PX))
+    budget = MEASURE_PIXELS // n
+    across = min(width, max(MIN_BLOCK_PX, math.isqrt(budget)))
+    first, middle = region[long_axis].start, (region[1 - long_axis].start
+                                              + region[1 - long_axis].stop) // 2
+    out = []
+    for k in range(n):
+        lo, hi = first + k * length // n, first + (k + 1) * length // n
+        along = min(hi - lo, max(MIN_BLOCK_PX, budget // across))
+        start = (lo + hi - along) // 2
+        block = [slice(None), slice(None)]
+        block[long_axis] = slice(start, start + along)
+        block[1 - long_axis] = slice(middle - across // 2, middle - across // 2 + across)
+        out.append(tuple(block))
+    return out
+
+
+def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
                 n_chan: int) -> np.ndarray:
     """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed)."""
     gains = np.ones((n_views, n_chan))
     for c in range(n_chan):
         rows, rhs = [], []
-        for (a, b, _), crop in zip(pairs, crops, strict=True):
-            if crop is None:
+        for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+            if overlap is None:
                 continue
-            mean_a, mean_b = (float(x[c][crop[2]].mean()) for x in crop[:2])
+            count = sum(int(both.sum()) for _, _, both in overlap.pieces)
+            mean_a, mean_b = (sum(float(piece[k][c][piece[2]].sum()) for piece in overlap.pieces)
+                              / count for k in (0, 1))
             if mean_a <= 0 or mean_b <= 0:
                 continue  # signed data: leave this pair out
             rows.append(difference_row(a, b, n_views))
@@ -121,16 +185,17 @@ def match_gains(crops: list, pairs: list[tuple[int, int, str]], n_views: int,
     return gains
 
 
-def residuals(crops: list, pairs: list[tuple[int, int, str]], gains: np.ndarray) -> list:
+def residuals(overlaps: list, pairs: list[tuple[int, int, str]], gains: np.ndarray) -> list:
     """Per pair: (RMS local shift left in the overlap px or None, overlap area px)."""
     out = []
-    for (a, b, _), crop in zip(pairs, crops, strict=True):
-        if crop is None:
+    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+        if overlap is None:
             out.append((None, 0))
             continue
-        luma = [(x * gains[k].astype(np.float32)[:, None, None]).mean(axis=0)
-                for x, k in ((crop[0], a), (crop[1], b))]
-        out.append((overlap_residual(luma[0], luma[1], crop[2]), int(crop[2].sum())))
+        lumas = [tuple((x * gains[k].astype(np.float32)[:, None, None]).mean(axis=0)
+                       for x, k in ((crop_a, a), (crop_b, b))) + (both,)
+                 for crop_a, crop_b, both in overlap.pieces]
+        out.append((overlap_residual(lumas, overlap.long_axis), overlap.area))
     return out
 
 

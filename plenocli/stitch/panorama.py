@@ -18,6 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from plenocli.progress import step
 from plenocli.stitch import compose
+from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
 from plenocli.stitch.quality import bounding_box
@@ -197,16 +198,24 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     expected = priors(layout, frame_shape, origins, overlap, overlap_tolerance, tolerance)
     if rig is not None:
         _check_rig_layout(expected, layout, frame_shape)
+    windows, across = expected, dict.fromkeys(expected)
     if rig is None:
         def images(a, b, _):
             return luma[a], luma[b], (0, 0), (0, 0)
     else:
+        if model == "translation":
+            windows, across = fine_windows(luma, rig, origins, layout, expected, limits)
+
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
-                              expected[(a, b)])
+                              windows[(a, b)], across[(a, b)])
     with _prism_hint(rig):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
-                                                  limits, expected)
+                                                  limits, windows)
+    for info in pair_info:  # the report keeps the rig's own prediction
+        prior = expected[tuple(info["views"])][0]
+        if prior is not None:
+            info["expected_shift_px"] = list(prior)
     return transforms, layout, "estimated", pair_info, closure
 
 
@@ -248,14 +257,14 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     holes = [holes_of(view) for view in stack]
     filled = [view if h is None else fill_nan_channels(view) for view, h in
               zip(stack, holes, strict=True)]
-    crops = compose.overlap_crops(filled, maps, boxes, holes, pairs)
+    overlaps = compose.measure_overlaps(filled, maps, boxes, holes, pairs)
     if check_correlation is not None:
-        _check_fit(crops, pairs, check_correlation)
+        _check_fit(overlaps, pairs, check_correlation)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = compose.match_gains(crops, pairs, *stack.shape[:2])
-    residuals = compose.residuals(crops, pairs, gains)
-    del crops
+        gains = compose.match_gains(overlaps, pairs, *stack.shape[:2])
+    residuals = compose.residuals(overlaps, pairs, gains)
+    del overlaps
     if blend == "multiband":
         panorama = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)
         covered = np.isfinite(panorama).all(axis=0)
@@ -272,17 +281,21 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     return panorama, covered, offset, gains, residuals
 
 
-def _check_fit(crops: list, pairs: list, min_correlation: float) -> None:
+def _check_fit(overlaps: list, pairs: list, min_correlation: float) -> None:
     """Refuse a given transform under which a pair's overlap does not correlate: it was made
     for another rig or capture, or it lies."""
-    for (a, b, _), crop in zip(pairs, crops, strict=True):
-        if crop is None:
+    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+        if overlap is None:
             raise StitchError(f"the transform places views {a} and {b} without an overlap; it "
                              "does not describe these views: register them again (without "
                              "--transform-in)")
-        ha, hb = (highpass(np.where(crop[2], x.mean(axis=0), np.nan)) for x in crop[:2])
-        inner = erode(crop[2], 2)
-        corr = ncc(ha[inner], hb[inner]) if inner.sum() >= 64 else float("nan")
+        values: list = [[], []]
+        for *crops, both in overlap.pieces:
+            inner = erode(both, 2)
+            for k, crop in enumerate(crops):
+                values[k].append(highpass(np.where(both, crop.mean(axis=0), np.nan))[inner])
+        ha, hb = (np.concatenate(v) for v in values)
+        corr = ncc(ha, hb) if ha.size >= 64 else float("nan")
         if not corr >= min_correlation:
             raise StitchError(f"the transform does not fit these views: views {a} and {b} "
                              f"correlate {corr:.2f} over the overlap it gives (at least "

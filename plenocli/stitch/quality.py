@@ -48,38 +48,30 @@ def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
     return int(starts[k]), int(stops[k])
 
 
-def overlap_residual(pano_a: np.ndarray, pano_b: np.ndarray, both: np.ndarray) -> float | None:
-    """RMS (px) of local shifts left between two warped views (same-size crops of the canvas,
-    one channel), over blocks of their overlap ``both``; None when it is too small to measure."""
+def overlap_residual(pieces: list, long_axis: int) -> float | None:
+    """RMS (px) of the local shifts left between two warped views over the blocks of their
+    overlap: ``pieces`` (view a, view b, pixels both cover), same-size crops of the canvas, one
+    channel, in order along a seam whose long axis is ``long_axis``; None when too little of it
+    is covered to measure."""
     from skimage.registration import phase_cross_correlation
 
-    ys, xs = np.nonzero(both)
-    if ys.size < 1024:
+    if sum(int(both.sum()) for _, _, both in pieces) < 1024:
         return None
-    y0, y1, x0, x1 = ys.min() + 2, ys.max() - 1, xs.min() + 2, xs.max() - 1
-    if y1 - y0 < 32 or x1 - x0 < 32:
-        return None
-    ok = both[y0:y1, x0:x1]
-    ha = highpass(np.where(ok, pano_a[y0:y1, x0:x1], np.nan))
-    hb = highpass(np.where(ok, pano_b[y0:y1, x0:x1], np.nan))
-    long_axis = 0 if (y1 - y0) >= (x1 - x0) else 1
-    n_blocks = max(1, min(4, (ha.shape[long_axis]) // 64))
     shifts = []
-    for block in range(n_blocks):
-        sl = [slice(None), slice(None)]
-        length = ha.shape[long_axis]
-        sl[long_axis] = slice(block * length // n_blocks, (block + 1) * length // n_blocks)
+    for pano_a, pano_b, both in pieces:
+        if min(both.shape) < 32:
+            continue
         # an overlap that is not a rectangle (homography, undistorted views): keep the longest
         # run of lines across the block that lie wholly inside it
-        full = ok[tuple(sl)].all(axis=long_axis)
-        run = _longest_run(full)
+        run = _longest_run(both.all(axis=long_axis))
         if run is None or run[1] - run[0] < 16:
             continue
-        sl[1 - long_axis] = slice(*run)
-        sl = tuple(sl)
-        if ha[sl].std() == 0:
+        across = [slice(None), slice(None)]
+        across[1 - long_axis] = slice(*run)
+        ha, hb = (highpass(np.where(both, x, np.nan))[tuple(across)] for x in (pano_a, pano_b))
+        if ha.std() == 0:
             continue
-        shift, _, _ = phase_cross_correlation(ha[sl], hb[sl], upsample_factor=20)
+        shift, _, _ = phase_cross_correlation(ha, hb, upsample_factor=20)
         shifts.append(shift)
     if not shifts:
         return None

@@ -169,12 +169,16 @@ STRIP_MARGIN_PX = 64  # past the searched overlap: the high-pass (4 sigma) and r
 
 
 def rig_strips(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, size: tuple[int, int],
-               a: int, b: int, direction: str, expected) -> tuple:
+               a: int, b: int, direction: str, expected, across: tuple[int, int] | None = None
+               ) -> tuple:
     """The overlap strips of views a and b's canvases (see :func:`canvases`) in the common
     frame, from their luminance (V, rows, cols): the part of each canvas that the rig's predicted
-    shift, within its tolerance and a margin, can bring over the other. Returns (strip of a,
-    strip of b, [dy, dx] of a's strip in its canvas, the same for b). Strips start on the maps'
-    node grid and on multiples of 4, so they hold exactly the pixels of the whole canvases."""
+    shift, within its tolerance and a margin, can bring over the other. ``across`` = (lo, hi)
+    limits a's strip across the stitching direction to those canvas rows (columns for "v") and
+    b's to the ones the prediction brings there; default: the whole canvases. Returns (strip of
+    a, strip of b, [dy, dx] of a's strip in its canvas, the same for b). Strips start on the
+    maps' node grid and on multiples of 4, so they hold exactly the pixels of the whole
+    canvases."""
     (prior, tol) = expected
     axis = 1 if direction == "h" else 0
     along = prior[axis]
@@ -182,12 +186,15 @@ def rig_strips(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, size: tuple
     align = pitch * 4 // math.gcd(pitch, 4)
     start = max(0, int(np.floor(along - tol)) - STRIP_MARGIN_PX) // align * align
     stop = min(size[axis], int(np.ceil(size[axis] - along + tol)) + STRIP_MARGIN_PX)
+    lo, hi = across if across is not None else (0, size[1 - axis])
+    shift_across = int(round(prior[1 - axis])) if across is not None else 0
     out, offsets = [], []
-    for view, (lo, hi) in ((a, (start, size[axis])), (b, (0, stop))):
-        offset = [0, 0]
-        offset[axis] = lo
-        shape = list(size)
-        shape[axis] = hi - lo
+    for view, span, moved in ((a, (start, size[axis]), 0), (b, (0, stop), shift_across)):
+        first = max(0, lo - moved) // align * align
+        last = min(size[1 - axis], hi - moved)
+        offset, shape = [0, 0], list(size)
+        offset[axis], offset[1 - axis] = span[0], first
+        shape[axis], shape[1 - axis] = span[1] - span[0], last - first
         origin_xy = origins[view, ::-1] + offset[::-1]
         out.append(undistort_region(luma[view], rig, view, origin_xy, tuple(shape)))
         offsets.append(tuple(offset))

@@ -13,7 +13,7 @@ from plenocli.stitch.quality import aligned_correlation
 from plenocli.stitch.views import highpass, translation_matrix, valid_eroded
 
 
-def _overlap_crops(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
+def shifted_overlap(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
     """Same-size crops of a and b over their overlap for b(q) <-> a(q + (dy, dx)), or None."""
     rows, cols = a.shape
     y0, y1 = max(0, dy), min(rows, rows + dy)
@@ -132,7 +132,7 @@ def _ecc_subpixel(a: np.ndarray, b: np.ndarray, dy0: int, dx0: int) -> tuple[flo
     """Sub-pixel correction (ty, tx) of the integer match (dy0, dx0) by ECC (translation) on the
     overlap of the raw views, and the method that gave it. ECC is invariant to gain and
     offset, and the raw views resample without the bias a high-pass would add."""
-    crops = _overlap_crops(a, b, dy0, dx0)
+    crops = shifted_overlap(a, b, dy0, dx0)
     if crops is None:
         raise StitchError("no overlap found between the views; check the layout (--layout) and "
                          "that the views overlap")
