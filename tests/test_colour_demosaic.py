@@ -102,3 +102,19 @@ def test_menon_equals_the_colour_demosaicing_reference(pattern):
     reference = colour_demosaicing.demosaicing_CFA_Bayer_Menon2007(frame, pattern)
     ours = dm.demosaic(frame.astype(np.float32), pattern, method="menon2007", gains=(1, 1, 1))
     np.testing.assert_allclose(ours, reference, rtol=0, atol=2e-6)
+
+
+@pytest.mark.parametrize("method", ["rcd", "bilinear"])
+def test_out_receives_the_same_pixels_in_place(method):
+    """``out`` (a view of a larger, channel-interleaved stack) gets exactly what a fresh array
+    gets, NaN reach included; a wrong shape is refused."""
+    rng = np.random.default_rng(2)
+    frame = rng.random((64, 96)).astype(np.float32)
+    frame[20, 30] = np.nan
+    fresh = dm.demosaic(frame, "GRBG", method=method, gains=(2.0, 1.0, 1.5))
+    stack = np.zeros((2, 64, 96, 3), np.float32)
+    got = dm.demosaic(frame, "GRBG", method=method, gains=(2.0, 1.0, 1.5), out=stack[1])
+    assert got is stack[1] or np.shares_memory(got, stack)
+    assert np.array_equal(stack[1], fresh, equal_nan=True) and not stack[0].any()
+    with pytest.raises(ValueError, match="out must be"):
+        dm.demosaic(frame, "GRBG", out=np.zeros((64, 96, 3), np.float64))

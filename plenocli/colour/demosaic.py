@@ -81,8 +81,16 @@ def mosaic(rgb: np.ndarray, cfa: str) -> np.ndarray:
     return out
 
 
+def _output(out: np.ndarray | None, shape: tuple[int, int, int]) -> np.ndarray:
+    if out is None:
+        return np.empty(shape, np.float32)
+    if out.shape != shape or out.dtype != np.float32:
+        raise ValueError(f"out must be float32 {shape}, got {out.dtype} {out.shape}")
+    return out
+
+
 def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains=None,
-             balanced: bool = False) -> np.ndarray:
+             balanced: bool = False, out: np.ndarray | None = None) -> np.ndarray:
     """Full-resolution RGB of a Bayer frame, demosaiced white-balanced.
 
     Parameters
@@ -98,6 +106,8 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         mosaic's grey-edge estimate (:func:`grey_edge_gains`).
     balanced : bool
         Return the white-balanced RGB (times the gains) instead of camera RGB.
+    out : ndarray float32, (rows, cols, 3), optional
+        Written in place and returned (a view of a larger stack: no full-size copy).
 
     Returns
     -------
@@ -120,7 +130,7 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         data = fill_unknown(data, unknown)
     gains = grey_edge_gains(data, pattern) if gains is None else normalised_gains(gains)
     tile = np.array([gains["RGB".index(c)] for c in pattern], np.float32).reshape(2, 2)
-    rgb = np.empty((*data.shape, 3), np.float32)
+    rgb = _output(out, (*data.shape, 3))
     radius = SUPPORT_RADIUS[method]
     margin = radius + radius % 2  # even: every band keeps the CFA phase of row 0
     low, high = (_balanced_range(data, tile) if method.startswith("opencv")

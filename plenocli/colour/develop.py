@@ -74,18 +74,23 @@ def colour_views(names: list[str], *, cfa: str | None = None,
 
 
 def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD,
-               gains=None) -> np.ndarray:
+               gains=None, out: np.ndarray | None = None) -> np.ndarray:
     """Camera RGB (rows, cols, 3) float32 of one colour view; a Bayer view is demosaiced
     white-balanced by ``gains`` (the ones the photograph is developed with; None: the mosaic's
     own estimate), see :func:`plenocli.colour.demosaic.demosaic`. Pixels clipped in some
     channels only are rebuilt (:func:`plenocli.colour.highlights.rebuild_partly_clipped`);
-    those clipped in every channel stay NaN."""
+    those clipped in every channel stay NaN. ``out`` (rows, cols, 3) float32: written in place
+    and returned."""
     if view.cfa is None:
-        return np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
+        rgb = np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
+        if out is None:
+            return rgb
+        out[...] = rgb
+        return out
     frame = pages[view.pages[0]]
     if gains is None:
         gains = grey_edge_gains(frame, view.cfa)
-    rgb = demosaic(frame, view.cfa, method=method, gains=gains)
+    rgb = demosaic(frame, view.cfa, method=method, gains=gains, out=out)
     rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains))
     return rgb
 

@@ -107,11 +107,11 @@ def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: l
     if not cfa:
         out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
         return
-    try:
-        rgb = camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb)
+    try:  # demosaiced straight into the stack (its channels interleaved): no full-size copy
+        camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb,
+                   out=np.moveaxis(out, 0, -1))
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
-    np.moveaxis(out, 0, -1)[...] = rgb
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
