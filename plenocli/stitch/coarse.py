@@ -8,7 +8,7 @@ size two 17 Mpx strips per pair. Here each pair is first registered on the lumin
 shift to about a reduced pixel. The full-resolution registration then searches only
 ``FINE_TOLERANCE_PX`` around it, on strips holding the overlap and, across it, the
 ``FINE_PIXELS`` whose texture the two views share most (a translation has two parameters;
-two million textured pixels fix them far below the 0.01 px the stitch promises).
+half a million textured pixels fix them far below the 0.01 px the stitch promises).
 
 Nothing here decides a result: the reduced pass only chooses the window, and a pair it cannot
 register (no texture at the reduced scale, an ambiguous match) is searched at full resolution
@@ -28,7 +28,7 @@ from plenocli.stitch.translation import estimate_translation, shifted_overlap
 from plenocli.stitch.views import highpass, neighbour_pairs
 
 FINE_TOLERANCE_PX = 8.0  # the reduced pass is right to ~1 reduced px: 4 px at factor 4
-FINE_PIXELS = 1 << 20  # per strip at full resolution
+FINE_PIXELS = 1 << 19  # per strip at full resolution
 MIN_REDUCED_PX = 256  # the reduced views' short side: enough texture for the reduced search
 
 
