@@ -197,6 +197,11 @@ def test_cli_rig_file_and_errors(tmp_path):
     assert res.exit_code == 0, res.output
     rep = json.loads(report.read_text())
     assert rep["residual_px"] < 0.25 and rep["rig"]["prism_apex_deg"] == 30.0
+    crossed = tmp_path / "crossed.tif"  # the rig puts B right of A: not one above the other
+    res = CliRunner().invoke(cli, ["stitch", str(src), "--layout", "2x1", "--rig", str(rig_file),
+                                   "-o", str(crossed)])
+    assert res.exit_code == 1 and "--layout 2x1 contradicts the rig" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not crossed.exists()
     bad = tmp_path / "bad.yaml"
     bad.write_text("focal_mm: 6\n")
     out2 = tmp_path / "pano2.tif"

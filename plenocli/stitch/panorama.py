@@ -234,12 +234,18 @@ def _prism_hint(rig: PrismRig | None):
 
 def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int]) -> None:
     """Refuse a rig whose predicted view positions do not make the layout: each view after its
-    neighbour (right of it, or below) and overlapping it."""
+    neighbour (right of it, or below), overlapping it, and further along the layout's direction
+    than across it (a side-by-side rig is not a 2x1 layout)."""
     for a, b, direction in neighbour_pairs(layout):
         (dy, dx), _ = expected[(a, b)]
         along, size = (dx, frame_shape[1]) if direction == "h" else (dy, frame_shape[0])
+        across = dy if direction == "h" else dx
+        where = "right of" if direction == "h" else "below"
+        if abs(across) > abs(along):
+            placed = "below" if direction == "h" else "right of"
+            raise StitchError(f"--layout {layout} contradicts the rig: it puts view {b} {placed} "
+                             f"view {a}, not {where} it; drop --layout (the rig sets it)")
         if not 0 < along < size:
-            where = "right of" if direction == "h" else "below"
             raise StitchError(f"the rig puts view {b} {along:.0f} px from view {a} along the "
                              f"layout {layout} (views {size} px long), so not {where} it with an "
                              "overlap; list the views in the rig's order (--views) or fix the "
