@@ -163,13 +163,15 @@ def _smooth_profile(mean, counts, usable, x, y) -> np.ndarray:
     return out
 
 
-def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0)
-               ) -> LensDepth:
+def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0),
+               type_ranges: np.ndarray | None = None) -> LensDepth:
     """g and confidence of every lens of ``grid`` on ``frame`` (2-D, NaN pixels unused).
 
     ``g_range`` (min, max) bounds the search; a Galilean (inverted) camera has negative g,
     e.g. (-8, -2). Both bounds share one sign and |g| > 1. A grid with lens types (a
-    multi-focus array) matches each lens against its own type only.
+    multi-focus array) matches each lens against its own type only; with ``type_ranges``
+    ((3, 2): min, max g of types 0, 1, 2, where each is in focus) the lens median takes the
+    lenses whose g lies in their type's range, where there are any.
     """
     gmin, gmax = check_range(g_range)
     img = np.ascontiguousarray(frame, np.float32)
@@ -202,19 +204,31 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
-    g = lens_median(g, confidence, neighbours(indices, ring1))
+    in_range = None
+    if grid.lens_type_of_coset is not None and type_ranges is not None:
+        lo, hi = np.asarray(type_ranges, float)[grid.lens_types(indices[:, 0], indices[:, 1])].T
+        in_range = (g >= lo) & (g <= hi)
+    g = lens_median(g, confidence, neighbours(indices, ring1), prefer=in_range)
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
 
 
 def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
-                min_confidence: float = 0.1) -> np.ndarray:
+                min_confidence: float = 0.1, prefer: np.ndarray | None = None) -> np.ndarray:
     """Each lens's g replaced by the median over itself and its first ring (the confident
     ones): a lens sees a patch about one footprint across, its neighbours most of the same
     patch, so the median lowers the scatter of a surface without blurring a depth edge (the
-    majority side wins, as it would at the lens's centre)."""
+    majority side wins, as it would at the lens's centre). With ``prefer`` (K,) bool, only the
+    preferred ones of each neighbourhood count where it holds any: on a multi-focus array the
+    lenses of the type in focus there, whose micro-images are sharp; a blurred type's g is
+    biased towards small g by up to 0.6 (simulator, docs/depth.md)."""
     trusted = np.where(confidence >= min_confidence, g, np.nan)
     padded = np.append(trusted, np.nan)
     stack = np.concatenate([trusted[:, None], padded[np.where(nb >= 0, nb, -1)]], axis=1)
+    if prefer is not None:
+        chosen = np.append(prefer, False)
+        chosen = np.concatenate([prefer[:, None], chosen[np.where(nb >= 0, nb, -1)]], axis=1)
+        some = (chosen & np.isfinite(stack)).any(axis=1)
+        stack = np.where(chosen | ~some[:, None], stack, np.nan)
     with np.errstate(all="ignore"):
         import warnings
 
@@ -277,8 +291,8 @@ def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
 
 
 def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
-              g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1
-              ) -> DepthMap:
+              g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1,
+              type_ranges: np.ndarray | None = None) -> DepthMap:
     """g and confidence on the pixel grid of ``refocus(frame, grid, s=s)``; NaN where no lens
     with confidence >= ``min_confidence`` covers a pixel."""
     from plenocli.refocus import output_shape
@@ -287,7 +301,7 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
     if not 0 <= min_confidence <= 1:
         raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
-    lenses = lens_depth(frame, grid, g_range=g_range)
+    lenses = lens_depth(frame, grid, g_range=g_range, type_ranges=type_ranges)
     _check_sign(frame, grid, g_range, lenses)
     rows_out, cols_out = output_shape(np.shape(frame), s)
     weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)
