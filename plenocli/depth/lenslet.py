@@ -46,18 +46,20 @@ CLEAR_MATCH = 0.5     # median lens confidence above which the sign of g is not 
 SIGN_MARGIN = 0.2     # the other sign must beat this range's median confidence by this much
 RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output grid
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
+MIN_JUDGED = 10       # lenses in and out of their type's range needed to judge the ranges
 OVERLAP_RISE = 0.05   # a mean micro-image this much brighter than nearer its centre: overlap
 
 
 @dataclass(frozen=True)
 class LensDepth:
-    """Per-lens estimate: centres (K, 2), g (K,) (NaN: none), confidence (K,) in 0..1, and the
-    usable micro-image radius (px)."""
+    """Per-lens estimate: centres (K, 2), g (K,) (NaN: none), confidence (K,) in 0..1, the
+    usable micro-image radius (px), and whether lens-type depth ranges were used."""
 
     centres: np.ndarray
     g: np.ndarray
     confidence: np.ndarray
     radius_px: float
+    ranges_used: bool | None = None  # lens-type ranges given: whether the frame bore them out
 
 
 @dataclass(frozen=True)
@@ -222,10 +224,52 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
     in_range = None
     if grid.lens_type_of_coset is not None and type_ranges is not None:
-        lo, hi = np.asarray(type_ranges, float)[grid.lens_types(indices[:, 0], indices[:, 1])].T
-        in_range = (g >= lo) & (g <= hi)
+        in_range = _in_focus(flat, indices, centres, r_use, g, confidence,
+                             grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
     g = lens_median(g, confidence, neighbours(indices, ring1), prefer=in_range)
-    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
+    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use,
+                     None if type_ranges is None else in_range is not None)
+
+
+def _in_focus(flat, indices, centres, r_use, g, confidence, types, type_ranges
+              ) -> np.ndarray | None:
+    """(K,) bool: the lenses whose g lies in their type's depth range, where that type is in
+    focus; None when the frame contradicts the ranges (the lenses in range are not sharper,
+    relative to their neighbours of the other types, than those out of range): ranges of
+    another camera, or types swapped, would prefer the blurred lenses."""
+    from plenocli.calibration.lenstypes import local_contrast
+
+    lo, hi = np.asarray(type_ranges, float)[types].T
+    in_range = (g >= lo) & (g <= hi)
+    rows, relative = local_contrast(indices, _sharpness(flat, centres, r_use))
+    judged = np.isfinite(g[rows]) & (confidence[rows] >= 0.1) & np.isfinite(relative)
+    inside, outside = relative[judged & in_range[rows]], relative[judged & ~in_range[rows]]
+    if min(inside.size, outside.size) < MIN_JUDGED or \
+            not np.median(inside) > np.median(outside):
+        return None
+    return in_range
+
+
+def _sharpness(flat: np.ndarray, centres: np.ndarray, r_use: float) -> np.ndarray:
+    """Mean |Laplacian| of each flattened micro-image over its usable disc (K,)."""
+    import cv2
+
+    lap = np.abs(cv2.Laplacian(np.nan_to_num(flat), cv2.CV_32F, ksize=3))
+    valid = cv2.erode(np.isfinite(flat).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    lap[~valid] = np.nan  # the Laplacian of a pixel next to an unusable one
+    half = int(r_use)
+    dy, dx = np.mgrid[-half:half + 1, -half:half + 1]
+    disc = np.hypot(dx, dy) <= r_use
+    r = np.rint(centres[:, 1]).astype(np.int64)[:, None] + dy[disc]
+    c = np.rint(centres[:, 0]).astype(np.int64)[:, None] + dx[disc]
+    inside = (r >= 0) & (r < lap.shape[0]) & (c >= 0) & (c < lap.shape[1])
+    values = np.where(inside, lap[np.clip(r, 0, lap.shape[0] - 1),
+                                  np.clip(c, 0, lap.shape[1] - 1)], np.nan)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a lens with no usable pixel
+        return np.nanmean(values, axis=1)
 
 
 def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,

@@ -129,7 +129,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
             "crop_sensor_origin": list(framing.sensor_origin),
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
             "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
-            "type_ranges": None if ranges is None else ranges.tolist()}
+            "type_ranges": None if ranges is None else ranges.tolist(),
+            "type_ranges_used": lens.ranges_used}
     return [result.g, result.confidence], ["g", "confidence"], info
 
 
