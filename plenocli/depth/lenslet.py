@@ -187,9 +187,10 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
 
     ``g_range`` (min, max) bounds the search; a Galilean (inverted) camera has negative g,
     e.g. (-8, -2). Both bounds share one sign and |g| > 1. A grid with lens types (a
-    multi-focus array) matches each lens against its own type only; with ``type_ranges``
-    ((3, 2): min, max g of types 0, 1, 2, where each is in focus) the lens median takes the
-    lenses whose g lies in their type's range, where there are any.
+    multi-focus array) matches each lens against its own type only, and the lens median takes
+    the lenses of the type in focus where there are any: those sharper than their neighbours
+    and, with ``type_ranges`` ((3, 2): min, max g of types 0, 1, 2, where each is in focus)
+    that the frame bears out, whose g lies in their type's range.
     """
     gmin, gmax = check_range(g_range)
     img = np.ascontiguousarray(frame, np.float32)
@@ -222,32 +223,39 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
-    in_range = None
-    if grid.lens_type_of_coset is not None and type_ranges is not None:
-        in_range = _in_focus(flat, indices, centres, r_use, g, confidence,
-                             grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
-    g = lens_median(g, confidence, neighbours(indices, ring1), prefer=in_range)
-    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use,
-                     None if type_ranges is None else in_range is not None)
+    prefer, used = None, None
+    if grid.lens_type_of_coset is not None:
+        prefer, used = _in_focus(flat, indices, centres, r_use, g, confidence,
+                                 grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
+    g = lens_median(g, confidence, neighbours(indices, ring1), prefer=prefer)
+    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used)
 
 
 def _in_focus(flat, indices, centres, r_use, g, confidence, types, type_ranges
-              ) -> np.ndarray | None:
-    """(K,) bool: the lenses whose g lies in their type's depth range, where that type is in
-    focus; None when the frame contradicts the ranges (the lenses in range are not sharper,
-    relative to their neighbours of the other types, than those out of range): ranges of
-    another camera, or types swapped, would prefer the blurred lenses."""
+              ) -> tuple[np.ndarray, bool | None]:
+    """(K,) bool: the lenses of the type in focus where they are, and whether ``type_ranges``
+    were used (None: none given).
+
+    In focus: sharper than its six neighbours, which are of the two other types (mean
+    |Laplacian| over the usable disc; the scene's detail cancels); with ranges, also g within
+    its type's range. Ranges are used only when the frame bears them out (the lenses in range
+    are sharper, by median, than those out of range): ranges of another camera, or swapped
+    types, would prefer the blurred lenses."""
     from plenocli.calibration.lenstypes import local_contrast
 
+    rows, relative = local_contrast(indices, _sharpness(flat, centres, r_use))
+    sharper = np.zeros(len(g), bool)
+    sharper[rows] = relative > 0
+    if type_ranges is None:
+        return sharper, None
     lo, hi = np.asarray(type_ranges, float)[types].T
     in_range = (g >= lo) & (g <= hi)
-    rows, relative = local_contrast(indices, _sharpness(flat, centres, r_use))
     judged = np.isfinite(g[rows]) & (confidence[rows] >= 0.1) & np.isfinite(relative)
     inside, outside = relative[judged & in_range[rows]], relative[judged & ~in_range[rows]]
     if min(inside.size, outside.size) < MIN_JUDGED or \
             not np.median(inside) > np.median(outside):
-        return None
-    return in_range
+        return sharper, False
+    return sharper & in_range, True
 
 
 def _sharpness(flat: np.ndarray, centres: np.ndarray, r_use: float) -> np.ndarray:
@@ -279,8 +287,8 @@ def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
     patch, so the median lowers the scatter of a surface without blurring a depth edge (the
     majority side wins, as it would at the lens's centre). With ``prefer`` (K,) bool, only the
     preferred ones of each neighbourhood count where it holds any: on a multi-focus array the
-    lenses of the type in focus there, whose micro-images are sharp; a blurred type's g is
-    biased towards small g by up to 0.6 (simulator, docs/depth.md)."""
+    lenses of the type in focus there; a blurred type's own-type match is biased towards
+    small g by up to 0.65 (simulator, docs/depth.md)."""
     trusted = np.where(confidence >= min_confidence, g, np.nan)
     padded = np.append(trusted, np.nan)
     stack = np.concatenate([trusted[:, None], padded[np.where(nb >= 0, nb, -1)]], axis=1)
