@@ -259,25 +259,22 @@ def _in_focus(flat, indices, centres, r_use, g, confidence, types, type_ranges
 
 
 def _sharpness(flat: np.ndarray, centres: np.ndarray, r_use: float) -> np.ndarray:
-    """Mean |Laplacian| of each flattened micro-image over its usable disc (K,)."""
+    """Mean |Laplacian| of each flattened micro-image over its usable disc (K,): two disc
+    filters over the frame (the sum and the count of usable pixels) read at the centres."""
     import cv2
 
-    lap = np.abs(cv2.Laplacian(np.nan_to_num(flat), cv2.CV_32F, ksize=3))
-    valid = cv2.erode(np.isfinite(flat).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    lap[~valid] = np.nan  # the Laplacian of a pixel next to an unusable one
+    valid = cv2.erode(np.isfinite(flat).astype(np.uint8), np.ones((3, 3), np.uint8))
+    # a pixel next to an unusable one has no Laplacian of its own micro-image
+    lap = np.abs(cv2.Laplacian(np.nan_to_num(flat), cv2.CV_32F, ksize=3)) * valid
     half = int(r_use)
     dy, dx = np.mgrid[-half:half + 1, -half:half + 1]
-    disc = np.hypot(dx, dy) <= r_use
-    r = np.rint(centres[:, 1]).astype(np.int64)[:, None] + dy[disc]
-    c = np.rint(centres[:, 0]).astype(np.int64)[:, None] + dx[disc]
-    inside = (r >= 0) & (r < lap.shape[0]) & (c >= 0) & (c < lap.shape[1])
-    values = np.where(inside, lap[np.clip(r, 0, lap.shape[0] - 1),
-                                  np.clip(c, 0, lap.shape[1] - 1)], np.nan)
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # a lens with no usable pixel
-        return np.nanmean(values, axis=1)
+    disc = (np.hypot(dx, dy) <= r_use).astype(np.float32)
+    total = cv2.filter2D(lap, -1, disc, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.filter2D(valid.astype(np.float32), -1, disc, borderType=cv2.BORDER_CONSTANT)
+    r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, flat.shape[0] - 1)
+    c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, flat.shape[1] - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count[r, c] > 0.5, total[r, c] / count[r, c], np.nan)
 
 
 def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
