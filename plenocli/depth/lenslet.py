@@ -46,17 +46,20 @@ CLEAR_MATCH = 0.5     # median lens confidence above which the sign of g is not 
 SIGN_MARGIN = 0.2     # the other sign must beat this range's median confidence by this much
 RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output grid
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
+MIN_JUDGED = 10       # lenses in and out of their type's range needed to judge the ranges
+OVERLAP_RISE = 0.05   # a mean micro-image this much brighter than nearer its centre: overlap
 
 
 @dataclass(frozen=True)
 class LensDepth:
-    """Per-lens estimate: centres (K, 2), g (K,) (NaN: none), confidence (K,) in 0..1, and the
-    usable micro-image radius (px)."""
+    """Per-lens estimate: centres (K, 2), g (K,) (NaN: none), confidence (K,) in 0..1, the
+    usable micro-image radius (px), and whether lens-type depth ranges were used."""
 
     centres: np.ndarray
     g: np.ndarray
     confidence: np.ndarray
     radius_px: float
+    ranges_used: bool | None = None  # lens-type ranges given: whether the frame bore them out
 
 
 @dataclass(frozen=True)
@@ -121,12 +124,13 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
     # the peak among bins many pixels fall in: a bin at the disc's edge that one bright pixel
     # falls in would raise it and leave no bin usable
     filled = weight > 0.05 * weight.max()
-    peak = float(np.max(mean[filled])) if filled.any() else 0.0
+    yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
+    own = filled & (np.hypot(xx, yy) < _overlap_radius(mean, filled, np.hypot(xx, yy)))
+    peak = float(np.max(mean[own])) if own.any() else 0.0
     if not peak > 0:
         raise ValueError("the micro-images hold no light (the frame is dark or NaN under the "
                          "grid); check the frames and the grid")
-    usable = (mean >= USABLE_LEVEL * peak) & filled
-    yy, xx = (np.indices(mean.shape) - 2 * half) / 2.0
+    usable = (mean >= USABLE_LEVEL * peak) & own
     usable &= np.hypot(xx, yy) <= radius * 0.95
     # the rim of a micro-image falls off within a pixel or two: its binned mean is not the
     # rim of each lens (sub-pixel centres), and the residual pattern, the same in every
@@ -139,6 +143,20 @@ def micro_profile(frame: np.ndarray, centres: np.ndarray, pitch: float
         raise ValueError(f"micro-images are usable over a radius of {r_use:.1f} px only; "
                          "depth needs micro-images of at least 4 px across")
     return profile, mean, half, r_use
+
+
+def _overlap_radius(mean: np.ndarray, filled: np.ndarray, r: np.ndarray) -> float:
+    """Offset (px) from which the mean micro-image grows brighter than it is nearer the
+    centre by OVERLAP_RISE: there the micro-images overlap and neighbours' light adds (Boys2:
+    0.57 of the peak at 14 px, 0.69 at 34 px, pitch 70 px), and a pixel shows two lenses'
+    content at once. Vignetting alone only darkens outwards; inf when nothing rises."""
+    rings = np.floor(r[filled]).astype(np.int64)
+    sums = np.bincount(rings, weights=mean[filled])
+    counts = np.bincount(rings)
+    radial = sums[counts > 0] / counts[counts > 0]
+    low = np.minimum.accumulate(radial)
+    rise = np.flatnonzero(radial > (1 + OVERLAP_RISE) * low)
+    return float(np.flatnonzero(counts > 0)[rise[0]]) if rise.size else np.inf
 
 
 def _smooth_profile(mean, counts, usable, x, y) -> np.ndarray:
@@ -163,13 +181,16 @@ def _smooth_profile(mean, counts, usable, x, y) -> np.ndarray:
     return out
 
 
-def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0)
-               ) -> LensDepth:
+def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float] = (2.0, 8.0),
+               type_ranges: np.ndarray | None = None) -> LensDepth:
     """g and confidence of every lens of ``grid`` on ``frame`` (2-D, NaN pixels unused).
 
     ``g_range`` (min, max) bounds the search; a Galilean (inverted) camera has negative g,
     e.g. (-8, -2). Both bounds share one sign and |g| > 1. A grid with lens types (a
-    multi-focus array) matches each lens against its own type only.
+    multi-focus array) matches each lens against its own type only, and the lens median takes
+    the lenses of the type in focus where there are any: those sharper than their neighbours
+    and, with ``type_ranges`` ((3, 2): min, max g of types 0, 1, 2, where each is in focus)
+    that the frame bears out, whose g lies in their type's range.
     """
     gmin, gmax = check_range(g_range)
     img = np.ascontiguousarray(frame, np.float32)
@@ -202,19 +223,77 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
-    g = lens_median(g, confidence, neighbours(indices, ring1))
-    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use)
+    prefer, used = None, None
+    if grid.lens_type_of_coset is not None:
+        prefer, used = _in_focus(flat, indices, centres, r_use, g, confidence,
+                                 grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
+    g = lens_median(g, confidence, neighbours(indices, ring1), prefer=prefer)
+    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used)
+
+
+def _in_focus(flat, indices, centres, r_use, g, confidence, types, type_ranges
+              ) -> tuple[np.ndarray, bool | None]:
+    """(K,) bool: the lenses of the type in focus where they are, and whether ``type_ranges``
+    were used (None: none given).
+
+    In focus: sharper than its six neighbours, which are of the two other types (mean
+    |Laplacian| over the usable disc; the scene's detail cancels); with ranges, also g within
+    its type's range. Ranges are used only when the frame bears them out (the lenses in range
+    are sharper, by median, than those out of range): ranges of another camera, or swapped
+    types, would prefer the blurred lenses."""
+    from plenocli.calibration.lenstypes import local_contrast
+
+    rows, relative = local_contrast(indices, _sharpness(flat, centres, r_use))
+    sharper = np.zeros(len(g), bool)
+    sharper[rows] = relative > 0
+    if type_ranges is None:
+        return sharper, None
+    lo, hi = np.asarray(type_ranges, float)[types].T
+    in_range = (g >= lo) & (g <= hi)
+    judged = np.isfinite(g[rows]) & (confidence[rows] >= 0.1) & np.isfinite(relative)
+    inside, outside = relative[judged & in_range[rows]], relative[judged & ~in_range[rows]]
+    if min(inside.size, outside.size) < MIN_JUDGED or \
+            not np.median(inside) > np.median(outside):
+        return sharper, False
+    return sharper & in_range, True
+
+
+def _sharpness(flat: np.ndarray, centres: np.ndarray, r_use: float) -> np.ndarray:
+    """Mean |Laplacian| of each flattened micro-image over its usable disc (K,): two disc
+    filters over the frame (the sum and the count of usable pixels) read at the centres."""
+    import cv2
+
+    valid = cv2.erode(np.isfinite(flat).astype(np.uint8), np.ones((3, 3), np.uint8))
+    # a pixel next to an unusable one has no Laplacian of its own micro-image
+    lap = np.abs(cv2.Laplacian(np.nan_to_num(flat), cv2.CV_32F, ksize=3)) * valid
+    half = int(r_use)
+    dy, dx = np.mgrid[-half:half + 1, -half:half + 1]
+    disc = (np.hypot(dx, dy) <= r_use).astype(np.float32)
+    total = cv2.filter2D(lap, -1, disc, borderType=cv2.BORDER_CONSTANT)
+    count = cv2.filter2D(valid.astype(np.float32), -1, disc, borderType=cv2.BORDER_CONSTANT)
+    r = np.clip(np.rint(centres[:, 1]).astype(np.int64), 0, flat.shape[0] - 1)
+    c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, flat.shape[1] - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count[r, c] > 0.5, total[r, c] / count[r, c], np.nan)
 
 
 def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
-                min_confidence: float = 0.1) -> np.ndarray:
+                min_confidence: float = 0.1, prefer: np.ndarray | None = None) -> np.ndarray:
     """Each lens's g replaced by the median over itself and its first ring (the confident
     ones): a lens sees a patch about one footprint across, its neighbours most of the same
     patch, so the median lowers the scatter of a surface without blurring a depth edge (the
-    majority side wins, as it would at the lens's centre)."""
+    majority side wins, as it would at the lens's centre). With ``prefer`` (K,) bool, only the
+    preferred ones of each neighbourhood count where it holds any: on a multi-focus array the
+    lenses of the type in focus there; a blurred type's own-type match is biased towards
+    small g by up to 0.65 (simulator, docs/depth.md)."""
     trusted = np.where(confidence >= min_confidence, g, np.nan)
     padded = np.append(trusted, np.nan)
     stack = np.concatenate([trusted[:, None], padded[np.where(nb >= 0, nb, -1)]], axis=1)
+    if prefer is not None:
+        chosen = np.append(prefer, False)
+        chosen = np.concatenate([prefer[:, None], chosen[np.where(nb >= 0, nb, -1)]], axis=1)
+        some = (chosen & np.isfinite(stack)).any(axis=1)
+        stack = np.where(chosen | ~some[:, None], stack, np.nan)
     with np.errstate(all="ignore"):
         import warnings
 
@@ -277,8 +356,8 @@ def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
 
 
 def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
-              g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1
-              ) -> DepthMap:
+              g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1,
+              type_ranges: np.ndarray | None = None) -> DepthMap:
     """g and confidence on the pixel grid of ``refocus(frame, grid, s=s)``; NaN where no lens
     with confidence >= ``min_confidence`` covers a pixel."""
     from plenocli.refocus import output_shape
@@ -287,7 +366,7 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
     if not 0 <= min_confidence <= 1:
         raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
-    lenses = lens_depth(frame, grid, g_range=g_range)
+    lenses = lens_depth(frame, grid, g_range=g_range, type_ranges=type_ranges)
     _check_sign(frame, grid, g_range, lenses)
     rows_out, cols_out = output_shape(np.shape(frame), s)
     weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)

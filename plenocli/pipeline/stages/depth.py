@@ -113,8 +113,9 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
         check_fits(grey, framing.grid, grid_path, for_depth=True)
-        result = lenslet.depth_map(grey, framing.grid, s=s,
-                                   g_range=g_range, min_confidence=min_confidence)
+        ranges = _type_ranges(grid_path, framing.grid)
+        result = lenslet.depth_map(grey, framing.grid, s=s, g_range=g_range,
+                                   min_confidence=min_confidence, type_ranges=ranges)
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
     if not np.isfinite(result.g).any():
@@ -127,8 +128,25 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
             "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
             "crop_sensor_origin": list(framing.sensor_origin),
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
-            "lenses_confident": int(np.sum(lens.confidence >= min_confidence))}
+            "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
+            "type_ranges": None if ranges is None else ranges.tolist(),
+            "type_ranges_used": lens.ranges_used}
     return [result.g, result.confidence], ["g", "confidence"], info
+
+
+def _type_ranges(grid_path, grid) -> np.ndarray | None:
+    """(3, 2) depth range of lens types 0, 1, 2 from a RayCalibData XML grid with types (the
+    virtual depths where each type is in focus), else None."""
+    from pathlib import Path
+
+    from plenocli.io import raytrix
+
+    if grid.lens_type_of_coset is None or Path(grid_path).suffix.lower() != ".xml":
+        return None
+    types = {t["id"]: t["depth_range"] for t in raytrix.read_calib(grid_path)["lens_types"]}
+    if sorted(types) != [0, 1, 2]:
+        return None
+    return np.array([types[k] for k in range(3)], float)
 
 
 def _views(input, data, meta, max_disparity):
