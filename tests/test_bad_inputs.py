@@ -806,7 +806,7 @@ def infinite(tmp_path_factory, inputs) -> Path:
     _plenocli_tiff(d / "frame.tif", np.where(np.isinf(bad[1]), -np.inf, bad[0]))
     _plain_tiff(d / "sensor.tif", bad[1])
     nodes = np.array([[1.0, 0.2], [0.1, 1.0]])[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
-    field = MixingField(nodes, np.array([16.0, 48.0]), np.array([16.0, 48.0]), (64, 64),
+    field = MixingField(nodes, np.array([15.5, 47.5]), np.array([15.5, 47.5]), (64, 64),
                         ("A", "B"), ("L",))
     write_mixing(d / "mixing.tif", field, layout="mono", cfa=None, meta={})
     frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
@@ -928,9 +928,13 @@ def _mixing_variant(path: Path, change: str) -> None:
     from plenocli.model.mixing import MixingField
 
     m = np.array([[1.0, 0.2], [0.1, 1.0]])
-    rows = cols = np.array([16.0, 48.0])
+    rows = cols = np.array([15.5, 47.5])
     views = ("A", "B")
-    if change == "scaled-1e30":
+    if change == "share-1.5":
+        m = m + [[0, 1.3], [0, 0]]
+    elif change == "nodes-not-tile-centres":
+        cols = cols / 2
+    elif change == "scaled-1e30":
         m = m * 1e30
     elif change == "diagonal-negative":
         m = m * [[-1, 1], [1, 1]]
@@ -951,6 +955,8 @@ def _mixing_variant(path: Path, change: str) -> None:
     ("scaled-1e30", ("1e+30", "diagonal")), ("diagonal-negative", ("diagonal",)),
     ("diagonal-zero", ("diagonal",)), ("negative-share", ("negative light",)),
     ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
+    ("share-1.5", ("M[A<-B]", "1.5", ">= 1")),
+    ("nodes-not-tile-centres", ("node_cols", "centres of 32 px tiles")),
 ])
 def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
     side = tmp_path / "side"
