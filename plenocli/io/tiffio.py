@@ -246,6 +246,12 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
             raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
                              f"rectangle inside the {shape[-1]} x {shape[-2]} image; the file "
                              "was edited or damaged: decode the capture again")
+    active = meta.get("active_area")
+    for area in (masked or []) if active is not None else ():
+        if rects_overlap(area, active):
+            raise InputError(f"{path}: masked area {area} overlaps active_area {active} (the "
+                             "over-scan lies outside the image area); the file was edited or "
+                             "damaged: decode the capture again")
     origin = meta.get("origin")
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
                                    and all(isinstance(v, int) and not isinstance(v, bool)
@@ -311,6 +317,11 @@ def _inside(area, shape) -> bool:
         return False
     top, left, bottom, right = area
     return 0 <= top < bottom <= shape[0] and 0 <= left < right <= shape[1]
+
+
+def rects_overlap(a, b) -> bool:
+    """Whether two [top, left, bottom, right] rectangles share a pixel."""
+    return max(a[0], b[0]) < min(a[2], b[2]) and max(a[1], b[1]) < min(a[3], b[3])
 
 
 def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
