@@ -12,6 +12,7 @@ import hashlib
 import json
 import struct
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -901,6 +902,11 @@ def _lying_grid(path: Path, source: Path, change) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
+def _measured(rows):
+    scatter = np.random.default_rng(3).normal(0, 0.02, (len(rows), 2))
+    return rows + np.hstack([np.zeros((len(rows), 2)), scatter])
+
+
 def _outside(grid, rows):
     i, j = rows[:, 0].max() + 3, rows[:, 1].max() + 3   # three lenses beyond the image
     return np.vstack([rows, [i, j, *grid.lattice_xy(i, j)]])
@@ -910,6 +916,11 @@ def _outside(grid, rows):
     ("shifted", lambda g, r: r + [0, 0, 0.6 * g.pitch_px, 0], ("from its lattice place",)),
     ("indices-off-by-one", lambda g, r: r + [1, 0, 0, 0], ("from its lattice place",)),
     ("outside", _outside, ("outside the",)),
+    # measured centres (scattered 0.02 px about the lattice) all moved, or listed for a lattice
+    # of another pitch: neither the file's lattice nor that lattice bent by a smooth field
+    ("all-moved-1px", lambda g, r: _measured(r) + [0, 0, 1.0, 0], ("up to 1.0", "smooth")),
+    ("pitch-0.5%-larger", lambda g, r: _measured(np.hstack([r[:, :2], replace(
+        g, pitch_px=1.005 * g.pitch_px).lattice_xy(r[:, 0], r[:, 1])])), ("lattice it lists",)),
 ])
 @pytest.mark.parametrize("stage", ["refocus", "sai"])
 def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words, stage, inputs,
@@ -919,6 +930,22 @@ def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words
     args = [stage, str(inputs / "rt" / "frames.tif"), "--grid", str(grid), "-o", "{o}/x.tif"]
     result = run_bad(inputs, tmp_path / "out", args + (["-n", "2"] if stage == "sai" else []))
     assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("key,value,words", [
+    ("angle_deg", 30.0, ("angle_deg 30.0 disagrees",)), ("count", 5, ("lenses.count 5",)),
+])
+def test_grid_fields_that_disagree_are_refused(key, value, words, inputs, tmp_path):
+    doc = yaml.safe_load((inputs / "rt" / "grid.yaml").read_text())
+    if key == "count":
+        doc["lens_grid"]["lenses"] = {"count": value, "rows": [[0, 0, *doc["lens_grid"][
+            "offset_xy"]]]}
+    else:
+        doc["lens_grid"][key] = value
+    (tmp_path / "grid.yaml").write_text(yaml.safe_dump(doc))
+    args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "grid.yaml"),
+            "-o", "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
 
 
 # ------------------- side files checked against what they describe: mixing files
