@@ -846,6 +846,8 @@ def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, input
     ({"colour": {"as_shot_wb": [-1, 1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": [1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": "abc"}}, 1, ("as-shot white balance 'abc'",)),
+    ({"colour": {"as_shot_wb": [1e30, 1, 1.5]}}, 1, ("more than 100 times another", "--wb")),
+    ({"colour": {"as_shot_wb": [1e-30, 1, 1.5]}}, 1, ("more than 100 times another",)),
     ({"colour": [1, 2]}, 1, ("colour metadata [1, 2] is not a mapping",)),
     ({"exif": {"ISO": 10 ** 7}}, 0, ("EXIF ISO 10000000",)),
     ({"exif": {"ISO": -5}}, 0, ("EXIF ISO -5",)),
