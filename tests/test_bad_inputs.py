@@ -1081,16 +1081,18 @@ def test_a_result_that_overflows_to_infinity_is_not_written(inputs, infinite, tm
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("overflowed", "view B"))
 
 
-@pytest.mark.parametrize("photometric", ["palette", "miniswhite"])
+@pytest.mark.parametrize("photometric", ["palette", "miniswhite", "separated", "cielab"])
 @pytest.mark.parametrize("stage", ["decode", "sai"])
 def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, stage, inputs,
                                                                   tmp_path):
     side = tmp_path / "side"
     side.mkdir()
     grey = np.random.default_rng(4).integers(0, 255, (32, 48)).astype(np.uint8)
-    extra = {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}
-    tifffile.imwrite(side / "x.tif", grey, photometric=photometric,
-                     **(extra if photometric == "palette" else {}))
+    extra = {"palette": {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}}
+    samples = {"separated": 4, "cielab": 3}.get(photometric)
+    image = grey if samples is None else np.repeat(grey[..., None], samples, axis=2)
+    tifffile.imwrite(side / "x.tif", image, photometric=photometric, metadata=None,
+                     **extra.get(photometric, {}))
     args = [stage, str(side / "x.tif"), "-o", "{o}/x.tif"] + (["-n", "2"] if stage == "sai"
                                                               else [])
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("holds no light levels",))
