@@ -978,6 +978,11 @@ def _mixing_variant(path: Path, change: str) -> None:
     nodes = m[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
     field = MixingField(nodes, rows, cols, (64, 64), views, ("L",))
     write_mixing(path, field, layout="mono", cfa=None, meta={})
+    if change == "share-edited":  # still a mixing crosstalk could measure, but not this one
+        pages, meta = tiffio.read_image(path)
+        pages[1] += 0.1
+        tifffile.imwrite(path, pages, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
 
 
 @pytest.mark.parametrize("change,words", [
@@ -986,6 +991,7 @@ def _mixing_variant(path: Path, change: str) -> None:
     ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
     ("share-1.5", ("M[A<-B]", "1.5", ">= 1")),
     ("nodes-not-tile-centres", ("node_cols", "centres of 32 px tiles")),
+    ("share-edited", ("no longer match their checksum",)),
 ])
 def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
     side = tmp_path / "side"
@@ -1005,6 +1011,10 @@ def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp
     (lambda g: g * 0.5, ("smallest gain is 0.5",)),
     (lambda g: -g, ("outside",)),
     (lambda g: g * 1.3, ("not 1 as reference max",)),
+    # edits that keep every rule of a gain: the checksum flat sealed the file with
+    (lambda g: g[:, :, ::-1], ("no longer match their checksum",)),
+    (lambda g: np.roll(g, 1, axis=2), ("no longer match their checksum",)),
+    (lambda g: g[[1, 0, 2]], ("no longer match their checksum",)),
 ])
 def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
     side = tmp_path / "side"

@@ -51,7 +51,7 @@ def write_mixing(path: str | os.PathLike, mixing: MixingField, *, layout: str,
             "node_rows": [float(v) for v in mixing.node_rows],
             "node_cols": [float(v) for v in mixing.node_cols]}
     tiffio.write_image(path, pages, {**meta, "views": page_names(mixing), "cfa": None,
-                                     "mixing": info}, protect=protect)
+                                     "mixing": info}, protect=protect, seal=True)
 
 
 def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
@@ -80,6 +80,7 @@ def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
                          f"colours {','.join(colours)} (M[k<-j].colour); the file was edited or "
                          "damaged: measure it again with plenocli crosstalk --mixing-out")
     check_mixing(path, field, info)
+    tiffio.check_seal(path, pages, meta, "measure it again with plenocli crosstalk --mixing-out")
     return field, meta
 
 
