@@ -1,6 +1,6 @@
 """Parameters of ``plenocli refocus``."""
 
-from plenocli.model.focus import KERNELS, VIEWS, parse_g
+from plenocli.model.focus import KERNELS, MAX_S, VIEWS, parse_g
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
 
@@ -21,7 +21,7 @@ PARAMS = (
     OUTPUT,
     Param("grid", InputFile(), "Lens grid (plenocli YAML from `plenocli calibrate`).",
           role="input", required=True),
-    Param("s", FiniteFloat(min=0, min_open=True),
+    Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
           "Size of the refocused image relative to the sensor image.", default=0.2),
     Param("g", GValues(), "Refocus parameter; a list (2,3,4) or range (2:6:0.5, stop included) "
           "makes a focal sweep: one page per g and a sharpness score per g.", default="4"),
