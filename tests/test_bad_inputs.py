@@ -1130,3 +1130,31 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         result = run_bad(inputs, out, [str(a) for a in args])
         assert_one_line(result, 1, ())
         assert words in result.stderr, (args, result.stderr)
+
+
+# ------------------- JSON nested past any plenocli document: one line, never a RecursionError
+
+def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    deep = "[" * 100_000 + "]" * 100_000
+    (side / "deep.json").write_text(deep)
+    tifffile.imwrite(side / "deep.tif", np.ones((8, 8), np.float32), metadata=None,
+                     description=f'{{"{tiffio.FORMAT_KEY}": 1, "x": {deep}}}')
+    for args in (["info", str(side / "deep.json")], ["info", str(side / "deep.tif")],
+                 ["develop", str(side / "deep.tif"), "--wb", "1,1,1", "--matrix", "none", "-o",
+                  "{o}/x.jpg"],
+                 ["stitch", str(inputs / "biased.tif"), "--views", "A,B", "--transform-in",
+                  str(side / "deep.json"), "-o", "{o}/x.tif"]):
+        assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("nested more than 100",))
+    # a record that deep is unreadable: the step runs again, as for no record
+    made = tmp_path / "made"
+    made.mkdir()
+    config = made / "c.yaml"
+    config.write_text(f"steps:\n  bias:\n    input: {inputs / 'frames.tif'}\n"
+                      f"    output: {made / 'b.tif'}\n")
+    assert CliRunner().invoke(cli, ["run", str(config)]).exit_code == 0
+    (made / ".b.tif.plenocli.json").write_text(deep)
+    again = CliRunner().invoke(cli, ["run", str(config)])
+    assert again.exit_code == 0 and "internal error" not in again.output + again.stderr
+    assert "skip" not in again.stderr + again.output
