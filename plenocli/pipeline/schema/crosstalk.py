@@ -12,7 +12,8 @@ PARAMS = (
     Param("intended", Text(), "Name of the view whose pupil part was open (one, or one per "
           "input, comma separated); default: the brightest view. With --mask-widths: "
           "left|right."),
-    Param("tile", Int(min=2), "Tile side (px, even) of the cross-talk map.", default=64),
+    Param("tile", Int(min=2, parity="even"), "Tile side (px, even) of the cross-talk map.",
+          default=64),
     PREVIEW,
     Param("mask_widths", Text(), "Raytrix sweep: mask widths m (px), e.g. 0,1,2,3; INPUT is then "
           "a frames TIFF and --grid is needed (uses plenocli refocus)."),

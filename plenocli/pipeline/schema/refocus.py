@@ -44,7 +44,11 @@ PARAMS = (
 
 
 def check(params: dict) -> None:
-    """With a depth map every lens takes its g from the map: a --g would be ignored."""
+    """With a depth map every lens takes its g from the map: a --g would be ignored; the
+    central band a --mask-width leaves out is a half or quarter view's."""
     if params.get("depth"):
         refuse_unused(PARAMS, params, ["g"], "is not used with --depth (each lens takes its g "
                       "from the map)")
+    if params.get("view", "full") == "full":
+        refuse_unused(PARAMS, params, ["mask_width"], "applies to half and quarter views only "
+                      "(--view left, right, top, bottom, q00 ...)")
