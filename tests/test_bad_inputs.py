@@ -332,6 +332,8 @@ CASES = [
                           ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("infinite",)),
                           ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
                           ("huge.png", ("more than",))]],
+    ("decode-frames-empty", ["decode", "{i}/dp.dng", "--frames=", "-o", "{o}/d.tif"], 2,
+     ("'--frames'", "empty")),
     ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
      1, ("distinct",)),
     ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
@@ -956,11 +958,12 @@ def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words
 
 @pytest.mark.parametrize("key,value,words", [
     ("angle_deg", 30.0, ("angle_deg 30.0 disagrees",)), ("count", 5, ("lenses.count 5",)),
+    ("columns", ["i", "j", "y", "x"], ("lenses.columns ['i', 'j', 'y', 'x']",)),
 ])
 def test_grid_fields_that_disagree_are_refused(key, value, words, inputs, tmp_path):
     doc = yaml.safe_load((inputs / "rt" / "grid.yaml").read_text())
-    if key == "count":
-        doc["lens_grid"]["lenses"] = {"count": value, "rows": [[0, 0, *doc["lens_grid"][
+    if key in ("count", "columns"):
+        doc["lens_grid"]["lenses"] = {key: value, "rows": [[0, 0, *doc["lens_grid"][
             "offset_xy"]]]}
     else:
         doc["lens_grid"][key] = value

@@ -35,7 +35,14 @@ class Validator:
 
 
 class Text(Validator):
-    """Any text (the stage parses it)."""
+    """Any text but blank (the stage parses it): an empty value is not the default, as
+    ``--smooth=`` is not (leave the option out for that)."""
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value)
+        if not text.strip():
+            raise ValueError(f"{text!r} is empty; give a value or leave the option out")
+        return text
 
 
 class Flag(Validator):

@@ -92,3 +92,15 @@ def test_a_stop_wider_than_the_lens_is_refused(stop_mm, tmp_path):
     assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
     assert "surface 2 (clear aperture 3.53718 mm)" in res.output
     assert "the stop must limit the pupil" in res.output and not out.exists()
+
+
+def test_object_distances_the_trace_cannot_vouch_for(tmp_path):
+    """Nearer than the focal length there is no real image to focus on (the message names the
+    distance, not the lens); beyond 1e9 mm the board is at infinity and the rays lose their
+    precision (1e15 mm moved r by half a point): a usage error."""
+    near = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm", "7"])
+    assert near.exit_code == 1 and "object_distance_mm 7: the lens forms no real image" in \
+        near.output and len(near.output.strip().splitlines()) == 1
+    far = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm",
+                                   "1e15"])
+    assert far.exit_code == 2 and "'--object-distance-mm'" in far.output
