@@ -1181,3 +1181,19 @@ def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):
     again = CliRunner().invoke(cli, ["run", str(config)])
     assert again.exit_code == 0 and "internal error" not in again.output + again.stderr
     assert "skip" not in again.stderr + again.output
+
+
+def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inputs, tmp_path):
+    """The record beside an output (.NAME.plenocli.json) is checked with the outputs: a folder
+    in its place, or another output given its name, is one line before the stage runs."""
+    (tmp_path / ".b.tif.plenocli.json").mkdir()
+    result = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                      str(tmp_path / "b.tif")])
+    assert_one_line(result, 1, ("records how", "is a folder"))
+    assert "bias:" not in result.stderr and not (tmp_path / "b.tif").exists()
+    result = CliRunner().invoke(cli, ["crosstalk", str(inputs / "unmasked0.tif"),
+                                      str(inputs / "unmasked1.tif"), "--mixing-out",
+                                      str(tmp_path / "m.tif"), "-o",
+                                      str(tmp_path / ".m.tif.plenocli.json")])
+    assert_one_line(result, 1, ("is the record plenocli writes beside",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
