@@ -12,6 +12,7 @@ import hashlib
 import json
 import struct
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -239,7 +240,7 @@ CASES = [
     ("refocus-g-inf", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g",
                        "inf", "-o", "{o}/r.tif"], 2, ("g",)),
     ("refocus-s1000", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
-                       "1000", "-o", "{o}/r.tif"], 1, ("s = 1000",)),
+                       "1000", "-o", "{o}/r.tif"], 2, ("'--s'", "x<=1")),
     ("refocus-g-empty-item", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
                               "--g", "1,,2", "-o", "{o}/r.tif"], 2, ("'--g'",)),
     ("refocus-s-tiny", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
@@ -311,6 +312,13 @@ CASES = [
                                   "-o", "{o}/d.tif"], 1, ("white level",)),
     ("decode-black-negative", ["decode", "{i}/dp.dng", "--black=-3", "-o", "{o}/d.tif"], 2,
      ("black",)),
+    # a level the samples cannot reach: refused here, not written for bias to call damaged
+    ("decode-white-beyond-samples", ["decode", "{i}/dp.dng", "--white", "1e308", "-o",
+                                     "{o}/d.tif"], 1, ("(--white)", "uint16", "65535")),
+    ("decode-white-70000", ["decode", "{i}/dp.dng", "--white", "70000", "-o", "{o}/d.tif"], 1,
+     ("(--white)", "65535")),
+    ("decode-black-huge", ["decode", "{i}/dp.dng", "--black", "1e308", "-o", "{o}/d.tif"], 1,
+     ("black level 1e+308 (--black)",)),
     *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, ("real",))
       for kind in ("complex", "bool", "int8")],
     ("decode-all-nan", ["decode", "{i}/nan_plain.tif", "-o", "{o}/d.tif"], 1, ("no valid",)),
@@ -324,6 +332,8 @@ CASES = [
                           ("zlib_trunc.tif", ("truncated",)), ("inf.tif", ("infinite",)),
                           ("volume.tif", ("shape",)), ("garbage.tif", ("damaged",)),
                           ("huge.png", ("more than",))]],
+    ("decode-frames-empty", ["decode", "{i}/dp.dng", "--frames=", "-o", "{o}/d.tif"], 2,
+     ("'--frames'", "empty")),
     ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
      1, ("distinct",)),
     ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
@@ -340,8 +350,6 @@ CASES = [
     ("flat-median-huge", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
                           "100001", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
      ("median",)),
-    ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
-                          "4", "-o", "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1, ("median",)),
     ("flat-white-nan", ["flat", "{i}/nan.tif", "--white", "{i}/nan.tif", "-o", "{o}/f.tif",
                         "--save-gain", "{o}/g.tif"], 1, ("no valid pixel",)),
     ("flat-truncated-white", ["flat", "{i}/biased.tif", "--white", "{i}/truncated.tif", "-o",
@@ -351,6 +359,21 @@ CASES = [
                              "{o}/f.tif"], 2, ("percentile",)),
     ("flat-floor-nan", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--floor", "nan",
                         "-o", "{o}/f.tif"], 2, ("floor",)),
+    # a value the option's own rule refuses, or an option with no effect: usage errors naming it
+    ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
+                          "10", "-o", "{o}/f.tif"], 2, ("'--median'", "10 is not odd")),
+    ("crosstalk-tile-odd", ["crosstalk", "{i}/biased.tif", "--tile", "3", "-o", "{o}/c.json"], 2,
+     ("'--tile'", "3 is not even")),
+    ("flat-gain-with-median", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--median",
+                               "7", "-o", "{o}/f.tif"], 2, ("--median makes a gain",)),
+    ("flat-gain-with-floor", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--floor",
+                              "0.5", "-o", "{o}/f.tif"], 2, ("--floor makes a gain",)),
+    ("flat-percentile-with-max", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif",
+                                  "--percentile", "0", "-o", "{o}/f.tif"], 2,
+     ("--percentile applies to --reference percentile",)),
+    ("refocus-mask-width-full-view", ["refocus", "{i}/rt/frames.tif", "--grid",
+                                      "{i}/rt/grid.yaml", "--mask-width", "5", "-o",
+                                      "{o}/r.tif"], 2, ("--mask-width applies to half",)),
     ("flat-not-bias-corrected", ["flat", "{i}/frames.tif", "--white", "{i}/frames.tif", "-o",
                                  "{o}/f.tif", "--save-gain", "{o}/g.tif"], 1,
      ("run plenocli bias first",)),
@@ -806,7 +829,7 @@ def infinite(tmp_path_factory, inputs) -> Path:
     _plenocli_tiff(d / "frame.tif", np.where(np.isinf(bad[1]), -np.inf, bad[0]))
     _plain_tiff(d / "sensor.tif", bad[1])
     nodes = np.array([[1.0, 0.2], [0.1, 1.0]])[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
-    field = MixingField(nodes, np.array([16.0, 48.0]), np.array([16.0, 48.0]), (64, 64),
+    field = MixingField(nodes, np.array([15.5, 47.5]), np.array([15.5, 47.5]), (64, 64),
                         ("A", "B"), ("L",))
     write_mixing(d / "mixing.tif", field, layout="mono", cfa=None, meta={})
     frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
@@ -845,6 +868,8 @@ def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, input
     ({"colour": {"as_shot_wb": [-1, 1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": [1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": "abc"}}, 1, ("as-shot white balance 'abc'",)),
+    ({"colour": {"as_shot_wb": [1e30, 1, 1.5]}}, 1, ("more than 100 times another", "--wb")),
+    ({"colour": {"as_shot_wb": [1e-30, 1, 1.5]}}, 1, ("more than 100 times another",)),
     ({"colour": [1, 2]}, 1, ("colour metadata [1, 2] is not a mapping",)),
     ({"exif": {"ISO": 10 ** 7}}, 0, ("EXIF ISO 10000000",)),
     ({"exif": {"ISO": -5}}, 0, ("EXIF ISO -5",)),
@@ -901,6 +926,11 @@ def _lying_grid(path: Path, source: Path, change) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
+def _measured(rows):
+    scatter = np.random.default_rng(3).normal(0, 0.02, (len(rows), 2))
+    return rows + np.hstack([np.zeros((len(rows), 2)), scatter])
+
+
 def _outside(grid, rows):
     i, j = rows[:, 0].max() + 3, rows[:, 1].max() + 3   # three lenses beyond the image
     return np.vstack([rows, [i, j, *grid.lattice_xy(i, j)]])
@@ -910,6 +940,11 @@ def _outside(grid, rows):
     ("shifted", lambda g, r: r + [0, 0, 0.6 * g.pitch_px, 0], ("from its lattice place",)),
     ("indices-off-by-one", lambda g, r: r + [1, 0, 0, 0], ("from its lattice place",)),
     ("outside", _outside, ("outside the",)),
+    # measured centres (scattered 0.02 px about the lattice) all moved, or listed for a lattice
+    # of another pitch: neither the file's lattice nor that lattice bent by a smooth field
+    ("all-moved-1px", lambda g, r: _measured(r) + [0, 0, 1.0, 0], ("up to 1.0", "smooth")),
+    ("pitch-0.5%-larger", lambda g, r: _measured(np.hstack([r[:, :2], replace(
+        g, pitch_px=1.005 * g.pitch_px).lattice_xy(r[:, 0], r[:, 1])])), ("lattice it lists",)),
 ])
 @pytest.mark.parametrize("stage", ["refocus", "sai"])
 def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words, stage, inputs,
@@ -921,6 +956,23 @@ def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words
     assert_one_line(result, 1, words)
 
 
+@pytest.mark.parametrize("key,value,words", [
+    ("angle_deg", 30.0, ("angle_deg 30.0 disagrees",)), ("count", 5, ("lenses.count 5",)),
+    ("columns", ["i", "j", "y", "x"], ("lenses.columns ['i', 'j', 'y', 'x']",)),
+])
+def test_grid_fields_that_disagree_are_refused(key, value, words, inputs, tmp_path):
+    doc = yaml.safe_load((inputs / "rt" / "grid.yaml").read_text())
+    if key in ("count", "columns"):
+        doc["lens_grid"]["lenses"] = {key: value, "rows": [[0, 0, *doc["lens_grid"][
+            "offset_xy"]]]}
+    else:
+        doc["lens_grid"][key] = value
+    (tmp_path / "grid.yaml").write_text(yaml.safe_dump(doc))
+    args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "grid.yaml"),
+            "-o", "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
 # ------------------- side files checked against what they describe: mixing files
 
 def _mixing_variant(path: Path, change: str) -> None:
@@ -928,9 +980,13 @@ def _mixing_variant(path: Path, change: str) -> None:
     from plenocli.model.mixing import MixingField
 
     m = np.array([[1.0, 0.2], [0.1, 1.0]])
-    rows = cols = np.array([16.0, 48.0])
+    rows = cols = np.array([15.5, 47.5])
     views = ("A", "B")
-    if change == "scaled-1e30":
+    if change == "share-1.5":
+        m = m + [[0, 1.3], [0, 0]]
+    elif change == "nodes-not-tile-centres":
+        cols = cols / 2
+    elif change == "scaled-1e30":
         m = m * 1e30
     elif change == "diagonal-negative":
         m = m * [[-1, 1], [1, 1]]
@@ -945,12 +1001,20 @@ def _mixing_variant(path: Path, change: str) -> None:
     nodes = m[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
     field = MixingField(nodes, rows, cols, (64, 64), views, ("L",))
     write_mixing(path, field, layout="mono", cfa=None, meta={})
+    if change == "share-edited":  # still a mixing crosstalk could measure, but not this one
+        pages, meta = tiffio.read_image(path)
+        pages[1] += 0.1
+        tifffile.imwrite(path, pages, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
 
 
 @pytest.mark.parametrize("change,words", [
     ("scaled-1e30", ("1e+30", "diagonal")), ("diagonal-negative", ("diagonal",)),
     ("diagonal-zero", ("diagonal",)), ("negative-share", ("negative light",)),
     ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
+    ("share-1.5", ("M[A<-B]", "1.5", ">= 1")),
+    ("nodes-not-tile-centres", ("node_cols", "centres of 32 px tiles")),
+    ("share-edited", ("no longer match their checksum",)),
 ])
 def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
     side = tmp_path / "side"
@@ -970,6 +1034,10 @@ def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp
     (lambda g: g * 0.5, ("smallest gain is 0.5",)),
     (lambda g: -g, ("outside",)),
     (lambda g: g * 1.3, ("not 1 as reference max",)),
+    # edits that keep every rule of a gain: the checksum flat sealed the file with
+    (lambda g: g[:, :, ::-1], ("no longer match their checksum",)),
+    (lambda g: np.roll(g, 1, axis=2), ("no longer match their checksum",)),
+    (lambda g: g[[1, 0, 2]], ("no longer match their checksum",)),
 ])
 def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
     side = tmp_path / "side"
@@ -1046,16 +1114,18 @@ def test_a_result_that_overflows_to_infinity_is_not_written(inputs, infinite, tm
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("overflowed", "view B"))
 
 
-@pytest.mark.parametrize("photometric", ["palette", "miniswhite"])
+@pytest.mark.parametrize("photometric", ["palette", "miniswhite", "separated", "cielab"])
 @pytest.mark.parametrize("stage", ["decode", "sai"])
 def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, stage, inputs,
                                                                   tmp_path):
     side = tmp_path / "side"
     side.mkdir()
     grey = np.random.default_rng(4).integers(0, 255, (32, 48)).astype(np.uint8)
-    extra = {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}
-    tifffile.imwrite(side / "x.tif", grey, photometric=photometric,
-                     **(extra if photometric == "palette" else {}))
+    extra = {"palette": {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}}
+    samples = {"separated": 4, "cielab": 3}.get(photometric)
+    image = grey if samples is None else np.repeat(grey[..., None], samples, axis=2)
+    tifffile.imwrite(side / "x.tif", image, photometric=photometric, metadata=None,
+                     **extra.get(photometric, {}))
     args = [stage, str(side / "x.tif"), "-o", "{o}/x.tif"] + (["-n", "2"] if stage == "sai"
                                                               else [])
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("holds no light levels",))
@@ -1083,3 +1153,47 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         result = run_bad(inputs, out, [str(a) for a in args])
         assert_one_line(result, 1, ())
         assert words in result.stderr, (args, result.stderr)
+
+
+# ------------------- JSON nested past any plenocli document: one line, never a RecursionError
+
+def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):
+    side = tmp_path / "side"
+    side.mkdir()
+    deep = "[" * 100_000 + "]" * 100_000
+    (side / "deep.json").write_text(deep)
+    tifffile.imwrite(side / "deep.tif", np.ones((8, 8), np.float32), metadata=None,
+                     description=f'{{"{tiffio.FORMAT_KEY}": 1, "x": {deep}}}')
+    for args in (["info", str(side / "deep.json")], ["info", str(side / "deep.tif")],
+                 ["develop", str(side / "deep.tif"), "--wb", "1,1,1", "--matrix", "none", "-o",
+                  "{o}/x.jpg"],
+                 ["stitch", str(inputs / "biased.tif"), "--views", "A,B", "--transform-in",
+                  str(side / "deep.json"), "-o", "{o}/x.tif"]):
+        assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("nested more than 100",))
+    # a record that deep is unreadable: the step runs again, as for no record
+    made = tmp_path / "made"
+    made.mkdir()
+    config = made / "c.yaml"
+    config.write_text(f"steps:\n  bias:\n    input: {inputs / 'frames.tif'}\n"
+                      f"    output: {made / 'b.tif'}\n")
+    assert CliRunner().invoke(cli, ["run", str(config)]).exit_code == 0
+    (made / ".b.tif.plenocli.json").write_text(deep)
+    again = CliRunner().invoke(cli, ["run", str(config)])
+    assert again.exit_code == 0 and "internal error" not in again.output + again.stderr
+    assert "skip" not in again.stderr + again.output
+
+
+def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inputs, tmp_path):
+    """The record beside an output (.NAME.plenocli.json) is checked with the outputs: a folder
+    in its place, or another output given its name, is one line before the stage runs."""
+    (tmp_path / ".b.tif.plenocli.json").mkdir()
+    result = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                      str(tmp_path / "b.tif")])
+    assert_one_line(result, 1, ("records how", "is a folder"))
+    assert "bias:" not in result.stderr and not (tmp_path / "b.tif").exists()
+    result = CliRunner().invoke(cli, ["crosstalk", str(inputs / "unmasked0.tif"),
+                                      str(inputs / "unmasked1.tif"), "--mixing-out",
+                                      str(tmp_path / "m.tif"), "-o",
+                                      str(tmp_path / ".m.tif.plenocli.json")])
+    assert_one_line(result, 1, ("is the record plenocli writes beside",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]

@@ -56,6 +56,25 @@ def _to_stop(lens: Lens, y: float, u: float, wavelength_um: float) -> float:
     return y
 
 
+def _check_stop_limits(lens: Lens, pupil_radius_mm: float, wavelength_um: float) -> None:
+    """ValueError unless the stop limits the axial beam: the paraxial marginal ray through the
+    stop's edge must pass inside every surface's clear aperture (else that surface, not the
+    stop, sets the pupil, and f-number and pupils computed from the stop are wrong)."""
+    n = lens.indices(wavelength_um)
+    y, u = pupil_radius_mm, 0.0
+    stop = lens.stop_index
+    for k, s in enumerate(lens.surfaces):
+        half = 0.5 * s.diameter_mm
+        if k != stop and abs(y) > half * (1 + 1e-9):
+            raise ValueError(
+                f"surface {k + 1} (clear aperture {s.diameter_mm:g} mm) is narrower than the "
+                f"axial beam the stop (surface {stop + 1}, {lens.surfaces[stop].diameter_mm:g} "
+                f"mm) lets through ({2 * abs(y):.4g} mm there): the stop must limit the pupil; "
+                "make it smaller or the surface wider")
+        u = (n[k] * u - y * (n[k + 1] - n[k]) * s.curvature) / n[k + 1]
+        y = y + s.thickness_mm * u
+
+
 def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
     """First-order figures of ``lens`` (mm), object at infinity, image space in air.
 
@@ -81,6 +100,7 @@ def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
     y0 = -b / a  # chief ray height at the first vertex for u0 = 1
     enp_z = -y0
     enp_d = 2.0 * stop_radius / abs(a)
+    _check_stop_limits(lens, 0.5 * enp_d, wavelength_um)
     # Exit pupil: image of the stop by the surfaces from the stop on (Lagrange invariant for the
     # pupil size).
     y_c, u_c = _ynu(lens, 0.0, 1.0, first=stop, wavelength_um=wavelength_um)
