@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 
-from numba import njit, prange
+from numba import njit
 
 
 @njit(cache=True, inline="always")
@@ -43,7 +43,7 @@ def _sample(coeffs, g, x, y, bad):
     return True, total
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def warp_bspline(coeffs, g, xn, yn, bad, out, inside):
     """``out[i]``, ``inside[i]``: b (B-spline coefficients ``coeffs``) at g (xn[i], yn[i], 1)
     (g: 3 x 3, normalised template coordinates -> b pixels); see :func:`_sample`. Serial: it
@@ -52,14 +52,15 @@ def warp_bspline(coeffs, g, xn, yn, bad, out, inside):
         inside[i], out[i] = _sample(coeffs, g, xn[i], yn[i], bad)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True)
 def huber_residual(coeffs, g, xn, yn, template, bad, coef, degree, cut, err, weight):
     """``err[i]``: the residual in b's units e = (p b(g x) + o - a) / p at point i, with p =
     the ratio polynomial (``coef[:-1]`` on the monomials xn^i yn^j, i + j <= ``degree``, in
     the order of ``photometric._polynomial_terms``) and o = ``coef[-1]``; ``weight[i]``: its
-    Huber weight min(1, cut / |e|). Both 0 at points outside b."""
+    Huber weight min(1, cut / |e|). Both 0 at points outside b. Serial: the pairs of a layout
+    are refined in threads at once."""
     terms = (degree + 1) * (degree + 2) // 2
-    for i in prange(xn.shape[0]):
+    for i in range(xn.shape[0]):
         ok, value = _sample(coeffs, g, xn[i], yn[i], bad)
         if not ok:
             err[i] = weight[i] = 0.0

@@ -12,6 +12,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.stitch.bspline import huber_residual, warp_bspline
+from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.views import MODELS, corners_xy, fill_nan, translation_matrix
 
 
@@ -60,20 +61,20 @@ def _template(a: np.ndarray, valid_a: np.ndarray | None, valid_b: np.ndarray | N
     """The overlap pixels of a used as the template: their values, the normalising map
     (normalised template coordinates -> a pixels), their normalised coordinates and the
     steepest-descent images (8, N) of the inverse-compositional homography update at
-    identity."""
+    identity. Of a larger overlap the ``max_points`` pixels of strongest gradient are kept
+    (see :func:`_strongest`)."""
     rows, cols = a.shape
     src = np.ones(b_shape, np.uint8) if valid_b is None else valid_b.astype(np.uint8)
     cover = cv2.warpPerspective(src * np.uint8(255), h_ab, (cols, rows),
                                 flags=cv2.INTER_LINEAR) == 255
     if valid_a is not None:
         cover &= valid_a
-    ys, xs = np.nonzero(_erode(cover, 3))
-    if ys.size < 256:
-        raise ValueError(f"the overlap holds only {ys.size} px; too small to refine")
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    if ys.size > max_points:  # a fixed random subset (a regular subgrid biased the shift)
-        keep = np.random.default_rng(0).random(ys.size) < max_points / ys.size
-        ys, xs = ys[keep], xs[keep]
+    cover = _erode(cover, 3)
+    count, box = int(np.count_nonzero(cover)), bounding_box(cover)
+    if count < 256:
+        raise ValueError(f"the overlap holds only {count} px; too small to refine")
+    (y0, y1), (x0, x1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
+    ys, xs = np.nonzero(cover if count <= max_points else _strongest(a, cover, max_points))
     # normalised template coordinates (centre of the overlap, half its longer side) keep the
     # Gauss-Newton system well conditioned
     cx, cy, scale = (x0 + x1 - 1) / 2, (y0 + y1 - 1) / 2, max(x1 - x0, y1 - y0) / 2
@@ -86,6 +87,20 @@ def _template(a: np.ndarray, valid_a: np.ndarray | None, valid_b: np.ndarray | N
     steepest = np.stack([gx * xn, gx * yn, gx, gy * xn, gy * yn, gy, -xn * radial,
                          -yn * radial])
     return a[ys, xs], from_norm, xn, yn, steepest
+
+
+def _strongest(a: np.ndarray, cover: np.ndarray, count: int) -> np.ndarray:
+    """The ``count`` pixels of ``cover`` where a's gradient is strongest (ties at the threshold
+    all kept). A pixel's information on the geometry grows with its squared gradient (the
+    Gauss-Newton Hessian is the sum of the steepest-descent images' outer products): flat pixels
+    add noise and time, little else. In a textured overlap the strongest quarter of the pixels
+    holds about 60 % of the information, more than a random half."""
+    energy = np.zeros_like(a)
+    gx, gy = a[1:-1, 2:] - a[1:-1, :-2], a[2:, 1:-1] - a[:-2, 1:-1]
+    energy[1:-1, 1:-1] = gx * gx + gy * gy
+    inside = energy[cover]
+    threshold = np.partition(inside, inside.size - count)[inside.size - count]
+    return cover & (energy >= threshold)
 
 
 def _photometric_fit(warped: np.ndarray, template: np.ndarray, poly: np.ndarray
@@ -108,8 +123,9 @@ def _photometric_fit(warped: np.ndarray, template: np.ndarray, poly: np.ndarray
 
 
 # the photometric ratio's 15 coefficients and the residual's scale are fixed by this many
-# points (more only cost time); the geometry uses every point
-PHOTOMETRIC_POINTS = 50_000
+# points (more only cost time: 20 000 and 50 000 end within 5e-4 px); the geometry uses every
+# point
+PHOTOMETRIC_POINTS = 20_000
 # the crops' margin around the overlap: the refinement's moves and the reach of the cubic
 # B-spline prefilter (its edge effect falls as 0.27^d over d px: 1e-9 at 16 px)
 CROP_MARGIN_PX = 16
@@ -231,7 +247,7 @@ def _prepared(image: np.ndarray):
 
 
 def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
-                      max_points: int = 400_000, iterations: int = 30, degree: int = 4,
+                      max_points: int = 200_000, iterations: int = 30, degree: int = 4,
                       tol_px: float = 1e-3,
                       motion: str = "homography", pyramid: bool = True
                       ) -> tuple[np.ndarray, dict]:
@@ -249,7 +265,8 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
     ----------
     a, b : (rows, cols) views (NaN = no data); b's pixels map into a's by ``h_ab``.
     h_ab : (3, 3) initial homography (b pixels -> a pixels), within a few px.
-    max_points : at most this many overlap pixels are used per level (a fixed random subset).
+    max_points : at most this many overlap pixels are used at full size, those of strongest
+        gradient; a coarse level a quarter of its finer one's.
     iterations : Gauss-Newton steps per level.
     degree : degree of the photometric ratio polynomial.
     tol_px : stop when the update moves the overlap's corners by less than this (px).
@@ -284,7 +301,7 @@ def refine_homography(a: np.ndarray, b: np.ndarray, h_ab: np.ndarray, *,
         down = np.diag([0.5**level, 0.5**level, 1.0])  # pyrDown: level pixel = full pixel / 2^l
         level_tol = max(tol_px, COARSE_TOL_PX) if level else tol_px
         h_level, info = _refine_level(la, lb, va, vb, down @ h @ np.linalg.inv(down),
-                                      max_points=max_points, iterations=iterations,
+                                      max_points=max_points // 4**level, iterations=iterations,
                                       degree=degree, tol_px=level_tol * 0.5**level,
                                       motion=motion)
         h = np.linalg.inv(down) @ h_level @ down

@@ -3,6 +3,9 @@ an expected overlap), pairwise estimates, and their global solve into one transf
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import cv2
 import numpy as np
 
@@ -15,6 +18,9 @@ from plenocli.stitch.views import LAYOUTS, corners_xy, neighbour_pairs, translat
 # A 2 x 2 layout reaches the fourth view two ways; correct pair registrations agree within a
 # fraction of a pixel (noise), a wrong match by about the size of the shift it got wrong.
 MAX_CLOSURE_PX = 2.0
+# neighbour pairs registered at once: the two cores the stitch is sized for (SIFT, matching,
+# warps and FFTs in OpenCV and numpy, and the refinement's numba kernels release the GIL)
+PAIR_THREADS = 2
 
 
 def difference_row(a: int, b: int, n_views: int) -> np.ndarray:
@@ -82,8 +88,24 @@ def auto_layout(luma: np.ndarray, search: dict, overlap: float | None = None,
 
 
 
+class FeatureCache:
+    """Each image's SIFT features (:func:`features`), found once though two pairs registered
+    at once ask for them; keyed by (view, offset, shape) of the image."""
+
+    def __init__(self):
+        self._lock, self._locks, self._found = threading.Lock(), {}, {}
+
+    def __call__(self, key: tuple, image: np.ndarray) -> tuple:
+        with self._lock:
+            lock = self._locks.setdefault(key, threading.Lock())
+        with lock:
+            if key not in self._found:
+                self._found[key] = features(image)
+            return self._found[key]
+
+
 def _measure_pair(images, a: int, b: int, direction: str, model: str, search: dict,
-                  prior, tol, shape: tuple[int, int], found: dict | None = None
+                  prior, tol, shape: tuple[int, int], found: FeatureCache | None = None
                   ) -> tuple[np.ndarray, dict]:
     """One neighbour pair: the shift [dy, dx] or the homography b -> a, and its report.
     ``images`` = (image of a, image of b, offset of a, offset of b): the views, or crops of them
@@ -103,15 +125,12 @@ def _measure_pair(images, a: int, b: int, direction: str, model: str, search: di
             info.update(overlap_px=float(size - along), overlap_fraction=float(1 - along / size))
             info["shift_px"] = [dy, dx]
             return np.array([dy, dx]), info
-        found = {} if found is None else found
-        for key, img in (((a, tuple(off_a), img_a.shape), img_a),
-                         ((b, tuple(off_b), img_b.shape), img_b)):
-            if key not in found:
-                found[key] = features(img)
+        found = FeatureCache() if found is None else found
         h, info = estimate_homography(
             img_a, img_b, direction=direction, min_correlation=search["min_correlation"],
             prior=local, tolerance_px=tol, max_overlap=None,
-            found=(found[(a, tuple(off_a), img_a.shape)], found[(b, tuple(off_b), img_b.shape)]))
+            found=(found((a, tuple(off_a), img_a.shape), img_a),
+                   found((b, tuple(off_b), img_b.shape), img_b)))
         h = translation_matrix(*off_a) @ h @ translation_matrix(-off_b[0], -off_b[1])
         h /= h[2, 2]
         info["overlap_fraction"] = check_overlap(h, shape, direction, search["max_overlap"])
@@ -143,12 +162,23 @@ def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, mod
     """Transforms (view -> view 0), the per-pair reports and the closure (px, or None).
     ``pair_images(a, b, direction)`` gives the images a pair is registered on (see
     :func:`_measure_pair`); ``shape`` is the views' (rows, cols)."""
-    pair_info, measured, found = [], {}, {}
-    for a, b, direction in neighbour_pairs(layout):
+    pairs, found = neighbour_pairs(layout), FeatureCache()
+
+    def measure(pair):
+        a, b, direction = pair
         prior, tol = expected[(a, b)]
         step(f"registering views {a} and {b}")
-        measured[(a, b)], info = _measure_pair(pair_images(a, b, direction), a, b, direction,
-                                               model, search, prior, tol, shape, found)
+        return _measure_pair(pair_images(a, b, direction), a, b, direction, model, search,
+                             prior, tol, shape, found)
+
+    # the pairs are independent; their results (and a refusal: the first pair's in order)
+    # are those of one pair after the other
+    with ThreadPoolExecutor(min(PAIR_THREADS, len(pairs))) as pool:
+        results = list(pool.map(measure, pairs))
+    pair_info, measured = [], {}
+    for (a, b, direction), (estimate, info) in zip(pairs, results, strict=True):
+        prior, _ = expected[(a, b)]
+        measured[(a, b)] = estimate
         if prior is not None:
             info["expected_shift_px"] = list(prior)
         pair_info.append({"views": [a, b], "direction": direction, **info})
