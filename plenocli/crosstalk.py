@@ -24,7 +24,7 @@ import numpy as np
 from scipy import ndimage
 
 from plenocli.model.cfa import check_pattern
-from plenocli.model.mixing import MixingField
+from plenocli.model.mixing import MixingField, tile_centres
 
 
 def _colour_masks(shape: tuple[int, int], cfa: str | None) -> dict[str, np.ndarray]:
@@ -248,10 +248,8 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
                                  f"{colours[c]} has light in view {views[j]}; is it the capture "
                                  "with that pupil part open?")
     nodes = _fill_from_nearest(nodes)
-    centre_r = (np.arange(n_r) * tile_px + (np.minimum((np.arange(n_r) + 1) * tile_px, rows)
-                                            - 1)) / 2.0
-    centre_c = (np.arange(n_c) * tile_px + (np.minimum((np.arange(n_c) + 1) * tile_px, cols)
-                                            - 1)) / 2.0
+    _check_open_parts(nodes, views, colours)
+    centre_r, centre_c = tile_centres(rows, tile_px), tile_centres(cols, tile_px)
     for c in range(len(colours)):
         # A colour's pixels sit off the tile centre (red of RGGB by half a pixel up and left):
         # move its values to the centre along the field's gradient.
@@ -280,6 +278,18 @@ def measure_mixing_colours(captures: Sequence[np.ndarray], *, intended: Sequence
     first = fields[0]
     return MixingField(np.concatenate([f.nodes for f in fields]), first.node_rows,
                        first.node_cols, first.shape, tuple(views), tuple(colours))
+
+def _check_open_parts(nodes: np.ndarray, views: Sequence[str], colours: Sequence[str]) -> None:
+    """Every tile's open part is its brightest view: a share M_kj >= 1 (r >= 100 %) is a tile
+    where the mask let the other part through, and no mixing unmix should invert."""
+    off = nodes * ~np.eye(len(views), dtype=bool)[None, :, :, None, None]
+    if off.max() >= 1:
+        c, k, j, a, b = np.unravel_index(int(np.argmax(off)), off.shape)
+        raise ValueError(f"masked white of view {views[j]}: view {views[k]} records "
+                         f"{100 * off[c, k, j, a, b]:.0f} % of the open part's light in tile "
+                         f"({a}, {b}) of colour {colours[c]} (r >= 100 %): not a white with only "
+                         "that part open; check --intended and the mask")
+
 
 def _shift_nodes(values: np.ndarray, node_rows: np.ndarray, node_cols: np.ndarray,
                  off_r: float, off_c: float) -> np.ndarray:

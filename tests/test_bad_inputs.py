@@ -12,6 +12,7 @@ import hashlib
 import json
 import struct
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -806,7 +807,7 @@ def infinite(tmp_path_factory, inputs) -> Path:
     _plenocli_tiff(d / "frame.tif", np.where(np.isinf(bad[1]), -np.inf, bad[0]))
     _plain_tiff(d / "sensor.tif", bad[1])
     nodes = np.array([[1.0, 0.2], [0.1, 1.0]])[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
-    field = MixingField(nodes, np.array([16.0, 48.0]), np.array([16.0, 48.0]), (64, 64),
+    field = MixingField(nodes, np.array([15.5, 47.5]), np.array([15.5, 47.5]), (64, 64),
                         ("A", "B"), ("L",))
     write_mixing(d / "mixing.tif", field, layout="mono", cfa=None, meta={})
     frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
@@ -845,6 +846,8 @@ def test_infinite_pixels_are_refused_by_every_stage_that_reads_views(args, input
     ({"colour": {"as_shot_wb": [-1, 1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": [1, 1]}}, 1, ("as-shot white balance",)),
     ({"colour": {"as_shot_wb": "abc"}}, 1, ("as-shot white balance 'abc'",)),
+    ({"colour": {"as_shot_wb": [1e30, 1, 1.5]}}, 1, ("more than 100 times another", "--wb")),
+    ({"colour": {"as_shot_wb": [1e-30, 1, 1.5]}}, 1, ("more than 100 times another",)),
     ({"colour": [1, 2]}, 1, ("colour metadata [1, 2] is not a mapping",)),
     ({"exif": {"ISO": 10 ** 7}}, 0, ("EXIF ISO 10000000",)),
     ({"exif": {"ISO": -5}}, 0, ("EXIF ISO -5",)),
@@ -901,6 +904,11 @@ def _lying_grid(path: Path, source: Path, change) -> None:
     path.write_text(yaml.safe_dump(doc))
 
 
+def _measured(rows):
+    scatter = np.random.default_rng(3).normal(0, 0.02, (len(rows), 2))
+    return rows + np.hstack([np.zeros((len(rows), 2)), scatter])
+
+
 def _outside(grid, rows):
     i, j = rows[:, 0].max() + 3, rows[:, 1].max() + 3   # three lenses beyond the image
     return np.vstack([rows, [i, j, *grid.lattice_xy(i, j)]])
@@ -910,6 +918,11 @@ def _outside(grid, rows):
     ("shifted", lambda g, r: r + [0, 0, 0.6 * g.pitch_px, 0], ("from its lattice place",)),
     ("indices-off-by-one", lambda g, r: r + [1, 0, 0, 0], ("from its lattice place",)),
     ("outside", _outside, ("outside the",)),
+    # measured centres (scattered 0.02 px about the lattice) all moved, or listed for a lattice
+    # of another pitch: neither the file's lattice nor that lattice bent by a smooth field
+    ("all-moved-1px", lambda g, r: _measured(r) + [0, 0, 1.0, 0], ("up to 1.0", "smooth")),
+    ("pitch-0.5%-larger", lambda g, r: _measured(np.hstack([r[:, :2], replace(
+        g, pitch_px=1.005 * g.pitch_px).lattice_xy(r[:, 0], r[:, 1])])), ("lattice it lists",)),
 ])
 @pytest.mark.parametrize("stage", ["refocus", "sai"])
 def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words, stage, inputs,
@@ -921,6 +934,22 @@ def test_grid_lens_rows_that_are_not_the_lattice_are_refused(name, change, words
     assert_one_line(result, 1, words)
 
 
+@pytest.mark.parametrize("key,value,words", [
+    ("angle_deg", 30.0, ("angle_deg 30.0 disagrees",)), ("count", 5, ("lenses.count 5",)),
+])
+def test_grid_fields_that_disagree_are_refused(key, value, words, inputs, tmp_path):
+    doc = yaml.safe_load((inputs / "rt" / "grid.yaml").read_text())
+    if key == "count":
+        doc["lens_grid"]["lenses"] = {"count": value, "rows": [[0, 0, *doc["lens_grid"][
+            "offset_xy"]]]}
+    else:
+        doc["lens_grid"][key] = value
+    (tmp_path / "grid.yaml").write_text(yaml.safe_dump(doc))
+    args = ["refocus", str(inputs / "rt" / "frames.tif"), "--grid", str(tmp_path / "grid.yaml"),
+            "-o", "{o}/x.tif"]
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
 # ------------------- side files checked against what they describe: mixing files
 
 def _mixing_variant(path: Path, change: str) -> None:
@@ -928,9 +957,13 @@ def _mixing_variant(path: Path, change: str) -> None:
     from plenocli.model.mixing import MixingField
 
     m = np.array([[1.0, 0.2], [0.1, 1.0]])
-    rows = cols = np.array([16.0, 48.0])
+    rows = cols = np.array([15.5, 47.5])
     views = ("A", "B")
-    if change == "scaled-1e30":
+    if change == "share-1.5":
+        m = m + [[0, 1.3], [0, 0]]
+    elif change == "nodes-not-tile-centres":
+        cols = cols / 2
+    elif change == "scaled-1e30":
         m = m * 1e30
     elif change == "diagonal-negative":
         m = m * [[-1, 1], [1, 1]]
@@ -945,12 +978,20 @@ def _mixing_variant(path: Path, change: str) -> None:
     nodes = m[None, :, :, None, None] * np.ones((1, 1, 1, 2, 2))
     field = MixingField(nodes, rows, cols, (64, 64), views, ("L",))
     write_mixing(path, field, layout="mono", cfa=None, meta={})
+    if change == "share-edited":  # still a mixing crosstalk could measure, but not this one
+        pages, meta = tiffio.read_image(path)
+        pages[1] += 0.1
+        tifffile.imwrite(path, pages, photometric="minisblack", metadata=None,
+                         description=json.dumps({tiffio.FORMAT_KEY: 1, **meta}))
 
 
 @pytest.mark.parametrize("change,words", [
     ("scaled-1e30", ("1e+30", "diagonal")), ("diagonal-negative", ("diagonal",)),
     ("diagonal-zero", ("diagonal",)), ("negative-share", ("negative light",)),
     ("nodes-outside", ("node_rows", "outside")), ("names-not-text", ("views [1, 2]",)),
+    ("share-1.5", ("M[A<-B]", "1.5", ">= 1")),
+    ("nodes-not-tile-centres", ("node_cols", "centres of 32 px tiles")),
+    ("share-edited", ("no longer match their checksum",)),
 ])
 def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp_path):
     side = tmp_path / "side"
@@ -970,6 +1011,10 @@ def test_a_mixing_file_that_lies_is_refused(change, words, inputs, infinite, tmp
     (lambda g: g * 0.5, ("smallest gain is 0.5",)),
     (lambda g: -g, ("outside",)),
     (lambda g: g * 1.3, ("not 1 as reference max",)),
+    # edits that keep every rule of a gain: the checksum flat sealed the file with
+    (lambda g: g[:, :, ::-1], ("no longer match their checksum",)),
+    (lambda g: np.roll(g, 1, axis=2), ("no longer match their checksum",)),
+    (lambda g: g[[1, 0, 2]], ("no longer match their checksum",)),
 ])
 def test_a_gain_map_that_lies_is_refused(change, words, inputs, tmp_path):
     side = tmp_path / "side"
@@ -1046,16 +1091,18 @@ def test_a_result_that_overflows_to_infinity_is_not_written(inputs, infinite, tm
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("overflowed", "view B"))
 
 
-@pytest.mark.parametrize("photometric", ["palette", "miniswhite"])
+@pytest.mark.parametrize("photometric", ["palette", "miniswhite", "separated", "cielab"])
 @pytest.mark.parametrize("stage", ["decode", "sai"])
 def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, stage, inputs,
                                                                   tmp_path):
     side = tmp_path / "side"
     side.mkdir()
     grey = np.random.default_rng(4).integers(0, 255, (32, 48)).astype(np.uint8)
-    extra = {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}
-    tifffile.imwrite(side / "x.tif", grey, photometric=photometric,
-                     **(extra if photometric == "palette" else {}))
+    extra = {"palette": {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}}
+    samples = {"separated": 4, "cielab": 3}.get(photometric)
+    image = grey if samples is None else np.repeat(grey[..., None], samples, axis=2)
+    tifffile.imwrite(side / "x.tif", image, photometric=photometric, metadata=None,
+                     **extra.get(photometric, {}))
     args = [stage, str(side / "x.tif"), "-o", "{o}/x.tif"] + (["-n", "2"] if stage == "sai"
                                                               else [])
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, ("holds no light levels",))

@@ -140,6 +140,11 @@ def test_measure_mixing_refuses_bad_sets():
     with pytest.raises(ValueError, match="no tile"):
         dark = np.zeros((2, 8, 8))
         measure_mixing([white, dark], intended=[0, 1], views=["A", "B"], tile_px=4)
+    # globally the open part is brighter, but in one tile the other view is: r >= 100 % there
+    a_open = np.stack([np.ones((8, 8)), np.full((8, 8), 0.3)])
+    a_open[1, :4, 4:] = 1.2
+    with pytest.raises(ValueError, match=r"records 120 % .* tile \(0, 1\)"):
+        measure_mixing([a_open, a_open[::-1]], intended=[0, 1], views=["A", "B"], tile_px=4)
 
 
 def test_a_tile_larger_than_the_image_is_refused_before_allocating():

@@ -369,6 +369,12 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
     "uncompressed 16-bit samples labelled 12-bit": (_frame(), {},
                                                    lambda p: _patch_raw_tag(p, 258, 12),
                                                    "12 bits per sample"),
+    "MaskedAreas reaching into ActiveArea": (_frame(), _with_tags(
+        (50829, "I", 4, (0, 8, ROWS, COLS), True), (50830, "I", 4, (0, 0, ROWS, 12), True)),
+        None, "MaskedAreas [0, 0, 75, 12] overlaps ActiveArea"),
+    "ActiveArea covering MaskedAreas": (_frame(), _with_tags(
+        (50829, "I", 4, (0, 0, ROWS, COLS), True), (50830, "I", 4, (0, 0, ROWS, 8), True)),
+        None, "overlaps ActiveArea"),
     "float samples NaN": (_float_with(np.nan), dict(linear=True, white=1, tile=(32, 32),
                                                     compression="zlib", predictor=3),
                           None, "1 NaN or infinite samples"),

@@ -8,7 +8,7 @@ import yaml
 
 from plenocli.errors import InputError
 from plenocli.io import gridfile, yamlfile
-from plenocli.model.lensgrid import LensGrid
+from plenocli.model.lensgrid import LensGrid, fit_lattice
 
 
 def _grid(seed: int = 0) -> LensGrid:
@@ -138,3 +138,21 @@ def test_numpy_numbers_in_the_extra_fields_are_written_as_plain_numbers(tmp_path
     gridfile.write_grid(path, _grid(), {"stage": "calibrate"}, extra=extra)
     doc = yaml.safe_load(path.read_text())
     assert doc["calibration"] == {"pitch_px": 23.8323, "lenses": 451, "residuals": [0.25, 0.5]}
+
+
+@pytest.mark.parametrize("listed", ["measured", "bent", "moved"])
+def test_lens_rows_must_be_calibrates_own(listed):
+    """Rows as calibrate lists them (measured centres about their least-squares lattice, or the
+    lattice bent by a smooth field under FIELD_MAX pitch) pass; the same rows moved do not."""
+    grid = LensGrid(20.0, 0.1, (100.0, 80.0), image_shape=(160, 200))
+    idx, places = grid.lens_centres()
+    u = (places - places.mean(axis=0)) / 100.0
+    rows = {"measured": places + np.random.default_rng(1).normal(0, 0.05, places.shape),
+            "bent": places + 0.6 * np.stack([u[:, 0] ** 2, u[:, 0] * u[:, 1]], axis=1),
+            "moved": places + np.random.default_rng(1).normal(0, 0.05, places.shape) + 0.3}
+    measured = LensGrid(*fit_lattice(idx, rows["measured"]), image_shape=(160, 200))
+    listed_grid = measured if listed == "measured" else grid
+    found = gridfile.rows_misfit(LensGrid(listed_grid.pitch_px, listed_grid.angle_rad,
+                                          listed_grid.offset_xy, centres_xy=rows[listed],
+                                          indices=idx))
+    assert (found is None) == (listed != "moved"), found

@@ -117,6 +117,7 @@ def test_a_header_claiming_a_huge_image_is_refused_before_allocating(tmp_path, m
     ({"active_area": [0, 0, 9, 8]}, "active_area"),
     ({"active_area": [4, 0, 4, 8]}, "active_area"),
     ({"masked_areas": [[0, 0, 8, 2.5]]}, "masked area"),
+    ({"active_area": [0, 2, 8, 8], "masked_areas": [[0, 0, 8, 3]]}, "overlaps active_area"),
     ({"views": ["a", "b"]}, "names"),
     ({"origin": [0.5, 0]}, "origin"),
 ])

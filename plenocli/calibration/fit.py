@@ -8,60 +8,9 @@ import numpy as np
 
 from plenocli.calibration.centres import refine_centres, regional_shifts
 from plenocli.errors import CalibrationError
-from plenocli.model.lensgrid import LATTICES, LensGrid
+from plenocli.model.lensgrid import FIELD_DEGREE, FIELD_MAX, LATTICES, LensGrid, fit_lattice
 
 MIN_LENSES = 12   # fewer whole micro-images: no lattice worth fitting
-
-
-def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex",
-                weights: np.ndarray | None = None, return_se: bool = False) -> tuple:
-    """Least-squares similarity lattice through lens centres.
-
-    ``x_ij = o + i b1 + j R(step) b1`` is linear in (o, b1), so this is one linear solve.
-
-    Parameters
-    ----------
-    indices : (K, 2) lattice indices (i, j)
-    centres : (K, 2) centres (x, y) in px
-    weights : (K,) optional weights (0 drops a lens)
-
-    Returns
-    -------
-    pitch_px, angle_rad (unreduced), offset_xy (the centre of lens (0, 0)), and with
-    ``return_se`` the standard errors (pitch px, angle rad) from the residuals
-    """
-    if lattice not in LATTICES:
-        raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {lattice!r}")
-    i = np.asarray(indices[:, 0], float)
-    j = np.asarray(indices[:, 1], float)
-    cs, sn = np.cos(LATTICES[lattice]), np.sin(LATTICES[lattice])
-    ones, zeros = np.ones_like(i), np.zeros_like(i)
-    # unknowns (ox, oy, u, v); b1 = (u, v), b2 = (cs u - sn v, sn u + cs v)
-    ax = np.stack([ones, zeros, i + j * cs, -j * sn], axis=1)
-    ay = np.stack([zeros, ones, j * sn, i + j * cs], axis=1)
-    a = np.concatenate([ax, ay])
-    b = np.concatenate([centres[:, 0], centres[:, 1]])
-    if weights is not None:
-        w = np.sqrt(np.concatenate([weights, weights]))
-        a, b = a * w[:, None], b * w
-    # the 4 x 4 normal equations, not the 2K x 4 design: well conditioned, as lens indices
-    # count from the middle of the frame
-    inverse = np.linalg.pinv(a.T @ a)
-    sol = inverse @ (a.T @ b)
-    ox, oy, u, v = sol
-    pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
-    if not return_se:
-        return pitch, angle, (float(ox), float(oy))
-    if not pitch > 0:
-        return pitch, angle, (float(ox), float(oy)), (np.inf, np.inf)
-    # standard errors from the normal equations: pitch along (u, v), angle across it
-    dof = max(len(b) - 4, 1)
-    cov = inverse * float(np.sum((a @ sol - b) ** 2)) / dof
-    radial = np.array([u, v]) / pitch
-    across = np.array([-v, u]) / pitch
-    se_pitch = float(np.sqrt(radial @ cov[2:, 2:] @ radial))
-    se_angle = float(np.sqrt(across @ cov[2:, 2:] @ across)) / pitch
-    return pitch, angle, (float(ox), float(oy)), (se_pitch, se_angle)
 
 
 def lattice_from_lags(lags: np.ndarray, indices: np.ndarray, weights: np.ndarray, *,
@@ -213,10 +162,8 @@ def regional_lattice(flat: np.ndarray, grid: LensGrid) -> tuple | None:
     return pitch, angle, offset, se
 
 
-FIELD_DEGREE = 2       # of the polynomial field through the regions' shifts (6 terms per axis)
 FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
 FIELD_AGREEMENT = 0.02  # robust scatter (pitches) of the regions about the field
-FIELD_MAX = 0.05       # largest shift (pitches) of a lens by the field
 
 
 def smooth_field(middles: np.ndarray, shifts: np.ndarray, at: np.ndarray,

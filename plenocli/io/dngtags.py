@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import InputError
+from plenocli.io.tiffio import rects_overlap
 from plenocli.model.cfa import is_bayer
 
 CFA_REPEAT_DIM, CFA_PATTERN, CFA_PLANE_COLOR, CFA_LAYOUT = 33421, 33422, 50710, 50711
@@ -225,4 +226,10 @@ def areas(path, k: int, page, shape: tuple[int, int]) -> tuple[list[int], list[l
                          "per rectangle; the DNG is damaged")
     active_list = [0, 0, *shape] if active is None else [int(v) for v in active]
     flat = [] if masked is None else [int(v) for v in masked]
-    return active_list, [flat[i:i + 4] for i in range(0, len(flat), 4)]
+    rects = [flat[i:i + 4] for i in range(0, len(flat), 4)]
+    for rect in rects:
+        if rects_overlap(rect, active_list):
+            raise InputError(f"{path}: raw IFD {k}: MaskedAreas {rect} overlaps ActiveArea "
+                             f"{active_list} (masked areas lie outside the active area); the "
+                             "DNG is damaged")
+    return active_list, rects

@@ -12,7 +12,7 @@ import yaml
 from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
 from plenocli.io.yamlfile import DocumentError, load_yaml
-from plenocli.model.lensgrid import LensGrid
+from plenocli.model.lensgrid import FIELD_DEGREE, FIELD_MAX, MIN_PITCH_PX, LensGrid, fit_lattice
 from plenocli.model.provenance import json_safe
 
 # libyaml's emitter when PyYAML was built with it (10-50x faster; io/yamlfile reads)
@@ -126,8 +126,9 @@ def read_grid(path: str | os.PathLike, *,
 
 def check_lens_rows(path, grid: LensGrid) -> None:
     """The listed lenses must be the lattice's: each centre nearer its own lattice place (i, j)
-    than any other (within half a pitch; calibrated centres stray by tenths of a pixel), and
-    inside the image the grid was calibrated on (a lens one pitch outside holds none of it)."""
+    than any other (within half a pitch; calibrated centres stray by tenths of a pixel), about
+    the lattice as calibrate lists them (:func:`rows_misfit`), and inside the image the grid was
+    calibrated on (a lens one pitch outside holds none of it)."""
     if grid.centres_xy is None or not len(grid.centres_xy):
         return
     indices, centres = np.asarray(grid.indices), np.asarray(grid.centres_xy, np.float64)
@@ -139,6 +140,10 @@ def check_lens_rows(path, grid: LensGrid) -> None:
                          f"{centres[worst][1]:.1f}), {stray[worst]:.1f} px from its lattice "
                          f"place (pitch {grid.pitch_px:g} px): the lens rows do not belong to "
                          "this lattice; calibrate again")
+    misfit = rows_misfit(grid)
+    if misfit:
+        raise InputError(f"{path}: {misfit}; the lens rows or the lattice fields (pitch_px, "
+                         "angle_rad, offset_xy) were edited: calibrate again")
     if grid.image_shape is not None:
         rows, cols = grid.image_shape
         margin = grid.pitch_px
@@ -149,3 +154,35 @@ def check_lens_rows(path, grid: LensGrid) -> None:
             raise InputError(f"{path}: lens {tuple(int(v) for v in indices[k])} is listed at "
                              f"({centres[k][0]:.1f}, {centres[k][1]:.1f}), outside the "
                              f"{cols} x {rows} image the grid describes; calibrate again")
+
+
+REFIT_PX = 0.05       # a lattice fitted to calibrated rows moves no lens farther than this
+FIELD_FIT_PX = 0.01   # rows written as lattice + smooth field: their misfit to that polynomial
+
+
+def rows_misfit(grid: LensGrid) -> str | None:
+    """How the lens rows contradict the lattice fields, or None. Calibrate lists either the
+    measured centres with the least-squares lattice through them (a lattice fitted to the rows
+    is the file's lattice), or the lattice places moved by a smooth field (a polynomial of
+    degree FIELD_DEGREE in the place, at most FIELD_MAX pitch). A uniform shift of the rows, a
+    scaled pitch or a turned angle is neither."""
+    indices, centres = np.asarray(grid.indices), np.asarray(grid.centres_xy, np.float64)
+    places = grid.lattice_xy(indices[:, 0], indices[:, 1])
+    pitch, angle, offset = fit_lattice(indices, centres, lattice=grid.lattice)
+    refit = LensGrid(max(pitch, MIN_PITCH_PX), angle, offset, grid.lattice)
+    moved = float(np.hypot(*(refit.lattice_xy(indices[:, 0], indices[:, 1]) - places).T).max())
+    if moved <= REFIT_PX:
+        return None
+    shift = centres - places
+    scaled = (places - places.mean(axis=0)) / np.maximum(np.ptp(places, axis=0) / 2, 1.0)
+    design = np.stack([scaled[:, 0] ** a * scaled[:, 1] ** b for a in range(FIELD_DEGREE + 1)
+                       for b in range(FIELD_DEGREE + 1 - a)], axis=1)
+    smooth = design @ np.linalg.lstsq(design, shift, rcond=None)[0]
+    off_field = float(np.hypot(*(shift - smooth).T).max())
+    largest = float(np.hypot(*shift.T).max())
+    if off_field <= FIELD_FIT_PX and largest <= FIELD_MAX * grid.pitch_px + FIELD_FIT_PX:
+        return None
+    return (f"the lattice its {len(centres)} lens rows fit (pitch {pitch:.4f} px, angle "
+            f"{angle:.5f} rad) lies up to {moved:.2f} px from the lattice it lists (pitch "
+            f"{grid.pitch_px:.4f} px, angle {grid.angle_rad:.5f} rad), and the rows are not "
+            f"that lattice moved by a smooth field of at most {FIELD_MAX:g} pitch")

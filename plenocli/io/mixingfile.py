@@ -24,13 +24,14 @@ import numpy as np
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.model.cfa import is_bayer
-from plenocli.model.mixing import MixingField
+from plenocli.model.mixing import MixingField, tile_centres
 
 LAYOUTS = ("cfa", "channels", "mono")
 # measure_mixing writes M_jj = flux / flux = 1 exactly (float32); shares of light are >= 0 up to
 # the noise of a tile's flux ratio, far below this
 DIAGONAL_TOLERANCE = 1e-4
 NEGATIVE_SHARE = 0.05
+NODE_TOLERANCE_PX = 1e-3  # node positions are written as exact halves of a pixel
 
 
 def page_names(mixing: MixingField) -> list[str]:
@@ -50,7 +51,7 @@ def write_mixing(path: str | os.PathLike, mixing: MixingField, *, layout: str,
             "node_rows": [float(v) for v in mixing.node_rows],
             "node_cols": [float(v) for v in mixing.node_cols]}
     tiffio.write_image(path, pages, {**meta, "views": page_names(mixing), "cfa": None,
-                                     "mixing": info}, protect=protect)
+                                     "mixing": info}, protect=protect, seal=True)
 
 
 def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
@@ -79,6 +80,7 @@ def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
                          f"colours {','.join(colours)} (M[k<-j].colour); the file was edited or "
                          "damaged: measure it again with plenocli crosstalk --mixing-out")
     check_mixing(path, field, info)
+    tiffio.check_seal(path, pages, meta, "measure it again with plenocli crosstalk --mixing-out")
     return field, meta
 
 
@@ -110,7 +112,8 @@ def _frame_shape(values) -> tuple[int, int]:
 def check_mixing(path, field: MixingField, info: dict) -> None:
     """What a measured field is (crosstalk.measure_mixing): finite, M_jj = 1 exactly (each
     masked white's flux divided by its intended view's), no negative share of light beyond
-    noise, nodes at tile centres inside the frame."""
+    noise, no share of another part's light >= 1, nodes at the centres of the tiles covering
+    the frame."""
     nodes = np.asarray(field.nodes, np.float64)
     if not np.isfinite(nodes).all():
         raise InputError(f"{path}: the mixing field has non-finite values; measure it again "
@@ -128,14 +131,36 @@ def check_mixing(path, field: MixingField, info: dict) -> None:
         raise InputError(f"{path}: the mixing field holds a share of light of {share:.3g}; a "
                          "view cannot record negative light from another pupil part "
                          "(whites measured above a wrong black?): measure it again")
+    off = nodes * ~np.eye(field.n_views, dtype=bool)[None, :, :, None, None]
+    if off.max() >= 1:
+        c, k, j, a, b = np.unravel_index(int(np.argmax(off)), off.shape)
+        raise InputError(f"{path}: M[{field.views[k]}<-{field.views[j]}] of colour "
+                         f"{field.colours[c]} is {off[c, k, j, a, b]:.6g} at node ({a}, {b}): a "
+                         "share of another part's light >= 1 (r >= 100 %) is not a measured "
+                         "mixing (crosstalk refuses it): the file was edited: measure it again")
+    _check_nodes(path, field)
+
+
+def _check_nodes(path, field: MixingField) -> None:
+    """Nodes are the centres of the square tiles that cover the frame (measure_mixing)."""
     rows, cols = field.shape
-    for name, axis, size in (("node_rows", field.node_rows, rows),
-                             ("node_cols", field.node_cols, cols)):
-        axis = np.asarray(axis, np.float64)
+    axes = (("node_rows", np.asarray(field.node_rows, np.float64), rows),
+            ("node_cols", np.asarray(field.node_cols, np.float64), cols))
+    for name, axis, size in axes:
         if not (np.isfinite(axis).all() and axis.min() >= 0 and axis.max() <= size - 1):
             raise InputError(f"{path}: {name} {_short(axis)} lie outside the {cols} x {rows} "
                              "frame the mixing was measured on (nodes are tile centres); the "
                              "file was edited or damaged: measure it again")
+    # the first of several tiles is whole: its centre is (tile - 1) / 2
+    firsts = [axis[0] for _, axis, _ in axes if len(axis) > 1]
+    tile = int(round(2 * firsts[0] + 1)) if firsts else max(rows, cols)
+    for name, axis, size in axes:
+        centres = tile_centres(size, max(tile, 1))
+        if centres.shape != axis.shape or np.abs(centres - axis).max() > NODE_TOLERANCE_PX:
+            raise InputError(f"{path}: {name} {_short(axis)} ({len(axis)} nodes) are not the "
+                             f"centres of {tile} px tiles covering the {cols} x {rows} frame "
+                             "(crosstalk --tile); the file was edited or damaged: measure it "
+                             "again")
 
 
 def _short(axis: np.ndarray) -> str:

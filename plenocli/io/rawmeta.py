@@ -14,6 +14,8 @@ import re
 import numpy as np
 import tifffile
 
+from plenocli.model.colour import MAX_GAIN_RATIO
+
 # EXIF fields carried to the photograph and what each must be. Text is ASCII (EXIF's type) and
 # short (a JPEG's EXIF block holds 64 KiB);
 # rationals are written with denominators up to 1e5, so they must lie in [1e-5, 1e6].
@@ -127,6 +129,11 @@ def clean_colour(colour, warn) -> dict | None:
         if gains is None or min(gains) <= 0:
             warn(f"as-shot white balance {_shown(wb)} is not three positive gains R,G,B; "
                  "dropped (give develop --wb)")
+            out["as_shot_wb"] = None
+        elif max(gains) > MAX_GAIN_RATIO * min(gains):
+            warn(f"as-shot white balance {_shown(wb)} has one gain more than "
+                 f"{MAX_GAIN_RATIO:g} times another, beyond any light source; dropped (give "
+                 "develop --wb)")
             out["as_shot_wb"] = None
     matrix = colour.get("xyz_to_camera")
     if matrix is not None:

@@ -18,6 +18,7 @@ holds a JSON object with everything later stages need:
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import logging
 import os
@@ -63,13 +64,17 @@ def read_error(path, err: Exception, fallback: str) -> InputError:
 
 
 def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
-                protect: tuple = ()) -> None:
-    """Write ``views`` (rows, cols) or (views, rows, cols) with ``meta`` atomically."""
+                protect: tuple = (), seal: bool = False) -> None:
+    """Write ``views`` (rows, cols) or (views, rows, cols) with ``meta`` atomically; ``seal``
+    records the pixels' checksum (a side file a later stage trusts: :func:`check_seal`)."""
     data = np.asarray(views)
     if data.ndim == 2:
         data = data[np.newaxis]
     if data.ndim != 3:
         raise ValueError(f"views must be 2-D or 3-D, got shape {data.shape}")
+    meta = {k: v for k, v in meta.items() if k != SEAL_KEY}
+    if seal:
+        meta[SEAL_KEY] = pixels_digest(data, meta)
     names = meta.get("views")
     if names is not None and len(names) != data.shape[0]:
         raise ValueError(f"{len(names)} view names for {data.shape[0]} views")
@@ -95,6 +100,30 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                 tw.write(np.ascontiguousarray(page), photometric="minisblack",
                          description=description if k == 0 else None, metadata=None,
                          software=f"plenocli {__version__}")
+
+
+SEAL_KEY = "pixels_sha256"
+SEALED_META = ("views", "cfa", "origin", "mixing")  # what the pixels mean, sealed with them
+
+
+def pixels_digest(data: np.ndarray, meta: dict) -> str:
+    """sha256 of (views, rows, cols) ``data`` (dtype, shape, little-endian samples) and of the
+    ``SEALED_META`` fields of ``meta``."""
+    little = data.dtype.newbyteorder("<")
+    described = json.dumps({k: meta.get(k) for k in SEALED_META}, sort_keys=True)
+    digest = hashlib.sha256(f"{little.str}{tuple(data.shape)}{described}".encode())
+    for page in data:
+        digest.update(np.ascontiguousarray(page, dtype=little).data)
+    return digest.hexdigest()
+
+
+def check_seal(path, data: np.ndarray, meta: dict, remedy: str) -> None:
+    """A side file plenocli wrote sealed must hold the pixels it was written with: an edit that
+    keeps every other rule (flipped, shifted, pages swapped) would change a result."""
+    if meta.get(SEAL_KEY) != pixels_digest(data, meta):
+        state = "have no checksum" if SEAL_KEY not in meta else "no longer match their checksum"
+        raise InputError(f"{path}: its pixels or views {state} ({SEAL_KEY}): the file was "
+                         f"edited or damaged since plenocli wrote it; {remedy}")
 
 
 def _has_finite(page: np.ndarray, rows: int = 64) -> bool:
@@ -246,6 +275,12 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
             raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
                              f"rectangle inside the {shape[-1]} x {shape[-2]} image; the file "
                              "was edited or damaged: decode the capture again")
+    active = meta.get("active_area")
+    for area in (masked or []) if active is not None else ():
+        if rects_overlap(area, active):
+            raise InputError(f"{path}: masked area {area} overlaps active_area {active} (the "
+                             "over-scan lies outside the image area); the file was edited or "
+                             "damaged: decode the capture again")
     origin = meta.get("origin")
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
                                    and all(isinstance(v, int) and not isinstance(v, bool)
@@ -313,6 +348,11 @@ def _inside(area, shape) -> bool:
     return 0 <= top < bottom <= shape[0] and 0 <= left < right <= shape[1]
 
 
+def rects_overlap(a, b) -> bool:
+    """Whether two [top, left, bottom, right] rectangles share a pixel."""
+    return max(a[0], b[0]) < min(a[2], b[2]) and max(a[1], b[1]) < min(a[3], b[3])
+
+
 def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
     """Pages of a foreign TIFF as (views, rows, cols): interleaved samples (RGB) become views."""
     arrays = []
@@ -368,7 +408,7 @@ def derived_meta(source: dict, record: dict, **changes) -> dict:
     history = list(source.get("history", []))
     if source.get("provenance"):
         history.append(source["provenance"])
-    meta = {k: v for k, v in source.items() if k not in ("provenance", "history")}
+    meta = {k: v for k, v in source.items() if k not in ("provenance", "history", SEAL_KEY)}
     meta.update(changes)
     meta["provenance"] = record
     meta["history"] = history

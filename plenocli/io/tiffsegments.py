@@ -25,7 +25,14 @@ JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}  # SOF0..
 # Byte codecs whose output size tifffile pads or crops to the segment's (LZW, Deflate, PackBits,
 # LZMA, Zstandard): the decoded size of a segment is checked against the header's.
 BYTE_CODECS = frozenset({5, 8, 32946, 32773, 34925, 50000})
-NOT_LEVELS = {0: "MinIsWhite (inverted)", 3: "palette (colour-index)"}  # Photometric values
+# Photometric values whose samples are light levels: grey, RGB, a raw's CFA and LinearRaw (and
+# YCbCr as JPEG codes it, which the codec returns as RGB); anything else is named, never read.
+LIGHT_LEVELS = (1, 2, 32803, 34892)
+NOT_LEVELS = {0: "MinIsWhite (inverted)", 3: "palette (colour-index)",
+              4: "transparency-mask", 5: "CMYK (separated: ink amounts)", 6: "YCbCr",
+              8: "CIELab", 9: "ICCLab", 10: "ITULab", 32844: "LogL", 32845: "LogLuv",
+              51177: "depth"}
+JPEG = 7
 
 
 def check_page(path: Path, page) -> None:
@@ -233,9 +240,11 @@ def _packed_rows(page, samples: int) -> int:
 
 
 def check_light_levels(path, page) -> None:
-    """A page whose samples are not light levels (inverted grey, palette indices) is refused:
-    plenocli would take them for light."""
-    kind = NOT_LEVELS.get(int(page.photometric))
-    if kind is not None:
-        raise InputError(f"{path}: a {kind} TIFF holds no light levels; save the image as a "
-                         "grey (MinIsBlack) or RGB TIFF")
+    """A page whose samples are not light levels (inverted grey, palette indices, CMYK ink,
+    Lab) is refused: plenocli would take them for light."""
+    photometric = int(page.photometric)
+    if photometric in LIGHT_LEVELS or (photometric == 6 and int(page.compression) == JPEG):
+        return
+    kind = NOT_LEVELS.get(photometric, f"Photometric {photometric}")
+    raise InputError(f"{path}: a {kind} TIFF holds no light levels; save the image as a grey "
+                     "(MinIsBlack) or RGB TIFF")

@@ -18,6 +18,9 @@ OUTPUT_SPACES = {"srgb": "sRGB", "display-p3": "Display P3", "rec2020-linear": "
 # Demosaicing methods (plenocli.colour.demosaic; compared in docs/colour.md).
 METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
 DEFAULT_METHOD = "rcd"  # best PSNR and dE2000 on natural photographs (docs/colour.md)
+# White-balance gains within this ratio of each other: beyond any light source (a typo, or a
+# header that lies), and float overflow further on. --wb and a file's as-shot gains alike.
+MAX_GAIN_RATIO = 100.0
 CONDITION_LIMIT = 1e6  # beyond this a matrix inverse amplifies rounding into visible colour
 
 

@@ -28,6 +28,11 @@ LATTICES = {"hex": np.pi / 3, "square": np.pi / 2}
 # plenoptic sensor: refusing such grids keeps lens tables and loops from exploding.
 MIN_PITCH_PX = 1.0
 MAX_COORD_PX = 1e6
+# What a listed lens centre may be besides its measured symmetry centre: the lattice place moved
+# by a smooth field, a polynomial of this degree in the place, of at most FIELD_MAX pitch
+# (calibration.fit.smooth_field; the grid reader holds a file's rows to the same rule).
+FIELD_DEGREE = 2
+FIELD_MAX = 0.05
 
 
 @dataclass(frozen=True)
@@ -176,6 +181,12 @@ class LensGrid:
         if lenses:
             table = np.asarray(lenses["rows"], float).reshape(-1, 4)
             indices, centres = table[:, :2].astype(np.int64), table[:, 2:]
+            if "count" in lenses and lenses["count"] != len(table):
+                raise ValueError(f"lenses.count {lenses['count']!r} for {len(table)} rows")
+        if "angle_deg" in data and not abs(float(data["angle_deg"])
+                                           - np.degrees(float(data["angle_rad"]))) <= 1e-6:
+            raise ValueError(f"angle_deg {data['angle_deg']!r} disagrees with angle_rad "
+                             f"{data['angle_rad']!r}")
         shape = data.get("image_shape")
         return cls(pitch_px=float(data["pitch_px"]), angle_rad=float(data["angle_rad"]),
                    offset_xy=tuple(float(v) for v in data["offset_xy"]),
@@ -185,6 +196,57 @@ class LensGrid:
                    centres_xy=centres, indices=indices,
                    lens_type_of_coset=tuple(int(v) for v in data["lens_type_of_coset"])
                    if data.get("lens_type_of_coset") is not None else None)
+
+
+def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex",
+                weights: np.ndarray | None = None, return_se: bool = False) -> tuple:
+    """Least-squares similarity lattice through lens centres.
+
+    ``x_ij = o + i b1 + j R(step) b1`` is linear in (o, b1), so this is one linear solve.
+
+    Parameters
+    ----------
+    indices : (K, 2) lattice indices (i, j)
+    centres : (K, 2) centres (x, y) in px
+    weights : (K,) optional weights (0 drops a lens)
+
+    Returns
+    -------
+    pitch_px, angle_rad (unreduced), offset_xy (the centre of lens (0, 0)), and with
+    ``return_se`` the standard errors (pitch px, angle rad) from the residuals
+    """
+    if lattice not in LATTICES:
+        raise ValueError(f"lattice must be one of {sorted(LATTICES)}, got {lattice!r}")
+    i = np.asarray(indices[:, 0], float)
+    j = np.asarray(indices[:, 1], float)
+    cs, sn = np.cos(LATTICES[lattice]), np.sin(LATTICES[lattice])
+    ones, zeros = np.ones_like(i), np.zeros_like(i)
+    # unknowns (ox, oy, u, v); b1 = (u, v), b2 = (cs u - sn v, sn u + cs v)
+    ax = np.stack([ones, zeros, i + j * cs, -j * sn], axis=1)
+    ay = np.stack([zeros, ones, j * sn, i + j * cs], axis=1)
+    a = np.concatenate([ax, ay])
+    b = np.concatenate([centres[:, 0], centres[:, 1]])
+    if weights is not None:
+        w = np.sqrt(np.concatenate([weights, weights]))
+        a, b = a * w[:, None], b * w
+    # the 4 x 4 normal equations, not the 2K x 4 design: well conditioned, as lens indices
+    # count from the middle of the frame
+    inverse = np.linalg.pinv(a.T @ a)
+    sol = inverse @ (a.T @ b)
+    ox, oy, u, v = sol
+    pitch, angle = float(np.hypot(u, v)), float(np.arctan2(v, u))
+    if not return_se:
+        return pitch, angle, (float(ox), float(oy))
+    if not pitch > 0:
+        return pitch, angle, (float(ox), float(oy)), (np.inf, np.inf)
+    # standard errors from the normal equations: pitch along (u, v), angle across it
+    dof = max(len(b) - 4, 1)
+    cov = inverse * float(np.sum((a @ sol - b) ** 2)) / dof
+    radial = np.array([u, v]) / pitch
+    across = np.array([-v, u]) / pitch
+    se_pitch = float(np.sqrt(radial @ cov[2:, 2:] @ radial))
+    se_angle = float(np.sqrt(across @ cov[2:, 2:] @ across)) / pitch
+    return pitch, angle, (float(ox), float(oy)), (se_pitch, se_angle)
 
 
 def _check_point(name: str, xy) -> None:

@@ -52,6 +52,13 @@ class MixingField:
         return rows[..., c0] * (1 - wc) + rows[..., c1] * wc
 
 
+def tile_centres(size: int, tile_px: int) -> np.ndarray:
+    """Centres (px) of the tiles of side ``tile_px`` along an axis of ``size`` pixels, the last
+    tile partial: where ``crosstalk.measure_mixing`` puts its nodes."""
+    starts = np.arange(0, size, tile_px, dtype=np.float64)
+    return (starts + np.minimum(starts + tile_px, size) - 1) / 2.0
+
+
 def axis_weights(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bilinear indices (lo, hi) and weights of pixels 0..n-1 on node positions ``nodes``."""
     pos = np.arange(n, dtype=np.float64)

@@ -102,7 +102,8 @@ def _bad_views(tmp, shape=SHAPE, names=("A", "B", "S"), cfa="RGGB"):
 
 def _mixing_file(tmp, nodes, views=("A", "B")):
     path = tmp / "bad_mixing.tif"
-    field = MixingField(nodes, np.array([10.0, 50.0]), np.array([10.0, 80.0]), SHAPE, views,
+    # the centres of 48 px tiles on the 96 x 64 frame, as crosstalk --tile 48 writes them
+    field = MixingField(nodes, np.array([23.5, 55.5]), np.array([23.5, 71.5]), SHAPE, views,
                         ("L",))
     write_mixing(path, field, layout="mono", cfa=None, meta={})
     return path
@@ -130,8 +131,10 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
         nodes = np.tile(m[None, :, :, None, None], (1, 1, 1, 2, 2))
         mixing = _mixing_file(tmp, nodes, views=("A", "B", "c", "d"))
     elif case == "singular":
-        views = _bad_views(tmp, cfa=None)
-        mixing = _mixing_file(tmp, np.ones((1, 2, 2, 2, 2)))
+        views = _bad_views(tmp, cfa=None, names=("A", "B", "C"))
+        m = np.array([[1, 0, 5 / 6], [0, 1, 5 / 6], [0.6, 0.6, 1]])  # row C = 0.6 (A + B)
+        mixing = _mixing_file(tmp, np.tile(m[None, :, :, None, None], (1, 1, 1, 2, 2)),
+                              views=("A", "B", "C"))
     elif case == "not_mixing":
         mixing = paths["masked_A"]
     out = tmp / "out.tif"

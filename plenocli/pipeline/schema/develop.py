@@ -1,6 +1,6 @@
 """Parameters of ``plenocli develop``."""
 
-from plenocli.model.colour import DEFAULT_METHOD, METHODS, OUTPUT_SPACES
+from plenocli.model.colour import DEFAULT_METHOD, MAX_GAIN_RATIO, METHODS, OUTPUT_SPACES
 from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param
 from plenocli.pipeline.validators import (
     TIFF,
@@ -11,8 +11,6 @@ from plenocli.pipeline.validators import (
     OutputFile,
     Text,
 )
-
-MAX_GAIN_RATIO = 100.0  # beyond any light source: a typo, and float overflow further on
 
 
 class WhiteBalance(Text):

@@ -45,6 +45,8 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         except (ValueError, TypeError) as err:
             raise InputError(f"{gain}: {err}; make the gain again with plenocli flat "
                              "--save-gain") from err
+        tiffio.check_seal(gain, ref, ref_meta, "make the gain again with plenocli flat "
+                          "--save-gain")
     corrected = apply_gain(views, gains)
     params = dict(median=median, reference=reference, percentile=percentile, floor=floor)
     inputs = {"input": input, "white": white, "gain": gain}
@@ -57,7 +59,7 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
     if save_gain:
         gain_record = stage_record("flat-gain", params, {"white": source})
         gain_meta = tiffio.derived_meta(ref_meta, gain_record)
-        tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source))
+        tiffio.write_image(save_gain, gains, gain_meta, protect=(input, source), seal=True)
     if preview:
         rgb = colour_pages(corrected, meta.get("views"))  # R, G, B pages: one colour picture
         write_png(preview, corrected[:2] if rgb is None else rgb, cfa=meta.get("cfa"),
