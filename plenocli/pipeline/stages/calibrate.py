@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +16,11 @@ from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
 
 
-def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
+def load_image(path: str) -> tuple[np.ndarray, str | None, float, tuple[int, int], dict]:
     """The 2-D image to calibrate on: a plenocli frames TIFF (views summed, its CFA and black
     level used) or a plain TIFF/PNG/BMP (colour channels summed). Returns image, cfa, black
-    level (DN, summed over views) and the metadata."""
+    level (DN, summed over views), the full-sensor (row, col) of the image's pixel (0, 0) and
+    the metadata."""
     p = Path(path)
     if not p.is_file():
         raise not_a_file(p)
@@ -47,7 +49,8 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, dict]:
     cfa = shift_pattern(cfa, top, left)
     blacks = meta.get("black_level") or []
     black = float(sum(np.mean(b) for b in blacks)) if blacks else 0.0
-    return image, cfa, black, meta
+    o_row, o_col = (int(v) for v in (meta.get("origin") or (0, 0)))
+    return image, cfa, black, (o_row + top, o_col + left), meta
 
 
 def _is_xml(path: str) -> bool:
@@ -64,7 +67,7 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     if xml and lattice == "square":
         raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
                          "use --lattice hex or auto")
-    image, cfa, black, meta = load_image(input)
+    image, cfa, black, origin, meta = load_image(input)
     other = gridfile.read_grid(compare, image_shape=image.shape) if compare else None
     first = gridfile.read_grid(start, image_shape=image.shape) if start else None
     try:
@@ -72,6 +75,7 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
                                              pitch_hint=pitch, start=first)
     except ValueError as err:
         raise InputError(f"{input}: {err}") from err
+    grid = replace(grid, sensor_origin=origin)  # where the white lay: refocus frames it there
     if xml and grid.lattice != "hex":
         raise CalibrationError(f"{input}: the array is square; --xml writes hexagonal Raytrix "
                                "calibrations only, drop --xml")
