@@ -8,6 +8,7 @@ import pytest
 from plenocli.errors import ConfigError
 from plenocli.io.lensfile import lens_from_dict, read_lens
 from plenocli.optics.analysis import (
+    check_stop_limits,
     distortion_percent,
     half_field_deg,
     lens_report,
@@ -88,6 +89,33 @@ def test_field_of_view_of_a_distortion_free_limit():
     half = half_field_deg(lens, 1.0)
     assert half == pytest.approx(math.degrees(math.atan(1.0 / f)), rel=1e-3)
     assert spot_rms_um(lens, 0.0, rays_across=16) < 1.0
+
+
+@pytest.mark.parametrize("stop_mm", [3.6, 10.0, 1e6])
+def test_a_stop_wider_than_the_beam_the_elements_pass_is_refused(stop_mm):
+    """Table 2's stop lies at the first element's vertex, so the widest stop that still limits
+    the axial beam is that element's clear aperture, 3.53718 mm."""
+    import yaml
+
+    doc = yaml.safe_load(TABLE2.read_text())
+    doc["surfaces"][0]["diameter"] = stop_mm
+    with pytest.raises(ValueError, match=r"surface 2 \(diameter 3.53718 mm\).* at most 3.537 mm"):
+        check_stop_limits(lens_from_dict(doc))
+    doc["surfaces"][0]["diameter"] = 3.537
+    check_stop_limits(lens_from_dict(doc))
+    assert paraxial(lens_from_dict(doc))["f_number"] == pytest.approx(6.1654 / 3.537, rel=1e-3)
+
+
+def test_an_f_number_below_one_half_is_refused():
+    # A thick biconvex singlet (n = 1.9, R = 10 mm, 2 mm thick) at full aperture (19 mm):
+    # lensmaker's f = 5.83 mm, f/0.31, a numerical aperture above 1.
+    n, r, t, d = 1.9, 10.0, 2.0, 19.0
+    f = 1 / ((n - 1) * (2 / r - (n - 1) * t / (n * r * r)))
+    assert f / d < 0.5
+    lens = Lens((Surface(math.inf, 0.0, "air", d, stop=True), Surface(r, t, n, d),
+                 Surface(-r, 5.0, "air", d)))
+    with pytest.raises(ValueError, match=f"f-number {f / d:.3g} is below 0.5"):
+        paraxial(lens)
 
 
 @pytest.mark.parametrize("n, apex", [(1.74, 16.7), (1.5168, 5.0), (1.5, 1.0)])

@@ -77,3 +77,14 @@ def test_impossible_prescriptions_are_one_line(tmp_path, row, words):
     assert res.exit_code == 1, res.output
     assert words in res.output and len(res.output.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_a_stop_that_does_not_limit_the_pupil_is_one_line(tmp_path):
+    lens = tmp_path / "wide_stop.yaml"
+    lens.write_text(open(TABLE2).read().replace("{stop: true, diameter: 3.09",
+                                               "{stop: true, diameter: 10.0"))
+    out = tmp_path / "out.json"
+    res = CliRunner().invoke(cli, ["optics", str(lens), "--crosstalk", "--json", str(out)])
+    assert res.exit_code == 1, res.output
+    assert "the stop must be the limiting aperture" in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not out.exists()
