@@ -33,7 +33,13 @@ import numpy as np
 from numba import njit, prange
 
 from plenocli.model.cfa import check_pattern
-from plenocli.model.focus import KERNELS, MAX_G_VALUES, VIEWS, parse_g  # noqa: F401 (re-exported)
+from plenocli.model.focus import (  # noqa: F401 (re-exported)
+    KERNELS,
+    MAX_G_VALUES,
+    MAX_S,
+    VIEWS,
+    parse_g,
+)
 from plenocli.model.lensgrid import LensGrid
 
 CHANNELS = "RGB"
@@ -272,7 +278,7 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
     """Raise ValueError naming the first refocus option that is out of range."""
     if not (np.isfinite(s) and s > 0):
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
-    if s > 1:   # each output pixel gets 1 / s^2 sensor samples on average: below 1, holes
+    if s > MAX_S:   # each output pixel gets 1 / s^2 sensor samples on average: below 1, holes
         raise ValueError(f"s = {s:g} asks for more output pixels than the sensor has samples "
                          "(1 / s^2 per output pixel): use s <= 1 (paper: 0.2)")
     if not (np.isfinite(g) and g > 0):
@@ -345,10 +351,11 @@ def splat_sums(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 
     buf_off = np.concatenate([[0], np.cumsum(hi - lo)]).astype(np.int64)
     buf = np.zeros((int(buf_off[-1]), cols_out, 2 * n_chan))
     band_out = np.concatenate([lo, hi]).astype(np.int64)
+    # a radius beyond the reach keeps every pixel, as none does (and its square stays finite)
+    radius2 = -1.0 if radius is None else float(min(radius, reach)) ** 2
     _splat(data, 0.0, 0.0, inv, basis, np.asarray(grid.offset_xy, float), cx_tab, cy_tab,
            imin, jmin, float(s), float(g), xsign, ysign, mask_width / 2.0,
-           -1.0 if radius is None else float(radius) ** 2, chan_map, kernel_table(a), edges,
-           band_out,
+           radius2, chan_map, kernel_table(a), edges, band_out,
            buf_off, buf, rows_out, cols_out, g_tab, int(g_imin), int(g_jmin))
     sums = np.zeros((n_chan, rows_out, cols_out))
     weights = np.zeros((n_chan, rows_out, cols_out))

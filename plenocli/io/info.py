@@ -17,9 +17,10 @@ import numpy as np
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import raw as raw_io
 from plenocli.io.tiffio import open_tiff, read_meta
-from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
+from plenocli.io.yamlfile import DocumentError, load_json, read_json, read_yaml
 from plenocli.model.lensgrid import LensGrid
 
+PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png")
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
               "masked_areas")
 TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
@@ -38,11 +39,15 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_xml(p)}
     if suffix == ".json":
         return {**head, **_describe_json(p)}
+    if suffix in PHOTO_SUFFIXES:
+        return {**head, **_describe_photo(p)}
     kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
         return {**head, **_describe_raw(p)}
     if kind == "image":
         meta = read_meta(p) if suffix in (".tif", ".tiff") else {}
+        if not meta and _photo_record(p):
+            return {**head, **_describe_photo(p)}
         return {**head, **(_describe_plenocli_tiff(p, meta) if meta else _describe_image(p))}
     raise InputError(f"{p}: plenocli does not know this kind of file (expected a raw, a TIFF, "
                      "a lens grid or config YAML, a Raytrix XML or a JSON report)")
@@ -77,6 +82,37 @@ def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
             "cols": int(shape[1]), "dtype": dtype, **{k: meta.get(k) for k in IMAGE_KEYS},
             "provenance": meta.get("provenance"), "history": meta.get("history", []),
             "extra": extra}
+
+
+def _photo_record(p: Path) -> dict | None:
+    """The provenance ``develop`` writes in a photograph's ImageDescription ({"plenocli":
+    record, "history": [...]}), or None."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as image:
+            text = image.getexif().get(270) or image.info.get("description")
+    except (OSError, UnidentifiedImageError, ValueError):
+        return None
+    try:
+        doc = load_json(text) if isinstance(text, str) else None
+    except DocumentError:
+        return None
+    return doc if isinstance(doc, dict) and isinstance(doc.get("plenocli"), dict) else None
+
+
+def _describe_photo(p: Path) -> dict:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as image:
+            cols, rows = image.size
+            mode, fmt = image.mode, image.format
+    except (OSError, UnidentifiedImageError) as err:
+        raise InputError(f"{p}: not a readable photograph ({err})") from err
+    doc = _photo_record(p) or {}
+    return {"kind": "photo", "format": fmt, "rows": rows, "cols": cols, "mode": mode,
+            "provenance": doc.get("plenocli"), "history": doc.get("history", [])}
 
 
 def _describe_image(p: Path) -> dict:
@@ -239,9 +275,14 @@ def _other_fields(info: dict) -> list[tuple[str, object]]:
     return [("keys", info.get("keys"))]
 
 
+def _photo_fields(info: dict) -> list[tuple[str, object]]:
+    return [("size", f"{info['cols']} x {info['rows']} {info['mode']}")]
+
+
 _KIND_FIELDS = {"raw": _image_fields, "plenocli-tiff": _image_fields, "image": _image_fields,
                 "lens-grid": _grid_fields, "pipeline-config": _config_fields,
-                "raytrix-calibration": _raytrix_fields, "xml": _xml_fields}
+                "raytrix-calibration": _raytrix_fields, "xml": _xml_fields,
+                "photo": _photo_fields}
 
 
 def _title(info: dict) -> str:
@@ -251,6 +292,8 @@ def _title(info: dict) -> str:
     if kind == "plenocli-tiff":
         stage = (info.get("provenance") or {}).get("stage")
         return "plenocli image" + (f" from stage {stage}" if stage else "")
+    if kind == "photo":
+        return f"photograph ({info['format']})"
     return {"image": "sensor image", "lens-grid": "lens grid", "xml": "XML document",
             "pipeline-config": "pipeline config", "json": "JSON document",
             "yaml": "YAML document"}.get(kind, kind)

@@ -97,7 +97,9 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         raise InputError(f"--calib is for --camera raytrix, not {kind}")
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
                        white=white)
-    _check_levels(path, meta["black_level"], meta["white_level"])
+    _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype,
+                  given=tuple(name for name, value in (("--black", black), ("--white", white))
+                              if value is not None))
     tiffio.check_no_infinity(path, frames, meta.get("views"))
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
@@ -141,8 +143,13 @@ def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa
                                if frames.dtype.kind in "ui" else float("inf")] * n
 
 
-def _check_levels(path, blacks: list, whites: list) -> None:
-    """Black levels finite and >= 0, white levels above them (+inf: a float image's)."""
+def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = ()) -> None:
+    """Black levels finite and >= 0, white levels above them (+inf: a float image's) and, for
+    integer samples, within their range (a level they cannot reach makes every clipped pixel
+    pass as light; the next stage refuses such a file). ``given``: the options the user gave,
+    named in the message (the file's own levels otherwise)."""
+    top = float(np.iinfo(dtype).max) if np.dtype(dtype).kind in "ui" else np.inf
+    source = f" ({', '.join(given)})" if given else " (the file's)"
     for black, white in zip(blacks, whites, strict=True):
         if white != white:  # NaN
             raise InputError(f"{path}: no white level for these floating-point samples; give it "
@@ -151,9 +158,15 @@ def _check_levels(path, blacks: list, whites: list) -> None:
         if not (np.all(np.isfinite(low)) and np.all(low >= 0)):
             raise InputError(f"{path}: black level {black} must be finite and >= 0 DN "
                              "(--black)")
+        if white > top or low.max() >= top:
+            level = "white" if white > top else "black"
+            value = white if white > top else low.max()
+            raise InputError(f"{path}: {level} level {value:g}{source} is beyond what its "
+                             f"{np.dtype(dtype)} samples can reach ({top:g}); give a level "
+                             "within the samples' range")
         if not white > low.max():  # also refuses NaN
             raise InputError(f"{path}: white level {white:g} must be above the black level "
-                             f"{low.max():g} DN (--white)")
+                             f"{low.max():g} DN{source}")
 
 
 def _check_cfa(cfa: str) -> str:

@@ -403,11 +403,17 @@ def plenocli_meta(path, description: str | None) -> dict:
     return {k: v for k, v in parsed.items() if k != FORMAT_KEY}
 
 
-def derived_meta(source: dict, record: dict, **changes) -> dict:
-    """Metadata for an output made from ``source``: history grows, ``changes`` override keys."""
+def history_of(source: dict) -> list:
+    """The history of an output made from ``source``: its history and its own provenance."""
     history = list(source.get("history", []))
     if source.get("provenance"):
         history.append(source["provenance"])
+    return history
+
+
+def derived_meta(source: dict, record: dict, **changes) -> dict:
+    """Metadata for an output made from ``source``: history grows, ``changes`` override keys."""
+    history = history_of(source)
     meta = {k: v for k, v in source.items() if k not in ("provenance", "history", SEAL_KEY)}
     meta.update(changes)
     meta["provenance"] = record

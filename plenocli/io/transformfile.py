@@ -7,6 +7,7 @@ rig, matrices, overlaps: :func:`plenocli.stitch.registration.check_transform`)."
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 from plenocli.errors import InputError
@@ -31,6 +32,7 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
     if not isinstance(transform, dict):
         raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "
                          "--transform-out")
+    _check_matrices(file, transform.get("view_to_reference"))
     saved = transform.get("views")
     if saved is not None:
         if not isinstance(saved, list) or not all(isinstance(n, str) for n in saved) \
@@ -42,6 +44,23 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
                              f"these are {','.join(names)}; pass --views {','.join(saved)} or "
                              "register them again (without --transform-in)")
     return transform
+
+
+def _check_matrices(file: Path, matrices) -> None:
+    """``view_to_reference``: a list of 3 x 3 matrices of finite numbers, one per view; the
+    one that is not is named."""
+    if not isinstance(matrices, list):
+        raise InputError(f"{file}: the transform's view_to_reference is {type(matrices).__name__}"
+                         ", not a list of 3 x 3 matrices; save one with --transform-out")
+    for k, matrix in enumerate(matrices):
+        rows = matrix if isinstance(matrix, list) and len(matrix) == 3 else None
+        if rows is None or not all(
+                isinstance(row, list) and len(row) == 3
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                        and math.isfinite(v) for v in row) for row in rows):
+            raise InputError(f"{file}: view {k}'s matrix in view_to_reference is not 3 x 3 "
+                             "finite numbers; the file was edited or damaged: save one with "
+                             "--transform-out")
 
 
 def write_transform(path: str | Path, transform: dict, names: list[str], record: dict, *,

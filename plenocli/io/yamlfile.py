@@ -148,15 +148,40 @@ def _unique_pairs(pairs: list) -> dict:
     return doc
 
 
+MAX_DEPTH = 100  # nesting of a document: plenocli's own files nest a few levels
+
+
 def load_json(text: str) -> Any:
     """One JSON document; :class:`DocumentError` says what is wrong with it."""
     try:
-        return json.loads(text, object_pairs_hook=_unique_pairs)
+        doc = json.loads(text, object_pairs_hook=_unique_pairs)
     except JsonError:
         raise
     except json.JSONDecodeError as err:
         raise JsonError(f"line {err.lineno}, column {err.colno}: {err.msg}", text,
                         err.pos) from err
+    except RecursionError as err:
+        raise _too_deep() from err
+    if _deeper_than(doc, MAX_DEPTH):
+        raise _too_deep()
+    return doc
+
+
+def _too_deep() -> JsonError:
+    return JsonError(f"lists and objects nested more than {MAX_DEPTH} deep; not a document "
+                     "plenocli writes (damaged?)")
+
+
+def _deeper_than(doc: Any, limit: int) -> bool:
+    """Whether lists/dicts in ``doc`` nest more than ``limit`` deep (walked without recursion,
+    so every later reader can recurse safely)."""
+    level = [doc]
+    for _ in range(limit + 1):
+        level = [item for node in level if isinstance(node, (list, dict))
+                 for item in (node.values() if isinstance(node, dict) else node)]
+        if not level:
+            return False
+    return True
 
 
 def _text(path: str | os.PathLike) -> str:

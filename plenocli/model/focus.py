@@ -15,6 +15,9 @@ VIEWS = {
     "q00": (-1, -1), "q01": (1, -1), "q10": (-1, 1), "q11": (1, 1),
 }
 MAX_G_VALUES = 1000  # a focal sweep longer than this is a typo, not a plan
+# s is the output size relative to the sensor image: above 1 an output pixel gets fewer than one
+# sensor sample on average (holes). refocus, depth's lenslet map and the Raytrix sweep alike.
+MAX_S = 1.0
 
 
 def parse_g(text: str | float) -> list[float]:

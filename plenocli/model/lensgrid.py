@@ -33,6 +33,7 @@ MAX_COORD_PX = 1e6
 # (calibration.fit.smooth_field; the grid reader holds a file's rows to the same rule).
 FIELD_DEGREE = 2
 FIELD_MAX = 0.05
+LENS_COLUMNS = ["i", "j", "x", "y"]  # a grid file's lens rows
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ class LensGrid:
         if self.centres_xy is not None:
             out["lenses"] = {
                 "count": int(len(self.centres_xy)),
-                "columns": ["i", "j", "x", "y"],
+                "columns": list(LENS_COLUMNS),
             }
             if lens_rows:
                 out["lenses"]["rows"] = [
@@ -183,6 +184,9 @@ class LensGrid:
             indices, centres = table[:, :2].astype(np.int64), table[:, 2:]
             if "count" in lenses and lenses["count"] != len(table):
                 raise ValueError(f"lenses.count {lenses['count']!r} for {len(table)} rows")
+            if lenses.get("columns", LENS_COLUMNS) != LENS_COLUMNS:
+                raise ValueError(f"lenses.columns {lenses['columns']!r}: the rows are read as "
+                                 f"{LENS_COLUMNS}")
         if "angle_deg" in data and not abs(float(data["angle_deg"])
                                            - np.degrees(float(data["angle_rad"]))) <= 1e-6:
             raise ValueError(f"angle_deg {data['angle_deg']!r} disagrees with angle_rad "

@@ -21,9 +21,6 @@ from plenocli.optics.prism import prism_deviation_deg
 # weak element focusing on its own image plane stays far below; beyond it the y-nu slope is the
 # rounding left of surface powers that cancel (afocal), and every figure would be noise.
 MAX_EFL_PER_SIZE = 1e4
-# Paraxial marginal heights may exceed a clear aperture by this rounding before it clips the
-# stop's beam.
-STOP_SLACK = 1e-9
 # An f-number below 1/2 is a numerical aperture above 1: no lens forms it in air.
 MIN_F_NUMBER = 0.5
 
@@ -48,45 +45,36 @@ def _ynu(lens: Lens, y: float, u: float, *, first: int = 0, wavelength_um: float
     return y, u
 
 
-def _heights(lens: Lens, y: float, u: float, wavelength_um: float) -> list[float]:
-    """Paraxial height at every surface of a ray entering surface 0 with (y, u)."""
-    n = lens.indices(wavelength_um)
-    heights = []
-    for k, s in enumerate(lens.surfaces):
-        heights.append(y)
-        u = (n[k] * u - y * (n[k + 1] - n[k]) * s.curvature) / n[k + 1]
-        y = y + s.thickness_mm * u
-    return heights
-
-
 def _to_stop(lens: Lens, y: float, u: float, wavelength_um: float) -> float:
     """Paraxial height at the stop of a ray entering surface 0 with (y, u)."""
-    return _heights(lens, y, u, wavelength_um)[lens.stop_index]
-
-
-def check_stop_limits(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> None:
-    """Refuse a stop that is not the limiting aperture: the axial beam that fills the stop
-    (object at infinity) must pass every surface's clear aperture, or the pupils, f-number and
-    cross-talk computed from the stop describe a beam the lens cannot pass. (The paraxial
-    figures themselves need only the stop's place: a vignetted lens still has them.)"""
-    heights = _heights(lens, 1.0, 0.0, wavelength_um)
     stop = lens.stop_index
-    stop_d = lens.surfaces[stop].diameter_mm
-    if heights[stop] == 0 or not math.isfinite(stop_d):
-        raise ValueError(f"surface {stop + 1} (the stop) must have a finite diameter and lie "
-                         "where the axial beam has a width (not at a focus)")
-    scale = stop_d / abs(heights[stop])  # beam diameter per unit height
-    beams = [(k, s.diameter_mm, abs(h) * scale) for k, (s, h) in
-             enumerate(zip(lens.surfaces, heights, strict=True)) if k != stop and h != 0]
-    clipped = [(k, d, beam) for k, d, beam in beams if beam > d * (1 + STOP_SLACK)]
-    if clipped:
-        k, d, beam = clipped[0]
-        widest = min(stop_d * d / beam for _, d, beam in beams)
-        raise ValueError(
-            f"surface {k + 1} (diameter {d:g} mm) is narrower than the axial beam the stop "
-            f"(surface {stop + 1}, diameter {stop_d:g} mm) lets through ({beam:.4g} mm there): "
-            f"the stop must be the limiting aperture; give it a diameter of at most "
-            f"{widest:.4g} mm")
+    if stop == 0:
+        return y
+    n = lens.indices(wavelength_um)
+    for k in range(stop):
+        s = lens.surfaces[k]
+        u = (n[k] * u - y * (n[k + 1] - n[k]) * s.curvature) / n[k + 1]
+        y = y + s.thickness_mm * u
+    return y
+
+
+def _check_stop_limits(lens: Lens, pupil_radius_mm: float, wavelength_um: float) -> None:
+    """ValueError unless the stop limits the axial beam: the paraxial marginal ray through the
+    stop's edge must pass inside every surface's clear aperture (else that surface, not the
+    stop, sets the pupil, and f-number and pupils computed from the stop are wrong)."""
+    n = lens.indices(wavelength_um)
+    y, u = pupil_radius_mm, 0.0
+    stop = lens.stop_index
+    for k, s in enumerate(lens.surfaces):
+        half = 0.5 * s.diameter_mm
+        if k != stop and abs(y) > half * (1 + 1e-9):
+            raise ValueError(
+                f"surface {k + 1} (clear aperture {s.diameter_mm:g} mm) is narrower than the "
+                f"axial beam the stop (surface {stop + 1}, {lens.surfaces[stop].diameter_mm:g} "
+                f"mm) lets through ({2 * abs(y):.4g} mm there): the stop must limit the pupil; "
+                "make it smaller or the surface wider")
+        u = (n[k] * u - y * (n[k + 1] - n[k]) * s.curvature) / n[k + 1]
+        y = y + s.thickness_mm * u
 
 
 def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
@@ -114,6 +102,7 @@ def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
     y0 = -b / a  # chief ray height at the first vertex for u0 = 1
     enp_z = -y0
     enp_d = 2.0 * stop_radius / abs(a)
+    _check_stop_limits(lens, 0.5 * enp_d, wavelength_um)
     # Exit pupil: image of the stop by the surfaces from the stop on (Lagrange invariant for the
     # pupil size).
     y_c, u_c = _ynu(lens, 0.0, 1.0, first=stop, wavelength_um=wavelength_um)
@@ -284,7 +273,6 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
     """
     if not (math.isfinite(sensor_mm) and sensor_mm > 0):
         raise ValueError(f"sensor_mm {sensor_mm} must be a finite number > 0")
-    check_stop_limits(lens, wavelength_um=wavelength_um)
     par = paraxial(lens, wavelength_um=wavelength_um)
     half = half_field_deg(lens, sensor_mm / 2, wavelength_um=wavelength_um)
     half_diag = half_field_deg(lens, sensor_mm / math.sqrt(2), wavelength_um=wavelength_um)

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from plenocli.optics.analysis import check_stop_limits, image_distance, paraxial, pupil_grid
+from plenocli.optics.analysis import image_distance, paraxial, pupil_grid
 from plenocli.optics.fasttrace import trace_fast
 from plenocli.optics.glass import D_LINE_UM
 from plenocli.optics.lens import Lens
@@ -62,10 +62,14 @@ def sai_flux(lens: Lens, *, sensor_mm: float = 3.6, pixel_um: float = 1.2, n: in
             raise ValueError(f"{name} {value} must be > 0")
     if n < 1 or fields_across < 1 or pupil_rays_across < 2:
         raise ValueError("n, fields_across must be >= 1 and pupil_rays_across >= 2")
-    check_stop_limits(lens, wavelength_um=wavelength_um)
-    shift = (image_distance(lens, object_distance_mm=object_distance_mm,
-                            wavelength_um=wavelength_um)
-             - image_distance(lens, wavelength_um=wavelength_um))
+    near = image_distance(lens, object_distance_mm=object_distance_mm,
+                          wavelength_um=wavelength_um)
+    shift = near - image_distance(lens, wavelength_um=wavelength_um)
+    if not lens.image_z_mm - lens.vertex_z_mm[-1] + shift >= 0:
+        raise ValueError(f"object_distance_mm {object_distance_mm:g}: the lens forms no real "
+                         "image of a board this near (it would lie "
+                         f"{-(lens.image_z_mm - lens.vertex_z_mm[-1] + shift):.3g} mm before "
+                         "the last vertex); put the board farther than the focal length")
     focused = lens.with_image_distance(lens.image_z_mm - lens.vertex_z_mm[-1] + shift)
     par = paraxial(focused, wavelength_um=wavelength_um)
     dist_d = par["exit_pupil"]["distance_to_image_mm"]

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from plenocli import __version__
+from plenocli.errors import InputError
 from plenocli.io.atomic import short_name, write_text
 from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe
@@ -35,6 +36,20 @@ def record_path(output: str | os.PathLike) -> Path:
     """Where the record of ``output`` lives (``.`` or ``dir/..`` named by the folder's name)."""
     output = Path(os.path.abspath(output))
     return output.parent / f".{short_name(output.name)}{SUFFIX}"
+
+
+def check_record_paths(outputs: list[Path], inputs: list[Path]) -> None:
+    """Before any work: the record each output gets beside it must be writable as a file, and
+    not another output or an input (the run would succeed, then fail to land)."""
+    others = [Path(os.path.abspath(p)) for p in [*outputs, *inputs]]
+    for output in outputs:
+        record = record_path(output)
+        if record.is_dir():
+            raise InputError(f"{record}, where plenocli records how {output} was made, is a "
+                             "folder; remove it or choose another output name")
+        if record in others:
+            raise InputError(f"{record} is the record plenocli writes beside {output}; choose "
+                             "another name for it")
 
 
 def file_state(path: str | os.PathLike) -> list[int] | None:

@@ -106,6 +106,8 @@ class Stage:
         check_kinds(self.name, self.by_role(params, self.inputs))
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))
+        records.check_record_paths(self.paths(params, self.outputs),
+                                   self.paths(params, self.inputs))
         inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
         states = records.input_states(inputs)
 

@@ -35,7 +35,14 @@ class Validator:
 
 
 class Text(Validator):
-    """Any text (the stage parses it)."""
+    """Any text but blank (the stage parses it): an empty value is not the default, as
+    ``--smooth=`` is not (leave the option out for that)."""
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value)
+        if not text.strip():
+            raise ValueError(f"{text!r} is empty; give a value or leave the option out")
+        return text
 
 
 class Flag(Validator):
@@ -50,15 +57,21 @@ class Flag(Validator):
 
 
 class Int(Validator):
-    """A whole number, optionally bounded (both ends closed)."""
+    """A whole number, optionally bounded (both ends closed) and of one ``parity`` ("odd" or
+    "even": a median window has a centre, a tile holds whole CFA cells)."""
 
-    def __init__(self, min: int | None = None, max: int | None = None):
-        self.min, self.max = min, max
+    def __init__(self, min: int | None = None, max: int | None = None, *,
+                 parity: str | None = None):
+        if parity not in (None, "odd", "even"):
+            raise ValueError(f"parity must be 'odd' or 'even', got {parity!r}")
+        self.min, self.max, self.parity = min, max, parity
         self.name = "integer" if min is None and max is None else "integer range"
+        self.bounds = None
         if min is not None and max is not None:
-            self.range_help = f"{min}<=x<={max}"
+            self.bounds = f"{min}<=x<={max}"
         elif min is not None or max is not None:
-            self.range_help = f"x>={min}" if min is not None else f"x<={max}"
+            self.bounds = f"x>={min}" if min is not None else f"x<={max}"
+        self.range_help = ", ".join(p for p in (self.bounds, parity) if p) or None
 
     def convert(self, value: Any) -> int:
         if isinstance(value, int) and not isinstance(value, bool):
@@ -70,7 +83,9 @@ class Int(Validator):
                 raise ValueError(f"{shell_text(value)!r} is not a valid integer.") from None
         if (self.min is not None and number < self.min) or (
                 self.max is not None and number > self.max):
-            raise ValueError(f"{number} is not in the range {self.range_help}.")
+            raise ValueError(f"{number} is not in the range {self.bounds}.")
+        if self.parity and number % 2 != (self.parity == "odd"):
+            raise ValueError(f"{number} is not {self.parity}.")
         return number
 
 

@@ -201,10 +201,10 @@ def test_an_implausible_camera_file_is_refused(lenslet, tmp_path, text, field):
 
 def test_refocus_refuses_more_output_pixels_than_samples(lenslet, tmp_path):
     out = tmp_path / "r.tif"
-    for s in ("8", "50"):
-        result = invoke("refocus", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
+    for stage, s in (("refocus", "8"), ("refocus", "50"), ("depth", "10"), ("depth", "1e308")):
+        result = invoke(stage, lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",
                         "--s", s, "-o", out)
-        assert result.exit_code == 1 and "s <= 1" in result.output and not out.exists()
+        assert result.exit_code == 2 and "x<=1" in result.output and not out.exists()
 
 
 @pytest.mark.parametrize("args, option", [

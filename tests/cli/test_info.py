@@ -53,6 +53,27 @@ def test_plenocli_tiff_shows_provenance_and_history(tmp_path):
     assert "plenocli image from stage bias" in text and "history 1      decode" in text
 
 
+@pytest.mark.parametrize("suffix,fmt", [(".jpg", "JPEG"), (".tif", "TIFF"), (".png", "PNG")])
+def test_a_photograph_shows_develop_and_every_stage_before(suffix, fmt, tmp_path):
+    """develop's record and history, the stage that made its input included (bias here)."""
+    raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
+    write_dng(tmp_path / "c.dng", raw, **dng_options(truth))
+    runner = CliRunner()
+    for args in (["decode", tmp_path / "c.dng", "-o", tmp_path / "f.tif"],
+                 ["bias", tmp_path / "f.tif", "-o", tmp_path / "b.tif"],
+                 ["develop", tmp_path / "b.tif", "--view", "S", "--wb", "1,1,1", "--matrix",
+                  "none", "-o", tmp_path / f"p{suffix}"]):
+        assert runner.invoke(cli, [str(a) for a in args]).exit_code == 0
+    result = _info(tmp_path / f"p{suffix}", "--json")
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.stdout)
+    assert info["kind"] == "photo" and info["format"] == fmt
+    assert (info["rows"], info["cols"]) == (32, 48)
+    assert info["provenance"]["stage"] == "develop"
+    assert [h["stage"] for h in info["history"]] == ["decode", "bias"]
+    assert f"photograph ({fmt})" in _info(tmp_path / f"p{suffix}").stdout
+
+
 def test_lens_grid_yaml(tmp_path):
     from plenocli.io.gridfile import write_grid
     from plenocli.model.lensgrid import LensGrid

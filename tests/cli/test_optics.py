@@ -1,6 +1,7 @@
 """plenocli optics end to end."""
 
 import json
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -79,12 +80,27 @@ def test_impossible_prescriptions_are_one_line(tmp_path, row, words):
     assert not out.exists()
 
 
-def test_a_stop_that_does_not_limit_the_pupil_is_one_line(tmp_path):
+@pytest.mark.parametrize("stop_mm", [10.0, 1e6])
+def test_a_stop_wider_than_the_lens_is_refused(stop_mm, tmp_path):
+    """The first element (3.54 mm across, right behind the stop) would clip a wider beam: the
+    f-number and pupils computed from such a stop are not the lens's."""
     lens = tmp_path / "wide_stop.yaml"
-    lens.write_text(open(TABLE2).read().replace("{stop: true, diameter: 3.09",
-                                               "{stop: true, diameter: 10.0"))
+    lens.write_text(Path(TABLE2).read_text().replace("{stop: true, diameter: 3.09",
+                                                     f"{{stop: true, diameter: {stop_mm}"))
     out = tmp_path / "out.json"
     res = CliRunner().invoke(cli, ["optics", str(lens), "--crosstalk", "--json", str(out)])
-    assert res.exit_code == 1, res.output
-    assert "the stop must be the limiting aperture" in res.output
-    assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+    assert res.exit_code == 1 and len(res.output.strip().splitlines()) == 1, res.output
+    assert "surface 2 (clear aperture 3.53718 mm)" in res.output
+    assert "the stop must limit the pupil" in res.output and not out.exists()
+
+
+def test_object_distances_the_trace_cannot_vouch_for(tmp_path):
+    """Nearer than the focal length there is no real image to focus on (the message names the
+    distance, not the lens); beyond 1e9 mm the board is at infinity and the rays lose their
+    precision (1e15 mm moved r by half a point): a usage error."""
+    near = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm", "7"])
+    assert near.exit_code == 1 and "object_distance_mm 7: the lens forms no real image" in \
+        near.output and len(near.output.strip().splitlines()) == 1
+    far = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm",
+                                   "1e15"])
+    assert far.exit_code == 2 and "'--object-distance-mm'" in far.output

@@ -78,6 +78,7 @@ def one_line_error(result, *words):
     (["--s", "0"], ["'--s'", "x>0"]), (["--s", "-0.2"], ["'--s'"]),
     (["--view", "up"], ["'--view'", "'up'", "left"]), (["--kernel", "cubic"], ["'--kernel'"]),
     (["--g", "6:2:1"], ["'--g'"]), (["--mask-width", "-2"], ["'--mask-width'", "x>=0"]),
+    (["--s", "3"], ["'--s'", "x<=1"]), (["--s", "1e308"], ["'--s'", "x<=1"]),
 ])
 def test_bad_options_are_usage_errors(scene, tmp_path, args, words):
     folder, _ = scene
@@ -88,6 +89,19 @@ def test_bad_options_are_usage_errors(scene, tmp_path, args, words):
     last = result.output.strip().splitlines()[-1]
     assert last.startswith("Error: Invalid value") and all(w in last for w in words), last
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_a_radius_beyond_the_micro_images_keeps_every_pixel(scene, tmp_path):
+    """--radius 1e308 is finite and means "no limit": the image without --radius, no overflow."""
+    folder, _ = scene
+    images = []
+    for extra in ([], ["--radius", "1e308"]):
+        out = tmp_path / f"r{len(extra)}.tif"
+        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                        "-o", out, *extra)
+        assert result.exit_code == 0, result.output
+        images.append(tiffio.read_image(out)[0])
+    np.testing.assert_array_equal(images[0], images[1])
 
 
 def test_grid_and_frame_sizes_that_disagree(scene, tmp_path):

@@ -203,6 +203,8 @@ def _lies(data):
     yield {**t, "views": [1, 2]}, "distinct names"
     yield {**t, "layout": "2x2"}, "layout"
     yield {**t, "distortion_k1": 0.05}, "--distortion"
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], m[:2].tolist()]}, \
+        "view 1's matrix in view_to_reference is not 3 x 3"
 
 
 def test_a_transform_that_lies_is_refused_in_one_line(tmp_path):

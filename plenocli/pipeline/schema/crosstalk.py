@@ -1,5 +1,6 @@
 """Parameters of ``plenocli crosstalk``."""
 
+from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
 
@@ -11,13 +12,14 @@ PARAMS = (
     Param("intended", Text(), "Name of the view whose pupil part was open (one, or one per "
           "input, comma separated); default: the brightest view. With --mask-widths: "
           "left|right."),
-    Param("tile", Int(min=2), "Tile side (px, even) of the cross-talk map.", default=64),
+    Param("tile", Int(min=2, parity="even"), "Tile side (px, even) of the cross-talk map.",
+          default=64),
     PREVIEW,
     Param("mask_widths", Text(), "Raytrix sweep: mask widths m (px), e.g. 0,1,2,3; INPUT is then "
           "a frames TIFF and --grid is needed (uses plenocli refocus)."),
     Param("grid", InputFile(), "Lens grid YAML (only with --mask-widths).", role="input"),
-    Param("s", FiniteFloat(min=0, min_open=True), "Refocus scale s (only with --mask-widths).",
-          default=0.2),
+    Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
+          "Refocus scale s (only with --mask-widths).", default=0.2),
     Param("g", FiniteFloat(min=0, min_open=True), "Refocus g (only with --mask-widths).",
           default=4.0),
     Param("mixing_out", OutputFile(*TIFF), "Also write the mixing-matrix field M (TIFF) for "

@@ -1,5 +1,6 @@
 """Parameters of ``plenocli depth``."""
 
+from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
 
@@ -22,8 +23,8 @@ PARAMS = (
     Param("grid", InputFile(), "Lens grid (YAML or RayCalibData XML): INPUT is lenslet frames. "
           "Without it INPUT holds dual-pixel views A, B or quad-pixel SAIs S00..S11.",
           role="input"),
-    Param("s", FiniteFloat(min=0, min_open=True), "Output grid of `plenocli refocus --s S` "
-          "(lenslet).", default=0.2),
+    Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
+          "Output grid of `plenocli refocus --s S` (lenslet).", default=0.2),
     Param("g", GRange(), "Search range of g (lenslet); Galilean cameras: negative, e.g. -8:-2.",
           default="2:8"),
     Param("min_confidence", FiniteFloat(0, 1),

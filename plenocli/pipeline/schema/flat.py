@@ -1,6 +1,6 @@
 """Parameters of ``plenocli flat``."""
 
-from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import TIFF, Choice, FiniteFloat, InputFile, Int, OutputFile
 
 PARAMS = (
@@ -10,8 +10,8 @@ PARAMS = (
           role="input"),
     Param("gain", InputFile(), "A gain map saved earlier with --save-gain (instead of --white).",
           role="input"),
-    Param("median", Int(min=1), "Median filter size (pixels of one colour plane, odd).",
-          default=5),
+    Param("median", Int(min=1, parity="odd"),
+          "Median filter size (pixels of one colour plane, odd).", default=5),
     Param("reference", Choice(["max", "percentile"]),
           "Normalise by the maximum (paper) or a percentile.", default="max"),
     Param("percentile", FiniteFloat(0, 100), "Percentile for --reference percentile.",
@@ -29,3 +29,14 @@ def shared_inputs(params) -> tuple[tuple[str, str], ...]:
     output then shows how flat the white came out): without it, one file as the frames and the
     white is a mistake."""
     return (("input", "white"),) if params.get("save_gain") else ()
+
+
+def check(params: dict) -> None:
+    """Options of making a gain do nothing to a saved one (--gain: read, not made), and
+    --percentile is only the percentile reference's."""
+    if params.get("gain"):
+        refuse_unused(PARAMS, params, ["median", "reference", "percentile", "floor"],
+                      "makes a gain from --white; a saved --gain keeps the options it was "
+                      "made with")
+    elif params.get("reference", "max") == "max":
+        refuse_unused(PARAMS, params, ["percentile"], "applies to --reference percentile only")

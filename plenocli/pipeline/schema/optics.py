@@ -14,7 +14,9 @@ PARAMS = (
           "Cross mask width as a fraction of the stop diameter.", default=1 / 15),
     Param("pixel_um", FiniteFloat(min=0.1, max=100), "Pixel size (um) for --crosstalk.",
           default=1.2),
-    Param("object_distance_mm", FiniteFloat(min=0, min_open=True),
+    # beyond 1000 km the board is at infinity to a nanometre of focus, and the rays from it
+    # lose their precision (1e15 mm changed r by half a point)
+    Param("object_distance_mm", FiniteFloat(min=0, max=1e9, min_open=True),
           "White board distance (mm) for --crosstalk.", default=2000.0),
     Param("prism_n", FiniteFloat(min=1, max=4, min_open=True),
           "Prism index for the deviation figures.", default=1.74),

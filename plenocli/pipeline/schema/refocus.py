@@ -1,6 +1,6 @@
 """Parameters of ``plenocli refocus``."""
 
-from plenocli.model.focus import KERNELS, VIEWS, parse_g
+from plenocli.model.focus import KERNELS, MAX_S, VIEWS, parse_g
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
 
@@ -21,7 +21,7 @@ PARAMS = (
     OUTPUT,
     Param("grid", InputFile(), "Lens grid (plenocli YAML from `plenocli calibrate`).",
           role="input", required=True),
-    Param("s", FiniteFloat(min=0, min_open=True),
+    Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
           "Size of the refocused image relative to the sensor image.", default=0.2),
     Param("g", GValues(), "Refocus parameter; a list (2,3,4) or range (2:6:0.5, stop included) "
           "makes a focal sweep: one page per g and a sharpness score per g.", default="4"),
@@ -44,7 +44,11 @@ PARAMS = (
 
 
 def check(params: dict) -> None:
-    """With a depth map every lens takes its g from the map: a --g would be ignored."""
+    """With a depth map every lens takes its g from the map: a --g would be ignored; the
+    central band a --mask-width leaves out is a half or quarter view's."""
     if params.get("depth"):
         refuse_unused(PARAMS, params, ["g"], "is not used with --depth (each lens takes its g "
                       "from the map)")
+    if params.get("view", "full") == "full":
+        refuse_unused(PARAMS, params, ["mask_width"], "applies to half and quarter views only "
+                      "(--view left, right, top, bottom, q00 ...)")

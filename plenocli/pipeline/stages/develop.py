@@ -68,7 +68,7 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
                   camera_to_srgb=None if to_srgb is None else to_srgb.tolist())
     record = stage_record("develop", params, {"input": input, "wb_from": wb_from,
                                               "recover_highlights": recover_highlights})
-    description = json_safe({"plenocli": record, "history": meta.get("history", [])})
+    description = json_safe({"plenocli": record, "history": tiffio.history_of(meta)})
     try:
         body = export.image_bytes(encoded, fmt, space=space, exif=meta.get("exif"),
                                   description=description, quality=quality)
