@@ -39,7 +39,7 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_xml(p)}
     if suffix == ".json":
         return {**head, **_describe_json(p)}
-    if suffix in PHOTO_SUFFIXES:
+    if suffix in PHOTO_SUFFIXES and _photo_record(p):
         return {**head, **_describe_photo(p)}
     kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
@@ -87,12 +87,12 @@ def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
 def _photo_record(p: Path) -> dict | None:
     """The provenance ``develop`` writes in a photograph's ImageDescription ({"plenocli":
     record, "history": [...]}), or None."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     try:
         with Image.open(p) as image:
             text = image.getexif().get(270) or image.info.get("description")
-    except (OSError, UnidentifiedImageError, ValueError):
+    except Exception:  # any failure of this probe: the image readers below say what it is
         return None
     try:
         doc = load_json(text) if isinstance(text, str) else None
