@@ -30,6 +30,29 @@ class Terminated(KeyboardInterrupt):
     (``cli/options``) and by a batch worker's."""
 
 
+_terminated = [False]  # a SIGTERM arrived in this command (its exception may have been lost)
+
+
+def raise_terminated() -> None:
+    """A SIGTERM handler's body: note the request, then raise :class:`Terminated`. Python
+    only prints and drops an exception raised while it runs a ``__del__`` or a weakref
+    callback; the note survives, and :func:`check_terminated` acts on it before any output
+    lands."""
+    _terminated[0] = True
+    raise Terminated()
+
+
+def check_terminated() -> None:
+    """Raise :class:`Terminated` if a SIGTERM arrived whose exception was lost."""
+    if _terminated[0]:
+        raise Terminated()
+
+
+def clear_terminated() -> None:
+    """Start of a command (or a batch worker's capture): no SIGTERM yet."""
+    _terminated[0] = False
+
+
 _OS_HINTS = {
     errno.EACCES: "permission denied; choose a folder you can write to",
     errno.EPERM: "operation not permitted; choose a folder you can write to",

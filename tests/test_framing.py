@@ -53,6 +53,18 @@ def test_grid_outside_the_frames_is_refused():
         grid_framing(META, SHAPE, grid, frames_path="f.tif", grid_path="g.yaml")
 
 
+@pytest.mark.parametrize("origin", [(100, 200), (100, 205), (103, 200)])
+def test_grid_over_masked_pixels_is_refused(origin):
+    """Inside the page but over masked rows or columns, which hold no micro-images: the grid
+    was calibrated on another image, not on these frames' white."""
+    grid = LensGrid(10.0, 0.0, (5.0, 5.0), image_shape=(40, 60), sensor_origin=origin)
+    with pytest.raises(InputError, match=r"active area of f.tif is 60 x 40 at \(103, 205\)"):
+        grid_framing(META, SHAPE, grid, frames_path="f.tif", grid_path="g.yaml")
+    on_area = grid_framing(META, SHAPE, LensGrid(10.0, 0.0, (5.0, 5.0), image_shape=(40, 60),
+                                                 sensor_origin=(103, 205)))
+    assert (on_area.top, on_area.left, on_area.bottom, on_area.right) == (3, 5, 43, 65)
+
+
 def test_xml_grid_is_placed_on_the_active_area(tmp_path):
     on_area = LensGrid(9.5, 0.0, (31.0, 19.0), image_shape=(40, 60))
     raytrix.write_calib(tmp_path / "calib.xml", raytrix.calib_from_grid(on_area))

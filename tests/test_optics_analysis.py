@@ -94,6 +94,33 @@ def test_field_of_view_of_a_distortion_free_limit():
     assert spot_rms_um(lens, 0.0, rays_across=16) < 1.0
 
 
+@pytest.mark.parametrize("stop_mm", [3.54, 3.6])
+def test_a_stop_just_wider_than_the_first_element_is_refused(stop_mm):
+    """Table 2's stop lies at the first element's vertex, so the widest stop that still limits
+    the axial beam is that element's clear aperture, 3.53718 mm."""
+    import yaml
+
+    doc = yaml.safe_load(TABLE2.read_text())
+    doc["surfaces"][0]["diameter"] = stop_mm
+    with pytest.raises(ValueError, match=r"surface 2 \(clear aperture 3.53718 mm\).*the stop "
+                                         "must limit the pupil"):
+        paraxial(lens_from_dict(doc))
+    doc["surfaces"][0]["diameter"] = 3.537
+    assert paraxial(lens_from_dict(doc))["f_number"] == pytest.approx(6.1654 / 3.537, rel=1e-3)
+
+
+def test_an_f_number_below_one_half_is_refused():
+    # A thick biconvex singlet (n = 1.9, R = 10 mm, 2 mm thick) at full aperture (19 mm):
+    # lensmaker's f = 5.83 mm, f/0.31, a numerical aperture above 1.
+    n, r, t, d = 1.9, 10.0, 2.0, 19.0
+    f = 1 / ((n - 1) * (2 / r - (n - 1) * t / (n * r * r)))
+    assert f / d < 0.5
+    lens = Lens((Surface(math.inf, 0.0, "air", d, stop=True), Surface(r, t, n, d),
+                 Surface(-r, 5.0, "air", d)))
+    with pytest.raises(ValueError, match=f"f-number {f / d:.3g} is below 0.5"):
+        paraxial(lens)
+
+
 @pytest.mark.parametrize("n, apex", [(1.74, 16.7), (1.5168, 5.0), (1.5, 1.0)])
 def test_prism_deviation(n, apex):
     dev = prism_deviation_deg(n, apex)

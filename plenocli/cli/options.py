@@ -10,7 +10,15 @@ import warnings
 
 import click
 
-from plenocli.errors import OptionError, PlenocliError, Terminated, os_error_message
+from plenocli.errors import (
+    OptionError,
+    PlenocliError,
+    Terminated,
+    check_terminated,
+    clear_terminated,
+    os_error_message,
+    raise_terminated,
+)
 from plenocli.pipeline.params import Param
 from plenocli.pipeline.validators import Validator
 from plenocli.progress import configure, working
@@ -135,17 +143,28 @@ def _stage_edge(name: str, params: dict):
 
 @contextlib.contextmanager
 def _terminate_on_sigterm():
-    """Turn SIGTERM into an exception, so temporaries are removed as on Ctrl-C."""
+    """Turn SIGTERM into an exception, so temporaries are removed as on Ctrl-C. When the
+    exception is lost (raised inside a ``__del__`` or weakref callback), no traceback is
+    printed and the stage still ends as terminated before any output lands
+    (:func:`plenocli.errors.check_terminated`)."""
 
     def handler(signum, frame):
-        raise Terminated()
+        raise_terminated()
 
+    def unraisable(info):
+        if not isinstance(info.exc_value, Terminated):
+            previous_hook(info)
+
+    clear_terminated()
     try:
         previous = signal.signal(signal.SIGTERM, handler)
     except ValueError:  # not the main thread (e.g. a Dask worker): leave signals alone
         yield
         return
+    previous_hook, sys.unraisablehook = sys.unraisablehook, unraisable
     try:
         yield
+        check_terminated()
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = previous_hook

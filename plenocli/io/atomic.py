@@ -23,7 +23,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, check_terminated
 
 
 @dataclass
@@ -75,6 +75,7 @@ def outputs_together(
         yield
         if before_landing is not None:
             before_landing(list(pending.files))
+        check_terminated()  # a SIGTERM whose exception was lost still stops the landing
     except BaseException:
         _discard(pending.files)
         _remove_empty(pending.folders)
@@ -123,6 +124,7 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         yield tmp
         os.chmod(tmp, 0o644)
         if pending is None:
+            check_terminated()
             os.replace(tmp, dest)
         else:
             pending.files.append((tmp, dest))

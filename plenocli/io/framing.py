@@ -95,22 +95,25 @@ def grid_framing(meta: dict, shape: tuple[int, int], grid: LensGrid, *,
     """The part of the frames that ``grid`` describes, with the grid in that part's pixels.
 
     The grid's image (``image_shape`` at ``sensor_origin``: the white image it was calibrated
-    on) must lie inside the frames; a grid without a size covers the frames' active area.
+    on) must lie inside the frames' active area: masked and over-scan pixels hold no
+    micro-images, so a grid that covers them was calibrated on another image. A grid without
+    a size covers the frames' active area.
     """
-    rows, cols = shape
     f_row, f_col = _origin(meta)
     g_row, g_col = (int(v) for v in grid.sensor_origin)
+    a_top, a_left, a_bottom, a_right = _area(meta, shape)
     if grid.image_shape is not None:
         g_rows, g_cols = (int(v) for v in grid.image_shape)
         top, left = g_row - f_row, g_col - f_col
         bottom, right = top + g_rows, left + g_cols
-        if top < 0 or left < 0 or bottom > rows or right > cols:
+        if top < a_top or left < a_left or bottom > a_bottom or right > a_right:
             raise InputError(
                 f"{grid_path} was calibrated on a {g_cols} x {g_rows} image at sensor origin "
-                f"({g_row}, {g_col}) but {frames_path} is {cols} x {rows} at ({f_row}, {f_col}); "
+                f"({g_row}, {g_col}) but the active area of {frames_path} is "
+                f"{a_right - a_left} x {a_bottom - a_top} at ({f_row + a_top}, {f_col + a_left}); "
                 "use a grid calibrated on a white image of the same camera and crop")
     else:
-        top, left, bottom, right = _area(meta, shape)
+        top, left, bottom, right = a_top, a_left, a_bottom, a_right
     if min(bottom - top, right - left) < MIN_LENSES_ACROSS * grid.pitch_px:
         raise InputError(f"{grid_path}: lens pitch {grid.pitch_px:g} px, but the "
                          f"{right - left} x {bottom - top} frame area holds fewer than "

@@ -60,3 +60,26 @@ def half_size_rgb(frame: np.ndarray, cfa: str) -> np.ndarray:
         channel = "RGB".index(colour)
         out[..., channel] += plane * (0.5 if colour == "G" else 1.0)
     return out
+
+
+def phase_gains(image: np.ndarray, *, max_blocks: int = 1 << 20) -> np.ndarray:
+    """(2, 2) share of each pixel phase in the light of its 2 x 2 block: the median, over the
+    brighter half of the blocks, of pixel / block mean. About 1 everywhere for a mono sensor
+    (image detail averages out over many blocks); a Bayer mosaic without its pattern shows
+    its channels' sensitivities (0.7-1.2 for a white). At most ``max_blocks`` blocks are read
+    (whole block rows, evenly spaced)."""
+    rows, cols = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
+    if rows == 0 or cols == 0:
+        return np.ones((2, 2))
+    step = max(1, -(-(rows // 2) * (cols // 2) // max_blocks))
+    blocks = np.asarray(image[:rows, :cols], np.float32).reshape(rows // 2, 2, cols // 2, 2)
+    blocks = blocks[::step]
+    means = blocks.mean(axis=(1, 3))
+    finite = np.isfinite(means)
+    if not finite.any():
+        return np.ones((2, 2))
+    bright = finite & (means >= np.median(means[finite])) & (means > 0)
+    if not bright.any():
+        return np.ones((2, 2))
+    return np.array([[np.median(blocks[:, r, :, c][bright] / means[bright]) for c in range(2)]
+                     for r in range(2)])

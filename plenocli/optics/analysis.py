@@ -21,6 +21,8 @@ from plenocli.optics.prism import prism_deviation_deg
 # weak element focusing on its own image plane stays far below; beyond it the y-nu slope is the
 # rounding left of surface powers that cancel (afocal), and every figure would be noise.
 MAX_EFL_PER_SIZE = 1e4
+# An f-number below 1/2 is a numerical aperture above 1: no lens forms it in air.
+MIN_F_NUMBER = 0.5
 
 
 def lens_size_mm(lens: Lens) -> float:
@@ -107,6 +109,10 @@ def paraxial(lens: Lens, *, wavelength_um: float = D_LINE_UM) -> dict:
     z_last = lens.vertex_z_mm[-1]
     exp_z = z_last - y_c / u_c
     exp_d = 2.0 * stop_radius * n[stop] * 1.0 / abs(n[-1] * u_c)
+    if abs(efl) / enp_d < MIN_F_NUMBER:
+        raise ValueError(f"f-number {abs(efl) / enp_d:.3g} is below {MIN_F_NUMBER} (a numerical "
+                         "aperture above 1), which no lens reaches in air; check the stop "
+                         "diameter and the radii")
     return {
         "efl_mm": efl,
         "bfd_mm": bfd,

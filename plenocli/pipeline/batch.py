@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from multiprocessing import connection
 from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError, PlenocliError, Terminated
+from plenocli.errors import ConfigError, InputError, PlenocliError, raise_terminated
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
@@ -266,7 +266,7 @@ def _watchdog(batch_pid: int, parent_pid: int) -> None:
 
 def _on_sigterm(signum, frame) -> None:
     if _busy:
-        raise Terminated  # atomic_path deletes its .part file on the way up
+        raise_terminated()  # atomic_path deletes its .part file on the way up
     os._exit(128 + signum)
 
 

@@ -129,3 +129,45 @@ def test_a_start_xml_that_is_not_a_lens_array_is_refused(tmp_path):
     res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "--start", str(bad)])
     assert res.exit_code == 1 and not out.exists()
     assert "not a hexagonal" in res.output and res.output.strip().count("\n") == 0
+
+
+def test_a_grid_calibrated_on_a_crop_lies_where_the_crop_lay(tmp_path):
+    """calibrate records the white's full-sensor origin, so refocus frames the grid on the
+    same crop (a grid at origin (0, 0) would be refused there, or land on the wrong pixels)."""
+    import json
+
+    from plenocli.io import tiffio
+
+    image, _ = white_image((160, 200), pitch_px=15.3, angle_rad=0.1, offset_xy=(100.3, 80.1),
+                           seed=2)
+    meta = {tiffio.FORMAT_KEY: tiffio.FORMAT_VERSION, "views": ["raw"], "cfa": None,
+            "origin": [40, 60], "active_area": [0, 0, 160, 200], "masked_areas": []}
+    src = tmp_path / "white.tif"
+    tifffile.imwrite(src, image.astype(np.float32)[None], photometric="minisblack",
+                     metadata=None, description=json.dumps(meta))
+    out = tmp_path / "g.yaml"
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    assert yaml.safe_load(out.read_text())["lens_grid"]["sensor_origin"] == [40, 60]
+    res = CliRunner().invoke(cli, ["refocus", str(src), "--grid", str(out), "-o",
+                                   str(tmp_path / "r.tif"), "-q"])
+    assert res.exit_code == 0, res.output
+
+
+def test_a_bayer_mosaic_without_its_pattern_is_refused(tmp_path):
+    """A white seen through a Bayer filter (phase gains 0.6, 1, 1, 0.8) but saved as a plain
+    mono image: calibrating it as mono would measure the micro-images through the filters."""
+    from plenocli.model.cfa import phase_gains
+
+    image, _ = white_image((256, 256), pitch_px=15.3, angle_rad=0.2, offset_xy=(120.3, 130.1),
+                           seed=3)
+    gains = np.array([[0.6, 1.0], [1.0, 0.8]])
+    mosaic = image * np.tile(gains, (128, 128))
+    np.testing.assert_allclose(phase_gains(image), 1.0, atol=0.005)
+    np.testing.assert_allclose(phase_gains(mosaic), gains / gains.mean(), rtol=0.01)
+    src, out = tmp_path / "white.tif", tmp_path / "g.yaml"
+    tifffile.imwrite(src, mosaic.astype(np.float32))
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out)])
+    assert res.exit_code == 1, res.output
+    assert "looks like a 2 x 2 Bayer mosaic" in res.output and "--cfa" in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not out.exists()

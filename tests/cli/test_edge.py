@@ -120,6 +120,32 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path, frames, monkeypatch):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
 
 
+class _TerminatedWhileCollected:
+    """An object whose ``__del__`` receives a SIGTERM: Python drops the handler's exception
+    (as it does in a weakref callback), so only the noted request can stop the stage."""
+
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(10000):  # the handler runs here, inside __del__
+            pass
+
+
+def test_a_sigterm_whose_exception_is_lost_still_terminates(tmp_path, frames, monkeypatch):
+    import plenocli.pipeline.stages.bias as stage
+
+    real_write = stage.tiffio.write_image
+
+    def write_then_collected(path, *args, **kwargs):
+        real_write(path, *args, **kwargs)
+        _TerminatedWhileCollected()  # collected at once
+
+    monkeypatch.setattr(stage.tiffio, "write_image", write_then_collected)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif")
+    assert result.exit_code == 143, result.output
+    assert "terminated; no partial output was kept" in one_line(result)
+    assert sorted(p.name for p in tmp_path.iterdir()) == FRAMES_ONLY
+
+
 def test_temporaries_of_killed_runs_are_removed(tmp_path, frames):
     out = tmp_path / "b.tif"
     host = atomic._HOST
