@@ -14,7 +14,9 @@ from plenocli.model.lensgrid import LensGrid
 EDGE_MARGIN = 0.25   # border (pitches, beyond the disc) where lenses keep the lattice
 
 
-@numba.njit(parallel=True, cache=True)
+# reassociation lets the sums over a disc's pixels vectorise (a quarter faster; the centres
+# move by 1e-14 px); no flag that assumes finite values
+@numba.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
 def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - compiled
     """Gauss-Newton point-symmetry centres: minimise sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2
     over the pixels x_k of a disc of ``radius`` around c; I(2c - x_k) bilinear."""
@@ -51,9 +53,7 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
                                min(c_hi, int(np.floor(x + half))) + 1):
                     dx = c - x
                     d2 = dx * dx + dy * dy
-                    if d2 >= r2:
-                        continue
-                    t = 1.0 - d2 / r2
+                    t = max(1.0 - d2 / r2, 0.0)   # 0 on the rim: branch-free
                     w = t * t
                     i0 = ix2 - c
                     v00 = values[j0, i0]

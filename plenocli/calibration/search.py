@@ -13,6 +13,7 @@ import numpy as np
 
 from plenocli.calibration.candidates import (
     Lattice,
+    distinct,
     lattices_of_lag,
     lattices_of_peak,
     spectral_peaks,
@@ -91,17 +92,8 @@ def hypotheses(all_views: dict[int, View], *, pitch_hint: float | None) -> list[
     lo, hi = PITCH_RANGE_PX
     if pitch_hint is not None:
         lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
-    inside = [lat for view in all_views.values() for lat in view.suggested
-              if lo <= lat.pitch_px <= hi]
-    out: list[Lattice] = []
-    log_pitch, is_hex = np.empty(len(inside)), np.empty(len(inside), bool)
-    for lat in inside:   # the first of each set of hypotheses that are the same lattice
-        n, lp, hexagonal = len(out), np.log(lat.pitch_px), lat.kind == "hex"
-        near = np.flatnonzero((is_hex[:n] == hexagonal) & (np.abs(log_pitch[:n] - lp) <= 0.011))
-        if not any(lat.same_as(out[k]) for k in near):
-            log_pitch[n], is_hex[n] = lp, hexagonal
-            out.append(lat)
-    return out
+    return distinct([lat for view in all_views.values() for lat in view.suggested
+                     if lo <= lat.pitch_px <= hi])
 
 
 def acf_peaks(acf: np.ndarray, *, count: int = 6) -> list[np.ndarray]:

@@ -88,13 +88,7 @@ class Autocorrelation:
         if annulus is None:
             return -np.inf
         basis, lo, hi, n = annulus
-        b1, b2 = basis
-        if lattice.kind == "hex":
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
-        else:
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
-        offsets = np.array([[0.0, 0.0], *holes])
-        return float(_contrast(self.stack, basis, offsets, lo, hi, n, lattice.kind == "hex"))
+        return float(_contrast(self.stack, basis, lo, hi, n, lattice.kind == "hex"))
 
     def between(self, coarse: Lattice, fine: Lattice) -> np.ndarray:
         """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
@@ -213,12 +207,27 @@ def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np
 
 
 @numba.njit(cache=True, nogil=True)
-def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
+def _hole_offsets(basis, hexagonal):  # pragma: no cover - compiled
+    """The lattice point (0, 0) and its holes: the edge midpoints b1 / 2, b2 / 2,
+    (b1 + b2) / 2 and, hex, the triangle centres (b1 + b2) / 3, 2 (b1 + b2) / 3."""
+    out = np.zeros((6 if hexagonal else 4, 2))
+    for d in range(2):
+        b1, b2 = basis[0, d], basis[1, d]
+        out[1, d], out[2, d], out[3, d] = b1 / 2, b2 / 2, (b1 + b2) / 2
+        if hexagonal:
+            out[4, d], out[5, d] = (b1 + b2) / 3, 2 * (b1 + b2) / 3
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _contrast(acfs, basis, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
     """``Autocorrelation.contrast`` (numba kernel: a search evaluates it hundreds of times).
     The lattice lags k b1 + m b2 (m >= 0) with lo <= |lag| <= hi; each signal's A sampled
-    bilinearly at every lag plus every offset (0: the lattice point, then its holes); point
-    classes by (k mod 2, m mod 2) and by (k - m) mod 3 (hex) or (k + m) mod 2 (square). The
-    minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal without spread."""
+    bilinearly at every lag plus every offset (``_hole_offsets``: the lattice point, then its
+    holes); point classes by (k mod 2, m mod 2) and by (k - m) mod 3 (hex) or (k + m) mod 2
+    (square). The minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal
+    without spread."""
+    offsets = _hole_offsets(basis, hexagonal)
     size = (2 * n + 1) * (n + 1)
     lag_x, lag_y = np.empty(size), np.empty(size)
     coset_a, coset_b = np.empty(size, np.int64), np.empty(size, np.int64)
