@@ -128,7 +128,10 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
             chosen += [lat for lat, c in first if c > 0 and lat.kind == kind][:1]
     if not chosen:   # no hypothesis has its points above its holes even over near lags
         return Verdict(first[0][0], first[0][1], considered=tuple(first[:REFINED]))
-    return judged([refined(lat, all_views) for lat in chosen], all_views)
+    # refined side by side: each is independent, and the contrast and peak kernels it spends
+    # its time in release the GIL (numba's thread count is the budget, as for the views)
+    with ThreadPoolExecutor(max_workers=min(len(chosen), numba.get_num_threads())) as pool:
+        return judged(list(pool.map(lambda lat: refined(lat, all_views), chosen)), all_views)
 
 
 def refined(lattice: Lattice, all_views: dict[int, View]) -> tuple[Lattice, float]:

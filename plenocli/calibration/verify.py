@@ -168,16 +168,8 @@ class Autocorrelation:
 
     @staticmethod
     def _sample(lags: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """``a`` (an autocorrelation) at lags (..., 2) (x, y) px of the view, bilinear."""
-        rows, cols = a.shape
-        x = lags[..., 0] + cols // 2
-        y = lags[..., 1] + rows // 2
-        x0 = np.clip(np.floor(x).astype(np.int64), 0, cols - 2)
-        y0 = np.clip(np.floor(y).astype(np.int64), 0, rows - 2)
-        fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
-        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
-        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
-        return top * (1 - fy) + bottom * fy
+        """``a`` (an autocorrelation) at lags (K, 2) (x, y) px of the view, bilinear."""
+        return _bilinear(a, np.ascontiguousarray(lags, np.float64))
 
 
 def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np.ndarray
@@ -204,6 +196,25 @@ def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np
     del kept
     out[:, :ext_c] = wrapped[:, shape[1] - ext_c:]
     out[:, ext_c:] = wrapped[:, :ext_c + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _bilinear(a, lags):  # pragma: no cover - compiled
+    """``a`` at (K, 2) lags (x, y) from its centre, bilinear, clamped to the array (numba
+    kernel: no (K,) temporaries per step)."""
+    rows, cols = a.shape
+    out = np.empty(lags.shape[0])
+    for i in range(lags.shape[0]):
+        x = lags[i, 0] + cols // 2
+        y = lags[i, 1] + rows // 2
+        x0 = min(max(int(np.floor(x)), 0), cols - 2)
+        y0 = min(max(int(np.floor(y)), 0), rows - 2)
+        fx = min(max(x - x0, 0.0), 1.0)
+        fy = min(max(y - y0, 0.0), 1.0)
+        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+        out[i] = top * (1 - fy) + bottom * fy
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
