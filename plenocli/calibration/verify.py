@@ -156,15 +156,10 @@ class Autocorrelation:
         annulus = self._annulus(lattice, near, far)
         if annulus is None:
             return None
-        basis, lo, hi, n = annulus
-        k, m = np.meshgrid(np.arange(-n, n + 1), np.arange(0, n + 1), indexing="ij")
-        k, m = k.ravel(), m.ravel()
-        pts = k[:, None] * basis[0] + m[:, None] * basis[1]
-        dist = np.hypot(pts[:, 0], pts[:, 1])
-        keep = (dist >= lo) & (dist <= hi)
-        if keep.sum() < MIN_LAGS:
+        pts, k, m = _annulus_lags(*annulus)
+        if len(pts) < MIN_LAGS:
             return None
-        return pts[keep], k[keep], m[keep]
+        return pts, k, m
 
     @staticmethod
     def _sample(lags: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -196,6 +191,26 @@ def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np
     del kept
     out[:, :ext_c] = wrapped[:, shape[1] - ext_c:]
     out[:, ext_c:] = wrapped[:, :ext_c + 1]
+
+
+@numba.njit(cache=True, nogil=True)
+def _annulus_lags(basis, lo, hi, n):  # pragma: no cover - compiled
+    """The lattice vectors k b1 + m b2 (-n <= k <= n, 0 <= m <= n, in that order) with
+    lo <= |lag| <= hi, and their k and m (numba kernel: a peak search asks for them at every
+    step)."""
+    size = (2 * n + 1) * (n + 1)
+    pts = np.empty((size, 2))
+    ks, ms = np.empty(size, np.int64), np.empty(size, np.int64)
+    kept = 0
+    for k in range(-n, n + 1):
+        for m in range(0, n + 1):
+            x = k * basis[0, 0] + m * basis[1, 0]
+            y = k * basis[0, 1] + m * basis[1, 1]
+            dist = np.hypot(x, y)
+            if dist >= lo and dist <= hi:
+                pts[kept, 0], pts[kept, 1], ks[kept], ms[kept] = x, y, k, m
+                kept += 1
+    return pts[:kept].copy(), ks[:kept].copy(), ms[:kept].copy()
 
 
 @numba.njit(cache=True, nogil=True)
