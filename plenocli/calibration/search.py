@@ -128,10 +128,24 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
             chosen += [lat for lat, c in first if c > 0 and lat.kind == kind][:1]
     if not chosen:   # no hypothesis has its points above its holes even over near lags
         return Verdict(first[0][0], first[0][1], considered=tuple(first[:REFINED]))
-    # refined side by side: each is independent, and the contrast and peak kernels it spends
-    # its time in release the GIL (numba's thread count is the budget, as for the views)
-    with ThreadPoolExecutor(max_workers=min(len(chosen), numba.get_num_threads())) as pool:
-        return judged(list(pool.map(lambda lat: refined(lat, all_views), chosen)), all_views)
+    return judged(_refined_all(chosen, all_views), all_views)
+
+
+def _refined_all(lattices: list[Lattice], all_views: dict[int, View]
+                 ) -> list[tuple[Lattice, float]]:
+    """``refined`` of each lattice, side by side: each is independent, and the contrast and
+    peak kernels it spends its time in release the GIL (numba's thread count is the budget,
+    as for the views). The costliest start first: those with the most lags in their view's
+    reach (a hex cell is sqrt(3) / 2 of a square one)."""
+    def lags(lat: Lattice) -> float:
+        view = view_for(lat, all_views)
+        cell = np.sqrt(3) / 2 if lat.kind == "hex" else 1.0
+        return (view.acf.reach * view.factor / lat.pitch_px) ** 2 / cell
+
+    with ThreadPoolExecutor(max_workers=min(len(lattices), numba.get_num_threads())) as pool:
+        started = {k: pool.submit(refined, lattices[k], all_views)
+                   for k in sorted(range(len(lattices)), key=lambda k: -lags(lattices[k]))}
+        return [started[k].result() for k in range(len(lattices))]
 
 
 def refined(lattice: Lattice, all_views: dict[int, View]) -> tuple[Lattice, float]:
