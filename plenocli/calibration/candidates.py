@@ -79,6 +79,43 @@ class Lattice:
         return Lattice(self.kind, self.pitch_px * np.exp(res.x[0]), self.angle_rad + res.x[1])
 
 
+def distinct(lattices: list[Lattice], *, rel: float = 0.01, angle: float = 0.01
+             ) -> list[Lattice]:
+    """The first of each set of ``lattices`` that are the same lattice (``Lattice.same_as``
+    with these tolerances against every one kept before it), in their order."""
+    if not lattices:
+        return []
+    pitch = np.array([lat.pitch_px for lat in lattices])
+    turn = np.array([lat.angle_rad for lat in lattices])
+    step = np.array([LATTICES[lat.kind] for lat in lattices])
+    keep = _first_of_each(pitch, turn, step, rel, angle)
+    return [lat for lat, k in zip(lattices, keep, strict=True) if k]
+
+
+@numba.njit(cache=True, nogil=True)
+def _first_of_each(pitch, turn, step, rel, angle):  # pragma: no cover - compiled
+    """Which lattices no earlier kept one equals by ``Lattice.same_as`` (the same arithmetic;
+    the kind is told by its angle step)."""
+    keep = np.zeros(pitch.shape[0], np.bool_)
+    kept = np.empty(pitch.shape[0], np.int64)
+    count = 0
+    for i in range(pitch.shape[0]):
+        same = False
+        for q in range(count):
+            k = kept[q]
+            if step[k] != step[i] or abs(pitch[i] / pitch[k] - 1) > rel:
+                continue
+            half = step[i] / 2
+            if abs((turn[i] - turn[k] + half) % step[i] - half) <= angle:
+                same = True
+                break
+        if not same:
+            keep[i] = True
+            kept[count] = i
+            count += 1
+    return keep
+
+
 def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
                    count: int = PEAKS_PER_SPECTRUM) -> list[np.ndarray]:
     """The strongest isolated peaks (fx, fy) cycles/px of the Hann-windowed power spectrum of
@@ -94,15 +131,12 @@ def spectral_peaks(signal: np.ndarray, *, cfa: bool = False,
     del spec
     logmag += 1e-12
     np.log(logmag, out=logmag)
-    rings = _rings(size)
-    z = _ring_zscore(logmag, rings)
-    valid = rings.radius > 3.0 / min(rows, cols)
+    z = _ring_zscore(logmag, _rings(size), 3.0 / min(rows, cols))
     if cfa:   # residual mosaic sits at the Nyquist corners
         fy = np.fft.fftfreq(size)[:, None]
         fx = np.fft.rfftfreq(size)[None, :]
         for nx, ny in ((0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.5, -0.5)):
-            valid &= np.hypot(fx - nx, fy - ny) > 0.03
-    z[~valid] = -np.inf
+            z[np.hypot(fx - nx, fy - ny) <= 0.03] = -np.inf
     local = cv2.dilate(z, np.ones((5, 5), np.uint8))
     peaks = np.argwhere((z >= local) & (z > PEAK_Z))
     order = np.argsort(-z[peaks[:, 0], peaks[:, 1]])[:count]
@@ -171,14 +205,26 @@ def _rings(size: int) -> _Rings:
     return _Rings(radius, ring, sample, sample_start)
 
 
-def _ring_zscore(logmag: np.ndarray, rings: _Rings) -> np.ndarray:
-    """(logmag - median) / (median - 16th percentile) per ring of 4 bins: the peaks of a lattice
-    are a minority of each ring and do not inflate it. Two order statistics per ring by
-    partition: no full sort of the spectrum."""
+def _ring_zscore(logmag: np.ndarray, rings: _Rings, min_radius: float) -> np.ndarray:
+    """(logmag - median) / (median - 16th percentile) per ring of 4 bins, -inf up to
+    ``min_radius`` (cycles/px): the peaks of a lattice are a minority of each ring and do not
+    inflate it. Two order statistics per ring by partition: no full sort of the spectrum."""
     median, low = _ring_quantiles(logmag.ravel()[rings.order], rings.start)
     spread = np.maximum(median - low, 0.05)   # a flat field has no spread: no peak passes
-    z = logmag - median.astype(np.float32)[rings.ring]
-    z /= spread.astype(np.float32)[rings.ring]
+    return _normalised(logmag, rings.ring, median.astype(np.float32),
+                       spread.astype(np.float32), rings.radius, min_radius)
+
+
+@numba.njit(cache=True, nogil=True)
+def _normalised(logmag, ring, median, spread, radius, min_radius):  # pragma: no cover
+    """(logmag - median[ring]) / spread[ring] in float32, -inf where radius <= min_radius
+    (numba kernel: one pass, no gathered temporaries)."""
+    z = np.empty_like(logmag)
+    for r in range(logmag.shape[0]):
+        for c in range(logmag.shape[1]):
+            k = ring[r, c]
+            z[r, c] = ((logmag[r, c] - median[k]) / spread[k] if radius[r, c] > min_radius
+                       else -np.inf)
     return z
 
 

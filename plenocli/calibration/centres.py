@@ -4,6 +4,7 @@ and its border are), and the independent checks built on the same property."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numba
@@ -14,7 +15,9 @@ from plenocli.model.lensgrid import LensGrid
 EDGE_MARGIN = 0.25   # border (pitches, beyond the disc) where lenses keep the lattice
 
 
-@numba.njit(parallel=True, cache=True)
+# reassociation lets the sums over a disc's pixels vectorise (a quarter faster; the centres
+# move by 1e-14 px); no flag that assumes finite values
+@numba.njit(parallel=True, cache=True, fastmath={"reassoc", "contract", "arcp", "nsz"})
 def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - compiled
     """Gauss-Newton point-symmetry centres: minimise sum_k w(|x_k - c|) (I(x_k) - I(2c - x_k))^2
     over the pixels x_k of a disc of ``radius`` around c; I(2c - x_k) bilinear."""
@@ -51,9 +54,7 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
                                min(c_hi, int(np.floor(x + half))) + 1):
                     dx = c - x
                     d2 = dx * dx + dy * dy
-                    if d2 >= r2:
-                        continue
-                    t = 1.0 - d2 / r2
+                    t = max(1.0 - d2 / r2, 0.0)   # 0 on the rim: branch-free
                     w = t * t
                     i0 = ix2 - c
                     v00 = values[j0, i0]
@@ -302,18 +303,27 @@ def _fold(flat, inv, x0, y0, bins):  # pragma: no cover - compiled
     return total.sum(axis=0), count.sum(axis=0)
 
 
+@functools.lru_cache(maxsize=4)
+def _turned_bins(n: int, lattice: str) -> np.ndarray:
+    """(n, n, n, n) flat bin of (a, b) turned about every pivot bin (a0, b0), indexed
+    [a0, b0, a, b] (one table per cell size and lattice: every fold reuses it)."""
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a0, b0 = a[:, :, None, None], b[:, :, None, None]
+    da, db = a[None, None] - a0, b[None, None] - b0
+    turned_a = (a0 - db) % n
+    turned_b = (b0 + da + db) % n if lattice == "hex" else (b0 + da) % n
+    bins = turned_a * n + turned_b
+    bins.flags.writeable = False
+    return bins
+
+
 def _turn_asymmetry(cell: np.ndarray, lattice: str) -> np.ndarray:
     """(n, n): for every bin centre as the pivot, the mean squared difference between the
     periodic cell and the cell turned by one lattice step about it, over twice its variance.
     In lattice coordinates the turn is an integer map: hex (du, dv) -> (-dv, du + dv) (b1 ->
     b2, b2 -> b2 - b1), square (du, dv) -> (-dv, du)."""
     n = cell.shape[0]
-    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    a0, b0 = a[:, :, None, None], b[:, :, None, None]
-    da, db = a[None, None] - a0, b[None, None] - b0
-    turned_a = (a0 - db) % n
-    turned_b = (b0 + da + db) % n if lattice == "hex" else (b0 + da) % n
-    diff = cell[turned_a, turned_b] - cell[None, None]
+    diff = cell.ravel()[_turned_bins(n, lattice)] - cell[None, None]
     spread = 2 * float(np.nanvar(cell))
     if not spread > 0:
         return np.ones((n, n))

@@ -66,13 +66,18 @@ def _disc_means(image, r, c, dy, dx):  # pragma: no cover - compiled
     frame (a disc of 0.35 pitch is, in any frame that holds lenses)."""
     rows, cols = image.shape
     out = np.empty(r.shape[0])
+    reach_y, reach_x = np.abs(dy).max(), np.abs(dx).max()
     for k in numba.prange(r.shape[0]):
         acc = 0.0
-        for w in range(dy.shape[0]):
-            y, x = r[k] + dy[w], c[k] + dx[w]
-            y = -y - 1 if y < 0 else (2 * rows - 1 - y if y >= rows else y)
-            x = -x - 1 if x < 0 else (2 * cols - 1 - x if x >= cols else x)
-            acc += image[y, x]
+        if reach_y <= r[k] < rows - reach_y and reach_x <= c[k] < cols - reach_x:
+            for w in range(dy.shape[0]):   # inside the frame (nearly every lens): no mirror
+                acc += image[r[k] + dy[w], c[k] + dx[w]]
+        else:
+            for w in range(dy.shape[0]):
+                y, x = r[k] + dy[w], c[k] + dx[w]
+                y = -y - 1 if y < 0 else (2 * rows - 1 - y if y >= rows else y)
+                x = -x - 1 if x < 0 else (2 * cols - 1 - x if x >= cols else x)
+                acc += image[y, x]
         out[k] = acc / dy.shape[0]
     return out
 

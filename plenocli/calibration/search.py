@@ -13,6 +13,7 @@ import numpy as np
 
 from plenocli.calibration.candidates import (
     Lattice,
+    distinct,
     lattices_of_lag,
     lattices_of_peak,
     spectral_peaks,
@@ -91,17 +92,8 @@ def hypotheses(all_views: dict[int, View], *, pitch_hint: float | None) -> list[
     lo, hi = PITCH_RANGE_PX
     if pitch_hint is not None:
         lo, hi = pitch_hint / 1.15, pitch_hint * 1.15
-    inside = [lat for view in all_views.values() for lat in view.suggested
-              if lo <= lat.pitch_px <= hi]
-    out: list[Lattice] = []
-    log_pitch, is_hex = np.empty(len(inside)), np.empty(len(inside), bool)
-    for lat in inside:   # the first of each set of hypotheses that are the same lattice
-        n, lp, hexagonal = len(out), np.log(lat.pitch_px), lat.kind == "hex"
-        near = np.flatnonzero((is_hex[:n] == hexagonal) & (np.abs(log_pitch[:n] - lp) <= 0.011))
-        if not any(lat.same_as(out[k]) for k in near):
-            log_pitch[n], is_hex[n] = lp, hexagonal
-            out.append(lat)
-    return out
+    return distinct([lat for view in all_views.values() for lat in view.suggested
+                     if lo <= lat.pitch_px <= hi])
 
 
 def acf_peaks(acf: np.ndarray, *, count: int = 6) -> list[np.ndarray]:
@@ -136,7 +128,24 @@ def find_lattice(all_views: dict[int, View], hyps: list[Lattice]) -> Verdict:
             chosen += [lat for lat, c in first if c > 0 and lat.kind == kind][:1]
     if not chosen:   # no hypothesis has its points above its holes even over near lags
         return Verdict(first[0][0], first[0][1], considered=tuple(first[:REFINED]))
-    return judged([refined(lat, all_views) for lat in chosen], all_views)
+    return judged(_refined_all(chosen, all_views), all_views)
+
+
+def _refined_all(lattices: list[Lattice], all_views: dict[int, View]
+                 ) -> list[tuple[Lattice, float]]:
+    """``refined`` of each lattice, side by side: each is independent, and the contrast and
+    peak kernels it spends its time in release the GIL (numba's thread count is the budget,
+    as for the views). The costliest start first: those with the most lags in their view's
+    reach (a hex cell is sqrt(3) / 2 of a square one)."""
+    def lags(lat: Lattice) -> float:
+        view = view_for(lat, all_views)
+        cell = np.sqrt(3) / 2 if lat.kind == "hex" else 1.0
+        return (view.acf.reach * view.factor / lat.pitch_px) ** 2 / cell
+
+    with ThreadPoolExecutor(max_workers=min(len(lattices), numba.get_num_threads())) as pool:
+        started = {k: pool.submit(refined, lattices[k], all_views)
+                   for k in sorted(range(len(lattices)), key=lambda k: -lags(lattices[k]))}
+        return [started[k].result() for k in range(len(lattices))]
 
 
 def refined(lattice: Lattice, all_views: dict[int, View]) -> tuple[Lattice, float]:

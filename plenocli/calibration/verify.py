@@ -88,13 +88,7 @@ class Autocorrelation:
         if annulus is None:
             return -np.inf
         basis, lo, hi, n = annulus
-        b1, b2 = basis
-        if lattice.kind == "hex":
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2, (b1 + b2) / 3, 2 * (b1 + b2) / 3]
-        else:
-            holes = [b1 / 2, b2 / 2, (b1 + b2) / 2]
-        offsets = np.array([[0.0, 0.0], *holes])
-        return float(_contrast(self.stack, basis, offsets, lo, hi, n, lattice.kind == "hex"))
+        return float(_contrast(self.stack, basis, lo, hi, n, lattice.kind == "hex"))
 
     def between(self, coarse: Lattice, fine: Lattice) -> np.ndarray:
         """How much the points of ``fine`` that are not points of ``coarse`` (its sub-lattice)
@@ -162,28 +156,15 @@ class Autocorrelation:
         annulus = self._annulus(lattice, near, far)
         if annulus is None:
             return None
-        basis, lo, hi, n = annulus
-        k, m = np.meshgrid(np.arange(-n, n + 1), np.arange(0, n + 1), indexing="ij")
-        k, m = k.ravel(), m.ravel()
-        pts = k[:, None] * basis[0] + m[:, None] * basis[1]
-        dist = np.hypot(pts[:, 0], pts[:, 1])
-        keep = (dist >= lo) & (dist <= hi)
-        if keep.sum() < MIN_LAGS:
+        pts, k, m = _annulus_lags(*annulus)
+        if len(pts) < MIN_LAGS:
             return None
-        return pts[keep], k[keep], m[keep]
+        return pts, k, m
 
     @staticmethod
     def _sample(lags: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """``a`` (an autocorrelation) at lags (..., 2) (x, y) px of the view, bilinear."""
-        rows, cols = a.shape
-        x = lags[..., 0] + cols // 2
-        y = lags[..., 1] + rows // 2
-        x0 = np.clip(np.floor(x).astype(np.int64), 0, cols - 2)
-        y0 = np.clip(np.floor(y).astype(np.int64), 0, rows - 2)
-        fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
-        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
-        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
-        return top * (1 - fy) + bottom * fy
+        """``a`` (an autocorrelation) at lags (K, 2) (x, y) px of the view, bilinear."""
+        return _bilinear(a, np.ascontiguousarray(lags, np.float64))
 
 
 def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np.ndarray
@@ -213,12 +194,66 @@ def _lags_of_autocorrelation(signal: np.ndarray, shape: tuple[int, int], out: np
 
 
 @numba.njit(cache=True, nogil=True)
-def _contrast(acfs, basis, offsets, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
+def _annulus_lags(basis, lo, hi, n):  # pragma: no cover - compiled
+    """The lattice vectors k b1 + m b2 (-n <= k <= n, 0 <= m <= n, in that order) with
+    lo <= |lag| <= hi, and their k and m (numba kernel: a peak search asks for them at every
+    step)."""
+    size = (2 * n + 1) * (n + 1)
+    pts = np.empty((size, 2))
+    ks, ms = np.empty(size, np.int64), np.empty(size, np.int64)
+    kept = 0
+    for k in range(-n, n + 1):
+        for m in range(0, n + 1):
+            x = k * basis[0, 0] + m * basis[1, 0]
+            y = k * basis[0, 1] + m * basis[1, 1]
+            dist = np.hypot(x, y)
+            if dist >= lo and dist <= hi:
+                pts[kept, 0], pts[kept, 1], ks[kept], ms[kept] = x, y, k, m
+                kept += 1
+    return pts[:kept].copy(), ks[:kept].copy(), ms[:kept].copy()
+
+
+@numba.njit(cache=True, nogil=True)
+def _bilinear(a, lags):  # pragma: no cover - compiled
+    """``a`` at (K, 2) lags (x, y) from its centre, bilinear, clamped to the array (numba
+    kernel: no (K,) temporaries per step)."""
+    rows, cols = a.shape
+    out = np.empty(lags.shape[0])
+    for i in range(lags.shape[0]):
+        x = lags[i, 0] + cols // 2
+        y = lags[i, 1] + rows // 2
+        x0 = min(max(int(np.floor(x)), 0), cols - 2)
+        y0 = min(max(int(np.floor(y)), 0), rows - 2)
+        fx = min(max(x - x0, 0.0), 1.0)
+        fy = min(max(y - y0, 0.0), 1.0)
+        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+        out[i] = top * (1 - fy) + bottom * fy
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _hole_offsets(basis, hexagonal):  # pragma: no cover - compiled
+    """The lattice point (0, 0) and its holes: the edge midpoints b1 / 2, b2 / 2,
+    (b1 + b2) / 2 and, hex, the triangle centres (b1 + b2) / 3, 2 (b1 + b2) / 3."""
+    out = np.zeros((6 if hexagonal else 4, 2))
+    for d in range(2):
+        b1, b2 = basis[0, d], basis[1, d]
+        out[1, d], out[2, d], out[3, d] = b1 / 2, b2 / 2, (b1 + b2) / 2
+        if hexagonal:
+            out[4, d], out[5, d] = (b1 + b2) / 3, 2 * (b1 + b2) / 3
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _contrast(acfs, basis, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cover
     """``Autocorrelation.contrast`` (numba kernel: a search evaluates it hundreds of times).
     The lattice lags k b1 + m b2 (m >= 0) with lo <= |lag| <= hi; each signal's A sampled
-    bilinearly at every lag plus every offset (0: the lattice point, then its holes); point
-    classes by (k mod 2, m mod 2) and by (k - m) mod 3 (hex) or (k + m) mod 2 (square). The
-    minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal without spread."""
+    bilinearly at every lag plus every offset (``_hole_offsets``: the lattice point, then its
+    holes); point classes by (k mod 2, m mod 2) and by (k - m) mod 3 (hex) or (k + m) mod 2
+    (square). The minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal
+    without spread."""
+    offsets = _hole_offsets(basis, hexagonal)
     size = (2 * n + 1) * (n + 1)
     lag_x, lag_y = np.empty(size), np.empty(size)
     coset_a, coset_b = np.empty(size, np.int64), np.empty(size, np.int64)

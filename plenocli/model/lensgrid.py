@@ -274,13 +274,21 @@ def _check_centres(centres, indices) -> None:
     if not np.all(np.abs(xy) <= MAX_COORD_PX):
         raise ValueError("centres_xy must hold finite pixel coordinates; "
                          f"{int(np.sum(~(np.abs(xy) <= MAX_COORD_PX)))} values are not")
-    if ij.size and len(np.unique(ij.reshape(-1, 2), axis=0)) != len(ij):
+    if not ij.size:
+        return
+    span = np.ptp(ij, axis=0).astype(np.float64) + 1
+    # tables indexed by (i, j) are allocated from this span: keep it compact
+    compact = span[0] * span[1] <= 16 * len(ij) + 1024
+    if compact and np.issubdtype(ij.dtype, np.integer):   # one count per lattice place
+        place = (ij[:, 0] - ij[:, 0].min()) * int(span[1]) + (ij[:, 1] - ij[:, 1].min())
+        repeated = bool(np.bincount(place).max() > 1)
+    else:
+        repeated = len(np.unique(ij, axis=0)) != len(ij)
+    if repeated:
         raise ValueError("lens indices must be distinct; a lens (i, j) is listed twice")
-    if ij.size:  # tables indexed by (i, j) are allocated from this span: keep it compact
-        span = np.ptp(ij, axis=0).astype(np.float64) + 1
-        if span[0] * span[1] > 16 * len(ij) + 1024:
-            raise ValueError(f"lens indices span {int(span[0])} x {int(span[1])} lattice places "
-                             f"for {len(ij)} lenses; they must be a compact block of the lattice")
+    if not compact:
+        raise ValueError(f"lens indices span {int(span[0])} x {int(span[1])} lattice places "
+                         f"for {len(ij)} lenses; they must be a compact block of the lattice")
 
 
 def _whole(name: str, values) -> tuple[int, ...]:
