@@ -254,20 +254,14 @@ def _contrast(acfs, basis, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cov
     (square). The minimum over the signals; -inf for fewer than MIN_LAGS lags or a signal
     without spread."""
     offsets = _hole_offsets(basis, hexagonal)
-    size = (2 * n + 1) * (n + 1)
-    lag_x, lag_y = np.empty(size), np.empty(size)
-    coset_a, coset_b = np.empty(size, np.int64), np.empty(size, np.int64)
-    kept = 0
-    for k in range(-n, n + 1):
-        for m in range(0, n + 1):
-            x = k * basis[0, 0] + m * basis[1, 0]
-            y = k * basis[0, 1] + m * basis[1, 1]
-            dist = np.hypot(x, y)
-            if dist >= lo and dist <= hi:
-                lag_x[kept], lag_y[kept] = x, y
-                coset_a[kept] = 2 * (k % 2) + m % 2
-                coset_b[kept] = 4 + ((k - m) % 3 if hexagonal else (k + m) % 2)
-                kept += 1
+    lags, ks, ms = _annulus_lags(basis, lo, hi, n)
+    kept = lags.shape[0]
+    lag_x, lag_y = lags[:, 0], lags[:, 1]
+    coset_a, coset_b = np.empty(kept, np.int64), np.empty(kept, np.int64)
+    for i in range(kept):
+        k, m = ks[i], ms[i]
+        coset_a[i] = 2 * (k % 2) + m % 2
+        coset_b[i] = 4 + ((k - m) % 3 if hexagonal else (k + m) % 2)
     if kept < MIN_LAGS:
         return -np.inf
     n_sig, rows, cols = acfs.shape
