@@ -217,19 +217,26 @@ def _annulus_lags(basis, lo, hi, n):  # pragma: no cover - compiled
 def _bilinear(a, lags):  # pragma: no cover - compiled
     """``a`` at (K, 2) lags (x, y) from its centre, bilinear, clamped to the array (numba
     kernel: no (K,) temporaries per step)."""
-    rows, cols = a.shape
     out = np.empty(lags.shape[0])
     for i in range(lags.shape[0]):
-        x = lags[i, 0] + cols // 2
-        y = lags[i, 1] + rows // 2
-        x0 = min(max(int(np.floor(x)), 0), cols - 2)
-        y0 = min(max(int(np.floor(y)), 0), rows - 2)
-        fx = min(max(x - x0, 0.0), 1.0)
-        fy = min(max(y - y0, 0.0), 1.0)
-        top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
-        bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
-        out[i] = top * (1 - fy) + bottom * fy
+        out[i] = _bilinear_at(a, lags[i, 0], lags[i, 1])
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _bilinear_at(a, dx, dy):  # pragma: no cover - compiled
+    """``a`` at (dx, dy) from its centre, bilinear, clamped to the array: the one sampling
+    of the autocorrelation the kernels share."""
+    rows, cols = a.shape
+    x = dx + cols // 2
+    y = dy + rows // 2
+    x0 = min(max(int(np.floor(x)), 0), cols - 2)
+    y0 = min(max(int(np.floor(y)), 0), rows - 2)
+    fx = min(max(x - x0, 0.0), 1.0)
+    fy = min(max(y - y0, 0.0), 1.0)
+    top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
+    bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
 
 
 @numba.njit(cache=True, nogil=True)
@@ -264,7 +271,7 @@ def _contrast(acfs, basis, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cov
         coset_b[i] = 4 + ((k - m) % 3 if hexagonal else (k + m) % 2)
     if kept < MIN_LAGS:
         return -np.inf
-    n_sig, rows, cols = acfs.shape
+    n_sig = acfs.shape[0]
     n_off = offsets.shape[0]
     values = np.empty((n_off, kept))
     worst = np.inf
@@ -273,15 +280,8 @@ def _contrast(acfs, basis, lo, hi, n, hexagonal):  # noqa: C901 # pragma: no cov
         total = 0.0
         for o in range(n_off):
             for i in range(kept):
-                x = lag_x[i] + offsets[o, 0] + cols // 2
-                y = lag_y[i] + offsets[o, 1] + rows // 2
-                x0 = min(max(int(np.floor(x)), 0), cols - 2)
-                y0 = min(max(int(np.floor(y)), 0), rows - 2)
-                fx = min(max(x - x0, 0.0), 1.0)
-                fy = min(max(y - y0, 0.0), 1.0)
-                top = a[y0, x0] * (1 - fx) + a[y0, x0 + 1] * fx
-                bottom = a[y0 + 1, x0] * (1 - fx) + a[y0 + 1, x0 + 1] * fx
-                values[o, i] = top * (1 - fy) + bottom * fy
+                values[o, i] = _bilinear_at(a, lag_x[i] + offsets[o, 0],
+                                            lag_y[i] + offsets[o, 1])
                 total += values[o, i]
         mean = total / (n_off * kept)
         var = 0.0
