@@ -6,7 +6,7 @@ correlate strips twice that tolerance wide, over the whole canvas height: at the
 size two 17 Mpx strips per pair. Here each pair is first registered on the luminance reduced
 ``factor`` times (area mean) through the same rig scaled to the reduced views, which finds the
 shift to about a reduced pixel. The full-resolution registration then searches only
-``FINE_TOLERANCE_PX`` around it, on strips holding the overlap and, across it, the
+a few reduced pixels around it, on strips holding the overlap and, across it, the
 ``FINE_PIXELS`` whose texture the two views share most (a translation has two parameters;
 half a million textured pixels fix them far below the 0.01 px the stitch promises).
 
@@ -24,10 +24,13 @@ import numpy as np
 
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.rig import STRIP_MARGIN_PX, PrismRig, canvases, rig_strips
-from plenocli.stitch.translation import estimate_translation, shifted_overlap
+from plenocli.stitch.translation import (
+    RUNNER_UP_EXCLUSION_PX,
+    estimate_translation,
+    shifted_overlap,
+)
 from plenocli.stitch.views import highpass, neighbour_pairs
 
-FINE_TOLERANCE_PX = 8.0  # the reduced pass is right to ~1 reduced px: 4 px at factor 4
 FINE_PIXELS = 1 << 19  # per strip at full resolution
 MIN_REDUCED_PX = 256  # the reduced views' short side: enough texture for the reduced search
 
@@ -39,6 +42,15 @@ def reduction(shape: tuple[int, int]) -> int:
         if min(shape) >= MIN_REDUCED_PX * factor:
             return factor
     return 1
+
+
+def fine_tolerance(factor: int) -> float:
+    """How far (px) around the reduced pass's shift the full resolution searches. The reduced
+    search is right to about a reduced pixel, but it cannot see a runner-up within
+    RUNNER_UP_EXCLUSION_PX reduced pixels of its match (``factor`` times that at full
+    resolution): the window reaches past that, so a periodic scene whose period lies there is
+    still refused as ambiguous by the full-resolution search, as without the reduced pass."""
+    return float((RUNNER_UP_EXCLUSION_PX + 2) * factor)
 
 
 def reduced(luma: np.ndarray, rig: PrismRig, factor: int) -> tuple[np.ndarray, PrismRig]:
@@ -56,7 +68,7 @@ def fine_windows(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, layout: s
                  expected: dict, search: dict) -> tuple[dict, dict]:
     """Per neighbour pair, the (prior, tolerance) of the full-resolution search and the canvas
     rows (columns for "v") of view a it reads, or None for all of them: the rig's prediction
-    moved by what the reduced pass measured, within FINE_TOLERANCE_PX; the rig's own
+    moved by what the reduced pass measured, within :func:`fine_tolerance`; the rig's own
     (prior, tolerance) and None where the reduced pass finds nothing or the views are small."""
     factor = reduction(luma.shape[1:])
     windows, across = dict(expected), dict.fromkeys(expected)
@@ -78,7 +90,7 @@ def fine_windows(luma: np.ndarray, rig: PrismRig, origins: np.ndarray, layout: s
             continue  # searched at full resolution over the whole tolerance
         moved = np.array([dy, dx]) - to_crops - small_prior
         windows[(a, b)] = (tuple(float(v) for v in np.asarray(prior) + factor * moved),
-                           FINE_TOLERANCE_PX)
+                           fine_tolerance(factor))
         span = _textured_span(img_a, img_b, (dy, dx), direction, factor)
         if span is not None:  # reduced canvas -> common -> full-resolution canvas of view a
             k = 0 if direction == "h" else 1

@@ -12,6 +12,10 @@ from plenocli.stitch.photometric import match_photometry, refine_homography
 from plenocli.stitch.quality import aligned_correlation
 from plenocli.stitch.views import highpass, translation_matrix, valid_eroded
 
+# the ambiguity test's runner-up lies further than this from the match (a periodic scene's next
+# period; nearer peaks are the match's own shoulders)
+RUNNER_UP_EXCLUSION_PX = 6
+
 
 def shifted_overlap(a: np.ndarray, b: np.ndarray, dy: int, dx: int):
     """Same-size crops of a and b over their overlap for b(q) <-> a(q + (dy, dx)), or None."""
@@ -76,7 +80,8 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
         max_cross_px=max_cross_px, prior=prior, tolerance_px=tolerance_px)
     dy0, dx0, best, second = search_highpassed(ha, hb, valid_eroded(a), valid_eroded(b),
                                                dy_range=dy_range, dx_range=dx_range,
-                                               min_pixels=min_pixels, exclusion_px=6)
+                                               min_pixels=min_pixels,
+                                               exclusion_px=RUNNER_UP_EXCLUSION_PX)
     if best < min_correlation:
         raise StitchError(f"no reliable overlap found between the views (best normalised "
                          f"correlation {best:.2f} < {min_correlation}); the views may not "
