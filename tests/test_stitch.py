@@ -314,7 +314,7 @@ def test_the_steps_say_what_the_stitch_is_doing():
         log.setLevel(level)
     assert "registering views 0 and 1" in seen
     assert "measuring the overlap of views 0 and 1" in seen
-    assert any(s.startswith("warping view 2 of 2, band 1 of") for s in seen)
+    assert any(s.startswith("blending band 1 of 1, view 2 of 2") for s in seen)
 
 
 @pytest.mark.parametrize("iterations", [1, 2, 3])

@@ -75,6 +75,24 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
     meta = {k: v for k, v in meta.items() if k != SEAL_KEY}
     if seal:
         meta[SEAL_KEY] = pixels_digest(data, meta)
+    check_result(path, data, meta)
+    description = describe(meta)
+    with atomic_path(path, protect=protect) as tmp:
+        with tifffile.TiffWriter(tmp) as tw:
+            for k, page in enumerate(data):
+                tw.write(np.ascontiguousarray(page), photometric="minisblack",
+                         description=description if k == 0 else None, metadata=None,
+                         software=f"plenocli {__version__}")
+
+
+def describe(meta: dict) -> str:
+    """The first page's ImageDescription: the format's key and ``meta`` as JSON."""
+    return json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
+
+
+def check_result(path, data: np.ndarray, meta: dict) -> None:
+    """Refuse to write a result (views, rows, cols) whose views ``meta`` does not name one by one,
+    that holds no valid pixel in a view, or that holds +-Inf (an overflow, never light)."""
     names = meta.get("views")
     if names is not None and len(names) != data.shape[0]:
         raise ValueError(f"{len(names)} view names for {data.shape[0]} views")
@@ -93,13 +111,6 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
                              f"pixels (first at row {row}, col {col}): it overflowed float32, "
                              "the inputs hold values far beyond any sensor level; nothing was "
                              "written")
-    description = json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
-    with atomic_path(path, protect=protect) as tmp:
-        with tifffile.TiffWriter(tmp) as tw:
-            for k, page in enumerate(data):
-                tw.write(np.ascontiguousarray(page), photometric="minisblack",
-                         description=description if k == 0 else None, metadata=None,
-                         software=f"plenocli {__version__}")
 
 
 SEAL_KEY = "pixels_sha256"

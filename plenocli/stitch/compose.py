@@ -1,10 +1,12 @@
 """Compositing through one map per view: the panorama canvas, the overlaps (exposure gains and
 the residual measured there only), and the views resampled once into the panorama and blended.
 
-Memory: the panorama is built view by view and band by band (``warp.BAND_PIXELS`` panorama
-pixels at a time). A band of a view is mapped, resampled and added, weighted, into the panorama
-and its weight sum; the peak is the panorama, its weight sum and one band. Outside the overlaps a
-view's weight is its alone, so the normalisation leaves it as resampled.
+Memory: the panorama is trimmed to what the views cover first (from their maps along its
+edges), then blended band by band of its rows into the array it is written in (the output file
+itself, memory-mapped, for the stage): every view's part of a band is mapped, resampled and
+added, weighted, and the band normalised in place. The peak is the views, the panorama and a
+few bands; no weight canvas. Outside the overlaps a view's weight is its alone, so the
+normalisation leaves it as resampled.
 """
 
 from __future__ import annotations
@@ -200,52 +202,150 @@ def residuals(overlaps: list, pairs: list[tuple[int, int, str]], gains: np.ndarr
     return out
 
 
-def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box], holes: list,
-          gains: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Feathered panorama (C, rows, cols) float32 (NaN where no view covers) and its weight sum:
-    each view resampled once through its map, band by band, weighted by its distance to its
-    edge.
+def covered_box(maps: list[ViewMap], boxes: list[Box], holes: list) -> Box | None:
+    """The bounding box of the canvas pixels some view covers (its feather weight > 0), or None.
 
-    The maps of a band are computed here while worker threads resample the bands before it
-    (numpy, OpenCV and the compiled kernels release the GIL); the bands are weighted and added
-    in their order by one compiled pass, so the sums are those of a serial loop."""
-    n_chan = views[0].shape[0]
-    panorama = np.zeros((n_chan,) + shape, np.float32)
-    total = np.zeros(shape, np.float32)
-    pending: deque = deque()
+    Each view's extent is found from the edges of its box inward, a strip of rows or columns at
+    a time: the maps of a few strips, not of the footprint. The panorama is trimmed to it before
+    it is blended, so its pixels can be written straight into the output."""
+    extents = [e for e in (_view_extent(m, b, h) for m, b, h in zip(maps, boxes, holes,
+                                                                        strict=True)) if e]
+    if not extents:
+        return None
+    return (slice(min(e[0].start for e in extents), max(e[0].stop for e in extents)),
+            slice(min(e[1].start for e in extents), max(e[1].stop for e in extents)))
+
+
+EXTENT_STRIP = 8  # rows or columns mapped at a time while looking for a view's extent
+
+
+def _view_extent(vmap: ViewMap, box: Box, hole) -> Box | None:
+    ends = []
+    for axis in (0, 1):
+        first = _first_covered(vmap, box, hole, axis, inward=1)
+        if first is None:
+            return None
+        ends.append(slice(first, _first_covered(vmap, box, hole, axis, inward=-1) + 1))
+    return ends[0], ends[1]
+
+
+def _first_covered(vmap: ViewMap, box: Box, hole, axis: int, inward: int) -> int | None:
+    """The first row (axis 0) or column of ``box`` holding a covered pixel, from its start
+    (``inward`` 1) or its end (-1)."""
+    lo, hi = box[axis].start, box[axis].stop
+    for k in range(0, hi - lo, EXTENT_STRIP):
+        strip = (slice(lo + k, min(hi, lo + k + EXTENT_STRIP)) if inward > 0
+                 else slice(max(lo, hi - k - EXTENT_STRIP), hi - k))
+        region = list(box)
+        region[axis] = strip
+        found = np.flatnonzero(_coverage(vmap, tuple(region), hole).any(axis=1 - axis))
+        if found.size:
+            return strip.start + int(found[0] if inward > 0 else found[-1])
+    return None
+
+
+def _coverage(vmap: ViewMap, region: Box, hole) -> np.ndarray:
+    """Where the view covers ``region`` (its feather weight > 0), from its maps alone."""
+    out = np.empty(_shape(region), bool)
+    for band, mx, my, lost in vmap.bands(region):
+        out[band] = feather(mx, my, vmap.view_shape, lost, hole) > 0
+    return out
+
+
+def crop(maps: list[ViewMap], boxes: list[Box], box: Box) -> tuple[list[ViewMap], list]:
+    """The maps and boxes on the canvas cropped to ``box`` (a view's box None where it lies
+    outside)."""
+    to_full = translation_matrix(box[0].start, box[1].start)
+    cropped = []
+    for b in boxes:
+        inside = intersect(b, box)
+        cropped.append(None if inside is None else tuple(
+            slice(s.start - o.start, s.stop - o.start) for s, o in zip(inside, box, strict=True)))
+    return [ViewMap(m.view_shape, m.to_frame @ to_full, m.k1, m.rig, m.index)
+            for m in maps], cropped
+
+
+# the panorama is blended in bands of at least this many pixels (OpenCV's remap slows on thin
+# bands: 35 rows took 1.36 x one call, 256 rows 1.07 x)
+BLEND_BAND_PIXELS = 1 << 22
+
+
+def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: list,
+          gains: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Blend the feathered panorama into ``out`` (C, rows, cols) float32, zero-filled (NaN where
+    no view covers); returns the pixels some view covers (rows, cols).
+
+    Band by band of panorama rows, each view's part of the band is resampled once through its
+    map and added, weighted by its distance to its edge; the band is then normalised in place.
+    So ``out`` is written once, in order, and may be the output file itself (a memory map):
+    no whole canvas and no weight canvas. The maps of a band are computed here while worker
+    threads resample the parts before it (numpy, OpenCV and the compiled kernels release the
+    GIL); the parts are added in view order by one compiled pass, so the sums are those of a
+    serial loop."""
+    panorama = np.asarray(out)
+    rows, cols = panorama.shape[1:]
+    step_rows = max(1, BLEND_BAND_PIXELS // cols)
+    n_bands = -(-rows // step_rows)
+    covered = np.empty((rows, cols), bool)
+    totals = [np.empty((step_rows, cols), np.float32) for _ in range(2)]
+    pending: deque = deque()  # (band number, rows within the band, cols, gain, job)
+    open_bands: deque = deque()  # (band number, its rows)
 
     def add_oldest() -> None:
-        rows, cols, gain, job = pending.popleft()
+        j, band_rows, band_cols, gain, job = pending.popleft()
         img, weight = job.result()
-        accumulate(panorama[:, rows, cols], total[rows, cols], img, weight, gain,
-                   bool((gain != 1).any()))
+        rows_out = slice(j * step_rows + band_rows.start, j * step_rows + band_rows.stop)
+        accumulate(panorama[:, rows_out, band_cols], totals[j % 2][band_rows, band_cols], img,
+                   weight, gain, bool((gain != 1).any()))
+
+    def close_bands(before: int) -> None:
+        while open_bands and open_bands[0][0] < before:
+            j, band = open_bands.popleft()
+            while pending and pending[0][0] <= j:
+                add_oldest()
+            _normalise(panorama[:, band], totals[j % 2][:band.stop - band.start], covered[band])
 
     with ThreadPoolExecutor(max_workers=BLEND_WORKERS) as pool:
-        for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
-            gain = gains[k].astype(np.float32)
-            n_bands = vmap.n_bands(box)
-            for j, (band, mx, my, lost) in enumerate(vmap.bands(box)):
-                step(f"warping view {k + 1} of {len(views)}, band {j + 1} of {n_bands}")
-                span = on_view(mx, my, lost, vmap.view_shape)
-                if span is None:
+        for j in range(n_bands):
+            close_bands(j - 1)  # band j reuses the weight sums of band j - 2
+            band = slice(j * step_rows, min(rows, (j + 1) * step_rows))
+            totals[j % 2][:] = 0
+            open_bands.append((j, band))
+            for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
+                part = None if box is None else intersect(box, (band, slice(0, cols)))
+                if part is None:
                     continue
-                mx, my = mx[:, span], my[:, span]
-                lost = lost[:, span] if lost is not None else None
-                rows = slice(box[0].start + band.start, box[0].start + band.stop)
-                cols = slice(box[1].start + span.start, box[1].start + span.stop)
-                job = pool.submit(_band, view, mx, my, lost, vmap.view_shape, holes[k])
-                pending.append((rows, cols, gain, job))
-                while len(pending) > BLEND_WORKERS:
-                    add_oldest()
-        while pending:
-            add_oldest()
-    step("normalising the blend")
-    for r0 in range(0, shape[0], max(1, (1 << 18) // shape[1])):
-        rows = slice(r0, r0 + max(1, (1 << 18) // shape[1]))
-        t = total[rows]
-        panorama[:, rows] *= 1.0 / np.maximum(t, 1e-12)
-        panorama[:, rows][:, t <= 0] = np.nan
-    return panorama, total
+                step(f"blending band {j + 1} of {n_bands}, view {k + 1} of {len(views)}")
+                gain = gains[k].astype(np.float32)
+                for piece_rows, piece_cols, job in _resample_part(pool, band, part, view, vmap,
+                                                                  holes[k]):
+                    pending.append((j, piece_rows, piece_cols, gain, job))
+                    while len(pending) > BLEND_WORKERS:
+                        add_oldest()
+        close_bands(n_bands)
+    return covered
+
+
+def _resample_part(pool, band: slice, part: Box, view: np.ndarray, vmap: ViewMap, hole):
+    """Queue the resampling of a view's ``part`` of a panorama ``band``, a piece of rows at a
+    time: yields (rows within the band, columns, the job giving the piece and its weight)."""
+    for piece, mx, my, lost in vmap.bands(part):
+        span = on_view(mx, my, lost, vmap.view_shape)
+        if span is None:
+            continue
+        mx, my = mx[:, span], my[:, span]
+        lost = lost[:, span] if lost is not None else None
+        first = part[0].start - band.start + piece.start
+        yield (slice(first, first + piece.stop - piece.start),
+               slice(part[1].start + span.start, part[1].start + span.stop),
+               pool.submit(_band, view, mx, my, lost, vmap.view_shape, hole))
+
+
+def _normalise(panorama: np.ndarray, total: np.ndarray, covered: np.ndarray) -> None:
+    """A band's weighted sums divided by their weights, NaN where no view covers."""
+    np.greater(total, 0, out=covered)
+    panorama *= 1.0 / np.maximum(total, 1e-12)
+    panorama[:, ~covered] = np.nan
 
 
 def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,

@@ -10,7 +10,7 @@ measure the local shifts left in every overlap.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +21,6 @@ from plenocli.stitch import compose
 from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
-from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
 from plenocli.stitch.rig import PrismRig, canvases, rig_axis_and_field, rig_strips
 from plenocli.stitch.views import (
@@ -85,7 +84,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            max_overlap: float = 0.7, min_overlap_px: int = 16,
            min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
-           tolerance_px: float | None = None) -> tuple[np.ndarray, StitchReport]:
+           tolerance_px: float | None = None, out: Callable[..., np.ndarray] | None = None,
+           ) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -108,6 +108,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         only within ``tolerance_px`` (default 5 % of the view, >= 8 px) of the rig's prediction.
     overlap, overlap_tolerance : without a rig, the expected overlap (fraction of the view
         along the stitching direction) and the tolerance on it (same unit).
+    out : given the shape (C, rows', cols'), the zero-filled float32 array to blend into (a
+        memory-mapped output file: never held whole in memory); default a new array.
 
     Returns
     -------
@@ -135,12 +137,10 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
     panorama, covered, offset, gains, residuals = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, check_correlation=min_correlation if source == "given" else None)
-    pair_info = _pair_report(pair_info, pairs, residuals)
-    measured = [res for res, _ in residuals if res is not None]
-    axis_px = field_deg = None
-    if rig is not None:
-        axis_px, field_deg = rig_axis_and_field(rig, (rows, cols), origins, offset, covered)
+        rig=rig, check_correlation=min_correlation if source == "given" else None, out=out)
+    pair_info, measured = _pair_report(pair_info, pairs, residuals)
+    axis_px, field_deg = (None, None) if rig is None else rig_axis_and_field(
+        rig, (rows, cols), origins, offset, covered)
     rig_dict = rig.to_dict() if rig is not None else None
     report = StitchReport(
         model=model, layout=layout, n_views=n_views, channels=n_chan if colour else 1,
@@ -160,14 +160,15 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     return (panorama if colour else panorama[0]), report
 
 
-def _pair_report(pair_info: list[dict] | None, pairs, residuals) -> list[dict]:
-    """Each pair's registration figures with its residual; a given transform's pairs are only
-    named."""
+def _pair_report(pair_info: list[dict] | None, pairs, residuals) -> tuple[list[dict], list]:
+    """Each pair's registration figures with its residual (a given transform's pairs only
+    named), and the residuals measured."""
+    measured = [res for res, _ in residuals if res is not None]
     if pair_info is None:
-        return [{"views": [a, b], "direction": d} for a, b, d in pairs]
+        return [{"views": [a, b], "direction": d} for a, b, d in pairs], measured
     for info, (res, area) in zip(pair_info, residuals, strict=True):
         info.update(residual_px=res, overlap_px_area=area)
-    return pair_info
+    return pair_info, measured
 
 
 def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
@@ -254,7 +255,7 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
                match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
-               check_correlation: float | None):
+               check_correlation: float | None, out):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
     cover, the reference -> panorama translation, the per-view, per-channel gains and per pair
     (residual px, overlap area). ``check_correlation``: refuse a (given) transform under which
@@ -271,20 +272,23 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
         gains = compose.match_gains(overlaps, pairs, *stack.shape[:2])
     residuals = compose.residuals(overlaps, pairs, gains)
     del overlaps
-    if blend == "multiband":
-        panorama = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)
-        covered = np.isfinite(panorama).all(axis=0)
-    else:
-        panorama, total = compose.blend(filled, maps, boxes, holes, gains, shape)
-        covered = total > 0
-        del total
-    box = bounding_box(covered)
+    box = compose.covered_box(maps, boxes, holes)
     if box is None:
         raise StitchError("the views cover no pixel of the panorama; check the transform")
-    if (box[0].stop - box[0].start, box[1].stop - box[1].start) != covered.shape:
-        panorama, covered = panorama[(slice(None),) + box], covered[box]
-        offset = translation_matrix(-box[0].start, -box[1].start) @ offset
+    offset = translation_matrix(-box[0].start, -box[1].start) @ offset
+    panorama = (out or _zeros)((stack.shape[1], box[0].stop - box[0].start,
+                                box[1].stop - box[1].start))
+    if blend == "multiband":
+        whole = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)
+        panorama[...] = whole[(slice(None),) + box]
+        covered = np.isfinite(panorama).all(axis=0)
+    else:
+        covered = compose.blend(filled, *compose.crop(maps, boxes, box), holes, gains, panorama)
     return panorama, covered, offset, gains, residuals
+
+
+def _zeros(shape: tuple[int, int, int]) -> np.ndarray:
+    return np.zeros(shape, np.float32)
 
 
 def _check_fit(overlaps: list, pairs: list, min_correlation: float) -> None:

@@ -21,7 +21,6 @@ import cv2
 import numpy as np
 
 from plenocli.stitch.rig import (
-    MAP_BAND_PIXELS,
     PrismRig,
     _view_maps,
     common_to_view,
@@ -72,12 +71,6 @@ class ViewMap:
             elif self.k1:
                 fx, fy = distort(fx, fy, self.k1, self.view_shape)
             yield band, fx.astype(np.float32), fy.astype(np.float32), lost
-
-    def n_bands(self, region: tuple[slice, slice]) -> int:
-        """How many bands :meth:`bands` yields over ``region``."""
-        rows = region[0].stop - region[0].start
-        cols = region[1].stop - region[1].start
-        return -(-rows // max(1, min(BAND_PIXELS, MAP_BAND_PIXELS) // max(1, cols)))
 
     def outline(self) -> np.ndarray:
         """(N, 2) panorama points (x, y) along the view's outline."""

@@ -27,6 +27,7 @@ from plenocli.io.atomic import write_text
 from plenocli.io.framing import active_area
 from plenocli.io.preview import write_png
 from plenocli.io.rigfile import read_rig
+from plenocli.io.tiffcanvas import image_canvas
 from plenocli.io.transformfile import read_transform, write_transform
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
@@ -129,28 +130,29 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         _verified(verify.check_transform_names, transform, names, layout,
                   named_after_files=named_after_files)
     prism_rig = read_rig(rig) if rig else None
-    panorama, result = _verified(stitch_lib.stitch, stack, layout=layout, model=model,
-                                 distortion_k1=distortion, transform=transform, blend=blend,
-                                 rig=prism_rig, overlap=overlap,
-                                 overlap_tolerance=overlap_tolerance)
-    if transform_in or rig:  # a side file may make the panorama refused, never wrong
-        _verified(verify.check_alignment, stack, result,
-                  what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
-    params = dict(views=views, layout=layout, model=model, distortion=distortion,
-                  transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
-                  overlap_tolerance=overlap_tolerance)
-    record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
-                                             "rig": rig})
-    rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
-    pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
-    page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"] if pano.shape[0] == 1
-                  else [f"C{c}" for c in range(pano.shape[0])])
-    out_meta = tiffio.derived_meta(meta, record, views=page_names, cfa=None, view_colours=None,
-                                   active_area=None, masked_areas=None, origin=None,
-                                   stitch={k: rep[k] for k in ("model", "layout", "shifts_px",
-                                                               "residual_px", "origin_px")})
-    tiffio.write_image(output, pano, out_meta, protect=protect)
+    with image_canvas(output, protect=protect) as canvas:  # blended straight into the file
+        panorama, result = _verified(stitch_lib.stitch, stack, layout=layout, model=model,
+                                     distortion_k1=distortion, transform=transform, blend=blend,
+                                     rig=prism_rig, overlap=overlap,
+                                     overlap_tolerance=overlap_tolerance, out=canvas.allocate)
+        if transform_in or rig:  # a side file may make the panorama refused, never wrong
+            _verified(verify.check_alignment, stack, result,
+                      what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
+        params = dict(views=views, layout=layout, model=model, distortion=distortion,
+                      transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
+                      overlap_tolerance=overlap_tolerance)
+        record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
+                                                 "rig": rig})
+        rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
+        pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
+        page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"]
+                      if pano.shape[0] == 1 else [f"C{c}" for c in range(pano.shape[0])])
+        canvas.finish(tiffio.derived_meta(
+            meta, record, views=page_names, cfa=None, view_colours=None, active_area=None,
+            masked_areas=None, origin=None,
+            stitch={k: rep[k] for k in ("model", "layout", "shifts_px", "residual_px",
+                                        "origin_px")}))
     if report:
         write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
