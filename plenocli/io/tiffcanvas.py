@@ -12,6 +12,7 @@ beside its destination, and checked as that function checks a result before it l
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,7 +42,11 @@ class ImageCanvas:
         # the disk space taken now: a full disk is an error here, not a crash (SIGBUS) while the
         # map is written
         with open(self._tmp, "r+b") as fh:
-            os.posix_fallocate(fh.fileno(), 0, os.fstat(fh.fileno()).st_size)
+            try:
+                os.posix_fallocate(fh.fileno(), 0, os.fstat(fh.fileno()).st_size)
+            except OSError as err:  # a file system that cannot reserve space maps it all the same
+                if err.errno not in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS):
+                    raise
         return self.pixels
 
     def finish(self, meta: dict) -> None:
