@@ -121,3 +121,18 @@ def test_swapping_two_outputs_reruns_the_step(built):
                                 "flat.output=../out/demo/dualpixel/gain.tif"])
     decisions = plan(steps)
     assert reason(decisions, "flat") == "gain.tif was made as flat save_gain"
+
+
+def test_a_hash_started_ahead_is_the_file_s_and_follows_a_change(tmp_path):
+    import hashlib
+
+    from plenocli.model.provenance import hash_ahead, sha256_file
+
+    path = tmp_path / "a.bin"
+    path.write_bytes(bytes(range(256)) * 40000)
+    hash_ahead([path, tmp_path / "missing.tif"])
+    assert sha256_file(path) == hashlib.sha256(path.read_bytes()).hexdigest()
+    path.write_bytes(b"changed")
+    os.utime(path, ns=(1, 1))
+    hash_ahead([path])
+    assert sha256_file(path) == hashlib.sha256(b"changed").hexdigest()

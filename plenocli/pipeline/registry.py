@@ -26,7 +26,7 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
-from plenocli.model.provenance import RESOLVED
+from plenocli.model.provenance import RESOLVED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
 from plenocli.pipeline.params import Param, names_by_role, resolve
@@ -110,6 +110,7 @@ class Stage:
                                    self.paths(params, self.inputs))
         inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
         states = records.input_states(inputs)
+        hash_ahead([p for paths in inputs.values() for p in paths])
 
         def record(landed):
             records.write_records(self.name, params, inputs, outputs, states, landed)
