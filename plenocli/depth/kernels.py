@@ -83,6 +83,46 @@ def _usable(profile, half, ux, uy):
         math.isfinite(profile[by, bx])
 
 
+@njit(cache=True)
+def _lens_samples(img, x, y, profile, half, stride):
+    """Pixels (x, y, value) of the micro-image centred at (x, y) that the matching uses: finite,
+    within its usable disc, every ``stride``-th pixel in a checkerboard."""
+    reach = half + 1
+    r0 = int(y) - reach
+    c0 = int(x) - reach
+    size = (2 * reach + 2) ** 2
+    xs = np.empty(size)
+    ys = np.empty(size)
+    vs = np.empty(size)
+    n = 0
+    for r in range(max(0, r0), min(img.shape[0], r0 + 2 * reach + 2)):
+        for c in range(max(0, c0), min(img.shape[1], c0 + 2 * reach + 2)):
+            if stride > 1 and (r + c) % stride:
+                continue
+            v = img[r, c]
+            if math.isfinite(v) and _usable(profile, half, c - x, r - y):
+                xs[n] = c
+                ys[n] = r
+                vs[n] = v
+                n += 1
+    return xs[:n], ys[:n], vs[:n]
+
+
+@njit(cache=True)
+def _baselines(cx, cy, nb, k):
+    """Baselines (x, y) from lens k to each of its neighbours in ``nb`` that exist."""
+    bx = np.empty(nb.shape[1])
+    by = np.empty(nb.shape[1])
+    n = 0
+    for m in range(nb.shape[1]):
+        j = nb[k, m]
+        if j >= 0:
+            bx[n] = cx[j] - cx[k]
+            by[n] = cy[j] - cy[k]
+            n += 1
+    return bx[:n], by[:n]
+
+
 @njit(cache=True, parallel=True)
 def normalise(frame, cx, cy, profile, gain, half, out):
     """out[p] = frame[p] / gain(u) (bilinear between bins) where the profile is finite (the
@@ -102,85 +142,56 @@ def normalise(frame, cx, cy, profile, gain, half, out):
 
 
 @njit(cache=True, parallel=True)
-def match_costs(img, cx, cy, nb, profile, half, qs, stride):  # noqa: C901 (numba kernel)
+def match_costs(img, cx, cy, nb, profile, half, qs, stride):
     """Sum of squared differences and sample counts (K, len(qs)) of every lens against its
     neighbours ``nb`` at each candidate q (every ``stride``-th pixel in a checkerboard)."""
     n_lens = cx.shape[0]
     nq = qs.shape[0]
     ssd = np.zeros((n_lens, nq))
     cnt = np.zeros((n_lens, nq))
-    reach = half + 1
     for k in prange(n_lens):
-        r0 = int(cy[k]) - reach
-        c0 = int(cx[k]) - reach
-        for r in range(max(0, r0), min(img.shape[0], r0 + 2 * reach + 2)):
-            for c in range(max(0, c0), min(img.shape[1], c0 + 2 * reach + 2)):
-                if stride > 1 and (r + c) % stride:
-                    continue
-                v = img[r, c]
-                if not math.isfinite(v):
-                    continue
-                ux = c - cx[k]
-                uy = r - cy[k]
-                if not _usable(profile, half, ux, uy):
-                    continue
-                for m in range(nb.shape[1]):
-                    j = nb[k, m]
-                    if j < 0:
+        xs, ys, vs = _lens_samples(img, cx[k], cy[k], profile, half, stride)
+        bx, by = _baselines(cx, cy, nb, k)
+        for p in range(vs.shape[0]):
+            for m in range(bx.shape[0]):
+                for iq in range(nq):
+                    q = qs[iq]
+                    if not _usable(profile, half, xs[p] - cx[k] - bx[m] * q,
+                                   ys[p] - cy[k] - by[m] * q):
                         continue
-                    bx = cx[j] - cx[k]
-                    by = cy[j] - cy[k]
-                    for iq in range(nq):
-                        q = qs[iq]
-                        if not _usable(profile, half, ux - bx * q, uy - by * q):
-                            continue
-                        w = _bilinear(img, c + bx * (1 - q), r + by * (1 - q))
-                        if math.isfinite(w):
-                            ssd[k, iq] += (v - w) ** 2
-                            cnt[k, iq] += 1.0
+                    w = _bilinear(img, xs[p] + bx[m] * (1 - q), ys[p] + by[m] * (1 - q))
+                    if math.isfinite(w):
+                        ssd[k, iq] += (vs[p] - w) ** 2
+                        cnt[k, iq] += 1.0
     return ssd, cnt
 
 
 @njit(cache=True, parallel=True)
-def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations, stride):  # noqa: C901 (numba kernel)
+def refine_q(img, cx, cy, nb, profile, half, q0, qmin, qmax, iterations, stride):
     """Gauss-Newton steps on q of each lens, all its neighbours together: the residual
     img(p + B (1 - q)) - img(p) is linearised in q (derivative -B . grad img)."""
     n_lens = cx.shape[0]
     q = q0.copy()
-    reach = half + 1
     for k in prange(n_lens):
         if not math.isfinite(q[k]):
             continue
-        r0 = int(cy[k]) - reach
-        c0 = int(cx[k]) - reach
+        xs, ys, vs = _lens_samples(img, cx[k], cy[k], profile, half, stride)
+        bx, by = _baselines(cx, cy, nb, k)
         for _ in range(iterations):
             num = 0.0
             den = 0.0
-            for r in range(max(0, r0), min(img.shape[0], r0 + 2 * reach + 2)):
-                for c in range(max(0, c0), min(img.shape[1], c0 + 2 * reach + 2)):
-                    if stride > 1 and (r + c) % stride:
+            for p in range(vs.shape[0]):
+                for m in range(bx.shape[0]):
+                    if not _usable(profile, half, xs[p] - cx[k] - bx[m] * q[k],
+                                   ys[p] - cy[k] - by[m] * q[k]):
                         continue
-                    v = img[r, c]
-                    if not math.isfinite(v):
+                    # d residual / d q = -B . grad
+                    w, dq = _bilinear_grad(img, xs[p] + bx[m] * (1 - q[k]),
+                                           ys[p] + by[m] * (1 - q[k]), -bx[m], -by[m])
+                    if not (math.isfinite(w) and math.isfinite(dq)):
                         continue
-                    ux = c - cx[k]
-                    uy = r - cy[k]
-                    if not _usable(profile, half, ux, uy):
-                        continue
-                    for m in range(nb.shape[1]):
-                        j = nb[k, m]
-                        if j < 0:
-                            continue
-                        bx = cx[j] - cx[k]
-                        by = cy[j] - cy[k]
-                        if not _usable(profile, half, ux - bx * q[k], uy - by * q[k]):
-                            continue
-                        w, dq = _bilinear_grad(img, c + bx * (1 - q[k]), r + by * (1 - q[k]),
-                                               -bx, -by)  # d residual / d q = -B . grad
-                        if not (math.isfinite(w) and math.isfinite(dq)):
-                            continue
-                        num += (w - v) * dq
-                        den += dq * dq
+                    num += (w - vs[p]) * dq
+                    den += dq * dq
             if den <= 0.0:
                 break
             q[k] = min(max(q[k] - num / den, qmin), qmax)

@@ -21,7 +21,8 @@ pytestmark = pytest.mark.realdata
 REGIONS = {
     "origami": {"front crane": (180, 250), "table front": (200, 390),
                 "table back": (150, 110), "far cranes": (330, 60)},
-    "fujita2": {"kangaroo": (240, 180), "koala": (330, 230), "books": (90, 120)},
+    "fujita2": {"kangaroo": (175, 200), "pot behind it": (250, 290), "koala": (330, 230),
+                "books": (90, 120)},
 }
 
 
@@ -46,7 +47,7 @@ def test_lenslet_depth_orders_near_and_far(realdata, tmp_path, name):
     g = data[meta["views"].index("g")]
     values = [_median(g, *xy) for xy in REGIONS[name].values()]
     assert values == sorted(values, reverse=True), dict(zip(REGIONS[name], values, strict=True))
-    assert values[0] - values[-1] > 1.5  # measured 3.0 (origami), 2.1 (fujita2)
+    assert values[0] - values[-1] > 1.5  # measured 2.8 (origami), 3.2 (fujita2)
     result = runner.invoke(cli, ["refocus", str(frames), "--grid", str(folder / "calib.xml"),
                                  "--depth", str(depth), "-o", str(aif)])
     assert result.exit_code == 0, result.output
@@ -57,8 +58,9 @@ def test_galilean_boys2_faces_are_nearer_than_the_backdrop(realdata, tmp_path):
     hint: both faces (left (265, 165), right (550, 160)) lie in front of the backdrop right of
     the right boy ((750, 250), (720, 130)); measured -4.11, -4.16 against -4.35, -4.29 (the
     overlapping rims of the micro-images left out). The scene spans about 1 px of shift
-    between micro-images: the left backdrop measures like the faces (-4.19) and the teddy like
-    the hoodie behind it, so only this ordering is checked (docs/depth.md)."""
+    between micro-images, and g falls by 0.1-0.2 from the top left to the bottom right of the
+    frame whatever the scene (a focal sweep agrees): the shoes measure behind the faces and
+    the teddy like the hoodie, so only this ordering is checked (docs/depth.md)."""
     folder = realdata / "raytrix" / "boys2_galilean"
     frames, grid, depth = tmp_path / "f.tif", tmp_path / "g.yaml", tmp_path / "d.tif"
     runner = CliRunner()
