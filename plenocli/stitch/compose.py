@@ -225,9 +225,10 @@ def _long_axis(region: Box) -> int:
 
 def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
     """The blocks of an overlap ``region`` that are measured: MEASURE_BLOCKS segments along its
-    long axis (fewer on a seam shorter than MEASURE_BLOCKS * MIN_BLOCK_PX), each across the
-    overlap's whole width (a centred part of it past the budget, at least 2 MIN_BLOCK_PX
-    along), whole or, past the budget, its middle rows (columns)."""
+    long axis (fewer on a seam shorter than MEASURE_BLOCKS * MIN_BLOCK_PX), each spanning the
+    overlap's width (its centred part where the budget would leave a block under
+    2 MIN_BLOCK_PX long) and, along the seam, the whole segment or, past the budget, its
+    middle."""
     length, width = _shape(region)[long_axis], _shape(region)[1 - long_axis]
     n = max(1, min(MEASURE_BLOCKS, length // MIN_BLOCK_PX))
     budget = MEASURE_PIXELS // n
