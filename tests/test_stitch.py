@@ -327,3 +327,31 @@ def test_erode_is_scipy_binary_erosion(iterations):
     mask[40:60, 50:70] = False
     assert np.array_equal(erode(mask, iterations),
                           ndimage.binary_erosion(mask, iterations=iterations))
+
+
+def test_overlap_area_from_the_geometry_is_that_of_the_maps():
+    """A plain homography's coverage is solved row by row from its geometry, the pixels near a
+    run's end mapped: the count equals the whole maps' (feather > 0) for random homographies,
+    shifts landing exactly on pixels and on the 1/64-px cover tolerance included."""
+    from plenocli.stitch.compose import _covered_by_both
+    from plenocli.stitch.warp import ViewMap, feather
+
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        shape = (int(rng.integers(40, 200)), int(rng.integers(40, 200)))
+        maps = []
+        for k in range(2):
+            h = np.eye(3)
+            h[:2, 2] = rng.integers(-20, 20, 2) + rng.choice([0, 0.5, 1 / 64, -1 / 64], 2)
+            if k:
+                h[:2, :2] += rng.normal(0, 0.05, (2, 2))
+                h[2, :2] = rng.normal(0, 3e-4, 2)
+            maps.append(ViewMap(shape, h))
+        region = (slice(int(rng.integers(0, 20)), shape[0] + 30),
+                  slice(int(rng.integers(0, 20)), shape[1] + 30))
+        whole = 0
+        for (_, xa, ya, _), (_, xb, yb, _) in zip(maps[0].bands(region), maps[1].bands(region),
+                                                  strict=True):
+            whole += int(np.count_nonzero((feather(xa, ya, shape, None, None) > 0)
+                                          & (feather(xb, yb, shape, None, None) > 0)))
+        assert _covered_by_both(maps[0], maps[1], region, None, None) == whole

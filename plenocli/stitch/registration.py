@@ -157,6 +157,18 @@ def _chain_homographies(measured: dict, n_views: int, shape: tuple[int, int]):
     return transforms, float(np.max(np.linalg.norm((p1 - p2).reshape(-1, 2), axis=1)))
 
 
+def _disjoint_first(pairs: list) -> list[int]:
+    """The pairs' indices in the order they are started: each next one, when it can, shares no
+    view with the ones started just before it (PAIR_THREADS - 1 of them)."""
+    order, left = [], list(range(len(pairs)))
+    while left:
+        recent = {v for k in order[max(0, len(order) - PAIR_THREADS + 1):] for v in pairs[k][:2]}
+        k = next((k for k in left if not recent & set(pairs[k][:2])), left[0])
+        order.append(k)
+        left.remove(k)
+    return order
+
+
 def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, model: str,
              search: dict, expected: dict):
     """Transforms (view -> view 0), the per-pair reports and the closure (px, or None).
@@ -172,9 +184,11 @@ def register(pair_images, n_views: int, shape: tuple[int, int], layout: str, mod
                              prior, tol, shape, found)
 
     # the pairs are independent; their results (and a refusal: the first pair's in order)
-    # are those of one pair after the other
+    # are those of one pair after the other. Pairs without a common view are started together,
+    # so neither waits for the other's features of their view (2 x 2: (0, 1) with (2, 3))
     with ThreadPoolExecutor(min(PAIR_THREADS, len(pairs))) as pool:
-        results = list(pool.map(measure, pairs))
+        jobs = {k: pool.submit(measure, pairs[k]) for k in _disjoint_first(pairs)}
+        results = [jobs[k].result() for k in range(len(pairs))]
     pair_info, measured = [], {}
     for (a, b, direction), (estimate, info) in zip(pairs, results, strict=True):
         prior, _ = expected[(a, b)]
