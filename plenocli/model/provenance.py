@@ -24,11 +24,12 @@ RESOLVED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("plenocli
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
     """Hex sha256 of a file's bytes.
 
-    Remembered per process by (device, inode, size, mtime): a shared input (the white image of a
-    batch) is hashed once, and any change to the file gives a new key.
+    Remembered per process by (device, inode, size, mtime, ctime): a shared input (the white
+    image of a batch) is hashed once, and any change to the file gives a new key (the change
+    time too, which no copy that keeps times can set back).
     """
     st = os.stat(path)
-    key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
     if key in _HASHES:
         return _HASHES[key]
     digest = hashlib.sha256()
