@@ -126,6 +126,7 @@ SIDE_READERS = {
 @pytest.mark.parametrize("make,words", [
     (lambda p: None, "no such file"),
     (lambda p: p.mkdir(), "is a folder"),
+    (lambda p: p.symlink_to(os.devnull), "not a regular file"),  # a FIFO would block
     (lambda p: p.write_bytes(b"\xff\xfe\x00a: 1"), "not UTF-8"),
     (lambda p: p.write_text("{[: 1\n"), "line 1, column"),
 ])
