@@ -22,6 +22,7 @@ import yaml
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.dng import write_dng
 from plenocli.io.raytrix import calib_from_grid, format_calib
@@ -1197,3 +1198,42 @@ def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inpu
                                       str(tmp_path / ".m.tif.plenocli.json")])
     assert_one_line(result, 1, ("is the record plenocli writes beside",))
     assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
+
+
+# an option with no effect is refused when given, whatever its value (its default's included)
+NO_EFFECT = [  # stage, its other values (as a YAML step), the options that then do nothing
+    ("depth", {"input": "v.tif", "output": "o.tif"}, ["g", "s", "min_confidence", "camera"]),
+    ("depth", {"input": "f.tif", "grid": "g.yaml", "output": "o.tif"}, ["max_disparity"]),
+    ("refocus", {"input": "f.tif", "grid": "g.yaml", "output": "o.tif"}, ["mask_width"]),
+    ("refocus", {"input": "f.tif", "grid": "g.yaml", "depth": "d.tif", "output": "o.tif"},
+     ["g"]),
+    ("stitch", {"inputs": ["v.tif"], "transform_in": "t.json", "output": "o.tif"},
+     ["overlap", "overlap_tolerance"]),
+    ("stitch", {"inputs": ["v.tif"], "rig": "r.yaml", "output": "o.tif"},
+     ["overlap", "overlap_tolerance"]),
+    ("stitch", {"inputs": ["v.tif"], "output": "o.tif"}, ["overlap_tolerance"]),
+    ("crosstalk", {"inputs": ["v.tif"], "output": "o.json"}, ["s", "g"]),
+    ("optics", {"input": "l.yaml"}, ["mask_width"]),
+]
+NO_DEFAULT = {"camera": "c.yaml", "overlap": 0.2}  # a value for options without a default
+
+
+@pytest.mark.parametrize("stage,step,name", [(s, a, n) for s, a, names in NO_EFFECT
+                                              for n in names])
+def test_an_option_with_no_effect_is_refused_at_its_default_value_too(stage, step, name,
+                                                                      tmp_path, monkeypatch):
+    """From the shell (a usage error) and from a YAML step alike, before any file is read."""
+    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.params import shell_words
+    from plenocli.pipeline.registry import get_stage
+
+    monkeypatch.chdir(tmp_path)
+    params = get_stage(stage).params
+    param = next(p for p in params if p.name == name)
+    step = {**step, name: NO_DEFAULT[name] if param.default is None else param.default}
+    result = CliRunner().invoke(cli, [stage, *shell_words(params, step)])
+    assert result.exit_code == 2, result.output
+    assert f"{param.label} " in result.output and not list(tmp_path.iterdir())
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump({"steps": {"s": {"stage": stage, **step}}}))
+    with pytest.raises(ConfigError, match=param.label):
+        load_config(tmp_path / "c.yaml")

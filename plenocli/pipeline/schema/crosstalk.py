@@ -1,5 +1,7 @@
 """Parameters of ``plenocli crosstalk``."""
 
+from collections.abc import Collection
+
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
@@ -28,7 +30,7 @@ PARAMS = (
 )
 
 
-def check(params: dict) -> None:
+def check(params: dict, given: Collection[str]) -> None:
     """The refocus options of the mask sweep are refused without it, not ignored."""
     if not params.get("mask_widths"):
-        refuse_unused(PARAMS, params, ["s", "g"], "applies to the --mask-widths sweep only")
+        refuse_unused(PARAMS, given, ["s", "g"], "applies to the --mask-widths sweep only")
