@@ -434,8 +434,8 @@ CASES = [
     ("unmix-same-views-twice", ["unmix", "{i}/unmasked0.tif", "{i}/unmasked0.tif", "--mixing",
                                 "{i}/unmasked1.tif", "-o", "{o}/u.tif"], 1, ("given twice",)),
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
-                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
-     ("--mask-widths",)),
+                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 2,
+     ("--grid applies to the --mask-widths sweep only",)),
     # optics
     ("optics-png", ["optics", "{i}/huge.png"], 1, ("not a YAML lens",)),
     ("optics-prism-n-1", ["optics", "{l}", "--prism-n", "1"], 2, ("'--prism-n'",)),
@@ -1212,10 +1212,14 @@ NO_EFFECT = [  # stage, its other values (as a YAML step), the options that then
     ("stitch", {"inputs": ["v.tif"], "rig": "r.yaml", "output": "o.tif"},
      ["overlap", "overlap_tolerance"]),
     ("stitch", {"inputs": ["v.tif"], "output": "o.tif"}, ["overlap_tolerance"]),
-    ("crosstalk", {"inputs": ["v.tif"], "output": "o.json"}, ["s", "g"]),
+    ("crosstalk", {"inputs": ["v.tif"], "output": "o.json"}, ["s", "g", "grid"]),
+    ("crosstalk", {"inputs": ["f.tif"], "mask_widths": "0,1", "grid": "g.yaml",
+                   "output": "o.json"}, ["views", "mixing_out"]),
+    ("bias", {"input": "f.tif", "overscan": "none", "output": "o.tif"}, ["smooth", "guard"]),
     ("optics", {"input": "l.yaml"}, ["mask_width"]),
 ]
-NO_DEFAULT = {"camera": "c.yaml", "overlap": 0.2}  # a value for options without a default
+NO_DEFAULT = {"camera": "c.yaml", "overlap": 0.2, "grid": "g.yaml", "views": "A,B",
+              "mixing_out": "m.tif"}  # a value for options without a default
 
 
 @pytest.mark.parametrize("stage,step,name", [(s, a, n) for s, a, names in NO_EFFECT
