@@ -1216,6 +1216,8 @@ NO_EFFECT = [  # stage, its other values (as a YAML step), the options that then
     ("crosstalk", {"inputs": ["f.tif"], "mask_widths": "0,1", "grid": "g.yaml",
                    "output": "o.json"}, ["views", "mixing_out"]),
     ("bias", {"input": "f.tif", "overscan": "none", "output": "o.tif"}, ["smooth", "guard"]),
+    ("develop", {"input": "v.tif", "wb_from": "w.tif", "output": "o.jpg"}, ["wb"]),
+    ("develop", {"input": "v.tif", "output": "o.png"}, ["quality"]),
     ("optics", {"input": "l.yaml"}, ["mask_width"]),
 ]
 NO_DEFAULT = {"camera": "c.yaml", "overlap": 0.2, "grid": "g.yaml", "views": "A,B",
