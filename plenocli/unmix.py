@@ -111,44 +111,39 @@ def _gauss_jordan(m, a, work):
 
 @numba.njit(cache=True, inline="always")
 def _inverse4(m, a):
-    """A = M^-1 of a 4 x 4 M by cofactors (no pivoting branches); False if singular."""
-    m00, m01, m02, m03 = m[0, 0], m[0, 1], m[0, 2], m[0, 3]
-    m10, m11, m12, m13 = m[1, 0], m[1, 1], m[1, 2], m[1, 3]
-    m20, m21, m22, m23 = m[2, 0], m[2, 1], m[2, 2], m[2, 3]
-    m30, m31, m32, m33 = m[3, 0], m[3, 1], m[3, 2], m[3, 3]
-    s0 = m00 * m11 - m10 * m01
-    s1 = m00 * m12 - m10 * m02
-    s2 = m00 * m13 - m10 * m03
-    s3 = m01 * m12 - m11 * m02
-    s4 = m01 * m13 - m11 * m03
-    s5 = m02 * m13 - m12 * m03
-    c5 = m22 * m33 - m32 * m23
-    c4 = m21 * m33 - m31 * m23
-    c3 = m21 * m32 - m31 * m22
-    c2 = m20 * m33 - m30 * m23
-    c1 = m20 * m32 - m30 * m22
-    c0 = m20 * m31 - m30 * m21
-    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+    """A = M^-1 of a 4 x 4 M by cofactors (no pivoting branches); False if singular. Laplace
+    expansion over the row pairs (0, 1) and (2, 3): the minors of one pair and the entries of
+    one row of the other make each column of the adjugate. M is read whole before A is
+    written (so the compiler need not reload it after each store)."""
+    r0, r1 = (m[0, 0], m[0, 1], m[0, 2], m[0, 3]), (m[1, 0], m[1, 1], m[1, 2], m[1, 3])
+    r2, r3 = (m[2, 0], m[2, 1], m[2, 2], m[2, 3]), (m[3, 0], m[3, 1], m[3, 2], m[3, 3])
+    s, c = _minors(r0, r1), _minors(r2, r3)
+    det = s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
     if abs(det) < SINGULAR_PIVOT:
         return False
     d = 1.0 / det
-    a[0, 0] = (m11 * c5 - m12 * c4 + m13 * c3) * d
-    a[0, 1] = (-m01 * c5 + m02 * c4 - m03 * c3) * d
-    a[0, 2] = (m31 * s5 - m32 * s4 + m33 * s3) * d
-    a[0, 3] = (-m21 * s5 + m22 * s4 - m23 * s3) * d
-    a[1, 0] = (-m10 * c5 + m12 * c2 - m13 * c1) * d
-    a[1, 1] = (m00 * c5 - m02 * c2 + m03 * c1) * d
-    a[1, 2] = (-m30 * s5 + m32 * s2 - m33 * s1) * d
-    a[1, 3] = (m20 * s5 - m22 * s2 + m23 * s1) * d
-    a[2, 0] = (m10 * c4 - m11 * c2 + m13 * c0) * d
-    a[2, 1] = (-m00 * c4 + m01 * c2 - m03 * c0) * d
-    a[2, 2] = (m30 * s4 - m31 * s2 + m33 * s0) * d
-    a[2, 3] = (-m20 * s4 + m21 * s2 - m23 * s0) * d
-    a[3, 0] = (-m10 * c3 + m11 * c1 - m12 * c0) * d
-    a[3, 1] = (m00 * c3 - m01 * c1 + m02 * c0) * d
-    a[3, 2] = (-m30 * s3 + m31 * s1 - m32 * s0) * d
-    a[3, 3] = (m20 * s3 - m21 * s1 + m22 * s0) * d
+    _adjugate_column(a, 0, r1, c, d)
+    _adjugate_column(a, 1, r0, c, -d)
+    _adjugate_column(a, 2, r3, s, d)
+    _adjugate_column(a, 3, r2, s, -d)
     return True
+
+
+@numba.njit(cache=True, inline="always")
+def _minors(p, q):
+    """The six 2 x 2 minors of rows p and q, over the column pairs 01 02 03 12 13 23."""
+    return (p[0] * q[1] - q[0] * p[1], p[0] * q[2] - q[0] * p[2], p[0] * q[3] - q[0] * p[3],
+            p[1] * q[2] - q[1] * p[2], p[1] * q[3] - q[1] * p[3], p[2] * q[3] - q[2] * p[3])
+
+
+@numba.njit(cache=True, inline="always")
+def _adjugate_column(a, col, r, t, scale):
+    """Column ``col`` of A: the cofactors from row ``r`` of M and the minors ``t`` of the
+    other row pair, times ``scale`` (+-1/det)."""
+    a[0, col] = (r[1] * t[5] - r[2] * t[4] + r[3] * t[3]) * scale
+    a[1, col] = (-r[0] * t[5] + r[2] * t[2] - r[3] * t[1]) * scale
+    a[2, col] = (r[0] * t[4] - r[1] * t[2] + r[3] * t[0]) * scale
+    a[3, col] = (-r[0] * t[3] + r[1] * t[1] - r[2] * t[0]) * scale
 
 
 @numba.njit(cache=True, parallel=True)

@@ -22,6 +22,7 @@ import yaml
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.dng import write_dng
 from plenocli.io.raytrix import calib_from_grid, format_calib
@@ -433,8 +434,8 @@ CASES = [
     ("unmix-same-views-twice", ["unmix", "{i}/unmasked0.tif", "{i}/unmasked0.tif", "--mixing",
                                 "{i}/unmasked1.tif", "-o", "{o}/u.tif"], 1, ("given twice",)),
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
-                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
-     ("--mask-widths",)),
+                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 2,
+     ("--grid applies to the --mask-widths sweep only",)),
     # optics
     ("optics-png", ["optics", "{i}/huge.png"], 1, ("not a YAML lens",)),
     ("optics-prism-n-1", ["optics", "{l}", "--prism-n", "1"], 2, ("'--prism-n'",)),
@@ -1197,3 +1198,48 @@ def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inpu
                                       str(tmp_path / ".m.tif.plenocli.json")])
     assert_one_line(result, 1, ("is the record plenocli writes beside",))
     assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
+
+
+# an option with no effect is refused when given, whatever its value (its default's included)
+NO_EFFECT = [  # stage, its other values (as a YAML step), the options that then do nothing
+    ("depth", {"input": "v.tif", "output": "o.tif"}, ["g", "s", "min_confidence", "camera"]),
+    ("depth", {"input": "f.tif", "grid": "g.yaml", "output": "o.tif"}, ["max_disparity"]),
+    ("refocus", {"input": "f.tif", "grid": "g.yaml", "output": "o.tif"}, ["mask_width"]),
+    ("refocus", {"input": "f.tif", "grid": "g.yaml", "depth": "d.tif", "output": "o.tif"},
+     ["g"]),
+    ("stitch", {"inputs": ["v.tif"], "transform_in": "t.json", "output": "o.tif"},
+     ["overlap", "overlap_tolerance"]),
+    ("stitch", {"inputs": ["v.tif"], "rig": "r.yaml", "output": "o.tif"},
+     ["overlap", "overlap_tolerance"]),
+    ("stitch", {"inputs": ["v.tif"], "output": "o.tif"}, ["overlap_tolerance"]),
+    ("crosstalk", {"inputs": ["v.tif"], "output": "o.json"}, ["s", "g", "grid"]),
+    ("crosstalk", {"inputs": ["f.tif"], "mask_widths": "0,1", "grid": "g.yaml",
+                   "output": "o.json"}, ["views", "mixing_out"]),
+    ("bias", {"input": "f.tif", "overscan": "none", "output": "o.tif"}, ["smooth", "guard"]),
+    ("develop", {"input": "v.tif", "wb_from": "w.tif", "output": "o.jpg"}, ["wb"]),
+    ("develop", {"input": "v.tif", "output": "o.png"}, ["quality"]),
+    ("optics", {"input": "l.yaml"}, ["mask_width"]),
+]
+NO_DEFAULT = {"camera": "c.yaml", "overlap": 0.2, "grid": "g.yaml", "views": "A,B",
+              "mixing_out": "m.tif"}  # a value for options without a default
+
+
+@pytest.mark.parametrize("stage,step,name", [(s, a, n) for s, a, names in NO_EFFECT
+                                              for n in names])
+def test_an_option_with_no_effect_is_refused_at_its_default_value_too(stage, step, name,
+                                                                      tmp_path, monkeypatch):
+    """From the shell (a usage error) and from a YAML step alike, before any file is read."""
+    from plenocli.pipeline.config import load_config
+    from plenocli.pipeline.params import shell_words
+    from plenocli.pipeline.registry import get_stage
+
+    monkeypatch.chdir(tmp_path)
+    params = get_stage(stage).params
+    param = next(p for p in params if p.name == name)
+    step = {**step, name: NO_DEFAULT[name] if param.default is None else param.default}
+    result = CliRunner().invoke(cli, [stage, *shell_words(params, step)])
+    assert result.exit_code == 2, result.output
+    assert f"{param.label} " in result.output and not list(tmp_path.iterdir())
+    (tmp_path / "c.yaml").write_text(yaml.safe_dump({"steps": {"s": {"stage": stage, **step}}}))
+    with pytest.raises(ConfigError, match=param.label):
+        load_config(tmp_path / "c.yaml")

@@ -113,6 +113,34 @@ def test_a_side_file_with_a_key_twice_is_refused_naming_file_and_key(tmp_path, n
     assert str(path) in str(err.value) and "given twice" in str(err.value)
 
 
+SIDE_READERS = {
+    "lens": lambda p: __import__("plenocli.io.lensfile", fromlist=["x"]).read_lens(p),
+    "camera": lambda p: __import__("plenocli.pipeline.stages.depth", fromlist=["x"])._camera(p),
+    "rig": lambda p: __import__("plenocli.io.rigfile", fromlist=["x"]).read_rig(p),
+    "transform": lambda p: __import__(
+        "plenocli.io.transformfile", fromlist=["x"]).read_transform(p, ["A", "B"]),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(SIDE_READERS))
+@pytest.mark.parametrize("make,words", [
+    (lambda p: None, "no such file"),
+    (lambda p: p.mkdir(), "is a folder"),
+    (lambda p: p.symlink_to(os.devnull), "not a regular file"),  # a FIFO would block
+    (lambda p: p.write_bytes(b"\xff\xfe\x00a: 1"), "not UTF-8"),
+    (lambda p: p.write_text("{[: 1\n"), "line 1, column"),
+])
+def test_every_side_file_is_read_and_refused_the_same_way(tmp_path, kind, make, words):
+    """One reading of lens, camera, rig and transform files: the same InputError, one line
+    naming the file and what it is meant to be."""
+    path = tmp_path / "side.file"
+    make(path)
+    with pytest.raises(InputError) as err:
+        SIDE_READERS[kind](str(path))
+    message = str(err.value)
+    assert message.startswith(str(path)) and words in message and "\n" not in message
+
+
 def test_a_tiff_description_with_a_key_twice_is_damaged(tmp_path):
     description = f'{{"{tiffio.FORMAT_KEY}": 1, "cfa": "RGGB", "cfa": "BGGR"}}'
     tifffile.imwrite(tmp_path / "a.tif", np.zeros((8, 8), np.float32), description=description,

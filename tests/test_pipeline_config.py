@@ -11,6 +11,7 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.errors import ConfigError
+from plenocli.pipeline import validators
 from plenocli.pipeline.batch import run_batch
 from plenocli.pipeline.config import load_config, read_template
 from plenocli.pipeline.runner import plan
@@ -82,6 +83,19 @@ def test_an_empty_output_folder_is_a_usage_error(tmp_path, command, monkeypatch)
     result = invoke(*args)
     assert result.exit_code == 2 and "the folder name is empty" in result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+@pytest.mark.parametrize("validator,kind", [
+    (validators.InputFile(), "file"), (validators.OutputFile(".tif"), "file"),
+    (validators.OutputFolder(), "folder")])
+def test_every_path_is_checked_the_same_way(tmp_path, validator, kind):
+    """Empty, or a folder where a file is meant (a file where a folder is): refused alike."""
+    with pytest.raises(ValueError, match=f"the {kind} name is empty"):
+        validator.convert("")
+    (tmp_path / "f.tif").write_text("")
+    wrong = tmp_path / ("f.tif" if kind == "folder" else "")
+    with pytest.raises(ValueError, match="is a file" if kind == "folder" else "is a directory"):
+        validator.convert(str(wrong))
 
 
 def test_a_step_that_writes_no_file_always_runs(tmp_path):

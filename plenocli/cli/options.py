@@ -9,6 +9,7 @@ import sys
 import warnings
 
 import click
+from click.core import ParameterSource
 
 from plenocli.errors import (
     OptionError,
@@ -137,7 +138,9 @@ def _stage_edge(name: str, params: dict):
     stage = get_stages().get(name)
     if stage is None:
         return contextlib.nullcontext()
-    stage.check(params)
+    ctx = click.get_current_context()
+    stage.check(params, {key for key in params
+                         if ctx.get_parameter_source(key) not in (None, ParameterSource.DEFAULT)})
     return stage.guard(params)
 
 

@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError
-from plenocli.io.yamlfile import DocumentError, read_yaml
+from plenocli.errors import ConfigError
+from plenocli.io.yamlfile import read_side_file
 from plenocli.optics.glass import refractive_index
 from plenocli.optics.lens import Lens, Surface
 
@@ -99,11 +98,4 @@ def _surface(row, where: str) -> Surface:
 
 def read_lens(path: str | os.PathLike) -> Lens:
     """Read a lens prescription YAML file."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: no such lens file")
-    try:
-        doc = read_yaml(p)
-    except DocumentError as err:
-        raise ConfigError(f"{p}: not a YAML lens prescription ({err})") from err
-    return lens_from_dict(doc, source=str(p))
+    return lens_from_dict(read_side_file(path, "YAML lens prescription"), source=str(path))

@@ -9,22 +9,16 @@ from __future__ import annotations
 from pathlib import Path
 
 from plenocli.errors import InputError
-from plenocli.io.yamlfile import DocumentError, read_yaml
+from plenocli.io.yamlfile import read_side_file
 from plenocli.model.rig import PrismRig
 
 
 def read_rig(path: str | Path) -> PrismRig:
     """The rig of a file, refused in one line naming the file and the key otherwise."""
-    file = Path(path)
-    if not file.is_file():
-        raise InputError(f"{file}: no such file (the --rig YAML)")
-    try:
-        data = read_yaml(file)
-    except DocumentError as err:
-        raise InputError(f"{file}: not a YAML rig ({err})") from err
+    data = read_side_file(path, "YAML rig", hint="see configs/rigs/ for examples")
     if isinstance(data, dict) and isinstance(data.get("rig"), dict):
         data = data["rig"]
     try:
         return PrismRig.from_dict(data)
     except ValueError as err:
-        raise InputError(f"{file}: {err}; see configs/rigs/ for examples") from err
+        raise InputError(f"{path}: {err}; see configs/rigs/ for examples") from err

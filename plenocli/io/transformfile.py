@@ -12,7 +12,7 @@ from pathlib import Path
 
 from plenocli.errors import InputError
 from plenocli.io.atomic import write_text
-from plenocli.io.yamlfile import DocumentError, read_json
+from plenocli.io.yamlfile import read_json, read_side_file
 from plenocli.model.provenance import json_safe
 
 
@@ -21,13 +21,8 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
     unless it is a mapping, and, when it names its views, unless they are distinct names in the
     order of ``names`` (views named after other files are not compared)."""
     file = Path(path)
-    if not file.is_file():
-        raise InputError(f"{file}: no such file (the --transform-in JSON)")
-    try:
-        data = read_json(file)
-    except DocumentError as err:
-        raise InputError(f"{file}: not a JSON stitch transform ({err}); save one with "
-                         "--transform-out") from err
+    data = read_side_file(file, "JSON stitch transform", read=read_json,
+                          hint="save one with --transform-out")
     transform = data.get("transform", data) if isinstance(data, dict) else None
     if not isinstance(transform, dict):
         raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "

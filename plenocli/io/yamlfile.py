@@ -16,9 +16,12 @@ from __future__ import annotations
 import json
 import os
 import re
+from pathlib import Path
 from typing import Any
 
 import yaml
+
+from plenocli.errors import InputError, not_a_file, os_error_message
 
 _INT = re.compile(r"^[-+]?[0-9]+$")
 _FLOAT = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
@@ -200,3 +203,21 @@ def read_yaml(path: str | os.PathLike) -> Any:
 def read_json(path: str | os.PathLike) -> Any:
     """A JSON file (OSError when it cannot be read, DocumentError when it is not JSON)."""
     return load_json(_text(path))
+
+
+def read_side_file(path: str | os.PathLike, kind: str, *, read=read_yaml,
+                   hint: str = "") -> Any:
+    """The document of a side file (a lens, a rig, a transform, a camera) by ``read``
+    (:func:`read_yaml` or :func:`read_json`), refused in one line naming the file: not a file,
+    unreadable, or not the ``kind`` it should be (``"YAML rig"``). ``hint`` ends the message:
+    how to make a good one."""
+    file = Path(path)
+    end = f"; {hint}" if hint else ""
+    if not file.is_file():
+        raise InputError(f"{not_a_file(file)} (the {kind}){end}")
+    try:
+        return read(file)
+    except OSError as err:
+        raise InputError(os_error_message(err)) from err
+    except DocumentError as err:
+        raise InputError(f"{file}: not a {kind} ({err}){end}") from err

@@ -27,8 +27,9 @@ RESOLVED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("plenocli
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
     """Hex sha256 of a file's bytes.
 
-    Remembered per process by (device, inode, size, mtime): a shared input (the white image of a
-    batch) is hashed once, and any change to the file gives a new key.
+    Remembered per process by (device, inode, size, mtime, ctime): a shared input (the white
+    image of a batch) is hashed once, and any change to the file gives a new key (the change
+    time too, which no copy that keeps times can set back).
     """
     key = _key(path)
     if key not in _HASHES:
@@ -66,7 +67,7 @@ def hash_ahead(paths) -> None:
 
 def _key(path) -> tuple:
     st = os.stat(path)
-    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
 def _digest(path, chunk: int) -> str:

@@ -14,7 +14,7 @@ Two readers: the command line builds its click options from the declaration (one
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -183,12 +183,13 @@ def shell_words(params: Sequence[Param], values: Mapping[str, Any]) -> list[str]
     return [*positional, *options]
 
 
-def refuse_unused(params: Sequence[Param], values: Mapping[str, Any], names: Sequence[str],
+def refuse_unused(params: Sequence[Param], given: Collection[str], names: Sequence[str],
                   reason: str) -> None:
-    """OptionError for the first of ``names`` given a value other than its default: an option
-    with no effect in this run is refused, never silently ignored."""
+    """OptionError for the first of ``names`` that was ``given`` (on the command line, in a YAML
+    step or by --set), whatever its value: an option with no effect in this run is refused,
+    never silently ignored, also when it repeats the default (which a reader cannot tell from
+    one that would matter, e.g. ``--g 2:8`` against ``--g=2:8.0``)."""
     declared = {p.name: p for p in params}
     for name in names:
-        value = values.get(name)
-        if value is not None and value != declared[name].unset:
+        if name in given:
             raise OptionError(f"{declared[name].label} {reason}")

@@ -3,22 +3,25 @@
 Every stage run (from the shell, a config, a batch or make) writes, landing together with its
 outputs, one JSON record per output: ``.NAME.plenocli.json`` beside NAME (beside the folder, for
 a folder output). A record holds the stage, the output's role (``output``, ``preview``, ...),
-the stage's fully resolved parameters other than file paths, the size and modification time of
-each input by role when the run started, and those of the output as written. Whatever the
-output's format (TIFF, JPEG, PNG, a folder), the record can be read, so the make-style runner
-trusts an output only when its record is there and matches: a changed parameter, another input
-file or an input changed in any way since (newer or older), an output edited or replaced by
-another program, or an output given another role makes the step run again.
+the stage's fully resolved parameters other than file paths, the size, modification time and
+sha256 of each input by role when the run started, and those of the output as written. Whatever
+the output's format (TIFF, JPEG, PNG, a folder), the record can be read, so the make-style
+runner trusts an output only when its record is there and matches: a changed parameter, another
+input file or an input changed in any way since (newer or older), an output edited or replaced
+by another program, or an output given another role makes the step run again.
 
 Paths themselves are not recorded: a project folder moved or copied with its times kept (``mv``,
-``cp -p``, ``rsync -a``) stays up to date, since what identifies an input is its role, size and
-time, and a record travels with its output.
+``cp -p``, ``rsync -a``) stays up to date, since what identifies an input is its role, size,
+time and content, and a record travels with its output. Size and time alone would not do:
+another frame of the same camera copied over an input with its time kept (a card's or an
+archive's whole-second times) has both.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +29,7 @@ from plenocli import __version__
 from plenocli.errors import InputError
 from plenocli.io.atomic import short_name, write_text
 from plenocli.io.yamlfile import read_json
-from plenocli.model.provenance import json_safe
+from plenocli.model.provenance import json_safe, sha256_file
 
 SUFFIX = ".plenocli.json"
 Roles = dict[str, list[Path]]  # a stage's file parameters by role, each a list of paths
@@ -52,13 +55,16 @@ def check_record_paths(outputs: list[Path], inputs: list[Path]) -> None:
                              "another name for it")
 
 
-def file_state(path: str | os.PathLike) -> list[int] | None:
-    """[size, mtime in ns] of a file (None when it is not there)."""
+def file_state(path: str | os.PathLike) -> list | None:
+    """[size, mtime in ns, sha256] of a file (None when it is not there; no sha256 for a
+    folder). Size and time alone do not tell two files apart: frames of one camera have one
+    size, and cards, archives and ``touch -r`` give them the same whole-second time."""
     try:
         st = os.stat(path)
+        digest = sha256_file(path) if stat.S_ISREG(st.st_mode) else None
     except OSError:
         return None
-    return [st.st_size, st.st_mtime_ns]
+    return [st.st_size, st.st_mtime_ns, digest]
 
 
 def input_states(inputs: Roles) -> dict[str, list]:
@@ -141,6 +147,7 @@ def _mismatch(stage: str, role: str, output: Path, current: dict, states: dict,
             changed = [p.name for p, a, b in zip(inputs.get(key, []), now, then, strict=False)
                        if a != b]
             if changed and len(now) == len(then):
-                return f"{changed[0]} is not the {key} file {name} was made from (size or time)"
+                return (f"{changed[0]} is not the {key} file {name} was made from (size, "
+                        "time or content)")
             return f"the {key} files are not those {name} was made from"
     return None

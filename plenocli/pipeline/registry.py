@@ -17,7 +17,7 @@ import contextlib
 import importlib
 import inspect
 import os
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -71,16 +71,18 @@ class Stage:
         return {p.name: inspect.Parameter.empty if p.required else p.unset for p in self.params}
 
     def resolve(self, values: dict[str, Any]) -> dict[str, Any]:
-        """Every parameter, converted and checked by its declared validator (ConfigError)."""
+        """Every parameter, converted and checked by its declared validator (ConfigError);
+        ``values``: those a YAML step gives."""
         params = resolve(self.params, values)
-        self.check(params)
+        self.check(params, frozenset(values))
         return params
 
-    def check(self, params: dict[str, Any]) -> None:
-        """The schema's check across parameters, if it has one (ConfigError)."""
+    def check(self, params: dict[str, Any], given: Collection[str]) -> None:
+        """The schema's check across parameters, if it has one (ConfigError). ``given``: the
+        names of the parameters the user gave (the rest hold their defaults)."""
         check = getattr(self.schema, "check", None)
         if check is not None:
-            check(params)
+            check(params, given)
 
     def paths(self, params: dict[str, Any], roles: tuple[str, ...]) -> list[Path]:
         """The file paths held by the parameters named in ``roles``."""

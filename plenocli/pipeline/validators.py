@@ -166,12 +166,7 @@ class InputFile(Validator):
     is_path = True
 
     def convert(self, value: Any) -> str:
-        path = shell_text(value)
-        if path == "":
-            raise ValueError("the file name is empty")
-        if os.path.isdir(path):
-            raise ValueError(f"File {path!r} is a directory.")
-        return path
+        return _path_word(value, folder=False)
 
 
 class OutputFile(Validator):
@@ -186,9 +181,7 @@ class OutputFile(Validator):
         self.suffixes = suffixes
 
     def convert(self, value: Any) -> str:
-        path = shell_text(value)
-        if os.path.isdir(path):
-            raise ValueError(f"File {path!r} is a directory.")
+        path = _path_word(value, folder=False)
         if self.suffixes and os.path.splitext(path)[1].lower() not in self.suffixes:
             raise ValueError(f"{path!r} is written as {self.suffixes[0][1:].upper()}; give a "
                              f"name ending in {' or '.join(self.suffixes)}")
@@ -203,9 +196,17 @@ class OutputFolder(Validator):
     is_path = True
 
     def convert(self, value: Any) -> str:
-        path = shell_text(value)
-        if path == "":
-            raise ValueError("the folder name is empty")
-        if os.path.exists(path) and not os.path.isdir(path):
-            raise ValueError(f"Directory {path!r} is a file.")
-        return path
+        return _path_word(value, folder=True)
+
+
+def _path_word(value: Any, *, folder: bool) -> str:
+    """A path given as a word: not empty (which would be the current folder or no file), and
+    not a folder where a file is meant, nor a file where a folder is."""
+    path = shell_text(value)
+    if path == "":
+        raise ValueError(f"the {'folder' if folder else 'file'} name is empty")
+    if folder and os.path.exists(path) and not os.path.isdir(path):
+        raise ValueError(f"Directory {path!r} is a file.")
+    if not folder and os.path.isdir(path):
+        raise ValueError(f"File {path!r} is a directory.")
+    return path

@@ -3,18 +3,17 @@ refused, never wrong.
 
 A transform (``--transform-in``) or a rig (``--rig``) claims where each view lies. The claim is
 checked where it can be seen: in every neighbour pair's overlap, the two views warped by the
-applied transform must line up. Up to four blocks of at most ``BLOCK_PX`` square, spread along
-each overlap, are warped at full resolution; in each block the shift that best aligns the two
-warped views is found by normalised cross-correlation over whole-pixel shifts within
-``SEARCH_PX`` and a parabola through the peak, on the high-passed luminance (exposure and
-vignetting do not move the peak). The RMS of the block shifts is the residual; beyond
-``TOLERANCE_PX`` the side file does not describe these views. Blocks along the seam (not one
-shift for the whole strip) also catch a rig whose distortion model is wrong: its misfit changes
-along the seam. A block of nearly no texture (under ``FLAT_FRACTION`` of the seam's most
-textured block) that does not correlate is left out: it measures nothing. This works on
-overlaps down to ~20 px wide, where the report's residual is not measured, and costs a few
-warps of small blocks whatever the view size.
-"""
+applied transform must line up. Up to eight blocks of at most ``BLOCK_PX`` square, tiling each
+overlap from one end of the seam to the other, are warped at full resolution; in each block the
+shift that best aligns the two warped views is found by normalised cross-correlation over whole-
+pixel shifts within ``SEARCH_PX`` and a parabola through the peak, on the high-passed luminance
+(exposure and vignetting do not move the peak). The RMS of the block shifts is the residual;
+beyond ``TOLERANCE_PX`` the side file does not describe these views. Short blocks along the
+whole seam (not one shift for the whole strip) also catch a rig whose distortion model is wrong:
+its misfit changes along the seam and is largest at its ends. A block of nearly no texture
+(under ``FLAT_FRACTION`` of the seam's most textured block) that does not correlate is left out:
+it measures nothing. This works on overlaps down to ~20 px wide, where the report's residual is
+not measured, and costs a few warps of small blocks whatever the view size."""
 
 from __future__ import annotations
 
@@ -38,6 +37,8 @@ MIN_CORRELATION = 0.3  # at the best shift: below it the overlap holds no common
 # edges curve) measures those edges, not the seam: it is left out.
 MIN_COVERED = 0.5
 BLOCK_PX = 192  # blocks of an overlap measured at full resolution: enough texture, little cost
+ALONG_PX = 48  # a block's least length along the seam (with SEARCH_PX: >= 1000 pixels compared)
+MAX_BLOCKS = 8
 # A block whose texture is under this fraction of the seam's most textured block holds mostly
 # noise (sky, a wall): with no correlation there it measures nothing, and a seam there is
 # invisible, so it is left out rather than counted as misaligned.
@@ -74,23 +75,7 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
                                       rig=rig)
     out = []
     for a, b, _ in neighbour_pairs(report.layout):
-        region = compose.intersect(boxes[a], boxes[b])
-        found_blocks = []
-        for block in _blocks(region):
-            crops = [compose.warp_region(stack[k], maps[k], block) for k in (a, b)]
-            both = (crops[0][1] > 0) & (crops[1][1] > 0)
-            luma = [np.where(both, crop.mean(axis=0), np.nan) for crop, _ in crops]
-            ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
-            if ok.mean() < MIN_COVERED:
-                continue
-            texture = [highpass(v) for v in luma]
-            found = _block_shift(*texture, ok)
-            if found is not None:
-                found_blocks.append((*found, min(float(np.std(t[ok])) for t in texture)))
-        strongest = max((t for _, _, t in found_blocks), default=0.0)
-        kept = [(s, c) for s, c, t in found_blocks
-                if c >= MIN_CORRELATION or t >= FLAT_FRACTION * strongest]
-        shifts, corrs = [s for s, _ in kept], [c for _, c in kept]
+        shifts, corrs = _seam_shifts(stack, maps, (a, b), compose.intersect(boxes[a], boxes[b]))
         if not shifts:
             raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
                              "(about 20 x 20 px); it cannot be vouched for: register the views "
@@ -105,24 +90,57 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
     return out
 
 
-def _blocks(region) -> list:
-    """Up to four blocks of at most BLOCK_PX x BLOCK_PX spread along an overlap ``region``
-    (canvas slices), centred across it, one per BLOCK_PX / 3 of its length (a short seam is
-    still measured in places); none without an overlap."""
+def _seam_shifts(stack: np.ndarray, maps: list, pair: tuple[int, int], region
+                 ) -> tuple[list, list]:
+    """The shifts aligning the pair's two warped views and their correlations, block by block
+    along the seam (:func:`_blocks`); a textureless block that does not correlate is left out.
+    When no block holds enough pixels (a seam about 20 px wide), fewer, longer blocks."""
+    n = _block_count(region)
+    while n >= 1:
+        found_blocks = []
+        for block in _blocks(region, n):
+            crops = [compose.warp_region(stack[k], maps[k], block) for k in pair]
+            both = (crops[0][1] > 0) & (crops[1][1] > 0)
+            luma = [np.where(both, crop.mean(axis=0), np.nan) for crop, _ in crops]
+            ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
+            if ok.mean() < MIN_COVERED:
+                continue
+            texture = [highpass(v) for v in luma]
+            found = _block_shift(*texture, ok)
+            if found is not None:
+                found_blocks.append((*found, min(float(np.std(t[ok])) for t in texture)))
+        if found_blocks:
+            strongest = max(t for _, _, t in found_blocks)
+            kept = [(s, c) for s, c, t in found_blocks
+                    if c >= MIN_CORRELATION or t >= FLAT_FRACTION * strongest]
+            return [s for s, _ in kept], [c for _, c in kept]
+        n //= 2
+    return [], []
+
+
+def _block_count(region) -> int:
+    """One block per ALONG_PX of the seam's length, at most MAX_BLOCKS (0: no overlap)."""
     if region is None:
-        return []
+        return 0
+    length = max(r.stop - r.start for r in region)
+    return int(np.clip(length // ALONG_PX, 1, MAX_BLOCKS))
+
+
+def _blocks(region, n: int) -> list:
+    """``n`` blocks of at most BLOCK_PX x BLOCK_PX tiling an overlap ``region`` (canvas slices)
+    from one end of the seam to the other, centred across it. A wrong distortion's misfit
+    changes along the seam and grows towards its ends (away from the axis): longer blocks, or
+    blocks that leave the ends out, average it away."""
     spans = [(r.start, r.stop) for r in region]
     long_axis = 0 if spans[0][1] - spans[0][0] >= spans[1][1] - spans[1][0] else 1
     lo, hi = spans[long_axis]
-    n = int(np.clip((hi - lo) // (BLOCK_PX // 3), 1, 4))
     size = min(BLOCK_PX, (hi - lo) // n)
     across_lo, across_hi = spans[1 - long_axis]
     mid = (across_lo + across_hi) // 2
     across = slice(max(across_lo, mid - BLOCK_PX // 2), min(across_hi, mid + BLOCK_PX // 2))
     out = []
-    for k in range(n):
-        centre = lo + (2 * k + 1) * (hi - lo) // (2 * n)
-        along = slice(max(lo, centre - size // 2), min(hi, centre + size // 2))
+    for start in np.linspace(lo, hi - size, n).round().astype(int):
+        along = slice(int(start), int(start) + size)
         out.append((along, across) if long_axis == 0 else (across, along))
     return out
 

@@ -37,7 +37,7 @@ def test_bad_lens_file_is_one_line_and_leaves_nothing(tmp_path):
 
 def test_missing_file_and_usage_error(tmp_path):
     res = CliRunner().invoke(cli, ["optics", str(tmp_path / "nope.yaml")])
-    assert res.exit_code == 1 and "no such lens file" in res.output
+    assert res.exit_code == 1 and "no such file (the YAML lens" in res.output
     res = CliRunner().invoke(cli, ["optics", TABLE2, "--sensor-mm", "wide"])
     assert res.exit_code == 2
 

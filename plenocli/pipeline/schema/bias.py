@@ -1,6 +1,8 @@
 """Parameters of ``plenocli bias``."""
 
-from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
+from collections.abc import Collection
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, Int, RowsCols
 
 PARAMS = (
@@ -16,3 +18,11 @@ PARAMS = (
           "phase kept)."),
     PREVIEW,
 )
+
+
+def check(params: dict, given: Collection[str]) -> None:
+    """The over-scan options do nothing when no over-scan is read."""
+    if params.get("overscan") == "none":
+        refuse_unused(PARAMS, given, ["smooth", "guard"],
+                      "applies to the over-scan levels; --overscan none takes the file's black "
+                      "level")

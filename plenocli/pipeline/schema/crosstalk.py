@@ -1,5 +1,7 @@
 """Parameters of ``plenocli crosstalk``."""
 
+from collections.abc import Collection
+
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
@@ -28,7 +30,13 @@ PARAMS = (
 )
 
 
-def check(params: dict) -> None:
-    """The refocus options of the mask sweep are refused without it, not ignored."""
+def check(params: dict, given: Collection[str]) -> None:
+    """The refocus options of the mask sweep are refused without it, not ignored; the views
+    options and the mixing with it (the sweep refocuses its own left and right views)."""
     if not params.get("mask_widths"):
-        refuse_unused(PARAMS, params, ["s", "g"], "applies to the --mask-widths sweep only")
+        refuse_unused(PARAMS, given, ["s", "g", "grid"],
+                      "applies to the --mask-widths sweep only")
+    else:
+        refuse_unused(PARAMS, given, ["views", "mixing_out"],
+                      "does not apply to the --mask-widths sweep (it refocuses its own left and "
+                      "right views); measure the mixing on refocused views of masked whites")

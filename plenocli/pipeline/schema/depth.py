@@ -1,5 +1,7 @@
 """Parameters of ``plenocli depth``."""
 
+from collections.abc import Collection
+
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
@@ -37,11 +39,11 @@ PARAMS = (
 )
 
 
-def check(params: dict) -> None:
+def check(params: dict, given: Collection[str]) -> None:
     """Options of the other kind of input are refused, not ignored."""
     if params.get("grid"):
-        refuse_unused(PARAMS, params, ["max_disparity"],
+        refuse_unused(PARAMS, given, ["max_disparity"],
                       "applies to dual/quad-pixel views (without --grid) only")
     else:
-        refuse_unused(PARAMS, params, ["s", "g", "min_confidence"],
+        refuse_unused(PARAMS, given, ["s", "g", "min_confidence", "camera"],
                       "applies to lenslet frames (with --grid) only")

@@ -1,7 +1,10 @@
 """Parameters of ``plenocli develop``."""
 
+import os
+from collections.abc import Collection
+
 from plenocli.model.colour import DEFAULT_METHOD, MAX_GAIN_RATIO, METHODS, OUTPUT_SPACES
-from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param
+from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import (
     TIFF,
     Choice,
@@ -65,3 +68,11 @@ PARAMS = (
 def shared_inputs(params) -> tuple[tuple[str, str], ...]:
     """One white image may give both the white balance and the highlight recovery."""
     return (("wb_from", "recover_highlights"),)
+
+
+def check(params: dict, given: Collection[str]) -> None:
+    """A measured white balance replaces --wb, and only a JPEG has a quality."""
+    if params.get("wb_from"):
+        refuse_unused(PARAMS, given, ["wb"], "and --wb-from both set the white balance; give one")
+    if os.path.splitext(str(params.get("output", "")))[1].lower() not in (".jpg", ".jpeg"):
+        refuse_unused(PARAMS, given, ["quality"], "applies to a JPEG output (-o NAME.jpg) only")

@@ -1,5 +1,7 @@
 """Parameters of ``plenocli flat``."""
 
+from collections.abc import Collection
+
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import TIFF, Choice, FiniteFloat, InputFile, Int, OutputFile
 
@@ -31,12 +33,12 @@ def shared_inputs(params) -> tuple[tuple[str, str], ...]:
     return (("input", "white"),) if params.get("save_gain") else ()
 
 
-def check(params: dict) -> None:
+def check(params: dict, given: Collection[str]) -> None:
     """Options of making a gain do nothing to a saved one (--gain: read, not made), and
     --percentile is only the percentile reference's."""
     if params.get("gain"):
-        refuse_unused(PARAMS, params, ["median", "reference", "percentile", "floor"],
+        refuse_unused(PARAMS, given, ["median", "reference", "percentile", "floor"],
                       "makes a gain from --white; a saved --gain keeps the options it was "
                       "made with")
     elif params.get("reference", "max") == "max":
-        refuse_unused(PARAMS, params, ["percentile"], "applies to --reference percentile only")
+        refuse_unused(PARAMS, given, ["percentile"], "applies to --reference percentile only")

@@ -1,5 +1,7 @@
 """Parameters of ``plenocli optics``."""
 
+from collections.abc import Collection
+
 from plenocli.pipeline.params import Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, Flag, OutputFile
 
@@ -25,8 +27,8 @@ PARAMS = (
 )
 
 
-def check(params: dict) -> None:
+def check(params: dict, given: Collection[str]) -> None:
     """The --crosstalk options are refused without it, not ignored."""
     if not params.get("crosstalk"):
-        refuse_unused(PARAMS, params, ["mask_width", "pixel_um", "object_distance_mm"],
+        refuse_unused(PARAMS, given, ["mask_width", "pixel_um", "object_distance_mm"],
                       "applies with --crosstalk only")

@@ -1,5 +1,7 @@
 """Parameters of ``plenocli refocus``."""
 
+from collections.abc import Collection
+
 from plenocli.model.focus import KERNELS, MAX_S, VIEWS, parse_g
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
@@ -43,12 +45,12 @@ PARAMS = (
 )
 
 
-def check(params: dict) -> None:
+def check(params: dict, given: Collection[str]) -> None:
     """With a depth map every lens takes its g from the map: a --g would be ignored; the
     central band a --mask-width leaves out is a half or quarter view's."""
     if params.get("depth"):
-        refuse_unused(PARAMS, params, ["g"], "is not used with --depth (each lens takes its g "
+        refuse_unused(PARAMS, given, ["g"], "is not used with --depth (each lens takes its g "
                       "from the map)")
     if params.get("view", "full") == "full":
-        refuse_unused(PARAMS, params, ["mask_width"], "applies to half and quarter views only "
+        refuse_unused(PARAMS, given, ["mask_width"], "applies to half and quarter views only "
                       "(--view left, right, top, bottom, q00 ...)")

@@ -3,6 +3,7 @@ in :mod:`plenocli.synth.params` and checked by :func:`check`, for the shell and 
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from typing import Any
 
 from plenocli.errors import ConfigError
@@ -76,7 +77,7 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def check(params: dict[str, Any]) -> None:
+def check(params: dict[str, Any], given: Collection[str]) -> None:
     """Every generator parameter known to the kind, of its type and in its declared range."""
     from plenocli.synth import generator
     from plenocli.synth.params import check_params

@@ -1,6 +1,8 @@
 """Parameters of ``plenocli stitch``."""
 
-from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, inputs_arg
+from collections.abc import Collection
+
+from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, inputs_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, OutputFile, Text
 
 _FRACTION = FiniteFloat(min=0, max=1, min_open=True, max_open=True)
@@ -33,3 +35,16 @@ PARAMS = (
           role="output"),
     PREVIEW,
 )
+
+
+def check(params: dict, given: Collection[str]) -> None:
+    """The overlap options only narrow a search: a saved transform is applied, not searched
+    for, and a rig predicts the overlap itself."""
+    if params.get("transform_in"):
+        refuse_unused(PARAMS, given, ["overlap", "overlap_tolerance"],
+                      "narrows the search; --transform-in applies a saved transform")
+    elif params.get("rig"):
+        refuse_unused(PARAMS, given, ["overlap", "overlap_tolerance"],
+                      "narrows the search without a rig; --rig predicts the overlap")
+    elif params.get("overlap") is None:
+        refuse_unused(PARAMS, given, ["overlap_tolerance"], "applies with --overlap only")

@@ -91,14 +91,9 @@ def _check_known(values, searched: str) -> None:
 
 
 def _camera(path: str) -> metric.Camera:
-    from plenocli.io.yamlfile import DocumentError, read_yaml
+    from plenocli.io.yamlfile import read_side_file
 
-    try:
-        doc = read_yaml(path)
-    except FileNotFoundError as err:
-        raise InputError(f"{path}: no such camera file") from err
-    except (OSError, DocumentError) as err:
-        raise InputError(f"{path}: not a readable YAML camera file ({err})") from err
+    doc = read_side_file(path, "YAML camera file")
     try:
         return metric.camera_from_dict(doc)
     except ValueError as err:
