@@ -55,22 +55,34 @@ def check_record_paths(outputs: list[Path], inputs: list[Path]) -> None:
                              "another name for it")
 
 
-def file_state(path: str | os.PathLike) -> list | None:
+def file_state(path: str | os.PathLike, *, hashed: bool = True) -> list | None:
     """[size, mtime in ns, sha256] of a file (None when it is not there; no sha256 for a
-    folder). Size and time alone do not tell two files apart: frames of one camera have one
-    size, and cards, archives and ``touch -r`` give them the same whole-second time."""
+    folder, nor when not ``hashed``). Size and time alone do not tell two files apart: frames of
+    one camera have one size, and cards, archives and ``touch -r`` give them the same
+    whole-second time."""
     try:
         st = os.stat(path)
-        digest = sha256_file(path) if stat.S_ISREG(st.st_mode) else None
+        digest = sha256_file(path) if hashed and stat.S_ISREG(st.st_mode) else None
     except OSError:
         return None
     return [st.st_size, st.st_mtime_ns, digest]
 
 
-def input_states(inputs: Roles) -> dict[str, list]:
+def input_states(inputs: Roles, *, hashed: bool = True) -> dict[str, list]:
     """The state of each input by role, taken before a stage reads them (a change while it
-    runs then shows as a change later)."""
-    return {role: [file_state(p) for p in paths] for role, paths in inputs.items() if paths}
+    runs then shows as a change later); without the sha256 when not ``hashed`` (see
+    :func:`with_digests`)."""
+    return {role: [file_state(p, hashed=hashed) for p in paths]
+            for role, paths in inputs.items() if paths}
+
+
+def with_digests(states: dict[str, list], inputs: Roles) -> dict[str, list]:
+    """``states`` taken unhashed, with each file's sha256 added: computed by then beside the
+    stage's work (:func:`plenocli.model.provenance.hash_ahead`), not before it."""
+    return {role: [state if state is None or not os.path.isfile(path)
+                   else [state[0], state[1], sha256_file(path)]
+                   for state, path in zip(found, inputs[role], strict=True)]
+            for role, found in states.items()}
 
 
 def values(params: dict[str, Any], paths: Roles) -> dict[str, Any]:

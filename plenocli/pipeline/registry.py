@@ -111,11 +111,12 @@ class Stage:
         records.check_record_paths(self.paths(params, self.outputs),
                                    self.paths(params, self.inputs))
         inputs, outputs = self.by_role(params, self.inputs), self.by_role(params, self.outputs)
-        states = records.input_states(inputs)
         hash_ahead([p for paths in inputs.values() for p in paths])
+        started = records.input_states(inputs, hashed=False)
 
         def record(landed):
-            records.write_records(self.name, params, inputs, outputs, states, landed)
+            records.write_records(self.name, params, inputs, outputs,
+                                  records.with_digests(started, inputs), landed)
 
         token = RESOLVED.set(dict(params))
         try:
