@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from plenocli.errors import InputError, check_terminated
+from plenocli.model.provenance import hash_ahead
 
 
 @dataclass
@@ -123,6 +124,8 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     try:
         yield tmp
         os.chmod(tmp, 0o644)
+        if pending is not None:  # its record's sha256, taken while the stage writes the rest
+            hash_ahead([tmp])
         if pending is None:
             check_terminated()
             os.replace(tmp, dest)
