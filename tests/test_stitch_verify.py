@@ -129,3 +129,21 @@ def test_the_true_quad_pixel_rig_passes_at_every_seam():
                          for v in truth["views"]), cam["aperture_mm"], cam["object_distance_mm"])
     _, report = stitch(views, layout="2x2", rig=rig)
     assert max(verify.check_alignment(views, report, what="the rig")) < 0.2
+
+
+def test_a_block_of_one_direction_s_texture_places_nothing_along_it():
+    """Edges along x correlate alike at every shift along x (the aperture problem): that axis
+    of the block's shift is unknown (NaN), not a misfit; the other is measured."""
+    rng = np.random.default_rng(5)
+    yy, xx = np.mgrid[0:64, 0:64].astype(np.float64)
+
+    def stripes(dy):
+        return np.sin(0.9 * (yy + dy)) + 0.5 * np.sin(0.37 * (yy + dy) + 1.0)
+
+    a = stripes(0.0) + rng.normal(0, 0.01, yy.shape)
+    b = stripes(0.3) + rng.normal(0, 0.01, yy.shape)
+    shift, corr = verify._block_shift(a, b, np.ones(a.shape, bool))
+    assert abs(shift[0] + 0.3) < 0.05 and np.isnan(shift[1]) and corr > 0.95
+    spots = np.sin(0.9 * yy) * np.sin(0.7 * xx) + rng.normal(0, 0.01, yy.shape)
+    shift, _ = verify._block_shift(spots, spots, np.ones(a.shape, bool))
+    assert np.all(np.abs(shift) < 0.05)

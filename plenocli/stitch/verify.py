@@ -31,6 +31,7 @@ from plenocli.stitch.views import (
 
 # A seam error under half a pixel is invisible after blending; a transform 1 px off shows.
 TOLERANCE_PX = 0.5
+APERTURE_FRACTION = 0.1  # a correlation peak this much flatter along one axis does not place it
 SEARCH_PX = 4  # the search reaches 4 px (8 px at half resolution); beyond, the residual is "> 4"
 MIN_CORRELATION = 0.3  # at the best shift: below it the overlap holds no common texture
 # A block mostly outside what both views cover (a corner of the panorama where the views'
@@ -80,7 +81,9 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
             raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
                              "(about 20 x 20 px); it cannot be vouched for: register the views "
                              "without it")
-        residual = float(np.sqrt(np.mean(np.sum(np.square(shifts), axis=1))))
+        # per axis over the blocks that constrain it (NaN: the block's texture runs along it)
+        squares = np.square(np.array(shifts))
+        residual = float(np.sqrt(sum(np.nanmean(c) for c in squares.T if np.isfinite(c).any())))
         if not min(corrs) >= MIN_CORRELATION or residual > TOLERANCE_PX:
             shown = f"> {SEARCH_PX}" if residual > SEARCH_PX else f"{residual:.2f}"
             raise ValueError(f"{what} does not describe these views: views {a} and {b} are "
@@ -169,7 +172,19 @@ def _block_shift(a: np.ndarray, b: np.ndarray, ok: np.ndarray
             scores[dy + s, dx + s] = (x * y).sum() / den if den > 0 else 0.0
     iy, ix = np.unravel_index(int(np.argmax(scores)), scores.shape)
     shift = np.array([_vertex(scores[:, ix], iy), _vertex(scores[iy, :], ix)]) - s
+    # the aperture problem: texture of one direction (edges along x, say) correlates alike at
+    # every shift along it, so the peak's place along that axis is noise, not a misfit
+    drops = np.array([_drop(scores[:, ix], iy), _drop(scores[iy, :], ix)])
+    shift[drops < APERTURE_FRACTION * drops.max()] = np.nan
     return shift, float(scores[iy, ix])
+
+
+def _drop(values: np.ndarray, k: int) -> float:
+    """How sharply the correlation peaks at ``values[k]``: its fall to both neighbours (the
+    parabola's curvature; one side at the search's edge). A peak between two pixels falls
+    little to the nearer one, so one side alone would not do."""
+    sides = [values[k] - values[j] for j in (k - 1, k + 1) if 0 <= j < len(values)]
+    return float(sum(sides) * 2 / len(sides))
 
 
 def _vertex(values: np.ndarray, k: int) -> float:
