@@ -48,18 +48,6 @@ def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
     return int(starts[k]), int(stops[k])
 
 
-# a local shift is measured on at most this many px square of a block (its centre, inside the
-# overlap): phase correlation of a textured 256-px window fixes a shift far below the measure's
-# 1/20-px step, and the high-pass and FFTs of a larger block only cost time
-RESIDUAL_WINDOW_PX = 256
-
-
-def _centred(start: int, stop: int) -> slice:
-    """The middle RESIDUAL_WINDOW_PX of [start, stop) (all of it when shorter)."""
-    cut = max(0, stop - start - RESIDUAL_WINDOW_PX) // 2
-    return slice(start + cut, min(stop, start + cut + RESIDUAL_WINDOW_PX))
-
-
 def overlap_residual(pieces: list, long_axis: int) -> float | None:
     """RMS (px) of the local shifts left between two warped views over the blocks of their
     overlap: ``pieces`` (view a, view b, pixels both cover), same-size crops of the canvas, one
@@ -74,14 +62,13 @@ def overlap_residual(pieces: list, long_axis: int) -> float | None:
         if min(both.shape) < 32:
             continue
         # an overlap that is not a rectangle (homography, undistorted views): keep the longest
-        # run of lines across the block that lie wholly inside it, and of it the centred window
+        # run of lines across the block that lie wholly inside it
         run = _longest_run(both.all(axis=long_axis))
         if run is None or run[1] - run[0] < 16:
             continue
-        cut = [_centred(0, n) for n in both.shape]
-        cut[1 - long_axis] = _centred(*run)
-        window = tuple(cut)  # lines wholly inside the overlap: no pixel left out
-        ha, hb = (highpass(np.where(both[window], x[window], np.nan)) for x in (pano_a, pano_b))
+        across = [slice(None), slice(None)]
+        across[1 - long_axis] = slice(*run)
+        ha, hb = (highpass(np.where(both, x, np.nan))[tuple(across)] for x in (pano_a, pano_b))
         if ha.std() == 0:
             continue
         shift, _, _ = phase_cross_correlation(ha, hb, upsample_factor=20)
