@@ -223,6 +223,12 @@ def assert_one_line(result, code: int, words: tuple[str, ...]) -> None:
 # a value the option's own type refuses is a usage error (exit 2), like any bad flag
 CASES = [
     # refocus: g, s and grids
+    # depth: a g bound past the shift the grid can measure (pitch / 0.25 px) is a usage error
+    ("depth-g-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                                 "--g", "2:1e308", "-o", "{o}/d.tif"], 2, ("--g", "1 < g <=")),
+    ("depth-g-galilean-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid",
+                                          "{i}/rt/grid.yaml", "--g", "-1e6:-2", "-o",
+                                          "{o}/d.tif"], 2, ("--g", "<= g < -1")),
     ("refocus-g0", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "0",
                     "-o", "{o}/r.tif"], 2, ("positive",)),
     ("refocus-g-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g=-1",
@@ -1197,3 +1203,18 @@ def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inpu
                                       str(tmp_path / ".m.tif.plenocli.json")])
     assert_one_line(result, 1, ("is the record plenocli writes beside",))
     assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
+
+
+@pytest.mark.parametrize("how", ["yaml", "set"])
+def test_a_g_bound_past_what_the_grid_measures_is_refused_from_a_config(how, inputs, tmp_path):
+    """`depth --g 2:1e308` searched shifts of 1e-307 px and wrote a map with exit 0: refused
+    as from the shell (exit 2, naming the range the grid measures), from YAML and --set."""
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    g = "2:1e308" if how == "yaml" else "2:8"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    g: \"{g}\"\n"
+                      f"    output: {out}/d.tif\n")
+    extra = ["--set", "depth.g=2:1e308"] if how == "set" else []
+    result = run_bad(inputs, out, ["run", str(config), *extra])
+    assert_one_line(result, 2, ("step 'depth'", "--g", "1 < g <="))
