@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 
 from plenocli import crosstalk as crosstalk_lib
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.framing import frame_grid, sensor_image
 from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
 from plenocli.io.views import read_colour_views, read_masked_whites
+from plenocli.model.focus import check_mask_width
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import ViewNames, view_of
 from plenocli.progress import log, shown
@@ -113,14 +115,26 @@ def _capture_entry(path: str, names: list[str], res: dict, tile: int, cfa: str |
     }
 
 
+def parse_mask_widths(text: str) -> list[float]:
+    """"0,1,2,3" -> [0.0, 1.0, 2.0, 3.0]: finite widths >= 0 (px), each once; ValueError with
+    the usage otherwise."""
+    usage = f"expected comma-separated widths >= 0 px, each once (e.g. 0,1,2,3), got {text!r}"
+    try:
+        widths = [float(w) for w in str(text).split(",")]
+    except ValueError as err:
+        raise ValueError(usage) from err
+    if not all(math.isfinite(w) and w >= 0 for w in widths) or len(set(widths)) < len(widths):
+        raise ValueError(usage)
+    return widths
+
+
 def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: int,
                mask_widths: str, grid: str | None, s: float, g: float) -> None:
     """Raytrix: refocus left/right views of a half-masked white capture for each mask width."""
     try:
-        widths = [float(w) for w in mask_widths.split(",") if w.strip()]
+        widths = parse_mask_widths(mask_widths)
     except ValueError as err:
-        raise ConfigError(f"--mask-widths {mask_widths!r} is not a comma-separated list of "
-                          "numbers (e.g. 0,1,2,3)") from err
+        raise OptionError(f"--mask-widths: {err}") from err
     if len(inputs) != 1:
         raise ConfigError("--mask-widths takes exactly one input: the frames TIFF of a white "
                           "capture with one pupil half masked")
@@ -132,6 +146,10 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
         raise ConfigError(f"with --mask-widths, --intended is 'left' or 'right', got {side!r}")
     data, meta = tiffio.read_image(inputs[0])
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=inputs[0])
+    try:
+        check_mask_width(max(widths), framing.grid.pitch_px)
+    except ValueError as err:
+        raise OptionError(f"--mask-widths: {err}") from err
     frame = framing.crop(sensor_image(data, meta))
     try:
         sweep = crosstalk_lib.refocus_mask_sweep(frame, framing.grid, widths, s=s, g=g,

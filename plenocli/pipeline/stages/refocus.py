@@ -8,7 +8,7 @@ import numpy as np
 
 from plenocli import refocus as rf
 from plenocli.depth.lenslet import sensor_grey
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
@@ -36,6 +36,11 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     data, meta = tiffio.read_image(input)
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=input)
+    if view != "full":
+        try:
+            rf.check_mask_width(mask_width, framing.grid.pitch_px)
+        except ValueError as err:
+            raise OptionError(f"--mask-width: {err}") from err
     try:
         rf.check_output_size((framing.bottom - framing.top, framing.right - framing.left), s,
                              pages=len(g_values) * data.shape[0] * (3 if framing.cfa else 1))
