@@ -170,6 +170,36 @@ def test_a_depth_map_that_does_not_fit_is_refused(lenslet, tmp_path):
         assert len(result.output.strip().splitlines()) == 1 and not out.exists()
 
 
+def _grid_moved(lenslet, path, dx: float):
+    import yaml
+
+    doc = yaml.safe_load((lenslet / "grid.yaml").read_text())
+    doc["lens_grid"]["offset_xy"][0] += dx
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def test_a_grid_whose_offset_is_off_is_moved_onto_the_frame_or_refused(lenslet, tmp_path):
+    """W1 (audit 6): a grid 1 px off in x moved a plane at g = 4 to 5.1 with exit 0. Its
+    centres are measured on the frame (the lens centre by symmetry) and the grid moved onto
+    them; one more than a quarter pitch off is refused, naming the grid."""
+    out = tmp_path / "d.tif"
+    result = invoke("depth", lenslet / "frames.tif", "--grid",
+                    _grid_moved(lenslet, tmp_path / "g1.yaml", 1.0), "-o", out)
+    assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(out)
+    inner = np.isfinite(data[0])
+    inner[:6], inner[-6:], inner[:, :6], inner[:, -6:] = False, False, False, False
+    assert np.median(np.abs(data[0][inner] - 4.5)) <= 0.1
+    assert np.allclose(meta["depth"]["grid_moved_px"], [-1.0, 0.0], atol=0.05)
+    far = _grid_moved(lenslet, tmp_path / "g8.yaml", 8.0)
+    result = invoke("depth", lenslet / "frames.tif", "--grid", far, "-o", out.with_name("e.tif"))
+    assert result.exit_code == 1
+    assert "lens centres lie 8.0 px from the frame's micro-images" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not out.with_name("e.tif").exists()
+
+
 def test_a_range_that_misses_the_scene_is_refused(lenslet, tmp_path):
     out = tmp_path / "d.tif"
     result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml",

@@ -12,7 +12,7 @@ from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames
-from plenocli.pipeline.fits import check_fits
+from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
@@ -117,8 +117,9 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
         check_fits(grey, framing.grid, grid_path, for_depth=True)
+        lens_grid, moved = centred_on(grey, framing.grid, grid_path)
         ranges = _type_ranges(grid_path, framing.grid)
-        result = lenslet.depth_map(grey, framing.grid, s=s, g_range=g_range,
+        result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,
                                    min_confidence=min_confidence, type_ranges=ranges)
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
@@ -131,6 +132,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     info = {"method": "disparity between neighbouring micro-images, q = 1/g",
             "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
             "crop_sensor_origin": list(framing.sensor_origin),
+            "grid_moved_px": None if moved is None else list(moved),
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
             "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
             "type_ranges": None if ranges is None else ranges.tolist(),
