@@ -193,11 +193,33 @@ def test_a_grid_whose_offset_is_off_is_moved_onto_the_frame_or_refused(lenslet, 
     assert np.median(np.abs(data[0][inner] - 4.5)) <= 0.1
     assert np.allclose(meta["depth"]["grid_moved_px"], [-1.0, 0.0], atol=0.05)
     far = _grid_moved(lenslet, tmp_path / "g8.yaml", 8.0)
-    result = invoke("depth", lenslet / "frames.tif", "--grid", far, "-o", out.with_name("e.tif"))
-    assert result.exit_code == 1
-    assert "lens centres lie 8.0 px from the frame's micro-images" in result.output
-    assert len(result.output.strip().splitlines()) == 1
-    assert not out.with_name("e.tif").exists()
+    for stage in ("depth", "refocus"):
+        result = invoke(stage, lenslet / "frames.tif", "--grid", far, "-o",
+                        out.with_name("e.tif"))
+        assert result.exit_code == 1
+        assert "lens centres lie 8.0 px from the frame's micro-images" in result.output
+        assert len(result.output.strip().splitlines()) == 1
+        assert not out.with_name("e.tif").exists()
+
+
+def test_refocus_views_use_the_lens_centres_the_frame_shows(lenslet, tmp_path):
+    """A grid 1 px off split each micro-image 1 px off its centre in a left view (the
+    cross-talk of a masked white's views moved from 3.6 to 3.0 %, exit 0): refocus moves it
+    onto the frame's centres as depth does, and gives the exact grid's view."""
+    views = []
+    for name, grid in (("exact", lenslet / "grid.yaml"),
+                       ("moved", _grid_moved(lenslet, tmp_path / "g1.yaml", 1.0))):
+        out = tmp_path / f"{name}.tif"
+        result = invoke("refocus", lenslet / "frames.tif", "--grid", grid, "--view", "left",
+                        "-o", out)
+        assert result.exit_code == 0, result.output
+        views.append(tiffio.read_image(out))
+    (exact, _), (moved, meta) = views
+    assert np.allclose(meta["refocus"]["grid_moved_px"], [-1.0, 0.0], atol=0.05)
+    both = np.isfinite(exact) & np.isfinite(moved)
+    assert both.mean() > 0.9
+    diff = np.abs(moved - exact)[both] / np.nanmean(exact)
+    assert diff.mean() <= 0.005 and np.percentile(diff, 99) <= 0.05   # 1 px off: 0.19, 0.29
 
 
 def test_a_range_that_misses_the_scene_is_refused(lenslet, tmp_path):

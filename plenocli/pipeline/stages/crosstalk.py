@@ -19,6 +19,7 @@ from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import ViewNames, view_of
+from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
 
@@ -150,15 +151,21 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
         check_mask_width(max(widths), framing.grid.pitch_px)
     except ValueError as err:
         raise OptionError(f"--mask-widths: {err}") from err
+    from plenocli.depth.lenslet import sensor_grey  # with the sweep's numba kernels
+
     frame = framing.crop(sensor_image(data, meta))
+    grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
+    check_fits(grey, framing.grid, grid)
+    lens_grid, moved = centred_on(grey, framing.grid, grid)
     try:
-        sweep = crosstalk_lib.refocus_mask_sweep(frame, framing.grid, widths, s=s, g=g,
+        sweep = crosstalk_lib.refocus_mask_sweep(frame, lens_grid, widths, s=s, g=g,
                                                  intended=side, tile_px=tile)
     except ValueError as err:
         raise ConfigError(f"crosstalk --mask-widths: {err}") from err
     params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
     record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
-    doc = {"sweep": sweep, "intended": side, "provenance": record}
+    doc = {"sweep": sweep, "intended": side, "provenance": record,
+           "grid_moved_px": None if moved is None else list(moved)}
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False),
                protect=(inputs[0], grid))
     for row in sweep:
