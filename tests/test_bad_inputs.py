@@ -1229,3 +1229,52 @@ def test_a_g_bound_past_what_the_grid_measures_is_refused_from_a_config(how, inp
     extra = ["--set", "depth.g=2:1e308"] if how == "set" else []
     result = run_bad(inputs, out, ["run", str(config), *extra])
     assert_one_line(result, 2, ("step 'depth'", "--g", "1 < g <="))
+
+
+def _png_chunk(kind: bytes, body: bytes) -> bytes:
+    return (struct.pack(">I", len(body)) + kind + body
+            + struct.pack(">I", zlib.crc32(kind + body) & 0xffffffff))
+
+
+def _damaged_pngs(folder: Path) -> dict[str, Path]:
+    """A PNG whose pixel data fails its check, one whose header claims 2^31 - 1 columns, and
+    one with a truncated zTXt chunk (its pixels whole)."""
+    import cv2
+
+    image = (np.random.default_rng(0).random((64, 96, 3)) * 255).astype(np.uint8)
+    raw = cv2.imencode(".png", image)[1].tobytes()
+    bad = bytearray(raw)
+    bad[-20] ^= 0xFF
+    header = raw.find(b"IHDR")
+    wide = bytearray(raw)
+    wide[header + 4:header + 12] = struct.pack(">II", 2 ** 31 - 1, 1)
+    wide[header + 17:header + 21] = struct.pack(">I", zlib.crc32(bytes(wide[header:header + 17]))
+                                                & 0xffffffff)
+    data = raw.find(b"IDAT") - 4
+    cut = zlib.compress(b"A" * 100_000)[:-9]   # a compressed comment that stops short
+    ztxt = raw[:data] + _png_chunk(b"zTXt", b"Comment\x00\x00" + cut) + raw[data:]
+    files = {"badcrc": bytes(bad), "wide": bytes(wide), "ztxt": ztxt}
+    for name, content in files.items():
+        (folder / f"{name}.png").write_bytes(content)
+    return {name: folder / f"{name}.png" for name in files}
+
+
+def test_a_damaged_png_is_one_line_without_the_codecs_own(tmp_path, capfd):
+    """E1 (audit 6): libpng printed its warnings and errors on stderr (2-3 lines, also on
+    success); they are the reason in plenocli's one line, or logged with -v."""
+    pngs = _damaged_pngs(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    for args, words in (
+            (["decode", str(pngs["badcrc"]), "-o", str(out / "a.tif")], ("incorrect data check",)),
+            (["calibrate", str(pngs["badcrc"]), "-o", str(out / "g.yaml")],
+             ("incorrect data check",)),
+            (["decode", str(pngs["wide"]), "-o", str(out / "b.tif")], ("IHDR",)),
+            (["calibrate", str(pngs["wide"]), "-o", str(out / "g.yaml")], ("IHDR",))):
+        result = CliRunner().invoke(cli, args)
+        assert_one_line(result, 1, words)
+        assert "libpng" not in capfd.readouterr().err
+    assert not list(out.iterdir())
+    result = CliRunner().invoke(cli, ["decode", str(pngs["ztxt"]), "-o", str(out / "z.tif")])
+    assert result.exit_code == 0, result.output
+    assert "libpng" not in capfd.readouterr().err + result.stderr

@@ -10,6 +10,7 @@ import numpy as np
 from plenocli import calibration
 from plenocli.errors import CalibrationError, InputError, not_a_file
 from plenocli.io import gridfile, raytrix, tiffio
+from plenocli.io.plainimage import read_plain_image
 from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import phase_gains, shift_pattern
 from plenocli.model.provenance import stage_record
@@ -27,12 +28,7 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, tuple[int, int
     if p.suffix.lower() in (".tif", ".tiff"):
         views, meta = tiffio.read_image(p)
     else:
-        import cv2
-
-        data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        if data is None:
-            raise InputError(f"{p}: unreadable image; pass a TIFF, PNG, JPEG or BMP image of "
-                             "the lens array")
+        data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
         views = np.moveaxis(data[..., :3], -1, 0) if data.ndim == 3 else data[np.newaxis]
         meta = {}
     if views.ndim != 3 or views.shape[1] == 0 or views.shape[2] == 0:
