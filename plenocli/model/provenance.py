@@ -89,3 +89,20 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
 def parameters_of(record: dict | None) -> dict | None:
     """The parameters stored in a provenance record (None when there is no record)."""
     return None if not record else record.get("parameters")
+
+
+def processing_of(meta: dict) -> list[str]:
+    """The stages that made a file, oldest first (its history, then its own record), named as
+    what changes its light levels: the stage, and for a refocused view its pupil mask width
+    (``refocus(mask_width=2)``). [] for a file without a plenocli record."""
+    records = [*(meta.get("history") or []), meta.get("provenance")]
+    steps = []
+    for record in records:
+        if not isinstance(record, dict) or not isinstance(record.get("stage"), str):
+            continue
+        step = record["stage"]
+        params = record.get("parameters") if isinstance(record.get("parameters"), dict) else {}
+        if step == "refocus" and params.get("view", "full") != "full":
+            step = f"refocus(mask_width={params.get('mask_width')})"
+        steps.append(step)
+    return steps

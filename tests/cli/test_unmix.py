@@ -201,3 +201,46 @@ def test_non_finite_mixing_is_refused(rig):
     res = _invoke("unmix", _bad_views(tmp, cfa=None), "--mixing", mixing, "-o", tmp / "o.tif",
                   "--regularise", 0.1)
     assert res.exit_code == 1 and "non-finite" in res.output and not (tmp / "o.tif").exists()
+
+
+def _made_by(path, stages):
+    """Rewrite ``path`` as if the stages listed (oldest first) had made it."""
+    data, meta = tiffio.read_image(path)
+    records = [{"software": "plenocli", "stage": s, "parameters": {}, "inputs": []}
+               for s in stages]
+    tiffio.write_image(path, data, {**meta, "history": records[:-1], "provenance": records[-1]})
+
+
+def test_a_mixing_of_views_processed_otherwise_is_refused(rig):
+    """W3 (audit 6): a mixing measured on bias-only whites unmixed flat-fielded views (ghosts
+    of 2 % median, 7 % p99 left, exit 0). The mixing records the stages that made its whites;
+    unmix refuses views made by others, and crosstalk whites processed unalike."""
+    paths, _, _, tmp = rig
+    for name in ("masked_A", "masked_B"):
+        _made_by(paths[name], ["decode", "bias"])
+    _made_by(paths["views"], ["decode", "bias", "flat"])
+    mixing = tmp / "m_bias.tif"
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_B"], "--views", "A,B",
+                  "--intended", "A,B", "--tile", 8, "-o", tmp / "c.json", "--mixing-out", mixing)
+    assert res.exit_code == 0, res.output
+    assert read_mixing(mixing)[1]["mixing"]["views_made_by"] == ["decode", "bias"]
+    out = tmp / "u.tif"
+    res = _invoke("unmix", paths["views"], "--mixing", mixing, "-o", out)
+    assert res.exit_code == 1 and not out.exists()
+    assert "measured on views made by decode > bias, but" in res.output
+    assert "made by decode > bias > flat" in res.output
+    _made_by(paths["views"], ["decode", "bias"])
+    assert _invoke("unmix", paths["views"], "--mixing", mixing, "-o", out).exit_code == 0
+    # a mixing file written before the record: the last stage of its whites (its history)
+    field, _ = read_mixing(mixing)
+    older = tmp / "older.tif"
+    write_mixing(older, field, layout="cfa", cfa="RGGB",
+                 meta={"history": [{"stage": "bias", "parameters": {}}] * 2})
+    _made_by(paths["views"], ["decode", "bias", "flat"])
+    res = _invoke("unmix", paths["views"], "--mixing", older, "-o", out)
+    assert res.exit_code == 1 and "measured on views made by bias" in res.output
+    _made_by(paths["masked_B"], ["decode", "bias", "flat"])
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_B"], "--views", "A,B",
+                  "--intended", "A,B", "--tile", 8, "-o", tmp / "d.json", "--mixing-out",
+                  tmp / "m2.tif")
+    assert res.exit_code == 1 and "process the masked whites alike" in res.output

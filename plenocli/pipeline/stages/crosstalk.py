@@ -17,7 +17,7 @@ from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
 from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
-from plenocli.model.provenance import json_safe, stage_record
+from plenocli.model.provenance import json_safe, processing_of, stage_record
 from plenocli.model.views import ViewNames, view_of
 from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
@@ -184,6 +184,19 @@ def _check_open_part(path: str, name: str, r: float) -> None:
                          "--intended and the mask")
 
 
+def _processing(inputs: list[str]) -> list[str] | None:
+    """The stages that made the masked whites (one list: they must be processed alike, as
+    the capture whose views the mixing will unmix); None when they carry no record."""
+    made = {tuple(processing_of(tiffio.read_meta(p))): p for p in inputs}
+    if len(made) > 1:
+        (one, first), (other, second) = list(made.items())[:2]
+        raise InputError(f"{first} was made by {' > '.join(one) or 'no plenocli stage'} but "
+                         f"{second} by {' > '.join(other) or 'no plenocli stage'}; process the "
+                         "masked whites alike, as the capture")
+    steps = next(iter(made))
+    return list(steps) if steps else None
+
+
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
@@ -193,6 +206,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
         if not white.same_kind(first):
             raise InputError(f"{label} does not match {inputs[0]} (views, colours, CFA or size); "
                              "give masked whites of one rig, processed the same way")
+    made_by = _processing(inputs)
     names = first.names
     if len(whites) != len(names):
         raise InputError(f"--mixing-out needs one masked white per pupil part: {len(names)} "
@@ -232,7 +246,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                       "definition": "view k records sum_j M_kj T_j; M_jj = 1; r = max over "
                       "k != j of M_kj / M_jj", **from_m}, "provenance": record}
     protect = tuple(inputs)
-    write_mixing(mixing_out, field, layout=first.layout, cfa=first.cfa,
+    write_mixing(mixing_out, field, layout=first.layout, cfa=first.cfa, made_by=made_by,
                  meta={"provenance": record, "history": history, "r_from_mixing": from_m},
                  protect=protect)
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False), protect=protect)

@@ -18,7 +18,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
-from plenocli.model.provenance import stage_record
+from plenocli.model.provenance import processing_of, stage_record
 from plenocli.model.views import ViewNames, colour_page
 from plenocli.progress import log, shown
 
@@ -77,6 +77,27 @@ def _check_geometry(field, info: dict, framing: Framing, mixing: str,
                          "processed like these views")
 
 
+def _check_processing(mix_meta: dict, mixing: str, inputs: list[str]) -> None:
+    """The mixing describes views made as the ones it measured (flat-fielded or not, refocused
+    with the same mask): other views carry other shares of light, and ghosts stay. Mixing
+    files of before this record name only the last stage of their whites (their history)."""
+    made = mix_meta["mixing"].get("views_made_by")
+    whites = sorted({r.get("stage") for r in mix_meta.get("history") or []
+                     if isinstance(r, dict)} - {None})
+    for path in inputs:
+        steps = processing_of(tiffio.read_meta(path))
+        if not steps:
+            continue  # no plenocli record: taken as it is
+        if made is not None:
+            differs, said = steps != list(made), " > ".join(made) or "no plenocli stage"
+        else:
+            differs, said = bool(whites) and [steps[-1]] != whites, " or ".join(whites)
+        if differs:
+            raise InputError(f"{mixing} was measured on views made by {said}, but {path} was "
+                             f"made by {' > '.join(steps)}; measure the mixing on masked "
+                             "whites processed as these views")
+
+
 def _check_condition(field, mixing: str, regularise: float) -> np.ndarray:
     if not np.isfinite(field.nodes).all():
         raise CalibrationError(f"{mixing}: the mixing field has non-finite values; measure it "
@@ -105,6 +126,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     groups = _plan(names, info, inputs)
     framing = active_area(meta, pages.shape[1:])
     _check_geometry(field, info, framing, mixing, inputs)
+    _check_processing(mix_meta, mixing, inputs)
     cond = _check_condition(field, mixing, regularise)
     cfa = framing.cfa
     out = pages.copy()
