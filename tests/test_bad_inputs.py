@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import struct
 import zlib
 from dataclasses import replace
@@ -1278,3 +1279,30 @@ def test_a_damaged_png_is_one_line_without_the_codecs_own(tmp_path, capfd):
     result = CliRunner().invoke(cli, ["decode", str(pngs["ztxt"]), "-o", str(out / "z.tif")])
     assert result.exit_code == 0, result.output
     assert "libpng" not in capfd.readouterr().err + result.stderr
+
+
+def test_a_list_or_camera_file_that_is_no_text_file_is_one_line(inputs, tmp_path, monkeypatch):
+    """M1 (audit 6): `depth --camera /dev/zero` read the device whole (RSS 6 GB in 8 s), a
+    FIFO blocked; `batch --inputs @LIST` of a binary file was an internal error
+    (UnicodeDecodeError), of a device "no such list file". Every text side file is read as a
+    regular file of bounded size."""
+    binary = tmp_path / "bin.lst"
+    binary.write_bytes(bytes(range(128, 256)))
+    config = Path(__file__).parents[1] / "configs" / "batch_dualpixel.yaml"
+    for listing, words in ((binary, "not UTF-8"), (Path(os.devnull), "not a regular file")):
+        result = run_bad(inputs, tmp_path / "out", ["batch", str(config), "--inputs",
+                                                    f"@{listing}", "--out", "{o}/b"])
+        assert_one_line(result, 1, ("--inputs", words))
+    result = run_bad(inputs, tmp_path / "out", ["depth", "{i}/rt/frames.tif", "--grid",
+                                                "{i}/rt/grid.yaml", "--camera", os.devnull,
+                                                "-o", "{o}/d.tif"])
+    assert_one_line(result, 1, ("not a regular file",))
+    from plenocli.io import yamlfile
+
+    monkeypatch.setattr(yamlfile, "MAX_TEXT_BYTES", 1 << 20)
+    camera = tmp_path / "camera.yaml"
+    camera.write_text("focal_length_mm: 50\n" + "# padding\n" * 120_000)
+    result = run_bad(inputs, tmp_path / "out", ["depth", "{i}/rt/frames.tif", "--grid",
+                                                "{i}/rt/grid.yaml", "--camera", str(camera),
+                                                "-o", "{o}/d.tif"])
+    assert_one_line(result, 1, ("more than 1 MiB of text",))
