@@ -32,14 +32,7 @@ from dataclasses import dataclass
 from multiprocessing import connection
 from pathlib import Path
 
-from plenocli.errors import (
-    ConfigError,
-    InputError,
-    PlenocliError,
-    not_a_file,
-    os_error_message,
-    raise_terminated,
-)
+from plenocli.errors import ConfigError, InputError, PlenocliError, raise_terminated
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
@@ -90,6 +83,7 @@ class BatchReport:
 
 def _list_lines(pattern: str, listing: Path) -> list[str]:
     """The lines of an ``@LIST`` file, refused in one line when it is no text file."""
+    from plenocli.errors import not_a_file, os_error_message
     from plenocli.io.yamlfile import DocumentError, read_text
 
     if not listing.is_file():
