@@ -116,6 +116,7 @@ def _mixing_file(tmp, nodes, views=("A", "B")):
     ("view_count", "has no view 'c'"),
     ("singular", "singular"),
     ("not_mixing", "not a mixing file"),
+    ("parts_left_out", "mixes views S00,S01 only, but"),   # W5 (audit 6): half unmixed, exit 0
 ])
 def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
     paths, _, _, tmp = rig
@@ -137,6 +138,11 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
                               views=("A", "B", "C"))
     elif case == "not_mixing":
         mixing = paths["masked_A"]
+    elif case == "parts_left_out":
+        views = _bad_views(tmp, cfa=None, names=("S00", "S01", "S10", "S11"))
+        m = np.eye(2) + 0.1 * (1 - np.eye(2))
+        mixing = _mixing_file(tmp, np.tile(m[None, :, :, None, None], (1, 1, 1, 2, 2)),
+                              views=("S00", "S01"))
     out = tmp / "out.tif"
     res = _invoke("unmix", views, "--mixing", mixing, "-o", out, "--noise-map",
                   tmp / "gain.tif", "--preview", tmp / "p.png")
@@ -144,6 +150,26 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
     assert message in res.output and len(res.output.strip().splitlines()) == 1
     assert "Traceback" not in res.output
     assert not out.exists() and not (tmp / "gain.tif").exists() and not (tmp / "p.png").exists()
+
+
+def test_crosstalk_mixing_covers_every_pupil_part(tmp_path):
+    """W5 (audit 6): --views S00,S01 on a quad-pixel rig's masked whites wrote a 2 x 2 mixing
+    that unmix applied to the four views (S00, S01 18 % off, S10, S11 left ghosted)."""
+    names = ["S00", "S01", "S10", "S11"]
+    whites = []
+    for j in range(2):
+        path = tmp_path / f"w{j}.tif"
+        views = np.full((4, *SHAPE), 0.1, np.float32)
+        views[j] = 1.0
+        tiffio.write_image(path, views, {"views": names})
+        whites.append(path)
+    res = _invoke("crosstalk", *whites, "--views", "S00,S01", "--intended", "S00,S01",
+                  "--tile", 16, "-o", tmp_path / "c.json", "--mixing-out", tmp_path / "m.tif")
+    assert res.exit_code == 1 and "holds pupil parts S00,S01,S10,S11" in res.output
+    assert not (tmp_path / "m.tif").exists() and not (tmp_path / "c.json").exists()
+    res = _invoke("crosstalk", *whites, "--views", "S00,S01", "--intended", "S00,S01",
+                  "--tile", 16, "-o", tmp_path / "c.json")   # r alone of two parts: fine
+    assert res.exit_code == 0, res.output
 
 
 def test_crosstalk_mixing_needs_one_white_per_part(rig):

@@ -18,7 +18,7 @@ from plenocli.io.preview import write_heat_map
 from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
 from plenocli.model.provenance import json_safe, processing_of, stage_record
-from plenocli.model.views import ViewNames, view_of
+from plenocli.model.views import ViewNames, pupil_views, view_of
 from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
@@ -208,6 +208,11 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                              "give masked whites of one rig, processed the same way")
     made_by = _processing(inputs)
     names = first.names
+    parts = pupil_views(tiffio.read_meta(inputs[0]).get("views") or [])
+    if len(parts) > 1 and not set(parts) <= set(names):
+        raise ConfigError(f"--views {views}: {inputs[0]} holds pupil parts "
+                          f"{','.join(parts)}; a mixing must cover every part (each leaks "
+                          "into the others): leave --views out, or name them all")
     if len(whites) != len(names):
         raise InputError(f"--mixing-out needs one masked white per pupil part: {len(names)} "
                          f"views ({','.join(names)}) but {len(whites)} inputs")
