@@ -1306,3 +1306,25 @@ def test_a_list_or_camera_file_that_is_no_text_file_is_one_line(inputs, tmp_path
                                                 "{i}/rt/grid.yaml", "--camera", str(camera),
                                                 "-o", "{o}/d.tif"])
     assert_one_line(result, 1, ("more than 1 MiB of text",))
+
+
+def test_messages_name_what_is_wrong(inputs, tmp_path):
+    """E3 (audit 6): bias said it takes simulate outputs (it refuses them) "or a foreign file";
+    `camera: false` in a config was "input .../False"; a 1-bit image "looks like a Bayer
+    mosaic" with its four phases alike."""
+    import cv2
+
+    result = run_bad(inputs, tmp_path / "out", ["bias", "{i}/rt/frames.tif", "-o", "{o}/b.tif"])
+    assert_one_line(result, 1, ("takes as input the output of decode",))
+    assert "simulate" not in result.stderr.split("output of")[-1]
+    assert "foreign" not in result.stderr
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n    grid: "
+                      f"{inputs}/rt/grid.yaml\n    camera: false\n    output: {tmp_path}/d.tif\n")
+    result = run_bad(inputs, tmp_path / "out", ["run", str(config)])
+    assert_one_line(result, 1, (f"{tmp_path}/false does not exist",))
+    binary = tmp_path / "binary.png"
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(binary), np.where(rng.random((96, 128)) > 0.5, 255, 0).astype(np.uint8))
+    result = run_bad(inputs, tmp_path / "out", ["calibrate", str(binary), "-o", "{o}/g.yaml"])
+    assert result.exit_code == 1 and "Bayer" not in result.stderr

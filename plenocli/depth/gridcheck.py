@@ -34,6 +34,7 @@ CHECK_PX = 1024         # side of the central region folded: a tenth of depth's 
 CHECK_PITCHES = 24      # and at least this many lenses across (16 left Boys2 unsure)
 MAX_DEPTH_ERROR = 0.002  # a lattice vector's error over the pitch, for depth (below)
 TURN_STARTS = 8         # starts per symmetry period when the grid's own angle folds to nothing
+FAR_ERROR = 0.2         # lattice vectors this far apart: the fold found a relative, maybe
 MAX_OFFSET = 0.25       # pitches: a grid's centres this far from the micro-images are refused
 
 
@@ -71,6 +72,10 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
         return shows
     error = _vector_error(own, found)
     drift = error * float(np.hypot(*frame.shape)) / 2 / own.pitch_px
+    if error > FAR_ERROR:   # folded from far off, the fold can settle on a coarse relative
+        return (f"the frame's micro-images do not lie on the grid's {own.describe()} lattice "
+                f"(folded from it they repeat on {found.describe()}, or a finer lattice "
+                f"within it; {drift:.2f} pitches apart at the frame's corners)")
     if drift > MAX_DRIFT:
         return f"{shows} ({drift:.2f} pitches apart at the frame's corners)"
     if for_depth and error > MAX_DEPTH_ERROR:

@@ -57,8 +57,10 @@ MOSAIC_LIMIT = 0.02
 
 def _refuse_hidden_mosaic(path: str, image: np.ndarray) -> None:
     """An image without a CFA pattern whose pixel phases differ like a Bayer mosaic's is
-    refused: its micro-images would be measured through the colour filters."""
+    refused: its micro-images would be measured through the colour filters. Phases alike but
+    off 1 together (a 1-bit image's medians) are no mosaic."""
     gains = phase_gains(image)
+    gains = gains / gains.mean()   # phases that differ from each other: alike is no mosaic
     if np.max(np.abs(gains - 1.0)) > MOSAIC_LIMIT:
         shares = ", ".join(f"{g:.3f}" for g in gains.ravel())
         raise InputError(f"{path} looks like a 2 x 2 Bayer mosaic but names no CFA pattern: its "
