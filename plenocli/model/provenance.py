@@ -19,6 +19,10 @@ _HASHES: dict[tuple, str] = {}
 # every record holds all of them, defaults included, whatever subset a stage passes.
 RESOLVED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("plenocli_resolved",
                                                                       default=None)
+# and the parameters that have no effect in this run (depth's --max-disparity on lenslet
+# frames): not recorded, as the run did not use them
+UNUSED: contextvars.ContextVar[frozenset] = contextvars.ContextVar("plenocli_unused",
+                                                                   default=frozenset())
 
 
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
@@ -63,11 +67,13 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
     ``inputs`` maps a role (``input``, ``white``, ...) to a path or a list of paths; each file is
     hashed. Parameters that are paths are kept as given (the hashes identify the content).
     Inside a stage run the edge's fully resolved parameters are recorded, with ``parameters``
-    on top (a stage may add derived values).
+    on top (a stage may add derived values), but for those without effect in this run.
     """
     resolved = RESOLVED.get()
     if resolved is not None:
         parameters = {**resolved, **parameters}
+    unused = UNUSED.get()
+    parameters = {k: v for k, v in parameters.items() if k not in unused}
     hashed: list[dict] = []
     for role, value in inputs.items():
         paths = value if isinstance(value, (list, tuple)) else [value]

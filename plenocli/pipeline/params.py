@@ -14,6 +14,7 @@ Two readers: the command line builds its click options from the declaration (one
 
 from __future__ import annotations
 
+import contextvars
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -186,9 +187,29 @@ def shell_words(params: Sequence[Param], values: Mapping[str, Any]) -> list[str]
 def refuse_unused(params: Sequence[Param], values: Mapping[str, Any], names: Sequence[str],
                   reason: str) -> None:
     """OptionError for the first of ``names`` given a value other than its default: an option
-    with no effect in this run is refused, never silently ignored."""
+    with no effect in this run is refused, never silently ignored (and, at its default, not
+    recorded: :func:`unused_in`)."""
     declared = {p.name: p for p in params}
+    noted = _NOTED.get()
+    if noted is not None:
+        noted.update(names)
     for name in names:
         value = values.get(name)
         if value is not None and value != declared[name].unset:
             raise OptionError(f"{declared[name].label} {reason}")
+
+
+_NOTED: contextvars.ContextVar[set | None] = contextvars.ContextVar("plenocli_noted",
+                                                                   default=None)
+
+
+def unused_in(check, values: Mapping[str, Any]) -> frozenset:
+    """The parameters a schema's ``check`` finds without effect for ``values`` (the names it
+    hands to :func:`refuse_unused`)."""
+    noted: set = set()
+    token = _NOTED.set(noted)
+    try:
+        check(values)
+    finally:
+        _NOTED.reset(token)
+    return frozenset(noted)

@@ -51,6 +51,8 @@ def test_dual_pixel_views_give_disparity(tmp_path):
     assert result.exit_code == 0, result.output
     data, meta = tiffio.read_image(out)
     assert meta["views"] == ["disparity", "confidence"]
+    recorded = meta["provenance"]["parameters"]   # P1 (audit 6): only what applied
+    assert recorded["max_disparity"] == 4.0 and not {"s", "g", "min_confidence"} & set(recorded)
     assert abs(np.median(data[0][20:-20, 20:100]) + 1.0) < 0.1
     assert abs(np.median(data[0][20:-20, 156:236]) - 1.0) < 0.1
 
@@ -168,6 +170,18 @@ def test_a_depth_map_that_does_not_fit_is_refused(lenslet, tmp_path):
                         "-o", out)
         assert result.exit_code == 1 and words in result.output, (case, result.output)
         assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_the_record_holds_the_resolved_range_and_only_what_applied(lenslet, tmp_path):
+    """P1 (audit 6): --g '２:８' was recorded as typed, and a lenslet depth recorded the
+    --max-disparity it did not use."""
+    out = tmp_path / "d.tif"
+    result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--g",
+                    " ２ : ８ ", "-o", out)
+    assert result.exit_code == 0, result.output
+    recorded = tiffio.read_meta(out)["provenance"]["parameters"]
+    assert recorded["g"] == "2:8" and recorded["s"] == 0.2
+    assert "max_disparity" not in recorded
 
 
 def _grid_moved(lenslet, path, dx: float):
