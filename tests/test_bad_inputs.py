@@ -1279,6 +1279,16 @@ def test_a_damaged_png_is_one_line_without_the_codecs_own(tmp_path, capfd):
     result = CliRunner().invoke(cli, ["decode", str(pngs["ztxt"]), "-o", str(out / "z.tif")])
     assert result.exit_code == 0, result.output
     assert "libpng" not in capfd.readouterr().err + result.stderr
+    # a truncated JPEG: libjpeg fills the rest grey with a warning; refused, not calibrated
+    import cv2
+
+    image = (np.random.default_rng(1).random((64, 96)) * 255).astype(np.uint8)
+    jpeg = cv2.imencode(".jpg", image)[1].tobytes()
+    (tmp_path / "cut.jpg").write_bytes(jpeg[:len(jpeg) * 2 // 3])
+    result = CliRunner().invoke(cli, ["calibrate", str(tmp_path / "cut.jpg"), "-o",
+                                      str(out / "g.yaml")])
+    assert_one_line(result, 1, ("Premature end of JPEG file", "pixels is missing"))
+    assert "JPEG" not in capfd.readouterr().err
 
 
 def test_a_list_or_camera_file_that_is_no_text_file_is_one_line(inputs, tmp_path, monkeypatch):

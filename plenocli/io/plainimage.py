@@ -2,8 +2,9 @@
 
 OpenCV's codecs (libpng, libjpeg) print their own warnings and errors on the process's stderr,
 below Python: a damaged PNG gave two or three lines before plenocli's one. They are caught
-here: an error becomes part of the one-line refusal, a warning (a damaged text or colour-profile
-chunk: the pixels are whole) is logged with -v.
+here: an error becomes part of the one-line refusal, as does a warning that pixels are missing
+(libjpeg fills a truncated file grey); another warning (a damaged text or colour-profile chunk:
+the pixels are whole) is logged with -v.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ from plenocli.errors import InputError
 from plenocli.progress import log
 
 MAX_SAID = 4096  # bytes of a codec's messages kept
+# what a codec says when it decoded only part of the pixels and made up the rest
+PIXELS_LOST = ("premature end", "corrupt jpeg data")
 
 
 def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
@@ -38,6 +41,10 @@ def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
                 raise InputError(f"{p}: the header claims an image of more than {max_pixels} "
                                  "pixels; the file is damaged or not a sensor image") from err
             data = None
+    cut = [line for line in said if any(w in line.lower() for w in PIXELS_LOST)]
+    if data is not None and cut:   # libjpeg fills the missing part grey and goes on
+        raise InputError(f"{p}: damaged image ({'; '.join(cut)}): part of its pixels is missing; "
+                         "use a complete copy of the file")
     if data is None:
         why = f" ({'; '.join(said)})" if said else ""
         raise InputError(f"{p}: unreadable image{why}; the file may be truncated, damaged or "
