@@ -162,7 +162,12 @@ def mask_width_sweep(make_views: Callable[[float], tuple[np.ndarray, np.ndarray]
             raise ValueError(f"mask widths must be >= 0, got {m}")
         left, right = make_views(float(m))
         stack = np.stack([np.asarray(left, np.float64), np.asarray(right, np.float64)])
-        res = crosstalk_ratio(stack, intended=0 if intended == "left" else 1, tile_px=tile_px)
+        try:
+            res = crosstalk_ratio(stack, intended=0 if intended == "left" else 1,
+                                  tile_px=tile_px)
+        except ValueError as err:
+            raise ValueError(f"mask width {m:g} px: {err} (a narrower mask keeps more of each "
+                             "micro-image)") from err
         main = stack[res["intended"]]
         results.append({"mask_width": float(m), "r": res["r"], "map_min": res["map_min"],
                         "map_max": res["map_max"],

@@ -38,6 +38,7 @@ from plenocli.model.focus import (  # noqa: F401 (re-exported)
     MAX_G_VALUES,
     MAX_S,
     VIEWS,
+    check_mask_width,
     parse_g,
 )
 from plenocli.model.lensgrid import LensGrid
@@ -250,6 +251,8 @@ def _check(frame, grid, s, g, view, mask_width, kernel, radius, cfa, min_weight)
         raise ValueError(f"frame must be 2-D (rows, cols), got shape {frame.shape}")
     check_options(s=s, g=g, view=view, mask_width=mask_width, kernel=kernel, radius=radius,
                   cfa=cfa, min_weight=min_weight)
+    if view != "full":
+        check_mask_width(mask_width, grid.pitch_px)
     check_output_size(frame.shape, s)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import struct
 import zlib
 from dataclasses import replace
@@ -224,6 +225,12 @@ def assert_one_line(result, code: int, words: tuple[str, ...]) -> None:
 # a value the option's own type refuses is a usage error (exit 2), like any bad flag
 CASES = [
     # refocus: g, s and grids
+    # depth: a g bound past the shift the grid can measure (pitch / 0.25 px) is a usage error
+    ("depth-g-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
+                                 "--g", "2:1e308", "-o", "{o}/d.tif"], 2, ("--g", "1 < g <=")),
+    ("depth-g-galilean-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid",
+                                          "{i}/rt/grid.yaml", "--g", "-1e6:-2", "-o",
+                                          "{o}/d.tif"], 2, ("--g", "<= g < -1")),
     ("refocus-g0", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "0",
                     "-o", "{o}/r.tif"], 2, ("positive",)),
     ("refocus-g-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g=-1",
@@ -250,7 +257,7 @@ CASES = [
                         "1e9", "-o", "{o}/r.tif"], 1, ("g = 1e+09", "no valid pixel")),
     ("refocus-mask-covers-lens", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
                                   "--view", "left", "--mask-width", "1e9", "-o", "{o}/r.tif"],
-     1, ("no valid pixel",)),
+     2, ("--mask-width", "0 <= m < ")),
     ("refocus-s-nan", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--s",
                        "nan", "-o", "{o}/r.tif"], 2, ("'--s'",)),
     *[(f"refocus-grid-{name}", ["refocus", "{i}/rt/frames.tif", "--grid",
@@ -436,6 +443,19 @@ CASES = [
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
                                       "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 2,
      ("--grid applies to the --mask-widths sweep only",)),
+                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
+     ("--mask-widths",)),
+    # a mask as wide as the micro-images keeps none of them: the range it can take is named
+    ("crosstalk-mask-widths-past-the-pitch", ["crosstalk", "{i}/rt/frames.tif", "--grid",
+                                              "{i}/rt/grid.yaml", "--mask-widths", "0,1e308",
+                                              "--tile", "8", "-o", "{o}/c.json"], 2,
+     ("--mask-widths", "0 <= m < ")),
+    ("crosstalk-mask-widths-infinite", ["crosstalk", "{i}/rt/frames.tif", "--grid",
+                                        "{i}/rt/grid.yaml", "--mask-widths", "0,inf", "-o",
+                                        "{o}/c.json"], 2, ("'--mask-widths'", ">= 0 px")),
+    ("crosstalk-mask-widths-twice", ["crosstalk", "{i}/rt/frames.tif", "--grid",
+                                     "{i}/rt/grid.yaml", "--mask-widths", "0,1,1", "-o",
+                                     "{o}/c.json"], 2, ("'--mask-widths'", "each once")),
     # optics
     ("optics-png", ["optics", "{i}/huge.png"], 1, ("not a YAML lens",)),
     ("optics-prism-n-1", ["optics", "{l}", "--prism-n", "1"], 2, ("'--prism-n'",)),
@@ -1243,3 +1263,124 @@ def test_an_option_with_no_effect_is_refused_at_its_default_value_too(stage, ste
     (tmp_path / "c.yaml").write_text(yaml.safe_dump({"steps": {"s": {"stage": stage, **step}}}))
     with pytest.raises(ConfigError, match=param.label):
         load_config(tmp_path / "c.yaml")
+@pytest.mark.parametrize("how", ["yaml", "set"])
+def test_a_g_bound_past_what_the_grid_measures_is_refused_from_a_config(how, inputs, tmp_path):
+    """`depth --g 2:1e308` searched shifts of 1e-307 px and wrote a map with exit 0: refused
+    as from the shell (exit 2, naming the range the grid measures), from YAML and --set."""
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    g = "2:1e308" if how == "yaml" else "2:8"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    g: \"{g}\"\n"
+                      f"    output: {out}/d.tif\n")
+    extra = ["--set", "depth.g=2:1e308"] if how == "set" else []
+    result = run_bad(inputs, out, ["run", str(config), *extra])
+    assert_one_line(result, 2, ("step 'depth'", "--g", "1 < g <="))
+
+
+def _png_chunk(kind: bytes, body: bytes) -> bytes:
+    return (struct.pack(">I", len(body)) + kind + body
+            + struct.pack(">I", zlib.crc32(kind + body) & 0xffffffff))
+
+
+def _damaged_pngs(folder: Path) -> dict[str, Path]:
+    """A PNG whose pixel data fails its check, one whose header claims 2^31 - 1 columns, and
+    one with a truncated zTXt chunk (its pixels whole)."""
+    import cv2
+
+    image = (np.random.default_rng(0).random((64, 96, 3)) * 255).astype(np.uint8)
+    raw = cv2.imencode(".png", image)[1].tobytes()
+    bad = bytearray(raw)
+    bad[-20] ^= 0xFF
+    header = raw.find(b"IHDR")
+    wide = bytearray(raw)
+    wide[header + 4:header + 12] = struct.pack(">II", 2 ** 31 - 1, 1)
+    wide[header + 17:header + 21] = struct.pack(">I", zlib.crc32(bytes(wide[header:header + 17]))
+                                                & 0xffffffff)
+    data = raw.find(b"IDAT") - 4
+    cut = zlib.compress(b"A" * 100_000)[:-9]   # a compressed comment that stops short
+    ztxt = raw[:data] + _png_chunk(b"zTXt", b"Comment\x00\x00" + cut) + raw[data:]
+    files = {"badcrc": bytes(bad), "wide": bytes(wide), "ztxt": ztxt}
+    for name, content in files.items():
+        (folder / f"{name}.png").write_bytes(content)
+    return {name: folder / f"{name}.png" for name in files}
+
+
+def test_a_damaged_png_is_one_line_without_the_codecs_own(tmp_path, capfd):
+    """E1 (audit 6): libpng printed its warnings and errors on stderr (2-3 lines, also on
+    success); they are the reason in plenocli's one line, or logged with -v."""
+    pngs = _damaged_pngs(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    for args, words in (
+            (["decode", str(pngs["badcrc"]), "-o", str(out / "a.tif")], ("incorrect data check",)),
+            (["calibrate", str(pngs["badcrc"]), "-o", str(out / "g.yaml")],
+             ("incorrect data check",)),
+            (["decode", str(pngs["wide"]), "-o", str(out / "b.tif")], ("IHDR",)),
+            (["calibrate", str(pngs["wide"]), "-o", str(out / "g.yaml")], ("IHDR",))):
+        result = CliRunner().invoke(cli, args)
+        assert_one_line(result, 1, words)
+        assert "libpng" not in capfd.readouterr().err
+    assert not list(out.iterdir())
+    result = CliRunner().invoke(cli, ["decode", str(pngs["ztxt"]), "-o", str(out / "z.tif")])
+    assert result.exit_code == 0, result.output
+    assert "libpng" not in capfd.readouterr().err + result.stderr
+    # a truncated JPEG: libjpeg fills the rest grey with a warning; refused, not calibrated
+    import cv2
+
+    image = (np.random.default_rng(1).random((64, 96)) * 255).astype(np.uint8)
+    jpeg = cv2.imencode(".jpg", image)[1].tobytes()
+    (tmp_path / "cut.jpg").write_bytes(jpeg[:len(jpeg) * 2 // 3])
+    result = CliRunner().invoke(cli, ["calibrate", str(tmp_path / "cut.jpg"), "-o",
+                                      str(out / "g.yaml")])
+    assert_one_line(result, 1, ("Premature end of JPEG file", "pixels is missing"))
+    assert "JPEG" not in capfd.readouterr().err
+
+
+def test_a_list_or_camera_file_that_is_no_text_file_is_one_line(inputs, tmp_path, monkeypatch):
+    """M1 (audit 6): `depth --camera /dev/zero` read the device whole (RSS 6 GB in 8 s), a
+    FIFO blocked; `batch --inputs @LIST` of a binary file was an internal error
+    (UnicodeDecodeError), of a device "no such list file". Every text side file is read as a
+    regular file of bounded size."""
+    binary = tmp_path / "bin.lst"
+    binary.write_bytes(bytes(range(128, 256)))
+    config = Path(__file__).parents[1] / "configs" / "batch_dualpixel.yaml"
+    for listing, words in ((binary, "not UTF-8"), (Path(os.devnull), "not a regular file")):
+        result = run_bad(inputs, tmp_path / "out", ["batch", str(config), "--inputs",
+                                                    f"@{listing}", "--out", "{o}/b"])
+        assert_one_line(result, 1, ("--inputs", words))
+    result = run_bad(inputs, tmp_path / "out", ["depth", "{i}/rt/frames.tif", "--grid",
+                                                "{i}/rt/grid.yaml", "--camera", os.devnull,
+                                                "-o", "{o}/d.tif"])
+    assert_one_line(result, 1, ("not a regular file",))
+    from plenocli.io import yamlfile
+
+    monkeypatch.setattr(yamlfile, "MAX_TEXT_BYTES", 1 << 20)
+    camera = tmp_path / "camera.yaml"
+    camera.write_text("focal_length_mm: 50\n" + "# padding\n" * 120_000)
+    result = run_bad(inputs, tmp_path / "out", ["depth", "{i}/rt/frames.tif", "--grid",
+                                                "{i}/rt/grid.yaml", "--camera", str(camera),
+                                                "-o", "{o}/d.tif"])
+    assert_one_line(result, 1, ("more than 1 MiB of text",))
+
+
+def test_messages_name_what_is_wrong(inputs, tmp_path):
+    """E3 (audit 6): bias said it takes simulate outputs (it refuses them) "or a foreign file";
+    `camera: false` in a config was "input .../False"; a 1-bit image "looks like a Bayer
+    mosaic" with its four phases alike."""
+    import cv2
+
+    result = run_bad(inputs, tmp_path / "out", ["bias", "{i}/rt/frames.tif", "-o", "{o}/b.tif"])
+    assert_one_line(result, 1, ("takes as input the output of decode",))
+    assert "simulate" not in result.stderr.split("output of")[-1]
+    assert "foreign" not in result.stderr
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n    grid: "
+                      f"{inputs}/rt/grid.yaml\n    camera: false\n    output: {tmp_path}/d.tif\n")
+    result = run_bad(inputs, tmp_path / "out", ["run", str(config)])
+    assert_one_line(result, 1, (f"{tmp_path}/false does not exist",))
+    binary = tmp_path / "binary.png"
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(binary), np.where(rng.random((96, 128)) > 0.5, 255, 0).astype(np.uint8))
+    result = run_bad(inputs, tmp_path / "out", ["calibrate", str(binary), "-o", "{o}/g.yaml"])
+    assert result.exit_code == 1 and "Bayer" not in result.stderr

@@ -7,7 +7,7 @@ import functools
 import numpy as np
 import pytest
 
-from plenocli.depth.lenslet import check_range, depth_map, lens_g_table
+from plenocli.depth.lenslet import check_measurable, check_range, depth_map, lens_g_table
 from plenocli.depth.views import disparity_x, quad_disparity
 from plenocli.io.preview import depth_picture
 from plenocli.model.lensgrid import LensGrid
@@ -108,6 +108,16 @@ def test_range_is_checked():
     with pytest.raises(ValueError, match="MIN < MAX"):
         check_range((5, 3))
     assert check_range((-8, -2)) == (-8.0, -2.0)
+
+
+def test_a_range_past_the_shift_the_grid_resolves_is_refused():
+    """|g| up to pitch / 0.5 px (a shift of half a pixel between neighbours): 2:1e308 searched
+    shifts of 1e-307 px and wrote a map with exit 0."""
+    check_measurable((2, 40.4), 20.2)
+    check_measurable((-40.4, -2), 20.2)
+    for bounds in ((2, 40.5), (-1e308, -2), (2, 1e308)):
+        with pytest.raises(ValueError, match="40.4"):
+            check_measurable(bounds, 20.2)
 
 
 def test_all_in_focus_with_one_g_is_the_plain_refocus():

@@ -48,3 +48,13 @@ def test_refocus_tolerates_what_a_fraction_of_a_pitch_allows():
     assert lattice_misfit(frame, _variant(grid, pitch_factor=1.005)) is None
     assert "pitches apart" in lattice_misfit(frame, _variant(grid, pitch_factor=1.03))
 
+
+
+def test_a_grid_far_off_is_not_said_to_be_what_the_frame_shows():
+    """E3 (audit 6): another camera's XML (pitch x 1.73) was refused saying "the frame shows
+    a hex 61.40 px at 10.90 deg lattice" (the fold, started from far off, settled on a coarse
+    relative of the frame's 23.22 px lattice)."""
+    frame, grid, _ = _scene("plane", g=4.0, seed=0)
+    misfit = lattice_misfit(frame, _variant(grid, pitch_factor=1.726))
+    assert misfit is not None and "do not lie on the grid's" in misfit
+    assert "the frame shows" not in misfit

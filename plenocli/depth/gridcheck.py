@@ -13,9 +13,14 @@ the grid's by more than ``MAX_DRIFT`` of a pitch anywhere in the frame (the erro
 angle error makes at the frame's corners: 3 % in pitch on a 240 px frame is 0.18 pitches at the
 corners, on a 4000 px frame 3 pitches).
 
-Only the lattice (kind, pitch, angle) is checked, not the grid's offset: a uniform offset
-error shifts every micro-image alike, so it moves a refocused image but leaves neighbour
-disparities (depth) and sharpness as they are.
+The grid's offset (where its lens centres are) is measured for depth, not only checked: the
+usable micro-image disc and its vignetting are centred on the grid's centres, and an offset
+0.5 px off moved a plane at g = 4 to 4.3, 1 px off to 5.1 (simulator). The lens centre among the
+lattice's symmetry points, by the turn symmetry of the frame's mean micro-image
+(:func:`plenocli.calibration.centres.lens_centre`, what calibrate measures), says where they
+are; :func:`centred` moves the grid onto it, and refuses a grid more than ``MAX_OFFSET`` of a
+pitch off (another capture's or crop's: its lens indices, hence lens types, are not vouched
+for).
 """
 
 from __future__ import annotations
@@ -29,6 +34,8 @@ CHECK_PX = 1024         # side of the central region folded: a tenth of depth's 
 CHECK_PITCHES = 24      # and at least this many lenses across (16 left Boys2 unsure)
 MAX_DEPTH_ERROR = 0.002  # a lattice vector's error over the pitch, for depth (below)
 TURN_STARTS = 8         # starts per symmetry period when the grid's own angle folds to nothing
+FAR_ERROR = 0.2         # lattice vectors this far apart: the fold found a relative, maybe
+MAX_OFFSET = 0.25       # pitches: a grid's centres this far from the micro-images are refused
 
 
 def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
@@ -65,6 +72,10 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
         return shows
     error = _vector_error(own, found)
     drift = error * float(np.hypot(*frame.shape)) / 2 / own.pitch_px
+    if error > FAR_ERROR:   # folded from far off, the fold can settle on a coarse relative
+        return (f"the frame's micro-images do not lie on the grid's {own.describe()} lattice "
+                f"(folded from it they repeat on {found.describe()}, or a finer lattice "
+                f"within it; {drift:.2f} pitches apart at the frame's corners)")
     if drift > MAX_DRIFT:
         return f"{shows} ({drift:.2f} pitches apart at the frame's corners)"
     if for_depth and error > MAX_DEPTH_ERROR:
@@ -81,3 +92,26 @@ def _vector_error(own, found) -> float:
     ratio = found.pitch_px / own.pitch_px
     return float(abs(ratio * np.exp(1j * turn) - 1))
 
+
+def centred(frame: np.ndarray, grid: LensGrid) -> tuple[LensGrid, tuple[float, float] | None]:
+    """``grid`` moved onto the lens centres the frame (rows, cols; grey) shows, and the move
+    (dx, dy) px; the grid as it is and None where the mean micro-image is not clearly round
+    about one symmetry point (a devignetted frame: nothing contradicts the grid). ValueError
+    when the grid's centres are more than MAX_OFFSET of a pitch from the frame's."""
+    from dataclasses import replace
+
+    from plenocli.calibration.centres import lens_centre
+    from plenocli.calibration.flatten import flatten
+
+    found = lens_centre(np.nan_to_num(flatten(np.nan_to_num(frame))), grid)
+    if not found.sure:
+        return grid, None
+    x, y = found.offset_xy
+    dx, dy = np.array([x, y]) - grid.lattice_xy(*grid.nearest_index(x, y))
+    if np.hypot(dx, dy) > MAX_OFFSET * grid.pitch_px:
+        raise ValueError(f"its lens centres lie {np.hypot(dx, dy):.1f} px from the frame's "
+                         f"micro-images (more than {MAX_OFFSET:g} of the {grid.pitch_px:.4g} px "
+                         "pitch): it is another capture's or crop's grid")
+    centres = None if grid.centres_xy is None else np.asarray(grid.centres_xy) + (dx, dy)
+    return replace(grid, offset_xy=(grid.offset_xy[0] + dx, grid.offset_xy[1] + dy),
+                   centres_xy=centres), (float(dx), float(dy))

@@ -48,6 +48,7 @@ RENDER_REACH = 1.0    # a lens's g reaches this many lens spacings on the output
 USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's peak are unused
 MIN_JUDGED = 10       # lenses in and out of their type's range needed to judge the ranges
 OVERLAP_RISE = 0.05   # a mean micro-image this much brighter than nearer its centre: overlap
+MIN_SHIFT_PX = 0.5    # smallest shift between neighbouring micro-images that measures a g
 
 
 @dataclass(frozen=True)
@@ -355,6 +356,19 @@ def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
     return gmin, gmax
 
 
+def check_measurable(g_range: tuple[float, float], pitch_px: float) -> None:
+    """ValueError naming the range a grid of this pitch measures when a bound of ``g_range``
+    lies past it: up to the |g| whose content shifts by MIN_SHIFT_PX between neighbouring
+    micro-images (pitch / |g|); a search beyond finds shifts the match cannot tell from none
+    (docs/depth.md)."""
+    limit = float(pitch_px) / MIN_SHIFT_PX
+    if max(abs(float(v)) for v in g_range) > limit:
+        span = f"-{limit:.4g} <= g < -1" if float(g_range[0]) < 0 else f"1 < g <= {limit:.4g}"
+        raise ValueError(f"g range {g_range[0]:g}:{g_range[1]:g} reaches past what this grid "
+                         f"can measure: with micro-images {pitch_px:.4g} px apart, {span} (a "
+                         f"shift of {MIN_SHIFT_PX:g} px or more between neighbours)")
+
+
 def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
               g_range: tuple[float, float] = (2.0, 8.0), min_confidence: float = 0.1,
               type_ranges: np.ndarray | None = None) -> DepthMap:
@@ -366,6 +380,7 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
         raise ValueError(f"s must be a positive number (paper: 0.2), got {s}")
     if not 0 <= min_confidence <= 1:
         raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
+    check_measurable(check_range(g_range), grid.pitch_px)
     lenses = lens_depth(frame, grid, g_range=g_range, type_ranges=type_ranges)
     _check_sign(frame, grid, g_range, lenses)
     rows_out, cols_out = output_shape(np.shape(frame), s)

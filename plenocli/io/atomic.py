@@ -17,8 +17,10 @@ import errno
 import glob
 import hashlib
 import os
+import signal
 import socket
 import tempfile
+import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,12 +87,36 @@ def outputs_together(
         _PENDING.reset(token)
     landed = 0
     try:
-        for tmp, dest in pending.files:
-            os.replace(tmp, dest)
-            landed += 1
+        with _signals_held():
+            for tmp, dest in pending.files:
+                os.replace(tmp, dest)
+                landed += 1
     except BaseException:
         _discard(pending.files[landed:])
         raise
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGTERM and SIGINT that arrive in the block are noted and raised again once it ends
+    (to the handlers they had): a signal between two renames would otherwise land some outputs
+    and not the others. Python runs handlers in the main thread only; elsewhere (a Dask
+    worker's thread) signals are not ours to hold."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    previous = {}
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        if signal.getsignal(sig) is not None:  # None: a handler not set from Python
+            previous[sig] = signal.signal(sig, lambda signum, frame: arrived.append(signum))
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        for sig in arrived:
+            signal.raise_signal(sig)
 
 
 @contextlib.contextmanager

@@ -40,8 +40,10 @@ def page_names(mixing: MixingField) -> list[str]:
 
 
 def write_mixing(path: str | os.PathLike, mixing: MixingField, *, layout: str,
-                 cfa: str | None, meta: dict, protect: tuple = ()) -> None:
-    """Write ``mixing`` with ``meta`` (provenance, history, report figures) atomically."""
+                 cfa: str | None, meta: dict, made_by: list[str] | None = None,
+                 protect: tuple = ()) -> None:
+    """Write ``mixing`` with ``meta`` (provenance, history, report figures) atomically;
+    ``made_by``: the stages that made the views it was measured on (sealed with it)."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {LAYOUTS}, got {layout!r}")
     n_c, n_v, _, n_r, n_k = mixing.nodes.shape
@@ -49,7 +51,7 @@ def write_mixing(path: str | os.PathLike, mixing: MixingField, *, layout: str,
     info = {"views": list(mixing.views), "colours": list(mixing.colours), "layout": layout,
             "cfa": cfa, "frame_shape": [int(v) for v in mixing.shape],
             "node_rows": [float(v) for v in mixing.node_rows],
-            "node_cols": [float(v) for v in mixing.node_cols]}
+            "node_cols": [float(v) for v in mixing.node_cols], "views_made_by": made_by}
     tiffio.write_image(path, pages, {**meta, "views": page_names(mixing), "cfa": None,
                                      "mixing": info}, protect=protect, seal=True)
 

@@ -23,6 +23,7 @@ import tifffile
 
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
+from plenocli.io.plainimage import read_plain_image
 from plenocli.model.cfa import check_pattern, is_bayer
 from plenocli.progress import log
 
@@ -329,23 +330,7 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "
                                             "truncated") from err
     else:
-        import cv2
-
-        # silent: a damaged file becomes our one line, not OpenCV's log
-        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
-        try:
-            data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        except cv2.error as err:  # OpenCV refuses headers beyond 2^30 pixels before allocating
-            if "CV_IO_MAX_IMAGE_PIXELS" in str(err):
-                raise InputError(f"{p}: the header claims an image of more than "
-                                 f"{tiffio.MAX_PAGE_PIXELS} pixels; the file is damaged or not "
-                                 "a sensor image") from err
-            raise InputError(f"{p}: unreadable image; the file may be truncated or of another "
-                             "type") from err
-        if data is None:
-            raise InputError(f"{p}: unreadable image; the file may be truncated or of another type")
-        if data.ndim == 3:
-            data = data[..., 2::-1] if data.shape[2] >= 3 else data  # BGR(A) -> RGB
+        data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
     if data.ndim == 2:
         frames, views = data[np.newaxis], ["raw"]
     elif data.ndim == 3 and data.shape[-1] in (3, 4):

@@ -16,7 +16,7 @@ from plenocli.io.yamlfile import read_json, read_side_file
 from plenocli.model.provenance import json_safe
 
 
-def read_transform(path: str | Path, names: list[str]) -> dict:
+def read_transform(path: str | Path, names: list[str], *, held: list[str] | None = None) -> dict:
     """A transform saved by ``--transform-out`` (the JSON, or its ``transform`` key), refused
     unless it is a mapping, and, when it names its views, unless they are distinct names in the
     order of ``names`` (views named after other files are not compared)."""
@@ -28,6 +28,7 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
         raise InputError(f"{file}: not a JSON stitch transform (no mapping); save one with "
                          "--transform-out")
     _check_matrices(file, transform.get("view_to_reference"))
+    _check_layout(file, transform)
     saved = transform.get("views")
     if saved is not None:
         if not isinstance(saved, list) or not all(isinstance(n, str) for n in saved) \
@@ -36,9 +37,34 @@ def read_transform(path: str | Path, names: list[str]) -> dict:
                              f"{saved!r}; save one with --transform-out")
         if saved != names and set(saved) & set(names):  # other names: other files, can't tell
             raise InputError(f"{file}: the transform was made for views {','.join(saved)}, "
-                             f"these are {','.join(names)}; pass --views {','.join(saved)} or "
-                             "register them again (without --transform-in)")
+                             f"these are {','.join(names)}; {views_remedy(saved, held)}")
     return transform
+
+
+def views_remedy(saved: list, held: list[str] | None) -> str:
+    """What to do about a transform made for views ``saved``: pick them with --views when the
+    input holds them all (``held``: its views; None: not known), else register again."""
+    again = "register them again (without --transform-in)"
+    missing = [str(n) for n in saved if held is not None and n not in held]
+    if missing:
+        return f"the input holds no view {missing[0]}: {again}"
+    return f"pass --views {','.join(map(str, saved))} or {again}"
+
+
+def _check_layout(file: Path, transform: dict) -> None:
+    """A pair's layout (1x2: side by side, 2x1: one above the other) must be the direction
+    its matrices move the second view: an edited layout was refused as "a false match"."""
+    layout, matrices = transform.get("layout"), transform["view_to_reference"]
+    if layout not in ("1x2", "2x1") or len(matrices) != 2:
+        return
+    dx = matrices[1][0][2] - matrices[0][0][2]
+    dy = matrices[1][1][2] - matrices[0][1][2]
+    beside = abs(dx) >= abs(dy)
+    if beside != (layout == "1x2"):
+        raise InputError(f"{file}: the transform's layout {layout} contradicts its matrices, "
+                         f"which put the second view {dx:.0f}, {dy:.0f} px from the first "
+                         f"({'side by side, 1x2' if beside else 'one above the other, 2x1'}); "
+                         "save one with --transform-out")
 
 
 def _check_matrices(file: Path, matrices) -> None:

@@ -23,6 +23,7 @@ import yaml
 
 from plenocli.errors import InputError, not_a_file, os_error_message
 
+MAX_TEXT_BYTES = 1 << 28  # 256 MiB: far above any config, grid, record or list; bounds memory
 _INT = re.compile(r"^[-+]?[0-9]+$")
 _FLOAT = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
                     r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
@@ -188,11 +189,23 @@ def _deeper_than(doc: Any, limit: int) -> bool:
 
 
 def _text(path: str | os.PathLike) -> str:
+    """The UTF-8 text of a regular file of at most MAX_TEXT_BYTES: a pipe would block and a
+    device (/dev/zero) never end."""
+    if os.path.exists(path) and not os.path.isdir(path) and not os.path.isfile(path):
+        raise DocumentError("not a regular file (a device, pipe or socket)")
+    with open(path, "rb") as fh:
+        raw = fh.read(MAX_TEXT_BYTES + 1)
+    if len(raw) > MAX_TEXT_BYTES:
+        raise DocumentError(f"more than {MAX_TEXT_BYTES >> 20} MiB of text")
     try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read()
+        return raw.decode("utf-8")
     except UnicodeDecodeError as err:
         raise DocumentError(f"not UTF-8 text (byte {err.start})") from err
+
+
+def read_text(path: str | os.PathLike) -> str:
+    """A text file (OSError when it cannot be read, DocumentError when it is not one)."""
+    return _text(path)
 
 
 def read_yaml(path: str | os.PathLike) -> Any:

@@ -54,3 +54,11 @@ def _g_values(spec: str, text) -> list[float]:
     if ":" in spec:
         return [parts[0] + k * parts[2] for k in range(count)]
     return parts
+
+
+def check_mask_width(mask_width: float, pitch_px: float) -> None:
+    """ValueError naming the widths that keep pixels: a central mask as wide as the
+    micro-images (one pitch) or wider keeps none of them."""
+    if not mask_width < pitch_px:
+        raise ValueError(f"a mask width of {mask_width:g} px covers the whole {pitch_px:.4g} px "
+                         f"micro-images; use 0 <= m < {pitch_px:.4g}")

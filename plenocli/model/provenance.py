@@ -22,6 +22,10 @@ _AHEAD: dict[tuple, Future] = {}  # hashes being computed beside the stage's wor
 # every record holds all of them, defaults included, whatever subset a stage passes.
 RESOLVED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("plenocli_resolved",
                                                                       default=None)
+# and the parameters that have no effect in this run (depth's --max-disparity on lenslet
+# frames): not recorded, as the run did not use them
+UNUSED: contextvars.ContextVar[frozenset] = contextvars.ContextVar("plenocli_unused",
+                                                                   default=frozenset())
 
 
 def sha256_file(path: str | os.PathLike, *, chunk: int = 1 << 22) -> str:
@@ -102,11 +106,13 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
     ``inputs`` maps a role (``input``, ``white``, ...) to a path or a list of paths; each file is
     hashed. Parameters that are paths are kept as given (the hashes identify the content).
     Inside a stage run the edge's fully resolved parameters are recorded, with ``parameters``
-    on top (a stage may add derived values).
+    on top (a stage may add derived values), but for those without effect in this run.
     """
     resolved = RESOLVED.get()
     if resolved is not None:
         parameters = {**resolved, **parameters}
+    unused = UNUSED.get()
+    parameters = {k: v for k, v in parameters.items() if k not in unused}
     hashed: list[dict] = []
     for role, value in inputs.items():
         paths = value if isinstance(value, (list, tuple)) else [value]
@@ -128,3 +134,20 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
 def parameters_of(record: dict | None) -> dict | None:
     """The parameters stored in a provenance record (None when there is no record)."""
     return None if not record else record.get("parameters")
+
+
+def processing_of(meta: dict) -> list[str]:
+    """The stages that made a file, oldest first (its history, then its own record), named as
+    what changes its light levels: the stage, and for a refocused view its pupil mask width
+    (``refocus(mask_width=2)``). [] for a file without a plenocli record."""
+    records = [*(meta.get("history") or []), meta.get("provenance")]
+    steps = []
+    for record in records:
+        if not isinstance(record, dict) or not isinstance(record.get("stage"), str):
+            continue
+        step = record["stage"]
+        params = record.get("parameters") if isinstance(record.get("parameters"), dict) else {}
+        if step == "refocus" and params.get("view", "full") != "full":
+            step = f"refocus(mask_width={params.get('mask_width')})"
+        steps.append(step)
+    return steps

@@ -37,6 +37,15 @@ def view_of(name: str) -> str:
     return split[0] if split else name
 
 
+def pupil_views(names: list[str]) -> list[str]:
+    """The views of a file's pages that are parts of the pupil, in page order: every view but
+    the sum S of a dual-pixel file (S = A + B is no part of its own)."""
+    views = list(dict.fromkeys(view_of(n) for n in names))
+    if {"A", "B", "S"} <= set(views):
+        views.remove("S")
+    return views
+
+
 def sweep_page(label: str, g: float) -> str:
     """A page of a focal sweep: ``label`` at g (``left.R``, 4 -> ``left.R@g4``)."""
     return f"{label}{SWEEP_TAG}{g:g}"

@@ -81,6 +81,22 @@ class BatchReport:
         return [r for r in self.results if r.status == "failed"]
 
 
+def _list_lines(pattern: str, listing: Path) -> list[str]:
+    """The lines of an ``@LIST`` file, refused in one line when it is no text file."""
+    from plenocli.errors import not_a_file, os_error_message
+    from plenocli.io.yamlfile import DocumentError, read_text
+
+    if not listing.is_file():
+        raise InputError(f"--inputs {pattern}: {not_a_file(listing)} (the list of captures)")
+    try:
+        return read_text(listing).splitlines()
+    except OSError as err:
+        raise InputError(f"--inputs {pattern}: {os_error_message(err)}") from err
+    except DocumentError as err:
+        raise InputError(f"--inputs {pattern}: {listing} is not a list of captures, one path "
+                         f"a line ({err})") from err
+
+
 def expand_inputs(patterns: Sequence[str]) -> list[Path]:
     """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
 
@@ -90,9 +106,7 @@ def expand_inputs(patterns: Sequence[str]) -> list[Path]:
     for pattern in patterns:
         if pattern.startswith("@"):
             listing = Path(pattern[1:])
-            if not listing.is_file():
-                raise InputError(f"--inputs {pattern}: no such list file {listing}")
-            lines = listing.read_text(encoding="utf-8").splitlines()
+            lines = _list_lines(pattern, listing)
             found = [listing.parent / ln.strip() for ln in lines
                      if ln.strip() and not ln.lstrip().startswith("#")]
         elif glob.has_magic(pattern):

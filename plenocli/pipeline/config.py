@@ -36,6 +36,7 @@ import difflib
 import inspect
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_distinct
 from plenocli.io.yamlfile import DocumentError, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
+from plenocli.pipeline.validators import shell_text
 
 TOP_KEYS = ("description", "steps", "out")
 PER_CAPTURE = ("capture", "name")  # placeholders that make a step run once per capture
@@ -387,8 +389,9 @@ def _flat(value) -> list:
 
 
 def _resolve(base: Path, value):
-    if value is None or value == "" or "\0" in str(value):
+    if value is None or value == "" or isinstance(value, Mapping) or "\0" in str(value):
         return value  # refused by its validator as the shell's word would be
     if isinstance(value, (list, tuple)):
         return [_resolve(base, v) for v in value]
-    return str((base / str(value)).resolve()) if not Path(str(value)).is_absolute() else str(value)
+    word = shell_text(value)   # the word written: `false`, not Python's False
+    return str((base / word).resolve()) if not Path(word).is_absolute() else word

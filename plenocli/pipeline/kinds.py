@@ -23,7 +23,7 @@ PICTURES = (*VIEWS, "stitch", "develop")
 
 # stage -> input role -> the producing stages it accepts
 ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
-    "bias": {"input": ("decode", "simulate")},
+    "bias": {"input": ("decode",)},
     "flat": {"input": CAPTURE, "white": ("decode", "bias", "simulate")},   # --gain: flat's own
     "unmix": {"inputs": VIEWS, "mixing": ("crosstalk", "simulate")},
     "crosstalk": {"inputs": VIEWS},
@@ -34,6 +34,8 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "develop": {"input": PICTURES, "wb_from": CAPTURE, "recover_highlights": CAPTURE},
     "stitch": {"inputs": VIEWS},
 }
+# stages that read what only their producer records (bias: decode's areas and levels)
+RECORD_NEEDED = ("bias",)
 # stages a capture goes through once: applied again they correct what is already corrected
 ONCE = ("bias", "flat", "unmix")
 
@@ -57,9 +59,10 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
             if not made or made[-1] is None:
                 continue
             if made[-1] not in accepted:
+                foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
                 raise InputError(f"{path} is a `plenocli {made[-1]}` output; {stage} takes as "
                                  f"{role.replace('_', '-')} the output of "
-                                 f"{', '.join(accepted)} (or a foreign file)")
+                                 f"{', '.join(accepted)}{foreign}")
             if stage in ONCE and role in ("input", "inputs") and stage in made:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "

@@ -14,6 +14,7 @@ Two readers: the command line builds its click options from the declaration (one
 
 from __future__ import annotations
 
+import contextvars
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -188,8 +189,28 @@ def refuse_unused(params: Sequence[Param], given: Collection[str], names: Sequen
     """OptionError for the first of ``names`` that was ``given`` (on the command line, in a YAML
     step or by --set), whatever its value: an option with no effect in this run is refused,
     never silently ignored, also when it repeats the default (which a reader cannot tell from
-    one that would matter, e.g. ``--g 2:8`` against ``--g=2:8.0``)."""
+    one that would matter, e.g. ``--g 2:8`` against ``--g=2:8.0``); and not recorded
+    (:func:`unused_in`)."""
     declared = {p.name: p for p in params}
+    noted = _NOTED.get()
+    if noted is not None:
+        noted.update(names)
     for name in names:
         if name in given:
             raise OptionError(f"{declared[name].label} {reason}")
+
+
+_NOTED: contextvars.ContextVar[set | None] = contextvars.ContextVar("plenocli_noted",
+                                                                   default=None)
+
+
+def unused_in(check, values: Mapping[str, Any]) -> frozenset:
+    """The parameters a schema's ``check`` finds without effect for ``values`` (the names it
+    hands to :func:`refuse_unused`)."""
+    noted: set = set()
+    token = _NOTED.set(noted)
+    try:
+        check(values, ())  # nothing given: every check passes, and names what it would refuse
+    finally:
+        _NOTED.reset(token)
+    return frozenset(noted)

@@ -26,10 +26,10 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
-from plenocli.model.provenance import RESOLVED, hash_ahead
+from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
-from plenocli.pipeline.params import Param, names_by_role, resolve
+from plenocli.pipeline.params import Param, names_by_role, resolve, unused_in
 
 # every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
 NAMES = ("decode", "bias", "flat", "calibrate", "refocus", "depth", "sai", "crosstalk", "unmix",
@@ -118,12 +118,15 @@ class Stage:
             records.write_records(self.name, params, inputs, outputs,
                                   records.with_digests(started, inputs), landed)
 
-        token = RESOLVED.set(dict(params))
+        check = getattr(self.schema, "check", None)
+        unused = unused_in(check, params) if check is not None else frozenset()
+        token, hidden = RESOLVED.set(dict(params)), UNUSED.set(unused)
         try:
             with outputs_together(before_landing=record):
                 yield
         finally:
             RESOLVED.reset(token)
+            UNUSED.reset(hidden)
 
     def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from plenocli.io.transformfile import views_remedy
 from plenocli.stitch import compose
 from plenocli.stitch.rig import PrismRig
 from plenocli.stitch.views import (
@@ -47,15 +48,14 @@ FLAT_FRACTION = 0.1
 
 
 def check_transform_names(transform: dict, names: list[str], layout: str, *,
-                          named_after_files: bool) -> None:
+                          named_after_files: bool, held: list[str] | None = None) -> None:
     """Refuse a saved transform whose view names are not these views' (unless the views are
     named after their files: another capture's files have other names) or whose layout a
     ``layout`` other than "auto" contradicts."""
     saved = transform.get("views")
     if saved is not None and not named_after_files and list(saved) != list(names):
         raise ValueError(f"the transform was made for views {','.join(map(str, saved))}, these "
-                         f"are {','.join(names)}; pass --views {','.join(map(str, saved))} or "
-                         "register them again (without --transform-in)")
+                         f"are {','.join(names)}; {views_remedy(saved, held)}")
     if layout != "auto" and transform.get("layout") not in (None, layout):
         raise ValueError(f"--layout {layout} contradicts the transform's layout "
                          f"{transform.get('layout')}; drop --layout (the transform sets it)")

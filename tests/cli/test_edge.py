@@ -120,6 +120,29 @@ def test_sigterm_is_handled_like_ctrl_c(tmp_path, frames, monkeypatch):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
 
 
+def test_a_sigterm_between_two_renames_lands_every_output(tmp_path, frames, monkeypatch):
+    """The outputs (here the image and its record) land together even when a SIGTERM arrives
+    after the first rename: the signal waits for the last one, then ends the command."""
+    real_replace = os.replace
+    renamed = []
+
+    def replace_then_terminated(src, dst):
+        real_replace(src, dst)
+        renamed.append(Path(dst).name)
+        if len(renamed) == 1:
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(10000):  # without the signals held, the handler runs here
+                pass
+
+    monkeypatch.setattr(os, "replace", replace_then_terminated)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif")
+    monkeypatch.undo()
+    assert result.exit_code == 143, result.output
+    assert len(renamed) == 2, (renamed, sorted(p.name for p in tmp_path.iterdir()))
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        FRAMES_ONLY + [".b.tif.plenocli.json", "b.tif"])
+
+
 class _TerminatedWhileCollected:
     """An object whose ``__del__`` receives a SIGTERM: Python drops the handler's exception
     (as it does in a weakref callback), so only the noted request can stop the stage."""

@@ -240,3 +240,28 @@ def test_a_rig_that_lies_is_refused_in_one_line(tmp_path):
         assert res.exit_code == 1, (k, res.output)
         assert words in res.output and len(res.output.strip().splitlines()) == 1, (k, res.output)
         assert not out.exists()
+
+
+def test_a_saved_transform_that_contradicts_itself_or_the_file_is_named(tmp_path):
+    """E3 (audit 6): a transform edited to layout 2x1 for a side-by-side pair was refused as
+    "the homography lays one view 101 % over the other ... use --overlap or --rig"; one made
+    for views L,R,X said "pass --views L,R,X" for a file of L and R."""
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(160, 200), seed=1)
+    views, saved = tmp_path / "rig" / "views.tif", tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "p.tif"),
+                                   "--transform-out", str(saved)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(saved.read_text())
+    doc["transform"]["layout"] = "2x1"
+    (tmp_path / "t21.json").write_text(json.dumps(doc))
+    doc["transform"]["layout"] = "1x2"
+    doc["transform"]["views"] += ["X"]
+    doc["transform"]["view_to_reference"] += doc["transform"]["view_to_reference"][:1]
+    (tmp_path / "t3.json").write_text(json.dumps(doc))
+    for name, words in (("t21.json", "layout 2x1 contradicts its matrices"),
+                        ("t3.json", "the input holds no view X")):
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "q.tif"),
+                                       "--transform-in", str(tmp_path / name)])
+        assert res.exit_code == 1 and words in res.output, res.output
+        assert "--views L,R,X" not in res.output and "homography" not in res.output
+        assert not (tmp_path / "q.tif").exists()

@@ -116,6 +116,7 @@ def _mixing_file(tmp, nodes, views=("A", "B")):
     ("view_count", "has no view 'c'"),
     ("singular", "singular"),
     ("not_mixing", "not a mixing file"),
+    ("parts_left_out", "mixes views S00,S01 only, but"),   # W5 (audit 6): half unmixed, exit 0
 ])
 def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
     paths, _, _, tmp = rig
@@ -137,6 +138,11 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
                               views=("A", "B", "C"))
     elif case == "not_mixing":
         mixing = paths["masked_A"]
+    elif case == "parts_left_out":
+        views = _bad_views(tmp, cfa=None, names=("S00", "S01", "S10", "S11"))
+        m = np.eye(2) + 0.1 * (1 - np.eye(2))
+        mixing = _mixing_file(tmp, np.tile(m[None, :, :, None, None], (1, 1, 1, 2, 2)),
+                              views=("S00", "S01"))
     out = tmp / "out.tif"
     res = _invoke("unmix", views, "--mixing", mixing, "-o", out, "--noise-map",
                   tmp / "gain.tif", "--preview", tmp / "p.png")
@@ -144,6 +150,26 @@ def test_bad_input_one_line_exit_1_nothing_written(rig, case, message):
     assert message in res.output and len(res.output.strip().splitlines()) == 1
     assert "Traceback" not in res.output
     assert not out.exists() and not (tmp / "gain.tif").exists() and not (tmp / "p.png").exists()
+
+
+def test_crosstalk_mixing_covers_every_pupil_part(tmp_path):
+    """W5 (audit 6): --views S00,S01 on a quad-pixel rig's masked whites wrote a 2 x 2 mixing
+    that unmix applied to the four views (S00, S01 18 % off, S10, S11 left ghosted)."""
+    names = ["S00", "S01", "S10", "S11"]
+    whites = []
+    for j in range(2):
+        path = tmp_path / f"w{j}.tif"
+        views = np.full((4, *SHAPE), 0.1, np.float32)
+        views[j] = 1.0
+        tiffio.write_image(path, views, {"views": names})
+        whites.append(path)
+    res = _invoke("crosstalk", *whites, "--views", "S00,S01", "--intended", "S00,S01",
+                  "--tile", 16, "-o", tmp_path / "c.json", "--mixing-out", tmp_path / "m.tif")
+    assert res.exit_code == 1 and "holds pupil parts S00,S01,S10,S11" in res.output
+    assert not (tmp_path / "m.tif").exists() and not (tmp_path / "c.json").exists()
+    res = _invoke("crosstalk", *whites, "--views", "S00,S01", "--intended", "S00,S01",
+                  "--tile", 16, "-o", tmp_path / "c.json")   # r alone of two parts: fine
+    assert res.exit_code == 0, res.output
 
 
 def test_crosstalk_mixing_needs_one_white_per_part(rig):
@@ -201,3 +227,46 @@ def test_non_finite_mixing_is_refused(rig):
     res = _invoke("unmix", _bad_views(tmp, cfa=None), "--mixing", mixing, "-o", tmp / "o.tif",
                   "--regularise", 0.1)
     assert res.exit_code == 1 and "non-finite" in res.output and not (tmp / "o.tif").exists()
+
+
+def _made_by(path, stages):
+    """Rewrite ``path`` as if the stages listed (oldest first) had made it."""
+    data, meta = tiffio.read_image(path)
+    records = [{"software": "plenocli", "stage": s, "parameters": {}, "inputs": []}
+               for s in stages]
+    tiffio.write_image(path, data, {**meta, "history": records[:-1], "provenance": records[-1]})
+
+
+def test_a_mixing_of_views_processed_otherwise_is_refused(rig):
+    """W3 (audit 6): a mixing measured on bias-only whites unmixed flat-fielded views (ghosts
+    of 2 % median, 7 % p99 left, exit 0). The mixing records the stages that made its whites;
+    unmix refuses views made by others, and crosstalk whites processed unalike."""
+    paths, _, _, tmp = rig
+    for name in ("masked_A", "masked_B"):
+        _made_by(paths[name], ["decode", "bias"])
+    _made_by(paths["views"], ["decode", "bias", "flat"])
+    mixing = tmp / "m_bias.tif"
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_B"], "--views", "A,B",
+                  "--intended", "A,B", "--tile", 8, "-o", tmp / "c.json", "--mixing-out", mixing)
+    assert res.exit_code == 0, res.output
+    assert read_mixing(mixing)[1]["mixing"]["views_made_by"] == ["decode", "bias"]
+    out = tmp / "u.tif"
+    res = _invoke("unmix", paths["views"], "--mixing", mixing, "-o", out)
+    assert res.exit_code == 1 and not out.exists()
+    assert "measured on views made by decode > bias, but" in res.output
+    assert "made by decode > bias > flat" in res.output
+    _made_by(paths["views"], ["decode", "bias"])
+    assert _invoke("unmix", paths["views"], "--mixing", mixing, "-o", out).exit_code == 0
+    # a mixing file written before the record: the last stage of its whites (its history)
+    field, _ = read_mixing(mixing)
+    older = tmp / "older.tif"
+    write_mixing(older, field, layout="cfa", cfa="RGGB",
+                 meta={"history": [{"stage": "bias", "parameters": {}}] * 2})
+    _made_by(paths["views"], ["decode", "bias", "flat"])
+    res = _invoke("unmix", paths["views"], "--mixing", older, "-o", out)
+    assert res.exit_code == 1 and "measured on views made by bias" in res.output
+    _made_by(paths["masked_B"], ["decode", "bias", "flat"])
+    res = _invoke("crosstalk", paths["masked_A"], paths["masked_B"], "--views", "A,B",
+                  "--intended", "A,B", "--tile", 8, "-o", tmp / "d.json", "--mixing-out",
+                  tmp / "m2.tif")
+    assert res.exit_code == 1 and "process the masked whites alike" in res.output

@@ -4,7 +4,30 @@ from collections.abc import Collection
 
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
-from plenocli.pipeline.validators import TIFF, FiniteFloat, InputFile, Int, OutputFile, Text
+from plenocli.pipeline.validators import (
+    TIFF,
+    FiniteFloat,
+    InputFile,
+    Int,
+    OutputFile,
+    Text,
+    Validator,
+    shell_text,
+)
+
+
+class MaskWidths(Validator):
+    """W,W,...: the mask widths of the sweep, checked by the stage's own parser (kept as that
+    text)."""
+
+    name = "W,W,..."
+
+    def convert(self, value) -> str:
+        from plenocli.pipeline.stages.crosstalk import parse_mask_widths
+
+        parse_mask_widths(shell_text(value))
+        return shell_text(value).strip()
+
 
 PARAMS = (
     inputs_arg(),
@@ -17,8 +40,9 @@ PARAMS = (
     Param("tile", Int(min=2, parity="even"), "Tile side (px, even) of the cross-talk map.",
           default=64),
     PREVIEW,
-    Param("mask_widths", Text(), "Raytrix sweep: mask widths m (px), e.g. 0,1,2,3; INPUT is then "
-          "a frames TIFF and --grid is needed (uses plenocli refocus)."),
+    Param("mask_widths", MaskWidths(), "Raytrix sweep: mask widths m (px), e.g. 0,1,2,3, each "
+          "below the lens pitch; INPUT is then a frames TIFF and --grid is needed (uses "
+          "plenocli refocus)."),
     Param("grid", InputFile(), "Lens grid YAML (only with --mask-widths).", role="input"),
     Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
           "Refocus scale s (only with --mask-widths).", default=0.2),

@@ -15,8 +15,8 @@ class GRange(Validator):
     def convert(self, value) -> str:
         from plenocli.pipeline.stages.depth import parse_range
 
-        parse_range(shell_text(value))
-        return shell_text(value).strip()
+        lo, hi = parse_range(shell_text(value))
+        return f"{lo:g}:{hi:g}"   # as resolved: ' 2 : 8 ' and full-width digits are 2:8
 
 
 PARAMS = (

@@ -24,9 +24,11 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
     if "active_area" not in meta:
         raise InputError(f"{input}: not a decoded frames file (no active_area in its metadata); "
                          "run plenocli decode first")
-    if meta.get("provenance", {}).get("stage") != "decode":
-        raise InputError(f"{input}: made by stage {meta.get('provenance', {}).get('stage')!r}, "
-                         "but bias needs the output of plenocli decode")
+    made = (meta.get("provenance") or {}).get("stage")
+    if made != "decode":
+        raise InputError(f"{input}: " + (f"a `plenocli {made}` output" if made else
+                                         "no plenocli record") +
+                         "; bias needs the output of plenocli decode")
     cfa = meta.get("cfa")
     try:
         corrected = capture_views(

@@ -10,6 +10,7 @@ import numpy as np
 from plenocli import calibration
 from plenocli.errors import CalibrationError, InputError, not_a_file
 from plenocli.io import gridfile, raytrix, tiffio
+from plenocli.io.plainimage import read_plain_image
 from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import phase_gains, shift_pattern
 from plenocli.model.provenance import stage_record
@@ -27,12 +28,7 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, tuple[int, int
     if p.suffix.lower() in (".tif", ".tiff"):
         views, meta = tiffio.read_image(p)
     else:
-        import cv2
-
-        data = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        if data is None:
-            raise InputError(f"{p}: unreadable image; pass a TIFF, PNG, JPEG or BMP image of "
-                             "the lens array")
+        data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
         views = np.moveaxis(data[..., :3], -1, 0) if data.ndim == 3 else data[np.newaxis]
         meta = {}
     if views.ndim != 3 or views.shape[1] == 0 or views.shape[2] == 0:
@@ -61,8 +57,10 @@ MOSAIC_LIMIT = 0.02
 
 def _refuse_hidden_mosaic(path: str, image: np.ndarray) -> None:
     """An image without a CFA pattern whose pixel phases differ like a Bayer mosaic's is
-    refused: its micro-images would be measured through the colour filters."""
+    refused: its micro-images would be measured through the colour filters. Phases alike but
+    off 1 together (a 1-bit image's medians) are no mosaic."""
     gains = phase_gains(image)
+    gains = gains / gains.mean()   # phases that differ from each other: alike is no mosaic
     if np.max(np.abs(gains - 1.0)) > MOSAIC_LIMIT:
         shares = ", ".join(f"{g:.3f}" for g in gains.ravel())
         raise InputError(f"{path} looks like a 2 x 2 Bayer mosaic but names no CFA pattern: its "

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 
 from plenocli import crosstalk as crosstalk_lib
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
 from plenocli.io.framing import frame_grid, sensor_image
 from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
 from plenocli.io.views import read_colour_views, read_masked_whites
-from plenocli.model.provenance import json_safe, stage_record
-from plenocli.model.views import ViewNames, view_of
+from plenocli.model.focus import check_mask_width
+from plenocli.model.provenance import json_safe, processing_of, stage_record
+from plenocli.model.views import ViewNames, pupil_views, view_of
+from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
 
@@ -113,14 +116,26 @@ def _capture_entry(path: str, names: list[str], res: dict, tile: int, cfa: str |
     }
 
 
+def parse_mask_widths(text: str) -> list[float]:
+    """"0,1,2,3" -> [0.0, 1.0, 2.0, 3.0]: finite widths >= 0 (px), each once; ValueError with
+    the usage otherwise."""
+    usage = f"expected comma-separated widths >= 0 px, each once (e.g. 0,1,2,3), got {text!r}"
+    try:
+        widths = [float(w) for w in str(text).split(",")]
+    except ValueError as err:
+        raise ValueError(usage) from err
+    if not all(math.isfinite(w) and w >= 0 for w in widths) or len(set(widths)) < len(widths):
+        raise ValueError(usage)
+    return widths
+
+
 def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: int,
                mask_widths: str, grid: str | None, s: float, g: float) -> None:
     """Raytrix: refocus left/right views of a half-masked white capture for each mask width."""
     try:
-        widths = [float(w) for w in mask_widths.split(",") if w.strip()]
+        widths = parse_mask_widths(mask_widths)
     except ValueError as err:
-        raise ConfigError(f"--mask-widths {mask_widths!r} is not a comma-separated list of "
-                          "numbers (e.g. 0,1,2,3)") from err
+        raise OptionError(f"--mask-widths: {err}") from err
     if len(inputs) != 1:
         raise ConfigError("--mask-widths takes exactly one input: the frames TIFF of a white "
                           "capture with one pupil half masked")
@@ -132,15 +147,25 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
         raise ConfigError(f"with --mask-widths, --intended is 'left' or 'right', got {side!r}")
     data, meta = tiffio.read_image(inputs[0])
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=inputs[0])
-    frame = framing.crop(sensor_image(data, meta))
     try:
-        sweep = crosstalk_lib.refocus_mask_sweep(frame, framing.grid, widths, s=s, g=g,
+        check_mask_width(max(widths), framing.grid.pitch_px)
+    except ValueError as err:
+        raise OptionError(f"--mask-widths: {err}") from err
+    from plenocli.depth.lenslet import sensor_grey  # with the sweep's numba kernels
+
+    frame = framing.crop(sensor_image(data, meta))
+    grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
+    check_fits(grey, framing.grid, grid)
+    lens_grid, moved = centred_on(grey, framing.grid, grid)
+    try:
+        sweep = crosstalk_lib.refocus_mask_sweep(frame, lens_grid, widths, s=s, g=g,
                                                  intended=side, tile_px=tile)
     except ValueError as err:
         raise ConfigError(f"crosstalk --mask-widths: {err}") from err
     params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
     record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
-    doc = {"sweep": sweep, "intended": side, "provenance": record}
+    doc = {"sweep": sweep, "intended": side, "provenance": record,
+           "grid_moved_px": None if moved is None else list(moved)}
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False),
                protect=(inputs[0], grid))
     for row in sweep:
@@ -159,6 +184,19 @@ def _check_open_part(path: str, name: str, r: float) -> None:
                          "--intended and the mask")
 
 
+def _processing(inputs: list[str]) -> list[str] | None:
+    """The stages that made the masked whites (one list: they must be processed alike, as
+    the capture whose views the mixing will unmix); None when they carry no record."""
+    made = {tuple(processing_of(tiffio.read_meta(p))): p for p in inputs}
+    if len(made) > 1:
+        (one, first), (other, second) = list(made.items())[:2]
+        raise InputError(f"{first} was made by {' > '.join(one) or 'no plenocli stage'} but "
+                         f"{second} by {' > '.join(other) or 'no plenocli stage'}; process the "
+                         "masked whites alike, as the capture")
+    steps = next(iter(made))
+    return list(steps) if steps else None
+
+
 def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str | None,
                 intended: str | None, tile: int, preview: str | None) -> None:
     """r of every masked white (as without --mixing-out) and the field M from all of them."""
@@ -168,7 +206,13 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
         if not white.same_kind(first):
             raise InputError(f"{label} does not match {inputs[0]} (views, colours, CFA or size); "
                              "give masked whites of one rig, processed the same way")
+    made_by = _processing(inputs)
     names = first.names
+    parts = pupil_views(tiffio.read_meta(inputs[0]).get("views") or [])
+    if len(parts) > 1 and not set(parts) <= set(names):
+        raise ConfigError(f"--views {views}: {inputs[0]} holds pupil parts "
+                          f"{','.join(parts)}; a mixing must cover every part (each leaks "
+                          "into the others): leave --views out, or name them all")
     if len(whites) != len(names):
         raise InputError(f"--mixing-out needs one masked white per pupil part: {len(names)} "
                          f"views ({','.join(names)}) but {len(whites)} inputs")
@@ -207,7 +251,7 @@ def _run_mixing(inputs: list[str], output: str, mixing_out: str, *, views: str |
                       "definition": "view k records sum_j M_kj T_j; M_jj = 1; r = max over "
                       "k != j of M_kj / M_jj", **from_m}, "provenance": record}
     protect = tuple(inputs)
-    write_mixing(mixing_out, field, layout=first.layout, cfa=first.cfa,
+    write_mixing(mixing_out, field, layout=first.layout, cfa=first.cfa, made_by=made_by,
                  meta={"provenance": record, "history": history, "r_from_mixing": from_m},
                  protect=protect)
     write_text(output, json.dumps(json_safe(doc), indent=1, allow_nan=False), protect=protect)

@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.depth import lenslet, metric, views
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames
-from plenocli.pipeline.fits import check_fits
+from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
@@ -105,11 +105,16 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
 
     framing = frame_grid(grid_path, meta, data.shape[1:], frames_path=input)
     try:
+        lenslet.check_measurable(g_range, framing.grid.pitch_px)
+    except ValueError as err:
+        raise OptionError(f"--g: {err}") from err
+    try:
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
         check_fits(grey, framing.grid, grid_path, for_depth=True)
+        lens_grid, moved = centred_on(grey, framing.grid, grid_path)
         ranges = _type_ranges(grid_path, framing.grid)
-        result = lenslet.depth_map(grey, framing.grid, s=s, g_range=g_range,
+        result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,
                                    min_confidence=min_confidence, type_ranges=ranges)
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
@@ -122,6 +127,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     info = {"method": "disparity between neighbouring micro-images, q = 1/g",
             "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
             "crop_sensor_origin": list(framing.sensor_origin),
+            "grid_moved_px": None if moved is None else list(moved),
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
             "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
             "type_ranges": None if ranges is None else ranges.tolist(),

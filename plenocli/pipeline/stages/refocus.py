@@ -3,18 +3,19 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
 from plenocli import refocus as rf
 from plenocli.depth.lenslet import sensor_grey
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
-from plenocli.pipeline.fits import check_fits
+from plenocli.pipeline.fits import centred_on, check_fits
 from plenocli.progress import log, shown
 
 
@@ -36,13 +37,21 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     data, meta = tiffio.read_image(input)
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=input)
+    if view != "full":
+        try:
+            rf.check_mask_width(mask_width, framing.grid.pitch_px)
+        except ValueError as err:
+            raise OptionError(f"--mask-width: {err}") from err
     try:
         rf.check_output_size((framing.bottom - framing.top, framing.right - framing.left), s,
                              pages=len(g_values) * data.shape[0] * (3 if framing.cfa else 1))
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
-    check_fits(sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa)), framing.grid, grid)
+    grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
+    check_fits(grey, framing.grid, grid)
+    lens_grid, moved = centred_on(grey, framing.grid, grid)
+    framing = replace(framing, grid=lens_grid)
     if depth:
         options = {"lens_g": _lens_g(depth, grid, framing, s)}
     else:
@@ -66,6 +75,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         refocus={"equation": "(X, Y) = s * (g * ((x, y) - c_ij) + c_ij)", "s": s,
                  "g": g_values, "view": view, "mask_width": mask_width, "kernel": kernel,
                  "radius": radius, "crop_sensor_origin": list(framing.sensor_origin),
+                 "grid_moved_px": None if moved is None else list(moved),
                  "covered_fraction": covered},
         sharpness={"measure": "mean(Lap(I_s)^2) / var(I_s), I_s = Gaussian(sigma = s * pitch / 2)",
                    "lens_period_px": period, "scores": scores, "best_g": best})

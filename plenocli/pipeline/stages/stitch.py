@@ -32,7 +32,7 @@ from plenocli.io.transformfile import read_transform, write_transform
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
-from plenocli.model.views import CHANNELS, ViewNames
+from plenocli.model.views import CHANNELS, ViewNames, view_of
 from plenocli.progress import log, shown
 from plenocli.stitch import verify
 
@@ -45,6 +45,17 @@ def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
     if not pattern or len(str(pattern)) != 4:
         return None
     return shift_pattern(pattern, top, left)
+
+
+def _held_views(inputs: list[str]) -> list[str]:
+    """Every view the inputs hold (a file of one view is named after the file), to say which
+    --views a saved transform's names could be."""
+    held: list[str] = []
+    for path in inputs:
+        views = tiffio.read_meta(path).get("views") or []
+        held += list(dict.fromkeys(view_of(str(v)) for v in views)) if len(views) > 1 \
+            else [Path(path).stem]
+    return held
 
 
 def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
@@ -124,11 +135,12 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
-    transform = read_transform(transform_in, names) if transform_in else None
+    held = _held_views(inputs) if transform_in else []
+    transform = read_transform(transform_in, names, held=held) if transform_in else None
     named_after_files = names == [Path(p).stem for p in inputs]
     if transform is not None:
         _verified(verify.check_transform_names, transform, names, layout,
-                  named_after_files=named_after_files)
+                  named_after_files=named_after_files, held=held)
     prism_rig = read_rig(rig) if rig else None
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     with image_canvas(output, protect=protect) as canvas:  # blended straight into the file

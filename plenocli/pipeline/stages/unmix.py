@@ -18,8 +18,8 @@ from plenocli.io import tiffio
 from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
-from plenocli.model.provenance import stage_record
-from plenocli.model.views import ViewNames, colour_page
+from plenocli.model.provenance import processing_of, stage_record
+from plenocli.model.views import ViewNames, colour_page, pupil_views
 from plenocli.progress import log, shown
 
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
@@ -44,6 +44,17 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
         raise InputError(f"the inputs have repeated view names ({','.join(names)}); give each "
                          "view once")
     return np.concatenate(pages), names, first
+
+
+def _check_parts(names: list[str], info: dict, mixing: str, inputs: list[str]) -> None:
+    """Every pupil part of the views leaks light into the others: a mixing over some of them
+    leaves the rest's light in the solved views and the others ghosted."""
+    left_out = [v for v in pupil_views(names) if v not in info["views"]]
+    if left_out:
+        raise InputError(f"{mixing} mixes views {','.join(info['views'])} only, but "
+                         f"{', '.join(inputs)} also holds {','.join(left_out)}: every pupil "
+                         "part leaks into the others; measure one masked white per part "
+                         "(crosstalk --mixing-out with all of them)")
 
 
 def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
@@ -77,6 +88,27 @@ def _check_geometry(field, info: dict, framing: Framing, mixing: str,
                          "processed like these views")
 
 
+def _check_processing(mix_meta: dict, mixing: str, inputs: list[str]) -> None:
+    """The mixing describes views made as the ones it measured (flat-fielded or not, refocused
+    with the same mask): other views carry other shares of light, and ghosts stay. Mixing
+    files of before this record name only the last stage of their whites (their history)."""
+    made = mix_meta["mixing"].get("views_made_by")
+    whites = sorted({r.get("stage") for r in mix_meta.get("history") or []
+                     if isinstance(r, dict)} - {None})
+    for path in inputs:
+        steps = processing_of(tiffio.read_meta(path))
+        if not steps:
+            continue  # no plenocli record: taken as it is
+        if made is not None:
+            differs, said = steps != list(made), " > ".join(made) or "no plenocli stage"
+        else:
+            differs, said = bool(whites) and [steps[-1]] != whites, " or ".join(whites)
+        if differs:
+            raise InputError(f"{mixing} was measured on views made by {said}, but {path} was "
+                             f"made by {' > '.join(steps)}; measure the mixing on masked "
+                             "whites processed as these views")
+
+
 def _check_condition(field, mixing: str, regularise: float) -> np.ndarray:
     if not np.isfinite(field.nodes).all():
         raise CalibrationError(f"{mixing}: the mixing field has non-finite values; measure it "
@@ -103,8 +135,10 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     info = mix_meta["mixing"]
     pages, names, meta = _load(inputs)
     groups = _plan(names, info, inputs)
+    _check_parts(names, info, mixing, inputs)
     framing = active_area(meta, pages.shape[1:])
     _check_geometry(field, info, framing, mixing, inputs)
+    _check_processing(mix_meta, mixing, inputs)
     cond = _check_condition(field, mixing, regularise)
     cfa = framing.cfa
     out = pages.copy()
