@@ -443,8 +443,6 @@ CASES = [
     ("crosstalk-grid-without-sweep", ["crosstalk", "{i}/biased.tif", "--grid",
                                       "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 2,
      ("--grid applies to the --mask-widths sweep only",)),
-                                      "{i}/rt/grid.yaml", "-o", "{o}/c.json"], 1,
-     ("--mask-widths",)),
     # a mask as wide as the micro-images keeps none of them: the range it can take is named
     ("crosstalk-mask-widths-past-the-pitch", ["crosstalk", "{i}/rt/frames.tif", "--grid",
                                               "{i}/rt/grid.yaml", "--mask-widths", "0,1e308",
