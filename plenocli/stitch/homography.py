@@ -219,16 +219,22 @@ class OverlapCorrelation:
         return aligned_correlation(ha, hb, h_crop, ca, cb)
 
 
+def overlap_fraction(h_ab: np.ndarray, shape: tuple[int, int], direction: str) -> float:
+    """The fraction of view a that view b covers along the stitching direction under ``h_ab``
+    (views of ``shape``; negative: b lies past a's far edge, or before it)."""
+    axis = 0 if direction == "h" else 1
+    size = shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
+    centre = np.array([[[(shape[1] - 1) / 2, (shape[0] - 1) / 2]]])
+    step = float(cv2.perspectiveTransform(centre, h_ab)[0, 0, axis] - centre[0, 0, axis])
+    return 1.0 - step / size
+
+
 def check_overlap(h_ab: np.ndarray, shape: tuple[int, int], direction: str,
                   max_overlap: float) -> float:
     """The fraction of view a that view b covers along the stitching direction under ``h_ab``
     (views of ``shape``); refused when not in (0, ``max_overlap``]: a false match, as a
     periodic scene gives."""
-    axis = 0 if direction == "h" else 1
-    size = shape[1 - axis]  # along the overlap direction: width for "h", height for "v"
-    centre = np.array([[[(shape[1] - 1) / 2, (shape[0] - 1) / 2]]])
-    step = float(cv2.perspectiveTransform(centre, h_ab)[0, 0, axis] - centre[0, 0, axis])
-    overlap = 1.0 - step / size
+    overlap = overlap_fraction(h_ab, shape, direction)
     if not 0 < overlap <= max_overlap:
         raise StitchError(f"the homography lays one view {100 * overlap:.0f} % over the other "
                          f"(at most {100 * max_overlap:.0f} % expected): a false match, as a "

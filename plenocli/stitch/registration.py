@@ -11,7 +11,12 @@ import numpy as np
 
 from plenocli.progress import step
 from plenocli.stitch.errors import StitchError
-from plenocli.stitch.homography import check_overlap, estimate_homography, features
+from plenocli.stitch.homography import (
+    check_overlap,
+    estimate_homography,
+    features,
+    overlap_fraction,
+)
 from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import LAYOUTS, corners_xy, neighbour_pairs, translation_matrix
 
@@ -252,11 +257,14 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
     _check_matrices(mats, model, frame_shape or tuple(shape))
     for a, b, direction in neighbour_pairs(layout):
         h_ab = np.linalg.inv(mats[a]) @ mats[b]
-        try:
-            check_overlap(h_ab / h_ab[2, 2], frame_shape or tuple(shape), direction, max_overlap)
-        except StitchError as err:
-            raise StitchError(f"the transform does not fit these views (views {a} and {b}: "
-                             f"{err}); {again}") from err
+        overlap = overlap_fraction(h_ab / h_ab[2, 2], frame_shape or tuple(shape), direction)
+        if not 0 < overlap <= max_overlap:
+            where = "right of" if direction == "h" else "below"
+            raise StitchError(f"the transform's layout {layout} puts view {b} {where} view {a}, "
+                             f"but its matrices lay it {100 * overlap:.0f} % over view {a} "
+                             f"along that direction (views that overlap: 0-"
+                             f"{100 * max_overlap:.0f} %): it was made for another layout or "
+                             f"capture; {again}")
     return mats, layout, "given"
 
 

@@ -258,8 +258,12 @@ def test_a_saved_transform_that_contradicts_itself_or_the_file_is_named(tmp_path
     doc["transform"]["views"] += ["X"]
     doc["transform"]["view_to_reference"] += doc["transform"]["view_to_reference"][:1]
     (tmp_path / "t3.json").write_text(json.dumps(doc))
+    doc = json.loads(saved.read_text())
+    doc["transform"]["view_to_reference"][1][0][2] += 40  # 40 px off: no overlap left
+    (tmp_path / "t40.json").write_text(json.dumps(doc))
     for name, words in (("t21.json", "layout 2x1 contradicts its matrices"),
-                        ("t3.json", "the input holds no view X")):
+                        ("t3.json", "the input holds no view X"),
+                        ("t40.json", "made for another layout or capture")):
         res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "q.tif"),
                                        "--transform-in", str(tmp_path / name)])
         assert res.exit_code == 1 and words in res.output, res.output
