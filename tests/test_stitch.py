@@ -333,7 +333,7 @@ def test_overlap_area_from_the_geometry_is_that_of_the_maps():
     """A plain homography's coverage is solved row by row from its geometry, the pixels near a
     run's end mapped: the count equals the whole maps' (feather > 0) for random homographies,
     shifts landing exactly on pixels and on the 1/64-px cover tolerance included."""
-    from plenocli.stitch.compose import _covered_by_both
+    from plenocli.stitch.overlaps import _covered_by_both
     from plenocli.stitch.warp import ViewMap, feather
 
     rng = np.random.default_rng(3)

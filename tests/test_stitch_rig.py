@@ -259,7 +259,7 @@ def test_the_reduced_pass_and_the_measured_blocks_only_narrow_the_work(monkeypat
     resolution near that shift only, on the most textured rows when the budget is small; the
     overlap is measured on blocks. Shifts stay the full search's within 0.01 px, gains within
     1e-3, the overlap area exact, and the report keeps the rig's own prediction."""
-    from plenocli.stitch import coarse, compose
+    from plenocli.stitch import coarse, overlaps
 
     views, _, rig = dual(768)
     assert coarse.reduction(views.shape[-2:]) == 2
@@ -268,12 +268,12 @@ def test_the_reduced_pass_and_the_measured_blocks_only_narrow_the_work(monkeypat
     monkeypatch.setattr(coarse, "estimate_translation",
                         lambda a, b, **kw: reduced_shapes.append(a.shape) or search(a, b, **kw))
     monkeypatch.setattr(coarse, "FINE_PIXELS", 1 << 16)
-    monkeypatch.setattr(compose, "MEASURE_PIXELS", 1 << 16)
+    monkeypatch.setattr(overlaps, "MEASURE_PIXELS", 1 << 16)
     _, fast = stitch(views, layout="1x2", rig=rig)
     assert reduced_shapes and max(reduced_shapes)[0] < views.shape[-2]  # halved canvases
     monkeypatch.undo()
     monkeypatch.setattr(coarse, "reduction", lambda shape: 1)
-    monkeypatch.setattr(compose, "MEASURE_PIXELS", 1 << 30)
+    monkeypatch.setattr(overlaps, "MEASURE_PIXELS", 1 << 30)
     _, full = stitch(views, layout="1x2", rig=rig)
     assert np.abs(np.subtract(fast.shifts_px, full.shifts_px)).max() < 0.01
     assert np.allclose(fast.gains, full.gains, rtol=1e-3)

@@ -18,6 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from plenocli.progress import step
 from plenocli.stitch import compose
+from plenocli.stitch import overlaps as overlap_measure
 from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
@@ -264,13 +265,13 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     holes = [holes_of(view) for view in stack]
     filled = [view if h is None else fill_nan_channels(view) for view, h in
               zip(stack, holes, strict=True)]
-    overlaps = compose.measure_overlaps(filled, maps, boxes, holes, pairs)
+    overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
     if check_correlation is not None:
         _check_fit(overlaps, pairs, check_correlation)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = compose.match_gains(overlaps, pairs, *stack.shape[:2])
-    residuals = compose.residuals(overlaps, pairs, gains)
+        gains = overlap_measure.match_gains(overlaps, pairs, *stack.shape[:2])
+    residuals = overlap_measure.residuals(overlaps, pairs, gains)
     del overlaps
     box = compose.covered_box(maps, boxes, holes)
     if box is None:

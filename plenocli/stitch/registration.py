@@ -260,8 +260,9 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
         overlap = overlap_fraction(h_ab / h_ab[2, 2], frame_shape or tuple(shape), direction)
         if not 0 < overlap <= max_overlap:
             where = "right of" if direction == "h" else "below"
-            raise StitchError(f"the transform's layout {layout} puts view {b} {where} view {a}, "
-                             f"but its matrices lay it {100 * overlap:.0f} % over view {a} "
+            raise StitchError(f"the transform does not fit these views: its layout {layout} "
+                             f"puts view {b} {where} view {a}, but its matrices lay it "
+                             f"{100 * overlap:.0f} % over view {a} "
                              f"along that direction (views that overlap: 0-"
                              f"{100 * max_overlap:.0f} %): it was made for another layout or "
                              f"capture; {again}")

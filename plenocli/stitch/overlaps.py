@@ -1,0 +1,222 @@
+"""The overlaps of neighbour views, measured where both cover the panorama: the exposure gains
+(per view, per channel), the residual local shift left by the registration, and the overlap's
+area (from the maps alone; for a plain homography from its geometry). Each view is resampled
+here through the same one map per view as the blend (:mod:`plenocli.stitch.compose`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from plenocli.progress import step
+from plenocli.stitch.compose import Box, _shape, intersect, warp_region
+from plenocli.stitch.quality import bounding_box, overlap_residual
+from plenocli.stitch.registration import difference_row
+from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, _apply, feather
+
+# An overlap is measured (exposure gains, residual shifts) on up to MEASURE_BLOCKS blocks spread
+# along the seam, together at most MEASURE_PIXELS: means and local shifts settle long before the
+# whole overlap of a full-size view (10 Mpx at the 5D Mark IV's size) is resampled a second time
+# (gains within 4e-5 and residuals within their 0.05 px steps of the whole overlap's).
+MEASURE_PIXELS = 1 << 20
+MEASURE_BLOCKS = 4
+MIN_BLOCK_PX = 64
+MEASURE_THREADS = 2  # neighbour pairs measured at once (the two cores the stitch is sized for)
+
+
+@dataclass(frozen=True)
+class Overlap:
+    """A neighbour pair's overlap as measured: ``pieces`` (crop of view a (C, h, w), crop of
+    view b, pixels both cover (h, w)) of its blocks, in order along the seam, the seam's long
+    axis (0: rows) and ``area``, the pixels both views cover in the whole overlap."""
+
+    pieces: list
+    long_axis: int
+    area: int
+
+
+def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
+                     holes: list, pairs: list[tuple[int, int, str]]) -> list[Overlap | None]:
+    """Per neighbour pair: its :class:`Overlap`, or None where the views do not overlap. The
+    pairs are measured in MEASURE_THREADS threads (OpenCV's remaps and numpy release the GIL);
+    each pair's figures are those of a serial loop."""
+    def measure(pair):
+        a, b, _ = pair
+        region = intersect(boxes[a], boxes[b])
+        if region is None:
+            return None
+        step(f"measuring the overlap of views {a} and {b}")
+        long_axis, pieces = _long_axis(region), []
+        for block in _measure_blocks(region, long_axis):
+            crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a])
+            crop_b, weight_b = warp_region(views[b], maps[b], block, holes[b])
+            both = (weight_a > 0) & (weight_b > 0)
+            box = bounding_box(both)
+            if box is not None:
+                pieces.append((crop_a[(slice(None),) + box], crop_b[(slice(None),) + box],
+                               both[box]))
+        area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
+        return Overlap(pieces, long_axis, area) if pieces else None
+
+    with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
+        return list(pool.map(measure, pairs))
+
+
+def _covered_by_both(map_a: ViewMap, map_b: ViewMap, region: Box, holes_a, holes_b) -> int:
+    """How many pixels of ``region`` both views cover (their maps only: nothing resampled).
+    Views placed by a plain homography (no rig, distortion or no-data pixel) cover a convex
+    quadrilateral: each row's run is solved from the geometry and only the pixels within
+    SPAN_DOUBT_PX of its ends are mapped, by the maps' own float32 arithmetic (so the count
+    is that of the whole maps)."""
+    runs = [_row_runs(m, region) if h is None else None
+            for m, h in ((map_a, holes_a), (map_b, holes_b))]
+    if runs[0] is not None and runs[1] is not None:
+        return _count_runs(runs[0], runs[1], (map_a, map_b), region)
+    count = 0
+    for (_, mx_a, my_a, lost_a), (_, mx_b, my_b, lost_b) in zip(
+            map_a.bands(region), map_b.bands(region), strict=True):
+        count += int(np.count_nonzero(
+            (feather(mx_a, my_a, map_a.view_shape, lost_a, holes_a) > 0)
+            & (feather(mx_b, my_b, map_b.view_shape, lost_b, holes_b) > 0)))
+    return count
+
+
+# a pixel whose column lies this close to a run's end, solved in float64, is mapped to decide
+# (the maps are float32: 1e-4 px at 2000 px)
+SPAN_DOUBT_PX = 0.05
+
+
+def _row_runs(vmap: ViewMap, region: Box) -> tuple[np.ndarray, ...] | None:
+    """Per row of ``region``, the columns [sure_lo, sure_hi] a plain homography's view surely
+    covers and [maybe_lo, maybe_hi] it may (panorama columns, clipped to the region); None for
+    a map that is not a plain homography, or one whose projective scale changes sign there."""
+    if vmap.rig is not None or vmap.k1:
+        return None
+    m = vmap.to_frame
+    ys = np.arange(region[0].start, region[0].stop, dtype=np.float64)
+    x_ends = (region[1].start, region[1].stop - 1)
+    w_ends = [m[2, 0] * x + m[2, 1] * ys + m[2, 2] for x in x_ends]
+    if not all((w > 0).all() for w in w_ends):
+        return None
+    lower = np.full(ys.shape, -np.inf)
+    upper = np.full(ys.shape, np.inf)
+    rows, cols = vmap.view_shape
+    # source coordinate k (x or y) within [-eps, size - 1 + eps] <=> A u + B >= 0 along a row
+    for k, size in ((0, cols), (1, rows)):
+        for sign, bound in ((1.0, -COVER_EPS_PX), (-1.0, size - 1 + COVER_EPS_PX)):
+            slope = sign * (m[k, 0] - bound * m[2, 0])
+            offset = sign * (m[k, 1] * ys + m[k, 2] - bound * (m[2, 1] * ys + m[2, 2]))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                root = -offset / slope
+            if slope > 0:
+                lower = np.maximum(lower, root)
+            elif slope < 0:
+                upper = np.minimum(upper, root)
+            else:
+                upper = np.where(offset >= 0, upper, -np.inf)
+    first, last = x_ends
+    clip = lambda v: np.clip(v, first - 1, last + 1)  # noqa: E731
+    return (clip(np.ceil(lower + SPAN_DOUBT_PX)), clip(np.floor(upper - SPAN_DOUBT_PX)),
+            clip(np.ceil(lower - SPAN_DOUBT_PX)), clip(np.floor(upper + SPAN_DOUBT_PX)))
+
+
+def _count_runs(runs_a, runs_b, maps, region: Box) -> int:
+    """Pixels both views cover, from their :func:`_row_runs`: the rows' sure runs counted, the
+    doubtful pixels at their ends mapped."""
+    first, last = region[1].start, region[1].stop - 1
+    sure_lo = np.maximum(np.maximum(runs_a[0], runs_b[0]), first)
+    sure_hi = np.minimum(np.minimum(runs_a[1], runs_b[1]), last)
+    maybe_lo = np.maximum(np.maximum(runs_a[2], runs_b[2]), first)
+    maybe_hi = np.minimum(np.minimum(runs_a[3], runs_b[3]), last)
+    sure = sure_hi >= sure_lo
+    count = int(np.maximum(sure_hi - sure_lo + 1, 0).sum())
+    # the doubtful columns: the maybe run less the sure one (the whole maybe run where none is)
+    spans = [(maybe_lo, np.where(sure, sure_lo - 1, maybe_hi)),
+             (np.where(sure, sure_hi + 1, maybe_hi + 1), maybe_hi)]
+    ys, xs = [], []
+    for lo, hi in spans:
+        n = np.maximum(hi - lo + 1, 0).astype(np.int64)
+        rows = np.repeat(np.arange(lo.size), n)
+        starts = np.repeat(lo.astype(np.int64) - np.cumsum(n) + n, n)
+        ys.append(rows + region[0].start)
+        xs.append(starts + np.arange(int(n.sum())))
+    ys, xs = np.concatenate(ys).astype(np.float64), np.concatenate(xs).astype(np.float64)
+    if not ys.size:
+        return count
+    covered = np.ones(ys.shape, bool)
+    for vmap in maps:
+        fx, fy = _apply(vmap.to_frame, xs, ys)
+        covered &= feather(fx.astype(np.float32), fy.astype(np.float32), vmap.view_shape,
+                           None, None) > 0
+    return count + int(np.count_nonzero(covered))
+
+
+def _long_axis(region: Box) -> int:
+    rows, cols = _shape(region)
+    return 0 if rows >= cols else 1
+
+
+def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
+    """The blocks of an overlap ``region`` that are measured: MEASURE_BLOCKS segments along its
+    long axis (fewer on a seam shorter than MEASURE_BLOCKS * MIN_BLOCK_PX), each whole or, past
+    the budget, a window centred in it, as square as the overlap allows (a local shift is
+    measured alike along and across)."""
+    length, width = _shape(region)[long_axis], _shape(region)[1 - long_axis]
+    n = max(1, min(MEASURE_BLOCKS, length // MIN_BLOCK_PX))
+    budget = MEASURE_PIXELS // n
+    across = min(width, max(MIN_BLOCK_PX, math.isqrt(budget)))
+    first, middle = region[long_axis].start, (region[1 - long_axis].start
+                                              + region[1 - long_axis].stop) // 2
+    out = []
+    for k in range(n):
+        lo, hi = first + k * length // n, first + (k + 1) * length // n
+        along = min(hi - lo, max(MIN_BLOCK_PX, budget // across))
+        start = (lo + hi - along) // 2
+        block = [slice(None), slice(None)]
+        block[long_axis] = slice(start, start + along)
+        block[1 - long_axis] = slice(middle - across // 2, middle - across // 2 + across)
+        out.append(tuple(block))
+    return out
+
+
+def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
+                n_chan: int) -> np.ndarray:
+    """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed)."""
+    gains = np.ones((n_views, n_chan))
+    for c in range(n_chan):
+        rows, rhs = [], []
+        for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+            if overlap is None:
+                continue
+            count = sum(int(both.sum()) for _, _, both in overlap.pieces)
+            mean_a, mean_b = (sum(float(piece[k][c][piece[2]].sum()) for piece in overlap.pieces)
+                              / count for k in (0, 1))
+            if mean_a <= 0 or mean_b <= 0:
+                continue  # signed data: leave this pair out
+            rows.append(difference_row(a, b, n_views))
+            rhs.append(np.log(mean_a / mean_b))
+        if rows:
+            sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
+            gains[1:, c] = np.exp(sol)
+    return gains
+
+
+def residuals(overlaps: list, pairs: list[tuple[int, int, str]], gains: np.ndarray) -> list:
+    """Per pair: (RMS local shift left in the overlap px or None, overlap area px); the pairs
+    in MEASURE_THREADS threads (the FFTs and blurs release the GIL)."""
+    def measure(item):
+        (a, b, _), overlap = item
+        if overlap is None:
+            return None, 0
+        lumas = [tuple((x * gains[k].astype(np.float32)[:, None, None]).mean(axis=0)
+                       for x, k in ((crop_a, a), (crop_b, b))) + (both,)
+                 for crop_a, crop_b, both in overlap.pieces]
+        return overlap_residual(lumas, overlap.long_axis), overlap.area
+
+    with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
+        return list(pool.map(measure, zip(pairs, overlaps, strict=True)))
