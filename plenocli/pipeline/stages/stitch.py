@@ -162,7 +162,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                       if pano.shape[0] == 1 else [f"C{c}" for c in range(pano.shape[0])])
         canvas.finish(tiffio.derived_meta(
             meta, record, views=page_names, cfa=None, view_colours=None, active_area=None,
-            masked_areas=None, origin=None,
+            masked_areas=None, origin=None, **_levels(meta, len(page_names)),
             stitch={k: rep[k] for k in ("model", "layout", "shifts_px", "residual_px",
                                         "origin_px")}))
     if report:
@@ -176,6 +176,17 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), pano.shape[2], pano.shape[1], _alignment(rep))
+
+
+def _levels(meta: dict, pages: int) -> dict:
+    """The black and white levels of the panorama's pages: the views' common ones (each page
+    mixes every view), none where the views differ."""
+    out = {}
+    for key in ("black_level", "white_level"):
+        levels = meta.get(key)
+        same = isinstance(levels, list) and levels and all(v == levels[0] for v in levels)
+        out[key] = [levels[0]] * pages if same else None
+    return out
 
 
 def _verified(call, *args, **kwargs):

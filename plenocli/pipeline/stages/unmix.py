@@ -1,9 +1,13 @@
 """Stage ``unmix``: views TIFF(s) + mixing file -> views without sub-aperture cross-talk.
 
-The pages the mixing names are solved per pixel (``plenocli.unmix``); every other page (e.g.
-the sum view S of a dual-pixel file) is copied unchanged, so the output has the input's page
-names and metadata and ``stitch`` takes it as it is. A file that holds a single view (a left
-or right refocused image) names it after the file (``left.tif`` -> ``left``), as in stitch.
+The pages the mixing names are solved per pixel (``plenocli.unmix``). The sum view S of a
+dual-pixel file cannot be copied: it would keep the ghosts the others lost (1.5 x the clean sum
+at r = 0.5). Where it is A + B (bias writes B = S - A) it is made again from the unmixed A and B
+(NaN where either is); after ``flat`` it is not (each view divided by its own white), nothing
+here can make it right, and it is left out (the log says so). Any other page is copied
+unchanged, so the output keeps the input's metadata and ``stitch`` takes it as it is. A file
+that holds a single view (a left or right refocused image) names it after the file
+(``left.tif`` -> ``left``), as in stitch.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import processing_of, stage_record
-from plenocli.model.views import ViewNames, colour_page, pupil_views
+from plenocli.model.views import ViewNames, colour_page, pupil_views, view_of
 from plenocli.progress import log, shown
 
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
@@ -158,14 +162,18 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
         raise CalibrationError(f"{mixing}: the mixing matrix cannot be inverted at {singular} "
                                "pixels; re-measure it, or pass --regularise (e.g. 0.05)")
     solved = [k for g in groups for k in g]
+    kept = _sum_again(out, pages, names, solved)
     if not np.isfinite(out[solved]).any():
         raise InputError(f"{', '.join(inputs)}: every unmixed pixel is NaN; check the views")
     summary = _summary(gains, [names[k] for k in solved], cond, regularise)
     params = dict(mixing=mixing, regularise=regularise)
     record = stage_record("unmix", params, {"inputs": inputs, "mixing": mixing})
-    out_meta = tiffio.derived_meta(meta, record, views=names, unmix=summary)
+    per_view = {key: [meta[key][k] for k in kept] for key in PER_VIEW_KEYS
+                if isinstance(meta.get(key), list) and len(meta[key]) == len(names)}
+    out_meta = tiffio.derived_meta(meta, record, views=[names[k] for k in kept], unmix=summary,
+                                   **per_view)
     protect = (*inputs, mixing)
-    tiffio.write_image(output, out, out_meta, protect=protect)
+    tiffio.write_image(output, out[kept], out_meta, protect=protect)
     if noise_map:
         gain_meta = tiffio.derived_meta(meta, record, views=[names[k] for k in solved],
                                         active_area=[0, 0, *gains.shape[1:]], unmix=summary,
@@ -180,6 +188,33 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
              "%.3g%s)", ", ".join(shown(p) for p in inputs), shown(output),
              ",".join(info["views"]), summary["noise_gain_median"], summary["noise_gain_max"],
              summary["condition_max"], f", Tikhonov {regularise:g}" if regularise else "")
+
+
+PER_VIEW_KEYS = ("black_level", "white_level", "view_colours")  # metadata listed view by view
+
+
+def _sum_again(out: np.ndarray, pages: np.ndarray, names: list[str],
+               solved: list[int]) -> list[int]:
+    """Make a dual-pixel file's S pages again as the sums of its unmixed A and B pages
+    (channel by channel: ``S.R`` = ``A.R`` + ``B.R``) where the input's S is their sum; the
+    pages to write (an S that is not, after flat, left out)."""
+    kept = list(range(len(names)))
+    if "S" in pupil_views(names) or not {"A", "B", "S"} <= {view_of(n) for n in names}:
+        return kept
+    for k, name in enumerate(names):
+        parts = [names.index(v + name[1:]) for v in "AB" if v + name[1:] in names]
+        if view_of(name) != "S" or len(parts) != 2 or not set(parts) <= set(solved):
+            continue
+        total = pages[parts[0]] + pages[parts[1]]
+        known = np.isfinite(total) & np.isfinite(pages[k])
+        if np.allclose(pages[k][known], total[known], rtol=1e-5, atol=0):
+            out[k] = out[parts[0]] + out[parts[1]]
+        else:
+            kept.remove(k)
+            log.info("unmix: %s left out: it is not %s + %s here (flat-fielded views), so it "
+                     "cannot be unmixed; sum the unmixed views if you need it", name,
+                     names[parts[0]], names[parts[1]])
+    return kept
 
 
 def _preview_views(pages: np.ndarray, groups: list[list[int]], info: dict) -> np.ndarray:
