@@ -11,7 +11,7 @@ from plenocli.stitch import StitchError, estimate_translation, refine_homography
 from plenocli.synth.rig import make_rig
 
 
-def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
+def apply_matrix(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
     q = np.c_[pts, np.ones(len(pts))] @ np.asarray(h).T
     return q[:, :2] / q[:, 2:]
 
@@ -19,7 +19,7 @@ def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
 def _corner_error(truth: dict, report) -> float:
     rows, cols = truth["view_shape"]
     corners = np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]])
-    return max(float(np.abs(_apply(t, corners) - _apply(e, corners)).max())
+    return max(float(np.abs(apply_matrix(t, corners) - apply_matrix(e, corners)).max())
                for t, e in zip(truth["relative"][1:],
                                report.transform["view_to_reference"][1:], strict=True))
 
@@ -65,8 +65,8 @@ def test_refine_homography_recovers_from_a_perturbed_start():
     refined, info = refine_homography(views[0], views[1], start)
     rows, cols = 300, 400
     corners = np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]])
-    assert np.abs(_apply(refined, corners) - _apply(true_h, corners)).max() < 0.01
-    assert np.abs(_apply(start, corners) - _apply(true_h, corners)).max() > 1.0
+    assert np.abs(apply_matrix(refined, corners) - apply_matrix(true_h, corners)).max() < 0.01
+    assert np.abs(apply_matrix(start, corners) - apply_matrix(true_h, corners)).max() > 1.0
     assert info["photometric_iterations"] >= 2
 
 

@@ -60,20 +60,17 @@ def intersect(a: Box, b: Box) -> Box | None:
     return (rows, cols) if rows.stop > rows.start and cols.stop > cols.start else None
 
 
-def _shape(region: Box) -> tuple[int, int]:
+def region_shape(region: Box) -> tuple[int, int]:
     return region[0].stop - region[0].start, region[1].stop - region[1].start
 
 
-def warp_region(view: np.ndarray, vmap: ViewMap, region: Box, holes=None,
-                label: str = "") -> tuple[np.ndarray, np.ndarray]:
+def warp_region(view: np.ndarray, vmap: ViewMap, region: Box,
+                holes=None) -> tuple[np.ndarray, np.ndarray]:
     """A view's channels (C, rows, cols; NaN filled) resampled onto a panorama ``region``
     through its map: (C, h, w) float32 and its feather weight (h, w), 0 where not covered."""
-    out = np.empty((len(view),) + _shape(region), np.float32)
-    weight = np.empty(_shape(region), np.float32)
-    bands = list(vmap.bands(region)) if label else vmap.bands(region)
-    for k, (band, mx, my, lost) in enumerate(bands):
-        if label:
-            step(f"{label}, band {k + 1} of {len(bands)}")
+    out = np.empty((len(view),) + region_shape(region), np.float32)
+    weight = np.empty(region_shape(region), np.float32)
+    for band, mx, my, lost in vmap.bands(region):
         weight[band] = feather(mx, my, vmap.view_shape, lost, holes)
         out[:, band] = resample(view, mx, my)
     return out, weight
@@ -115,15 +112,15 @@ def _first_covered(vmap: ViewMap, box: Box, hole, axis: int, inward: int) -> int
                  else slice(max(lo, hi - k - EXTENT_STRIP), hi - k))
         region = list(box)
         region[axis] = strip
-        found = np.flatnonzero(_coverage(vmap, tuple(region), hole).any(axis=1 - axis))
+        found = np.flatnonzero(coverage(vmap, tuple(region), hole).any(axis=1 - axis))
         if found.size:
             return strip.start + int(found[0] if inward > 0 else found[-1])
     return None
 
 
-def _coverage(vmap: ViewMap, region: Box, hole) -> np.ndarray:
+def coverage(vmap: ViewMap, region: Box, hole) -> np.ndarray:
     """Where the view covers ``region`` (its feather weight > 0), from its maps alone."""
-    out = np.empty(_shape(region), bool)
+    out = np.empty(region_shape(region), bool)
     for band, mx, my, lost in vmap.bands(region):
         out[band] = feather(mx, my, vmap.view_shape, lost, hole) > 0
     return out

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from plenocli.progress import step
-from plenocli.stitch.compose import Box, _shape, intersect, warp_region
+from plenocli.stitch.compose import Box, coverage, intersect, region_shape, warp_region
 from plenocli.stitch.quality import bounding_box, overlap_residual
 from plenocli.stitch.registration import difference_row
-from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, _apply, feather
+from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, apply_matrix, feather
 
 # An overlap is measured (exposure gains, residual shifts) on up to MEASURE_BLOCKS blocks spread
 # along the seam, together at most MEASURE_PIXELS: means and local shifts settle long before the
@@ -77,13 +77,8 @@ def _covered_by_both(map_a: ViewMap, map_b: ViewMap, region: Box, holes_a, holes
             for m, h in ((map_a, holes_a), (map_b, holes_b))]
     if runs[0] is not None and runs[1] is not None:
         return _count_runs(runs[0], runs[1], (map_a, map_b), region)
-    count = 0
-    for (_, mx_a, my_a, lost_a), (_, mx_b, my_b, lost_b) in zip(
-            map_a.bands(region), map_b.bands(region), strict=True):
-        count += int(np.count_nonzero(
-            (feather(mx_a, my_a, map_a.view_shape, lost_a, holes_a) > 0)
-            & (feather(mx_b, my_b, map_b.view_shape, lost_b, holes_b) > 0)))
-    return count
+    return int(np.count_nonzero(coverage(map_a, region, holes_a)
+                                & coverage(map_b, region, holes_b)))
 
 
 # a pixel whose column lies this close to a run's end, solved in float64, is mapped to decide
@@ -150,14 +145,14 @@ def _count_runs(runs_a, runs_b, maps, region: Box) -> int:
         return count
     covered = np.ones(ys.shape, bool)
     for vmap in maps:
-        fx, fy = _apply(vmap.to_frame, xs, ys)
+        fx, fy = apply_matrix(vmap.to_frame, xs, ys)
         covered &= feather(fx.astype(np.float32), fy.astype(np.float32), vmap.view_shape,
                            None, None) > 0
     return count + int(np.count_nonzero(covered))
 
 
 def _long_axis(region: Box) -> int:
-    rows, cols = _shape(region)
+    rows, cols = region_shape(region)
     return 0 if rows >= cols else 1
 
 
@@ -166,7 +161,7 @@ def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
     long axis (fewer on a seam shorter than MEASURE_BLOCKS * MIN_BLOCK_PX), each whole or, past
     the budget, a window centred in it, as square as the overlap allows (a local shift is
     measured alike along and across)."""
-    length, width = _shape(region)[long_axis], _shape(region)[1 - long_axis]
+    length, width = region_shape(region)[long_axis], region_shape(region)[1 - long_axis]
     n = max(1, min(MEASURE_BLOCKS, length // MIN_BLOCK_PX))
     budget = MEASURE_PIXELS // n
     across = min(width, max(MIN_BLOCK_PX, math.isqrt(budget)))

@@ -62,7 +62,7 @@ class ViewMap:
             band = slice(r0, min(r0 + step, rows))
             ys = np.arange(region[0].start + band.start, region[0].start + band.stop,
                            dtype=np.float64)
-            fx, fy = _apply(m, xs[None, :], ys[:, None])
+            fx, fy = apply_matrix(m, xs[None, :], ys[:, None])
             lost = None
             if self.rig is not None:
                 fx, fy = common_to_view(self.rig, self.index, fx, fy, self.view_shape)
@@ -84,11 +84,12 @@ class ViewMap:
             xs, ys = view_to_common(self.rig, self.index, xs, ys, self.view_shape)
             ok = np.isfinite(xs) & np.isfinite(ys)
             xs, ys = xs[ok], ys[ok]
-        px, py = _apply(np.linalg.inv(self.to_frame), xs, ys)
+        px, py = apply_matrix(np.linalg.inv(self.to_frame), xs, ys)
         return np.stack([px, py], axis=1)
 
 
-def _apply(m: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def apply_matrix(m: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (x, y) through the 3 x 3 matrix ``m`` (homogeneous, divided by w)."""
     w = m[2, 0] * x + m[2, 1] * y + m[2, 2]
     return (m[0, 0] * x + m[0, 1] * y + m[0, 2]) / w, (m[1, 0] * x + m[1, 1] * y + m[1, 2]) / w
 
