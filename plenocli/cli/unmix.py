@@ -13,8 +13,8 @@ def unmix(**params):
     INPUTS is a views TIFF (or one TIFF per view, e.g. left.tif right.tif); the pages the
     mixing names are replaced by their clean versions, every other page is kept, so stitch
     takes the output as it is; a dual-pixel sum S is made again as A + B of the clean views
-    (left out after flat, where it is not their sum). The metadata records the noise gain (median, max) and the
-    mixing's condition numbers; NaN stays NaN.
+    (left out after flat, where it is not their sum). The metadata records the noise gain
+    (median, max) and the mixing's condition numbers; NaN stays NaN.
 
     \b
     Example:
