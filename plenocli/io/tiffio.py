@@ -93,24 +93,32 @@ def describe(meta: dict) -> str:
 def check_result(path, data: np.ndarray, meta: dict) -> None:
     """Refuse to write a result (views, rows, cols) whose views ``meta`` does not name one by one,
     that holds no valid pixel in a view, or that holds +-Inf (an overflow, never light)."""
+    floats = data.dtype.kind == "f"
+    check_summary(path, meta, data.shape[0],
+                  [_has_finite(page) for page in data] if floats else None,
+                  _first_infinite(data) if floats else None)
+
+
+def check_summary(path, meta: dict, n_views: int, finite, infinite) -> None:
+    """:func:`check_result` from what was learnt of the pixels: per view whether it holds a
+    finite pixel (None: not float), and (view, how many, row, col) of the +-Inf pixels or None."""
     names = meta.get("views")
-    if names is not None and len(names) != data.shape[0]:
-        raise ValueError(f"{len(names)} view names for {data.shape[0]} views")
-    names = names or [f"view {k}" for k in range(data.shape[0])]
-    if data.dtype.kind == "f":
-        for name, page in zip(names, data, strict=True):
-            if not _has_finite(page):
-                raise InputError(f"{path}: view {name} of the result holds no valid pixel (all "
-                                 "NaN or infinite: every input pixel clipped, masked or outside "
-                                 "the grid); nothing was written: check the inputs with "
-                                 "plenocli info")
-        found = _first_infinite(data)
-        if found:  # +-Inf is never written either: an overflow, not light
-            k, count, row, col = found
-            raise InputError(f"{path}: view {names[k]} of the result holds {count} infinite "
-                             f"pixels (first at row {row}, col {col}): it overflowed float32, "
-                             "the inputs hold values far beyond any sensor level; nothing was "
-                             "written")
+    if names is not None and len(names) != n_views:
+        raise ValueError(f"{len(names)} view names for {n_views} views")
+    names = names or [f"view {k}" for k in range(n_views)]
+    for name, has_finite in zip(names, finite if finite is not None else [True] * n_views,
+                                strict=True):
+        if not has_finite:
+            raise InputError(f"{path}: view {name} of the result holds no valid pixel (all "
+                             "NaN or infinite: every input pixel clipped, masked or outside "
+                             "the grid); nothing was written: check the inputs with "
+                             "plenocli info")
+    if infinite:  # +-Inf is never written either: an overflow, not light
+        k, count, row, col = infinite
+        raise InputError(f"{path}: view {names[k]} of the result holds {count} infinite "
+                         f"pixels (first at row {row}, col {col}): it overflowed float32, "
+                         "the inputs hold values far beyond any sensor level; nothing was "
+                         "written")
 
 
 SEAL_KEY = "pixels_sha256"

@@ -2,11 +2,11 @@
 the residual measured there only), and the views resampled once into the panorama and blended.
 
 Memory: the panorama is trimmed to what the views cover first (from their maps along its
-edges), then blended band by band of its rows into the array it is written in (the output file
-itself, memory-mapped, for the stage): every view's part of a band is mapped, resampled and
-added, weighted, and the band normalised in place. The peak is the views, the panorama and a
-few bands; no weight canvas. Outside the overlaps a view's weight is its alone, so the
-normalisation leaves it as resampled.
+edges), then blended band by band of its rows: every view's part of a band is mapped, resampled
+and added, weighted, the band normalised in place and handed over (to the output file, for the
+stage). The peak is the views and a few bands; no panorama and no weight canvas in memory.
+Outside the overlaps a view's weight is its alone, so the normalisation leaves it as
+resampled.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numpy as np
 
 from plenocli.progress import step
 from plenocli.stitch.errors import StitchError
-from plenocli.stitch.kernels import accumulate
+from plenocli.stitch.kernels import accumulate, normalise
 from plenocli.stitch.views import translation_matrix
 from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, feather, resample
 
@@ -145,22 +145,23 @@ BLEND_BAND_PIXELS = 1 << 22
 
 
 def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: list,
-          gains: np.ndarray, out: np.ndarray) -> np.ndarray:
-    """Blend the feathered panorama into ``out`` (C, rows, cols) float32, zero-filled (NaN where
-    no view covers); returns the pixels some view covers (rows, cols).
+          gains: np.ndarray, shape: tuple[int, int, int], write_rows) -> np.ndarray:
+    """Blend the feathered panorama of ``shape`` (C, rows, cols) float32 (NaN where no view
+    covers), handing each band of rows to ``write_rows(rows, pixels)`` once it is final (in
+    order); returns the pixels some view covers (rows, cols).
 
     Band by band of panorama rows, each view's part of the band is resampled once through its
-    map and added, weighted by its distance to its edge; the band is then normalised in place.
-    So ``out`` is written once, in order, and may be the output file itself (a memory map):
-    no whole canvas and no weight canvas. The maps of a band are computed here while worker
-    threads resample the parts before it (numpy, OpenCV and the compiled kernels release the
-    GIL); the parts are added in view order by one compiled pass, so the sums are those of a
-    serial loop."""
-    panorama = np.asarray(out)
-    rows, cols = panorama.shape[1:]
-    step_rows = max(1, BLEND_BAND_PIXELS // cols)
+    map and added, weighted by its distance to its edge; the band is then normalised in place
+    and written. So no whole canvas and no weight canvas is held: the output file is written
+    band by band. The maps of a band are computed here while worker threads resample the parts
+    before it (numpy, OpenCV and the compiled kernels release the GIL); the parts are added in
+    view order by one compiled pass, so the sums are those of a serial loop."""
+    n_chan, rows, cols = shape
+    step_rows = max(1, min(rows, BLEND_BAND_PIXELS // cols))
     n_bands = -(-rows // step_rows)
     covered = np.empty((rows, cols), bool)
+    # band j is summed in buffers j % 2 while band j - 1 may still be open
+    sums = [np.empty((n_chan, step_rows, cols), np.float32) for _ in range(2)]
     totals = [np.empty((step_rows, cols), np.float32) for _ in range(2)]
     pending: deque = deque()  # (band number, rows within the band, cols, gain, job)
     open_bands: deque = deque()  # (band number, its rows)
@@ -168,21 +169,23 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
     def add_oldest() -> None:
         j, band_rows, band_cols, gain, job = pending.popleft()
         img, weight = job.result()
-        rows_out = slice(j * step_rows + band_rows.start, j * step_rows + band_rows.stop)
-        accumulate(panorama[:, rows_out, band_cols], totals[j % 2][band_rows, band_cols], img,
-                   weight, gain, bool((gain != 1).any()))
+        accumulate(sums[j % 2][:, band_rows, band_cols], totals[j % 2][band_rows, band_cols],
+                   img, weight, gain, bool((gain != 1).any()))
 
     def close_bands(before: int) -> None:
         while open_bands and open_bands[0][0] < before:
             j, band = open_bands.popleft()
             while pending and pending[0][0] <= j:
                 add_oldest()
-            _normalise(panorama[:, band], totals[j % 2][:band.stop - band.start], covered[band])
+            height = band.stop - band.start
+            normalise(sums[j % 2][:, :height], totals[j % 2][:height], covered[band])
+            write_rows(band, sums[j % 2][:, :height])
 
     with ThreadPoolExecutor(max_workers=BLEND_WORKERS) as pool:
         for j in range(n_bands):
-            close_bands(j - 1)  # band j reuses the weight sums of band j - 2
+            close_bands(j - 1)  # band j reuses the buffers of band j - 2
             band = slice(j * step_rows, min(rows, (j + 1) * step_rows))
+            sums[j % 2][:] = 0
             totals[j % 2][:] = 0
             open_bands.append((j, band))
             for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
@@ -213,13 +216,6 @@ def _resample_part(pool, band: slice, part: Box, view: np.ndarray, vmap: ViewMap
         yield (slice(first, first + piece.stop - piece.start),
                slice(part[1].start + span.start, part[1].start + span.stop),
                pool.submit(_band, view, mx, my, lost, vmap.view_shape, hole))
-
-
-def _normalise(panorama: np.ndarray, total: np.ndarray, covered: np.ndarray) -> None:
-    """A band's weighted sums divided by their weights, NaN where no view covers."""
-    np.greater(total, 0, out=covered)
-    panorama *= 1.0 / np.maximum(total, 1e-12)
-    panorama[:, ~covered] = np.nan
 
 
 def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,

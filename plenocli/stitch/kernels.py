@@ -59,3 +59,22 @@ def accumulate(panorama: np.ndarray, total: np.ndarray, image: np.ndarray, weigh
                 if scaled:
                     v = v * gain[k]
                 panorama[k, r, c] += v * w
+
+
+@numba.njit("void(f4[:, :, :], f4[:, :], b1[:, :])", cache=True, nogil=True, fastmath=False)
+def normalise(sums: np.ndarray, total: np.ndarray, covered: np.ndarray) -> None:
+    """A band's weighted sums divided by their weights (``sums *= 1 / max(total, 1e-12)`` in
+    float32) where a view covers it (``total`` > 0, marked in ``covered``), NaN elsewhere: one
+    pass instead of numpy's three."""
+    tiny = np.float32(1e-12)
+    for r in range(total.shape[0]):
+        for c in range(total.shape[1]):
+            t = total[r, c]
+            covered[r, c] = t > 0
+            if t > 0:
+                inverse = np.float32(1.0) / max(t, tiny)
+                for k in range(sums.shape[0]):
+                    sums[k, r, c] *= inverse
+            else:
+                for k in range(sums.shape[0]):
+                    sums[k, r, c] = np.nan

@@ -10,6 +10,7 @@ measure the local shifts left in every overlap.
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -85,7 +86,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            max_overlap: float = 0.7, min_overlap_px: int = 16,
            min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
-           tolerance_px: float | None = None, out: Callable[..., np.ndarray] | None = None,
+           tolerance_px: float | None = None, out: Callable[..., Callable] | None = None,
            ) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
@@ -109,8 +110,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         only within ``tolerance_px`` (default 5 % of the view, >= 8 px) of the rig's prediction.
     overlap, overlap_tolerance : without a rig, the expected overlap (fraction of the view
         along the stitching direction) and the tolerance on it (same unit).
-    out : given the shape (C, rows', cols'), the zero-filled float32 array to blend into (a
-        memory-mapped output file: never held whole in memory); default a new array.
+    out : given the shape (C, rows', cols'), the function ``write_rows(rows, pixels)`` taking
+        each band of the panorama once final (e.g. into a file; the panorama is then None).
 
     Returns
     -------
@@ -155,10 +156,10 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         shifts_px=[[float(t[1, 2]), float(t[0, 2])] for t in transforms],
         pairs=pair_info, gains=gains.tolist(),
         residual_px=float(np.sqrt(np.mean(np.square(measured)))) if measured else None,
-        closure_px=closure, panorama_shape=list(panorama.shape[1:]),
+        closure_px=closure, panorama_shape=list(covered.shape),
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
         coverage_fraction=float(covered.mean()))
-    return (panorama if colour else panorama[0]), report
+    return (panorama if colour or panorama is None else panorama[0]), report
 
 
 def _pair_report(pair_info: list[dict] | None, pairs, residuals) -> tuple[list[dict], list]:
@@ -277,19 +278,22 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     if box is None:
         raise StitchError("the views cover no pixel of the panorama; check the transform")
     offset = translation_matrix(-box[0].start, -box[1].start) @ offset
-    panorama = (out or _zeros)((stack.shape[1], box[0].stop - box[0].start,
-                                box[1].stop - box[1].start))
+    pano_shape = (stack.shape[1], box[0].stop - box[0].start, box[1].stop - box[1].start)
+    panorama = None if out else np.empty(pano_shape, np.float32)
+    write_rows = out(pano_shape) if out else functools.partial(_write_rows, panorama)
     if blend == "multiband":
-        whole = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)
-        panorama[...] = whole[(slice(None),) + box]
-        covered = np.isfinite(panorama).all(axis=0)
+        whole = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)[
+            (slice(None),) + box]
+        covered = np.isfinite(whole).all(axis=0)
+        write_rows(slice(0, pano_shape[1]), whole)
     else:
-        covered = compose.blend(filled, *compose.crop(maps, boxes, box), holes, gains, panorama)
+        covered = compose.blend(filled, *compose.crop(maps, boxes, box), holes, gains, pano_shape,
+                                write_rows)
     return panorama, covered, offset, gains, residuals
 
 
-def _zeros(shape: tuple[int, int, int]) -> np.ndarray:
-    return np.zeros(shape, np.float32)
+def _write_rows(panorama: np.ndarray, rows: slice, pixels: np.ndarray) -> None:
+    panorama[:, rows] = pixels
 
 
 def _check_fit(overlaps: list, pairs: list, min_correlation: float) -> None:

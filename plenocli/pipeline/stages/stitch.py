@@ -144,10 +144,10 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     prism_rig = read_rig(rig) if rig else None
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     with image_canvas(output, protect=protect) as canvas:  # blended straight into the file
-        panorama, result = _verified(stitch_lib.stitch, stack, layout=layout, model=model,
-                                     distortion_k1=distortion, transform=transform, blend=blend,
-                                     rig=prism_rig, overlap=overlap,
-                                     overlap_tolerance=overlap_tolerance, out=canvas.allocate)
+        _, result = _verified(stitch_lib.stitch, stack, layout=layout, model=model,
+                              distortion_k1=distortion, transform=transform, blend=blend,
+                              rig=prism_rig, overlap=overlap,
+                              overlap_tolerance=overlap_tolerance, out=canvas.allocate)
         if transform_in or rig:  # a side file may make the panorama refused, never wrong
             _verified(verify.check_alignment, stack, result,
                       what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
@@ -157,25 +157,26 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                                  "rig": rig})
         rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
-        pano = panorama if panorama.ndim == 3 else panorama[np.newaxis]
-        page_names = (list(CHANNELS) if pano.shape[0] == 3 else ["panorama"]
-                      if pano.shape[0] == 1 else [f"C{c}" for c in range(pano.shape[0])])
+        n_pages, height, width = canvas.shape
+        page_names = (list(CHANNELS) if n_pages == 3 else ["panorama"]
+                      if n_pages == 1 else [f"C{c}" for c in range(n_pages)])
         canvas.finish(tiffio.derived_meta(
             meta, record, views=page_names, cfa=None, view_colours=None, active_area=None,
             masked_areas=None, origin=None, **_levels(meta, len(page_names)),
             stitch={k: rep[k] for k in ("model", "layout", "shifts_px", "residual_px",
                                         "origin_px")}))
+        if preview:  # from the file's pages: the panorama was never held whole
+            pano = canvas.pixels()
+            write_png(preview, np.moveaxis(pano, 0, -1) if n_pages == 3 else pano[0],
+                      protect=protect, colour=meta.get("colour"))
     if report:
         write_text(report, json.dumps(json_safe({**rep, "provenance": record}), indent=2,
                                       allow_nan=False), protect=protect)
     if transform_out:
         write_transform(transform_out, rep["transform"], names, record, protect=protect)
-    if preview:
-        image = np.moveaxis(pano, 0, -1) if pano.shape[0] == 3 else pano[0]
-        write_png(preview, image, protect=protect, colour=meta.get("colour"))
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
-             ",".join(names), pano.shape[2], pano.shape[1], _alignment(rep))
+             ",".join(names), width, height, _alignment(rep))
 
 
 def _levels(meta: dict, pages: int) -> dict:
