@@ -121,8 +121,8 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     data = np.asarray(frame, np.float32)
     if data.ndim != 2 or data.shape[0] < 4 or data.shape[1] < 4:
         raise ValueError(f"frame must be a 2-D mosaic of at least 4 x 4 pixels, got {data.shape}")
-    # one pass without a mask for the usual frame with nothing unknown (float64: no overflow)
-    has_unknown = not np.isfinite(np.sum(data, dtype=np.float64))
+    # one pass without a mask for the usual frame (an overflowing sum takes the masked way)
+    has_unknown = not np.isfinite(np.sum(data))
     unknown = ~np.isfinite(data) if has_unknown else None
     if has_unknown:
         if unknown.all():

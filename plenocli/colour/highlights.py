@@ -35,7 +35,8 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     green below red and blue is the magenta of a badly developed highlight). Returns the number
     of pixels rebuilt.
     """
-    if np.isfinite(np.sum(frame, dtype=np.float64)):  # nothing clipped: one cheap pass
+    # nothing clipped: one cheap pass (a float32 sum that overflows only takes the long way)
+    if np.isfinite(np.sum(frame)):
         return 0
     masked = ~np.isfinite(rgb).all(axis=-1)
     if not masked.any():

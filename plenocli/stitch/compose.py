@@ -185,8 +185,7 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
         for j in range(n_bands):
             close_bands(j - 1)  # band j reuses the buffers of band j - 2
             band = slice(j * step_rows, min(rows, (j + 1) * step_rows))
-            sums[j % 2][:] = 0
-            totals[j % 2][:] = 0
+            totals[j % 2][:] = 0  # the sums are set where a first weight is added
             open_bands.append((j, band))
             for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
                 part = None if box is None else intersect(box, (band, slice(0, cols)))

@@ -44,13 +44,15 @@ def band_maps(along_x: np.ndarray, along_y: np.ndarray, first_y: np.ndarray,
 
 @numba.njit("void(f4[:, :, :], f4[:, :], f4[:, :, :], f4[:, :], f4[:], b1)", cache=True,
             nogil=True, fastmath=False)
-def accumulate(panorama: np.ndarray, total: np.ndarray, image: np.ndarray, weight: np.ndarray,
+def accumulate(sums: np.ndarray, total: np.ndarray, image: np.ndarray, weight: np.ndarray,
                gain: np.ndarray, scaled: bool) -> None:
-    """``panorama += image * gain * weight`` (channel by channel; the gain only when ``scaled``)
-    and ``total += weight`` over a band, in float32 as the numpy expressions round."""
+    """``sums += image * gain * weight`` (channel by channel; the gain only when ``scaled``)
+    and ``total += weight`` over a band, in float32 as the numpy expressions round. ``sums``
+    need not be zeroed: where ``total`` is still 0 no weight was added, and it is set."""
     for r in range(weight.shape[0]):
         for c in range(weight.shape[1]):
             w = weight[r, c]
+            first = total[r, c] == 0
             total[r, c] += w
             if w == 0:
                 continue
@@ -58,7 +60,35 @@ def accumulate(panorama: np.ndarray, total: np.ndarray, image: np.ndarray, weigh
                 v = image[k, r, c]
                 if scaled:
                     v = v * gain[k]
-                panorama[k, r, c] += v * w
+                if first:
+                    sums[k, r, c] = v * w
+                else:
+                    sums[k, r, c] += v * w
+
+
+@numba.njit("void(f4[:, :, :], f4[:, :])", cache=True, nogil=True, fastmath=False)
+def channel_mean(image: np.ndarray, out: np.ndarray) -> None:
+    """``out`` = the mean of ``image``'s (C, rows, cols) channels, summed in order (any layout:
+    interleaved RGB is read pixel by pixel); where a channel is NaN, the others' mean as
+    ``np.nanmean`` gives it (NaN where every channel is)."""
+    n = image.shape[0]
+    scale = np.float32(1.0 / n)
+    for r in range(out.shape[0]):
+        for c in range(out.shape[1]):
+            total = image[0, r, c]
+            for k in range(1, n):
+                total += image[k, r, c]
+            if np.isnan(total):
+                total = np.float32(0.0)
+                count = 0
+                for k in range(n):
+                    v = image[k, r, c]
+                    if not np.isnan(v):
+                        total += v
+                        count += 1
+                out[r, c] = np.float32(np.float64(total) / count) if count else np.nan
+            else:
+                out[r, c] = total * scale
 
 
 @numba.njit("void(f4[:, :, :], f4[:, :], b1[:, :])", cache=True, nogil=True, fastmath=False)

@@ -158,7 +158,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         residual_px=float(np.sqrt(np.mean(np.square(measured)))) if measured else None,
         closure_px=closure, panorama_shape=list(covered.shape),
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
-        coverage_fraction=float(covered.mean()))
+        coverage_fraction=np.count_nonzero(covered) / covered.size)
     return (panorama if colour or panorama is None else panorama[0]), report
 
 
