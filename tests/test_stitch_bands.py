@@ -1,10 +1,13 @@
 """The panorama blended band by band, trimmed before it is blended, written straight into its
-TIFF (``compose.covered_box``, ``compose.blend``, ``io.tiffcanvas``)."""
+TIFF (``compose.covered_box``, ``compose.blend``, ``io.tiffcanvas``), and the luminance the
+registration works on."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,9 +15,11 @@ import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.stitch import compose, stitch
 from plenocli.stitch.quality import bounding_box
+from plenocli.stitch.views import luminance
 from plenocli.synth.rig import make_rig
 
 
@@ -86,3 +91,55 @@ def test_a_panorama_the_disk_cannot_hold_is_one_line_and_leaves_nothing(tmp_path
     assert result.returncode == 1, result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and "p.tif" in result.stderr
     assert sorted(p.name for p in Path(tmp_path).iterdir()) == ["v.tif"]
+
+
+def _canvas_bands(tmp_path, bands: list[np.ndarray]) -> Path:
+    """The bands (2, rows, 5) written one after the other through an image canvas."""
+    from plenocli.io.tiffcanvas import image_canvas
+
+    path = tmp_path / "c.tif"
+    rows = sum(b.shape[1] for b in bands)
+    with image_canvas(path) as canvas:
+        write_rows = canvas.allocate((2, rows, 5))
+        first = 0
+        for band in bands:
+            write_rows(slice(first, first + band.shape[1]), band)
+            first += band.shape[1]
+        canvas.finish({"views": ["A", "B"]})
+    return path
+
+
+def test_the_canvas_holds_the_bands_where_they_were_written(tmp_path):
+    rng = np.random.default_rng(0)
+    bands = [rng.random((2, n, 5)).astype(np.float32) for n in (3, 1, 4)]
+    data, meta = tiffio.read_image(_canvas_bands(tmp_path, bands))
+    assert np.array_equal(data, np.concatenate(bands, axis=1))
+    assert meta["views"] == ["A", "B"]
+
+
+@pytest.mark.parametrize("bad, words", [("inf", "view B of the result holds 2 infinite pixels "
+                                                "(first at row 3, col 1)"),
+                                        ("nan", "view B of the result holds no valid pixel")])
+def test_the_canvas_refuses_what_write_image_refuses_and_leaves_nothing(tmp_path, bad, words):
+    bands = [np.ones((2, 3, 5), np.float32), np.ones((2, 4, 5), np.float32)]
+    if bad == "inf":
+        bands[1][1, 0, 1] = bands[1][1, 2, 2] = np.inf
+    else:
+        for band in bands:
+            band[1] = np.nan
+    with pytest.raises(InputError, match=re.escape(words)):
+        _canvas_bands(tmp_path, bands)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_luminance_is_the_channel_mean_and_nanmean_where_channels_lack_data():
+    rng = np.random.default_rng(1)
+    stack = np.moveaxis(rng.random((2, 20, 30, 3), np.float32), -1, 1)  # interleaved RGB
+    stack[0, 1, 3, 4] = np.nan
+    stack[1, :, 5, 6] = np.nan
+    luma = luminance(stack)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        expected = np.nanmean(stack.astype(np.float64), axis=1)
+    assert np.allclose(luma, expected, rtol=1e-6, equal_nan=True)
+    assert np.isnan(luma[1, 5, 6]) and np.isfinite(luma[0, 3, 4])
