@@ -212,12 +212,13 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
     n_q = max(3, int(math.ceil((q_hi - q_lo) * baseline * grid.pitch_px / SHIFT_STEP_PX)) + 1)
     qs = np.linspace(q_lo, q_hi, n_q)
+    # q = 0 (no shift: the scene at infinity, or no scene) scored too: see _coarse
     ssd, cnt = kn.match_costs(flat, cx, cy, neighbours(indices, coarse),
-                              profile, half, qs, COARSE_STRIDE)
+                              profile, half, np.append(qs, 0.0), COARSE_STRIDE)
     min_samples = 0.1 * math.pi * r_use ** 2 / COARSE_STRIDE
     with np.errstate(invalid="ignore", divide="ignore"):
         cost = np.where(cnt >= min_samples, ssd / cnt, np.nan)
-    q0, confidence = _coarse(cost, qs)
+    q0, confidence = _coarse(cost[:, :-1], qs, unshifted=cost[:, -1])
     q = kn.refine_q(flat, cx, cy, neighbours(indices, fine), profile, half, q0,
                     q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
@@ -304,9 +305,14 @@ def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
     return np.where(np.isfinite(g), np.where(np.isfinite(smoothed), smoothed, g), np.nan)
 
 
-def _coarse(cost: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _coarse(cost: np.ndarray, qs: np.ndarray,
+            unshifted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Best q of each lens's cost curve (parabola through the minimum and its neighbours) and
-    the confidence 1 - best / median cost."""
+    the confidence 1 - best / reference, the reference being the median cost over the range or
+    the ``unshifted`` cost (neighbours compared without a shift), whichever is lower. A
+    micro-image whose neighbours match as well unshifted holds nothing that moves between them
+    (a white, a blank wall: each micro-image is the lens's own vignetting and noise, the same in
+    its neighbours): whatever minimum the range shows is not a depth, and its confidence is 0."""
     have = np.isfinite(cost).sum(axis=1) >= 3
     filled = np.where(np.isfinite(cost), cost, np.inf)
     k = np.argmin(filled, axis=1)
@@ -324,7 +330,8 @@ def _coarse(cost: np.ndarray, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q0[have] = qs[k[have]] + np.clip(frac[have], -0.5, 0.5) * step
     conf = np.zeros(len(cost))
     with np.errstate(invalid="ignore", divide="ignore"):
-        conf[have] = np.clip(1.0 - best[have] / median, 0.0, 1.0)
+        reference = np.fmin(median, unshifted[have])
+        conf[have] = np.clip(1.0 - best[have] / reference, 0.0, 1.0)
     conf[~np.isfinite(conf)] = 0.0
     return q0, conf
 
