@@ -31,13 +31,13 @@ def _variant(grid, pitch_factor=1.0, turn=0.0, lattice=None):
 @pytest.mark.parametrize("g", [4.0, -4.0])
 def test_the_frames_own_grid_fits(g):
     frame, grid, _ = _scene("plane", g=g, seed=2 if g < 0 else 0)
-    assert lattice_misfit(frame, grid, for_depth=True) is None
+    assert lattice_misfit(frame, grid, for_depth=True) == (True, None)
 
 
 @pytest.mark.parametrize("case", sorted(WRONG))
 def test_a_grid_that_does_not_fit_is_refused_for_depth(case):
     frame, grid, _ = _scene("plane", g=4.0, seed=0)
-    misfit = lattice_misfit(frame, _variant(grid, **WRONG[case]), for_depth=True)
+    _, misfit = lattice_misfit(frame, _variant(grid, **WRONG[case]), for_depth=True)
     assert misfit is not None and "the grid" in misfit, case
 
 
@@ -45,8 +45,8 @@ def test_refocus_tolerates_what_a_fraction_of_a_pitch_allows():
     """Refocus needs the lattice within a quarter pitch at the corners: +0.5 % on this 480 px
     frame is 0.07 pitch (a slightly different g), +3 % is 0.43 pitch (a wrong image)."""
     frame, grid, _ = _scene("plane", g=4.0, seed=0)
-    assert lattice_misfit(frame, _variant(grid, pitch_factor=1.005)) is None
-    assert "pitches apart" in lattice_misfit(frame, _variant(grid, pitch_factor=1.03))
+    assert lattice_misfit(frame, _variant(grid, pitch_factor=1.005)) == (True, None)
+    assert "pitches apart" in lattice_misfit(frame, _variant(grid, pitch_factor=1.03))[1]
 
 
 
@@ -55,6 +55,6 @@ def test_a_grid_far_off_is_not_said_to_be_what_the_frame_shows():
     a hex 61.40 px at 10.90 deg lattice" (the fold, started from far off, settled on a coarse
     relative of the frame's 23.22 px lattice)."""
     frame, grid, _ = _scene("plane", g=4.0, seed=0)
-    misfit = lattice_misfit(frame, _variant(grid, pitch_factor=1.726))
+    _, misfit = lattice_misfit(frame, _variant(grid, pitch_factor=1.726))
     assert misfit is not None and "do not lie on the grid's" in misfit
     assert "the frame shows" not in misfit

@@ -66,7 +66,12 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
                  for k in range(1, TURN_STARTS)]
         found = fold_judge(turns, folds).lattice
     if found is None:   # too few lenses, or micro-images too flat, to vouch for a lattice
-        return None
+        return False, None
+    return True, _disagreement(frame, own, found, for_depth)
+
+
+def _disagreement(frame: np.ndarray, own, found, for_depth: bool) -> str | None:
+    """How the lattice the frame shows (``found``) disagrees with the grid's (``own``)."""
     shows = f"the frame shows a {found.describe()} lattice, the grid says {own.describe()}"
     if found.kind != own.kind:
         return shows

@@ -320,3 +320,28 @@ def test_a_grid_of_another_camera_is_refused(lenslet, tmp_path):
         assert result.exit_code == 1 and "does not fit the frames" in result.output, (
             command, result.output)
         assert "plenocli calibrate" in result.output and not out.exists()
+
+
+def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refused(tmp_path):
+    """The simulator's scene frames show no micro-image lattice (no vignetting): the grid is
+    used unchecked, which refocus says and records; depth vouches for it by the matches (its
+    own grid: median lens confidence 0.98) and refuses a grid turned by 2 deg (0.3-0.4)."""
+    from dataclasses import replace
+
+    from plenocli.io.gridfile import read_grid, write_grid
+
+    simulate("raytrix-scene", tmp_path / "sim", seed=3, rows=240, cols=320, g_true=4.5)
+    frames, grid_path = tmp_path / "sim" / "frames.tif", tmp_path / "sim" / "grid.yaml"
+    grid = read_grid(grid_path)
+    write_grid(tmp_path / "turned.yaml", replace(grid, angle_rad=grid.angle_rad + np.radians(2)),
+               {})
+    result = invoke("refocus", frames, "--grid", tmp_path / "turned.yaml", "-o",
+                    tmp_path / "r.tif")
+    assert result.exit_code == 0 and "used unchecked" in result.output
+    assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is False
+    refused = invoke("depth", frames, "--grid", tmp_path / "turned.yaml", "-o", tmp_path / "d.tif")
+    assert refused.exit_code == 1 and "not this camera's" in refused.output
+    assert len(refused.output.strip().splitlines()) == 1 and not (tmp_path / "d.tif").exists()
+    own = invoke("depth", frames, "--grid", grid_path, "-o", tmp_path / "d.tif")
+    assert own.exit_code == 0, own.output
+    assert tiffio.read_meta(tmp_path / "d.tif")["depth"]["grid_checked"] is False

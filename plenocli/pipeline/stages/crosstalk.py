@@ -19,7 +19,7 @@ from plenocli.io.views import read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
 from plenocli.model.provenance import json_safe, processing_of, stage_record
 from plenocli.model.views import ViewNames, pupil_views, view_of
-from plenocli.pipeline.fits import centred_on, check_fits
+from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 
@@ -155,7 +155,8 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
 
     frame = framing.crop(sensor_image(data, meta))
     grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
-    check_fits(grey, framing.grid, grid)
+    if not check_fits(grey, framing.grid, grid):
+        warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     try:
         sweep = crosstalk_lib.refocus_mask_sweep(frame, lens_grid, widths, s=s, g=g,

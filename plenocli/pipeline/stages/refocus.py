@@ -15,7 +15,7 @@ from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
-from plenocli.pipeline.fits import centred_on, check_fits
+from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 
@@ -49,7 +49,9 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
     grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
-    check_fits(grey, framing.grid, grid)
+    checked = check_fits(grey, framing.grid, grid)
+    if not checked:
+        warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     framing = replace(framing, grid=lens_grid)
     if depth:
@@ -76,7 +78,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
                  "g": g_values, "view": view, "mask_width": mask_width, "kernel": kernel,
                  "radius": radius, "crop_sensor_origin": list(framing.sensor_origin),
                  "grid_moved_px": None if moved is None else list(moved),
-                 "covered_fraction": covered},
+                 "grid_checked": checked, "covered_fraction": covered},
         sharpness={"measure": "mean(Lap(I_s)^2) / var(I_s), I_s = Gaussian(sigma = s * pitch / 2)",
                    "lens_period_px": period, "scores": scores, "best_g": best})
     protect = (input, grid) + ((depth,) if depth else ())
