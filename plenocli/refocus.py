@@ -284,8 +284,9 @@ def check_options(*, s: float, g: float, view: str, mask_width: float, kernel: s
     if s > MAX_S:   # each output pixel gets 1 / s^2 sensor samples on average: below 1, holes
         raise ValueError(f"s = {s:g} asks for more output pixels than the sensor has samples "
                          "(1 / s^2 per output pixel): use s <= 1 (paper: 0.2)")
-    if not (np.isfinite(g) and g > 0):
-        raise ValueError(f"g must be a positive number (paper: 4), got {g}")
+    if not (np.isfinite(g) and g != 0):
+        raise ValueError(f"g must be a finite non-zero number (paper: 4; negative for a "
+                         f"Galilean camera's inverted micro-images), got {g}")
     if view not in VIEWS:
         raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
     if kernel not in KERNELS:

@@ -264,13 +264,17 @@ def test_sharpness_ignores_the_lens_pattern_and_prefers_detail():
 
 
 @pytest.mark.parametrize("text,words", [
-    ("0", "positive"), ("-1", "positive"), ("2,-3", "positive"), ("nan", "positive"),
+    ("0", "non-zero numbers of one sign"), ("2,-3", "of one sign"), ("nan", "finite"),
     ("0:1e9:1", "1000000001 refocus planes"), ("1:1001:1", "at most 1000"),
     ("inf:5:1", "start:stop:step"),
 ])
 def test_parse_g_refuses_values_and_sweeps_up_front(text, words):
     with pytest.raises(ValueError, match=words):
         parse_g(text)
+
+
+def test_parse_g_takes_a_galilean_cameras_negative_g():
+    assert parse_g("-4") == [-4.0] and parse_g("-5:-3:1") == [-5.0, -4.0, -3.0]
 
 
 def test_parse_g_keeps_a_sweep_of_1000():

@@ -351,6 +351,31 @@ def _check_sign(frame, grid, g_range, lenses: LensDepth) -> None:
                          f"a {kind} camera; pass --g {other[0]:g}:{other[1]:g}")
 
 
+SIGN_CHECK_PX = 512    # side of the central region whose micro-images tell refocus g's sign
+
+
+def check_g_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> None:
+    """ValueError when the micro-images of ``frame``'s central region match their neighbours
+    far better with g of the other sign than ``sign``'s (a Galilean camera's inverted
+    micro-images refocused at g > 0, or the reverse: no plane of the scene is in focus then).
+    Frames that match neither clearly (a white, too few lenses) are not judged."""
+    side = int(max(SIGN_CHECK_PX, 12 * grid.pitch_px))  # hundreds of lenses
+    rows, cols = frame.shape
+    top, left = max(0, (rows - side) // 2), max(0, (cols - side) // 2)
+    crop = frame[top:top + side, left:left + side]
+    limit = min(8.0, grid.pitch_px / MIN_SHIFT_PX)
+    if limit <= 2.0:
+        return
+    ours = (2.0, limit) if sign > 0 else (-limit, -2.0)
+    try:
+        lenses = lens_depth(crop, grid.shifted(left, top), g_range=ours)
+        _check_sign(crop, grid.shifted(left, top), ours, lenses)
+    except ValueError as err:
+        if "match far better" in str(err):
+            raise
+        return  # too few lenses in the region to judge
+
+
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
     """(min, max) of a valid search range or ValueError saying what is wrong."""
     gmin, gmax = (float(v) for v in g_range)

@@ -23,14 +23,17 @@ MAX_S = 1.0
 def parse_g(text: str | float) -> list[float]:
     """g values from "4", "2,3,4" or a range "start:stop:step" (stop included when on a step).
 
-    Every value must be positive and finite, and a sweep holds at most MAX_G_VALUES values
-    (checked before the list is built: ``0:1e9:1`` is refused at once)."""
+    Every value must be finite and non-zero, all of one sign (positive for a Keplerian camera,
+    negative for a Galilean one, whose micro-images are inverted), and a sweep holds at most
+    MAX_G_VALUES values (checked before the list is built: ``0:1e9:1`` is refused at once)."""
     if isinstance(text, (int, float)):
         values = [float(text)]
     else:
         values = _g_values(str(text).strip(), text)
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise ValueError(f"g must hold positive finite numbers (paper: 4), got {text!r}")
+    if not values or not (all(math.isfinite(v) and v > 0 for v in values)
+                          or all(math.isfinite(v) and v < 0 for v in values)):
+        raise ValueError(f"g must hold finite non-zero numbers of one sign (paper: 4; "
+                         f"negative, e.g. -4, for a Galilean camera), got {text!r}")
     return [round(v, 10) for v in values]
 
 

@@ -191,3 +191,19 @@ def test_sai_of_rgb_frames_is_view_major(tmp_path):
     views, meta = tiffio.read_image(tmp_path / "v.tif")
     assert meta["views"][:4] == ["S00.R", "S00.G", "S00.B", "S01.R"]
     np.testing.assert_array_equal(views[4], frames[1, 0::2, 1::2])  # S01.G = G(2k, 2l + 1)
+
+
+def test_a_galilean_frame_is_refocused_at_negative_g_and_refused_at_positive(tmp_path):
+    """Inverted micro-images (a Galilean camera, g < 0 as depth measures it): refocus takes
+    negative g (the all-in-focus path already splatted them) and refuses the sign the
+    micro-images contradict, both ways, instead of writing a picture of no plane."""
+    simulate("lenslet-depth", tmp_path / "gal", seed=2, pixels="300x400", scene="plane", g=-4.0)
+    simulate("lenslet-depth", tmp_path / "kep", seed=2, pixels="300x400", scene="plane", g=4.0)
+    for kind, good, bad in (("gal", "-4", "4"), ("kep", "4", "-4")):
+        frames, grid = tmp_path / kind / "frames.tif", tmp_path / kind / "grid.yaml"
+        ok = invoke("refocus", frames, "--grid", grid, "--g", good, "-o", tmp_path / "ok.tif")
+        assert ok.exit_code == 0, ok.output
+        refused = invoke("refocus", frames, "--grid", grid, "--g", bad, "-o",
+                         tmp_path / f"{kind}.tif")
+        assert refused.exit_code == 1 and f"e.g. --g {good}" in refused.output
+        assert not (tmp_path / f"{kind}.tif").exists()

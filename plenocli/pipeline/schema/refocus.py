@@ -25,8 +25,9 @@ PARAMS = (
           role="input", required=True),
     Param("s", FiniteFloat(min=0, max=MAX_S, min_open=True),
           "Size of the refocused image relative to the sensor image.", default=0.2),
-    Param("g", GValues(), "Refocus parameter; a list (2,3,4) or range (2:6:0.5, stop included) "
-          "makes a focal sweep: one page per g and a sharpness score per g.", default="4"),
+    Param("g", GValues(), "Refocus parameter (negative for a Galilean camera); a list (2,3,4) "
+          "or range (2:6:0.5, stop included) makes a focal sweep: one page per g and a "
+          "sharpness score per g.", default="4"),
     Param("view", Choice(VIEWS), "Pupil mask: the whole micro-image, a half or a quadrant.",
           default="full"),
     Param("mask_width", FiniteFloat(min=0),

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.depth.lenslet import sensor_grey
+from plenocli.depth.lenslet import check_g_sign, sensor_grey
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -53,6 +53,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     if not checked:
         warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
+    if not depth:
+        _check_sign(grey, lens_grid, g_values[0])
     framing = replace(framing, grid=lens_grid)
     if depth:
         options = {"lens_g": _lens_g(depth, grid, framing, s)}
@@ -123,6 +125,15 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
                  else f"g = {g_value:g}", score)
         out_pages.extend(per_g)
     return out_pages, names, scores
+
+
+def _check_sign(grey: np.ndarray, grid, g: float) -> None:
+    """Refused: g of the sign the frames' micro-images contradict."""
+    try:
+        check_g_sign(grey, grid, g)
+    except ValueError as err:
+        raise InputError(f"refocus: --g {g:g}: {err.args[0].split('; pass --g')[0]}; refocus "
+                         f"at g of that sign (e.g. --g {-g:g})") from err
 
 
 def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
