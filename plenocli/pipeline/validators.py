@@ -12,6 +12,8 @@ import math
 import os
 from typing import Any
 
+from plenocli.model.views import name_problem
+
 TIFF = (".tif", ".tiff")
 
 
@@ -43,6 +45,26 @@ class Text(Validator):
         if not text.strip():
             raise ValueError(f"{text!r} is empty; give a value or leave the option out")
         return text
+
+
+class PageNames(Validator):
+    """Names for the pages a stage writes, comma separated: each distinct and read back as
+    itself (not a colour page ``S.R``, a sweep page ``S@g3`` or a page number)."""
+
+    def convert(self, value: Any) -> str:
+        text = Text().convert(value)
+        names = [n.strip() for n in text.split(",")]
+        if not all(names):
+            raise ValueError(f"{text!r} has an empty name; give names like S,A")
+        for name in names:
+            problem = name_problem(name)
+            if problem:
+                raise ValueError(f"{problem}; give names without .R/.G/.B, @g or digits "
+                                 "alone, like S,A")
+        if len(set(names)) < len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise ValueError(f"{twice!r} is given twice in {text!r}; give each page its own name")
+        return ",".join(names)
 
 
 class Flag(Validator):
