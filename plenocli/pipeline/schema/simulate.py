@@ -31,7 +31,8 @@ PARAMS = (
     Param("output", OutputFolder(), "Folder for the capture files and truth.json.",
           role="folder", flags=("-o", "--output"), required=True),
     Param("seed", Int(min=0), "Random seed.", default=0),
-    Param("pixels", Text(), "Sensor size, ROWSxCOLS or one number."),
+    Param("pixels", Text(), "Sensor size: one number (a square sensor), or ROWSxCOLS for the "
+          "kinds that take it (dualpixel and the -depth kinds)."),
     Param("rays", Int(min=1), "Rays per pixel (optical kinds)."),
     Param("no_prisms", Flag(), "Remove the prisms (optical kinds)."),
     Param("param", KeyValue(), "Another option of the kind (repeatable), e.g. --param noise=0.",
