@@ -19,6 +19,7 @@ import hashlib
 import os
 import signal
 import socket
+import stat
 import tempfile
 import threading
 from collections.abc import Callable, Iterable, Iterator
@@ -149,7 +150,7 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, _new_mode(dest))
         if pending is not None:  # its record's sha256, taken while the stage writes the rest
             hash_ahead([tmp])
         if pending is None:
@@ -169,6 +170,33 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _new_mode(dest: Path) -> int:
+    """The permissions a plain ``open(dest, "w")`` would leave: those of the file it replaces,
+    else 0666 less the umask (mkstemp makes its file 0600 whatever the umask)."""
+    with contextlib.suppress(OSError):
+        found = os.stat(dest)
+        if stat.S_ISREG(found.st_mode):
+            return stat.S_IMODE(found.st_mode)
+    return 0o666 & ~current_umask()
+
+
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (os.umask can only
+    be read by setting it, which another thread could see)."""
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    with _UMASK_LOCK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
 
 
 def write_bytes(path: str | os.PathLike, data: bytes, *, protect: tuple = ()) -> None:

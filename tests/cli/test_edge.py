@@ -178,3 +178,21 @@ def test_temporaries_of_killed_runs_are_removed(tmp_path, frames):
     live.write_bytes(b"another run still writing")
     assert invoke("bias", frames, "-o", out, "-q").exit_code == 0
     assert out.is_file() and not dead.exists() and live.exists()
+
+
+@pytest.mark.parametrize("mask", [0o077, 0o002, 0o022])
+def test_outputs_follow_the_umask_and_keep_the_mode_they_replace(tmp_path, frames, mask):
+    # audit 7 E5: every output was 0644 whatever the umask, and a 0600 output widened to 0644
+    old = os.umask(mask)
+    try:
+        assert atomic.current_umask() == mask
+        result = invoke("bias", frames, "-o", tmp_path / "b.tif", "-q")
+        assert result.exit_code == 0, result.output
+        for name in ("b.tif", ".b.tif.plenocli.json"):
+            assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~mask, name
+        (tmp_path / "b.tif").chmod(0o640)
+        result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--smooth", "3", "-q")
+        assert result.exit_code == 0, result.output
+        assert (tmp_path / "b.tif").stat().st_mode & 0o777 == 0o640
+    finally:
+        os.umask(old)
