@@ -6,7 +6,8 @@ succeeded, so a command's outputs land together or not at all. Temporaries are n
 ``.NAME.HOST-PID.XXXX.part``: one left by a killed run (its process gone) is removed the next time
 anything writes NAME. A NAME longer than :data:`LONG_NAME` bytes is shortened there to its start
 and a hash (:func:`short_name`), so that any name a file system with the common 255-byte limit
-takes has a temporary it takes too.
+takes has a temporary it takes too. An output that is a symbolic link is written through: its
+target is replaced and the link stays (as the shell's ``>`` does).
 """
 
 from __future__ import annotations
@@ -129,10 +130,10 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     destination is left as it was. ``protect`` lists input files that must never be overwritten.
     Inside :func:`outputs_together` the rename waits for the end of the block.
     """
-    dest = Path(path)
+    dest = written_path(path)
     for other in protect:
         if other is not None and _same_file(Path(other), dest):
-            raise InputError(f"output {dest} is also an input; choose another output path "
+            raise InputError(f"output {path} is also an input; choose another output path "
                              "(plenocli never overwrites its inputs)")
     if dest.is_dir():
         raise InputError(f"output {dest} is a folder; give a file name")
@@ -170,6 +171,13 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def written_path(path: str | os.PathLike) -> Path:
+    """The file a write to ``path`` replaces: the target of a symbolic link (written through,
+    as the shell's ``>`` and ``cp`` do; the link stays), else ``path`` itself."""
+    dest = Path(path)
+    return Path(os.path.realpath(dest)) if dest.is_symlink() else dest
 
 
 def _new_mode(dest: Path) -> int:
@@ -225,7 +233,7 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
     for out in outputs:
         if out.is_dir():
             raise InputError(f"output {out} is a folder; give a file name")
-        _check_folder(out)
+        _check_folder(written_path(out))
 
 
 def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
@@ -259,7 +267,11 @@ def _check_folder(out: Path) -> None:
     name_max = NAME_MAX
     folder = out.parent
     while not folder.exists():
-        if folder.is_symlink() or folder == folder.parent:
+        if folder.is_symlink():
+            raise InputError(f"cannot write {out}: folder {folder} is a symbolic link to "
+                             f"{os.readlink(folder)}, which does not exist; make that folder "
+                             "or choose another")
+        if folder == folder.parent:
             break
         folder = folder.parent
     if folder.exists() and not folder.is_dir():

@@ -27,7 +27,7 @@ from typing import Any
 
 from plenocli import __version__
 from plenocli.errors import InputError
-from plenocli.io.atomic import short_name, write_text
+from plenocli.io.atomic import short_name, write_text, written_path
 from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe, sha256_file
 
@@ -99,7 +99,7 @@ def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Ro
     recorded = values(params, {**inputs, **outputs})
     for role, paths in outputs.items():
         for output in paths:
-            target = os.path.abspath(output)
+            target = os.path.abspath(written_path(output))  # a link's target: what landed
             files = {}
             for tmp, dest in landed:
                 full = os.path.abspath(dest)

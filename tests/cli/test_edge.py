@@ -12,6 +12,8 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import atomic
+from plenocli.pipeline.config import load_config
+from plenocli.pipeline.runner import plan
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURE = ROOT / "fixtures" / "dualpixel" / "capture.dng"
@@ -196,3 +198,28 @@ def test_outputs_follow_the_umask_and_keep_the_mode_they_replace(tmp_path, frame
         assert (tmp_path / "b.tif").stat().st_mode & 0o777 == 0o640
     finally:
         os.umask(old)
+
+
+def test_an_output_that_is_a_symbolic_link_is_written_through(tmp_path, frames):
+    # audit 7 E6: the message named the link's target but the link was replaced by the file
+    (tmp_path / "old.tif").write_text("old")
+    (tmp_path / "b.tif").symlink_to("old.tif")
+    (tmp_path / "p.png").symlink_to("nowhere.png")  # dangling: made, as the shell's > does
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", tmp_path / "p.png")
+    assert result.exit_code == 0, result.output
+    assert os.readlink(tmp_path / "b.tif") == "old.tif"
+    assert os.readlink(tmp_path / "p.png") == "nowhere.png"
+    assert (tmp_path / "old.tif").read_bytes()[:2] in (b"II", b"MM")
+    assert (tmp_path / "nowhere.png").read_bytes()[:4] == b"\x89PNG"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  bias: {{input: {frames}, output: {tmp_path / 'b.tif'}}}\n")
+    assert invoke("run", config).exit_code == 0
+    assert [d.reason for d in plan(load_config(config))] == ["up to date"]  # its record matches
+
+
+def test_an_output_folder_that_is_a_dangling_link_is_named_so(tmp_path, frames):
+    (tmp_path / "out").symlink_to("nowhere")
+    result = invoke("bias", frames, "-o", tmp_path / "out" / "b.tif")
+    assert result.exit_code == 1
+    assert "symbolic link to nowhere, which does not exist" in one_line(result)
+    assert not (tmp_path / "nowhere").exists()
