@@ -109,6 +109,9 @@ def expand_inputs(patterns: Sequence[str]) -> list[Path]:
             lines = _list_lines(pattern, listing)
             found = [listing.parent / ln.strip() for ln in lines
                      if ln.strip() and not ln.lstrip().startswith("#")]
+            if not found:
+                raise InputError(f"--inputs {pattern}: {listing} lists no captures; write one "
+                                 "capture path a line (# starts a comment)")
         elif glob.has_magic(pattern):
             found = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
                      if Path(p).is_file()]
