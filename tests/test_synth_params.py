@@ -25,7 +25,9 @@ def test_every_generator_parameter_is_declared():
     ("raytrix-scene", {"s": 0.0}, "s must be in (0, 1]"),
     ("stereo-rig", {"view_shape": [200, 8]}, "view_shape must be >= 32"),
     ("dualpixel", {"seed": -1}, "seed must be in [0, 4.29497e+09)"),
-    ("dualpixel", {"noise": "loud"}, "noise = 'loud' is not a value like its default 2.0"),
+    ("dualpixel", {"noise": "loud"}, "noise = 'loud' is not a finite number (its default is 2.0)"),
+    ("hexgrid-white", {"size": "0x64"},
+     "size = '0x64' is not a whole number (its default is 1024)"),
     ("dualpixel", {"rays": 2}, "simulate dualpixel does not take 'rays'"),
 ])
 def test_values_out_of_range_are_refused_by_name(kind, params, words):

@@ -179,6 +179,22 @@ class RowsCols(Validator):
         return f"{int(rows)}x{int(cols)}"
 
 
+class SensorSize(Validator):
+    """A sensor size: one positive whole number (a square) or ROWSxCOLS (kept as that text)."""
+
+    name = "N|ROWSxCOLS"
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value).strip()
+        if text.isdigit() and int(text) > 0:
+            return str(int(text))
+        try:
+            return RowsCols().convert(text)
+        except ValueError:
+            raise ValueError(f"{shell_text(value)!r} is not one positive whole number or "
+                             "ROWSxCOLS (e.g. 256 or 192x256)") from None
+
+
 class InputFile(Validator):
     """A file a stage reads. A folder is a usage error, like any value of the wrong kind;
     whether the file is there and can be read is the reader's to say (exit 1 with the reason),

@@ -188,8 +188,22 @@ def _check_type(kind: str, key: str, value, default) -> None:
         ok = isinstance(value, type(default))
     if not ok:
         shown_default = list(default) if isinstance(default, tuple) else default
-        raise ValueError(f"simulate {kind}: {key} = {value!r} is not a value like its default "
-                         f"{shown_default!r} (finite numbers; whole where the default is)")
+        raise ValueError(f"simulate {kind}: {key} = {value!r} is not {_expected(default)} "
+                         f"(its default is {shown_default!r})")
+
+
+def _expected(default) -> str:
+    """What a value of ``default``'s type is, in words."""
+    if isinstance(default, bool):
+        return "true or false"
+    if isinstance(default, int):
+        return "a whole number"
+    if isinstance(default, float):
+        return "a finite number"
+    if isinstance(default, (tuple, list)):
+        whole = all(isinstance(d, int) for d in default)
+        return f"a list of {len(default)} {'whole' if whole else 'finite'} numbers"
+    return f"a {type(default).__name__}" if default is not None else "a finite value"
 
 
 def _check_size(kind: str, params: dict) -> None:

@@ -92,10 +92,14 @@ def test_options_reach_the_generator(tmp_path):
 
 
 @pytest.mark.parametrize("args, code, words", [
-    (["quadpixel-pyramid", "--param", "colour=1"], 1, "does not take 'colour'"),
-    (["quadpixel-pyramid", "--param", "crosstalk"], 2, "expected KEY=VALUE"),  # usage
-    (["quadpixel-pyramid", "--pixels", "15"], 1, "pixels 15"),
-    (["dualpixel", "--pixels", "wide"], 1, "ROWSxCOLS"),
+    # every bad value is a usage error (audit 7 E11: the kind's own values were exit 1)
+    (["quadpixel-pyramid", "--param", "colour=1"], 2, "does not take 'colour'"),
+    (["quadpixel-pyramid", "--param", "crosstalk"], 2, "expected KEY=VALUE"),
+    (["quadpixel-pyramid", "--pixels", "15"], 2, "pixels 15"),
+    (["dualpixel", "--pixels", "wide"], 2, "ROWSxCOLS"),
+    (["dualpixel", "--pixels", "-5"], 2, "'-5' is not one positive whole number"),
+    (["hexgrid-white", "--param", "pitch_px=1000"], 2, "pitch_px must be"),
+    (["hexgrid-white", "--param", "size="], 2, "no value after '='"),
     (["moon-rig"], 2, "moon-rig"),
     (["quadpixel-pyramid", "--rays", "0"], 2, "rays"),
 ])
