@@ -380,6 +380,11 @@ CASES = [
                           "10", "-o", "{o}/f.tif"], 2, ("'--median'", "10 is not odd")),
     ("crosstalk-tile-odd", ["crosstalk", "{i}/biased.tif", "--tile", "3", "-o", "{o}/c.json"], 2,
      ("'--tile'", "3 is not even")),
+    # audit 7 E17: one source of the gain is a usage error, as other option pairs are
+    ("flat-white-and-gain", ["flat", "{i}/biased.tif", "--white", "{i}/biased_copy.tif", "--gain",
+                             "{i}/biased.tif", "-o", "{o}/f.tif"], 2, ("exactly one of",)),
+    ("flat-no-white-nor-gain", ["flat", "{i}/biased.tif", "-o", "{o}/f.tif"], 2,
+     ("exactly one of",)),
     ("flat-gain-with-median", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--median",
                                "7", "-o", "{o}/f.tif"], 2, ("--median makes a gain",)),
     ("flat-gain-with-floor", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--floor",

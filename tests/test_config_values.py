@@ -42,7 +42,7 @@ def _outcome(convert, value):
 
 def _through_config(tmp_path: Path, stage: str, key: str, word: str, via_set: bool):
     extra = {"develop": "" if key == "view" else "    view: S\n",
-             "refocus": "    grid: g.yaml\n"}.get(stage, "")
+             "refocus": "    grid: g.yaml\n", "flat": "    white: w.tif\n"}.get(stage, "")
     inputs = "inputs" if stage == "stitch" else "input"
     out = "out.jpg" if stage == "develop" else "out.tif"
     text = f"steps:\n  {stage}:\n    {inputs}: in.tif\n    output: {out}\n{extra}"
