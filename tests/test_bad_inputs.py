@@ -625,6 +625,20 @@ def test_an_output_named_for_another_format_is_refused(args, inputs, tmp_path):
     assert_one_line(result, 2, ("ending in",))
 
 
+@pytest.mark.parametrize("args,words", [
+    (["decode", "{i}/dp.dng", "-o", "{o}/.tif"], "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/.PNG"],
+     "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/nl\nname.tif"], "holds a control character ('\\n')"),
+    (["simulate", "dualpixel", "-o", "{o}/a\tb"], "holds a control character ('\\t')"),
+])
+def test_an_output_name_that_is_only_a_suffix_or_holds_a_newline_is_refused(args, words, inputs,
+                                                                              tmp_path):
+    # audit 7 E14: '-o .tif' was told to end in .tif; a newline split the one-line messages
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, (words,))
+
+
 def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
                  top: str = "") -> str:
     return (f"out: {out}\n{top}steps:\n"

@@ -219,7 +219,11 @@ class OutputFile(Validator):
         self.suffixes = suffixes
 
     def convert(self, value: Any) -> str:
-        path = _path_word(value, folder=False)
+        path = _output_word(value, folder=False)
+        name = os.path.basename(path)
+        if self.suffixes and name.lower() in self.suffixes:  # splitext: '.tif' is all stem
+            raise ValueError(f"{path!r} has no name before its suffix; give one, e.g. "
+                             f"out{self.suffixes[0]}")
         if self.suffixes and os.path.splitext(path)[1].lower() not in self.suffixes:
             raise ValueError(f"{path!r} is written as {self.suffixes[0][1:].upper()}; give a "
                              f"name ending in {' or '.join(self.suffixes)}")
@@ -234,7 +238,18 @@ class OutputFolder(Validator):
     is_path = True
 
     def convert(self, value: Any) -> str:
-        return _path_word(value, folder=True)
+        return _output_word(value, folder=True)
+
+
+def _output_word(value: Any, *, folder: bool) -> str:
+    """An output path as :func:`_path_word`, without control characters: a newline in a name
+    would split every one-line message that names it (and most scripts that list the files)."""
+    path = _path_word(value, folder=folder)
+    control = next((c for c in path if ord(c) < 32 or ord(c) == 127), None)
+    if control is not None:
+        raise ValueError(f"{path!r} holds a control character ({control!r}); give a name "
+                         "without one")
+    return path
 
 
 def _path_word(value: Any, *, folder: bool) -> str:
