@@ -680,6 +680,17 @@ def test_config_out_must_be_one_folder(value, inputs, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
 
 
+@pytest.mark.parametrize("value", ['"{out}"', '"runs/{name}"', '"{foo}/x"'])
+def test_config_out_may_hold_no_placeholder(value, inputs, tmp_path):
+    # audit 7 E15: out: "{out}" wrote into a folder literally named {out}
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"out: {out}", f"out: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("holds a placeholder",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
 def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
     import errno
     from types import SimpleNamespace
