@@ -706,6 +706,23 @@ def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("name", ["x.json", ".x.tif.plenocli.json", "p.png"])
+def test_a_full_device_while_a_record_or_preview_is_written_names_it(tmp_path, name):
+    # audit 7 E16: a write without a file name (a record, a preview) said "no space left"
+    # without naming the file
+    import errno
+
+    from plenocli.errors import os_error_message
+    from plenocli.io import atomic
+
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / name) as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / name)
+    assert os_error_message(info.value).startswith(f"{tmp_path / name}: no space left")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_missing_codec_is_named_not_taken_for_damage(tmp_path):
     err = KeyError("<COMPRESSION.LZW: 5> requires the 'imagecodecs' package")
     message = str(tiffio.read_error(tmp_path / "x.tif", err, "fallback"))

@@ -167,6 +167,9 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         if err.errno is None or (err.errno == errno.EFBIG and err.filename is None):
             # a short write with space left: a file size limit (ulimit -f), or a full disk
             raise OSError(errno.EFBIG, os.strerror(errno.EFBIG), str(dest)) from err
+        if err.filename is None or err.filename == str(tmp):
+            # a write into the open temporary (no name), or of the temporary: the output it is
+            raise OSError(err.errno, err.strerror, str(dest)) from err
         raise
     except BaseException:
         tmp.unlink(missing_ok=True)
