@@ -50,7 +50,7 @@ NAME_MAX = 255   # the common file-name limit, when the file system does not say
 def short_name(name: str) -> str:
     """``name``, or for a name over LONG_NAME bytes its start and a hash of the whole: the
     part of a temporary's or side file's name that says whose it is (stable for one name)."""
-    raw = name.encode()
+    raw = os.fsencode(name)  # the bytes on disk (a name that is not UTF-8 too)
     if len(raw) <= LONG_NAME:
         return name
     digest = hashlib.sha256(raw).hexdigest()[:16]
@@ -283,7 +283,7 @@ def _check_folder(out: Path) -> None:
         name_max = os.pathconf(folder, "PC_NAME_MAX")
     temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
     names = [*out.parent.parts, out.name, temporary]
-    if any(len(p.encode()) > name_max for p in names):
+    if any(len(os.fsencode(p)) > name_max for p in names):
         raise InputError(f"cannot write {out}: a name in it is longer than this file system "
                          f"takes ({name_max} bytes); shorten it")
     if not os.access(folder, os.W_OK | os.X_OK):

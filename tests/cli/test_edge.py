@@ -223,3 +223,16 @@ def test_an_output_folder_that_is_a_dangling_link_is_named_so(tmp_path, frames):
     assert result.exit_code == 1
     assert "symbolic link to nowhere, which does not exist" in one_line(result)
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_an_output_name_that_is_not_utf8_is_written_with_its_record(tmp_path, frames):
+    # audit 7 I2: a Latin-1 byte in an output name (a lone surrogate to Python) was an internal
+    # error where the temporary's name was made; inputs with such names were read
+    name = os.fsdecode(b"lat\xe9.tif")
+    result = invoke("bias", frames, "-o", tmp_path / name, "--preview",
+                    tmp_path / os.fsdecode(b"p\xe9.png"), "-q")
+    assert result.exit_code == 0, result.output
+    made = set(os.listdir(os.fsencode(tmp_path)))
+    assert {b"lat\xe9.tif", b".lat\xe9.tif.plenocli.json", b"p\xe9.png"} <= made
+    result = invoke("bias", tmp_path / name, "-o", tmp_path / "again.tif", "-q")
+    assert result.exit_code == 1 and "is a `plenocli bias` output" in result.output  # read back
