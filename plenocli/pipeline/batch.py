@@ -43,8 +43,11 @@ THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 DASK_CONNECT_TIMEOUT = "20s"
 DASK_PROBE_SECONDS = 10  # a scheduler that does not accept a connection in this is not there
+# a template runs only as a batch (plenocli run refuses one): alone means one capture, -j 1,
+# which runs in this process, without --timeout
+ALONE = "plenocli batch CONFIG --inputs CAPTURE -j 1"
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
-           "memory); run it alone with plenocli run to see more")
+           f"memory); run it alone, in the batch's own process ({ALONE} --debug), to see more")
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
 GRACE_SECONDS = 10.0  # after a stop request, how long a worker may take to clean up
 EXIT_OVERRAN = 128 + signal.SIGALRM  # a worker stopped by its watchdog past the time limit
@@ -55,8 +58,8 @@ class CaptureTimeout(BaseException):
 
 
 def timed_out(seconds: float) -> str:
-    return (f"ran past --timeout {seconds:g} s and was stopped; run it alone with plenocli run, "
-            "or give a larger --timeout")
+    return (f"ran past --timeout {seconds:g} s and was stopped; give a larger --timeout, or "
+            f"run it alone without one ({ALONE})")
 
 
 @dataclass(frozen=True)
