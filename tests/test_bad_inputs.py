@@ -566,6 +566,21 @@ def test_bad_input_is_one_line_and_leaves_nothing(case, inputs, tmp_path):
     assert_one_line(result, code, words)
 
 
+@pytest.mark.parametrize("head", [b"II*\0", b"MM\0*", b"II*\0\x08\0\0", b"II+\0\x08\0\0\0"])
+@pytest.mark.parametrize("command", [["info"], ["info", "--json"], ["decode", "-o", "{o}/d.tif"],
+                                     ["decode", "--camera", "dng", "-o", "{o}/d.tif"],
+                                     ["bias", "-o", "{o}/b.tif"], ["sai", "-o", "{o}/s.tif"],
+                                     ["calibrate", "-o", "{o}/g.yaml"]])
+def test_a_tiff_cut_inside_its_header_is_damaged_not_an_internal_error(head, command, tmp_path):
+    # audit 7 I1: tifffile's struct.error ("unpack requires a buffer of 4 bytes") was an
+    # internal error in every command
+    cut = tmp_path / "in" / "cut.tif"
+    cut.parent.mkdir()
+    cut.write_bytes(head)
+    result = run_bad(tmp_path / "in", tmp_path / "out", [command[0], str(cut), *command[1:]])
+    assert_one_line(result, 1, ("damaged TIFF", "ends inside its header", "truncated"))
+
+
 def test_truncated_tiff_gives_no_stray_tifffile_line(inputs, tmp_path, capfd):
     result = run_bad(inputs, tmp_path / "out", ["info", "{i}/truncated.tif"])
     captured = capfd.readouterr()
