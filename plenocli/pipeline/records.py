@@ -124,6 +124,27 @@ def read_record(output: str | os.PathLike) -> dict | None:
     return doc
 
 
+def remove_replaced(folder: Path, earlier: dict | None, landed: list[tuple[Path, Path]]) -> list:
+    """After a stage filled ``folder`` again: remove the files its ``earlier`` record lists that
+    this run did not write and that are as that run left them (size and time), so the folder
+    holds one run's set, not two mixed (a simulation of another kind beside the new truth).
+    Files of anyone else, or changed since, are kept. Returns the names removed."""
+    if earlier is None:
+        return []
+    top = os.path.abspath(folder)
+    written = {os.path.relpath(os.path.abspath(dest), top) for _, dest in landed}
+    removed = []
+    for rel, state in earlier["output"].items():
+        path = Path(top) / rel
+        if rel in written or rel == "." or os.path.isabs(rel) or rel.startswith(".."):
+            continue
+        now = file_state(path, hashed=False)
+        if now is not None and isinstance(state, list) and now[:2] == state[:2]:
+            path.unlink(missing_ok=True)
+            removed.append(rel)
+    return removed
+
+
 def why_stale(stage: str, params: dict[str, Any], inputs: Roles,
               outputs: Roles) -> str | None:
     """Why the existing ``outputs`` cannot stand for a run of ``stage`` with ``params`` and

@@ -155,3 +155,18 @@ def test_a_pipeline_step_can_simulate(tmp_path):
     run_pipeline(load_config(config))
     truth = json.loads((tmp_path / "rig" / "truth.json").read_text())
     assert truth["seed"] == 4 and truth["view_shape"] == [48, 64]
+
+
+def test_a_folder_filled_again_holds_one_simulation_not_two(tmp_path):
+    # audit 7 E19: hexgrid-white's white.tif and grid_true.xml stayed beside dualpixel's truth
+    out = tmp_path / "sim"
+    assert invoke("hexgrid-white", "-o", out, "--param", "size=100").exit_code == 0
+    assert {"white.tif", "grid_true.xml"} <= {p.name for p in out.iterdir()}
+    (out / "mine.txt").write_text("the user's")
+    (out / "grid_true.xml").write_text("edited since")   # changed since plenocli wrote it: kept
+    assert invoke("dualpixel", "-o", out, "--pixels", 64).exit_code == 0
+    names = {p.name for p in out.iterdir()}
+    assert "white.tif" not in names and {"mine.txt", "grid_true.xml", "capture.dng"} <= names
+    assert json.loads((out / "truth.json").read_text())["kind"] == "dualpixel"
+    assert invoke("dualpixel", "-o", out, "--pixels", 64).exit_code == 0   # same set again
+    assert {p.name for p in out.iterdir()} == names
