@@ -27,6 +27,7 @@ from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.dng import write_dng
 from plenocli.io.raytrix import calib_from_grid, format_calib
+from plenocli.pipeline.config import load_config
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
@@ -883,7 +884,6 @@ def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
 
 
 def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path):
-    from plenocli.pipeline.config import load_config
     from plenocli.pipeline.records import read_record, record_path
     from plenocli.pipeline.runner import plan
 
@@ -1288,8 +1288,26 @@ def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inpu
                                       str(inputs / "unmasked1.tif"), "--mixing-out",
                                       str(tmp_path / "m.tif"), "-o",
                                       str(tmp_path / ".m.tif.plenocli.json")])
-    assert_one_line(result, 1, ("is the record plenocli writes beside",))
+    assert_one_line(result, 2, ("is named as a plenocli record",))
     assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
+
+
+def test_no_output_may_take_a_records_name(inputs, tmp_path):
+    # audit 7 W6: crosstalk -o .f.tif.plenocli.json replaced f.tif's record (and in a config
+    # the pipeline never settled: every run remade both steps)
+    made = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                    str(tmp_path / "b.tif")])
+    assert made.exit_code == 0, made.output
+    record = (tmp_path / ".b.tif.plenocli.json").read_bytes()
+    result = CliRunner().invoke(cli, ["crosstalk", str(tmp_path / "b.tif"), "-o",
+                                      str(tmp_path / ".b.tif.plenocli.json")])
+    assert_one_line(result, 2, ("is named as a plenocli record",))
+    assert (tmp_path / ".b.tif.plenocli.json").read_bytes() == record
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  crosstalk: {{inputs: [{tmp_path / 'b.tif'}], "
+                      f"output: {tmp_path / 'o' / '.b.tif.plenocli.json'}}}\n")
+    with pytest.raises(ConfigError, match="is named as a plenocli record"):
+        load_config(config)
 
 
 # an option with no effect is refused when given, whatever its value (its default's included)

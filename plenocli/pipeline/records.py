@@ -30,8 +30,9 @@ from plenocli.errors import InputError
 from plenocli.io.atomic import short_name, write_text, written_path
 from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe, sha256_file
+from plenocli.pipeline.validators import RECORD_SUFFIX
 
-SUFFIX = ".plenocli.json"
+SUFFIX = RECORD_SUFFIX
 Roles = dict[str, list[Path]]  # a stage's file parameters by role, each a list of paths
 
 

@@ -15,6 +15,7 @@ from typing import Any
 from plenocli.model.views import name_problem
 
 TIFF = (".tif", ".tiff")
+RECORD_SUFFIX = ".plenocli.json"  # .NAME.plenocli.json: the record of NAME (pipeline/records)
 
 
 def shell_text(value: Any) -> str:
@@ -249,6 +250,10 @@ def _output_word(value: Any, *, folder: bool) -> str:
     if control is not None:
         raise ValueError(f"{path!r} holds a control character ({control!r}); give a name "
                          "without one")
+    name = os.path.basename(os.path.normpath(path))
+    if name.startswith(".") and name.endswith(RECORD_SUFFIX):
+        raise ValueError(f"{path!r} is named as a plenocli record (.NAME{RECORD_SUFFIX} says "
+                         "how NAME was made, and the runner reads it); choose another name")
     return path
 
 
