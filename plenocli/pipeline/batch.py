@@ -43,9 +43,7 @@ THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 DASK_CONNECT_TIMEOUT = "20s"
 DASK_PROBE_SECONDS = 10  # a scheduler that does not accept a connection in this is not there
-# a template runs only as a batch (plenocli run refuses one): alone means one capture, -j 1,
-# which runs in this process, without --timeout
-ALONE = "plenocli batch CONFIG --inputs CAPTURE -j 1"
+ALONE = "plenocli batch CONFIG --inputs CAPTURE -j 1"  # in this process (run refuses templates)
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
            f"memory); run it alone, in the batch's own process ({ALONE} --debug), to see more")
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
@@ -113,8 +111,7 @@ def expand_inputs(patterns: Sequence[str]) -> list[Path]:
             found = [listing.parent / ln.strip() for ln in lines
                      if ln.strip() and not ln.lstrip().startswith("#")]
             if not found:
-                raise InputError(f"--inputs {pattern}: {listing} lists no captures; write one "
-                                 "capture path a line (# starts a comment)")
+                raise InputError(f"--inputs {pattern}: {listing} lists no captures (one a line)")
         elif glob.has_magic(pattern):
             found = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
                      if Path(p).is_file()]
