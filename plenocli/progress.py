@@ -37,6 +37,15 @@ def configure(verbosity: int) -> None:
     log.propagate = False
 
 
+def significant(value: float, digits: int = 2) -> str:
+    """``value`` to ``digits`` significant digits, without an exponent (an uncertainty of
+    4.7e-05 px is 0.000047, not the 0.0000 that four fixed decimals print)."""
+    import numpy as np  # here: --help and the command table load this module without numpy
+
+    return np.format_float_positional(float(value), precision=digits, fractional=False,
+                                      trim="-")
+
+
 def shown(path) -> str:
     """A path as the user would type it: relative to the working folder when inside it."""
     p = Path(path)

@@ -27,6 +27,7 @@ from plenocli.errors import ConfigError
 from plenocli.io import tiffio
 from plenocli.io.dng import write_dng
 from plenocli.io.raytrix import calib_from_grid, format_calib
+from plenocli.pipeline.config import load_config
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
@@ -330,6 +331,16 @@ CASES = [
     *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, ("real",))
       for kind in ("complex", "bool", "int8")],
     ("decode-all-nan", ["decode", "{i}/nan_plain.tif", "-o", "{o}/d.tif"], 1, ("no valid",)),
+    # audit 7 E2: a frame name that reads as another page (colour page S.R of a view S, a sweep
+    # page, a page number) or twice is a usage error, before the raw is read
+    ("decode-frame-colour-page", ["decode", "{i}/dp.dng", "--frames", "S.R,A", "-o",
+                                  "{o}/d.tif"], 2, ("colour page R of a view S",)),
+    ("decode-frame-sweep-page", ["decode", "{i}/dp.dng", "--frames", "S@g3,A", "-o",
+                                 "{o}/d.tif"], 2, ("'@g'",)),
+    ("decode-frame-number", ["decode", "{i}/dp.dng", "--frames", "S,1", "-o", "{o}/d.tif"], 2,
+     ("page number",)),
+    ("decode-frame-twice", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"], 2,
+     ("given twice",)),
     ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
      ("truncated",)),
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
@@ -342,8 +353,6 @@ CASES = [
                           ("huge.png", ("more than",))]],
     ("decode-frames-empty", ["decode", "{i}/dp.dng", "--frames=", "-o", "{o}/d.tif"], 2,
      ("'--frames'", "empty")),
-    ("decode-frames-duplicate", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"],
-     1, ("distinct",)),
     ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
      1, ("3 frame names",)),
     ("decode-calib-without-raytrix", ["decode", "{i}/dp.dng", "--calib", "{i}/rt/calib.xml",
@@ -372,6 +381,11 @@ CASES = [
                           "10", "-o", "{o}/f.tif"], 2, ("'--median'", "10 is not odd")),
     ("crosstalk-tile-odd", ["crosstalk", "{i}/biased.tif", "--tile", "3", "-o", "{o}/c.json"], 2,
      ("'--tile'", "3 is not even")),
+    # audit 7 E17: one source of the gain is a usage error, as other option pairs are
+    ("flat-white-and-gain", ["flat", "{i}/biased.tif", "--white", "{i}/biased_copy.tif", "--gain",
+                             "{i}/biased.tif", "-o", "{o}/f.tif"], 2, ("exactly one of",)),
+    ("flat-no-white-nor-gain", ["flat", "{i}/biased.tif", "-o", "{o}/f.tif"], 2,
+     ("exactly one of",)),
     ("flat-gain-with-median", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--median",
                                "7", "-o", "{o}/f.tif"], 2, ("--median makes a gain",)),
     ("flat-gain-with-floor", ["flat", "{i}/biased.tif", "--gain", "{i}/biased.tif", "--floor",
@@ -467,34 +481,35 @@ CASES = [
     ("optics-pixel-tiny", ["optics", "{l}", "--crosstalk", "--pixel-um", "1e-9"], 2,
      ("'--pixel-um'",)),
     # simulate
-    ("simulate-pixels-0", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "0"], 1,
-     ("--pixels 0",)),
-    ("simulate-pixels-huge", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "1000000"], 1,
+    # audit 7 E11: a value simulate does not take is a usage error (exit 2), as for a flag
+    ("simulate-pixels-0", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "0"], 2,
+     ("'0' is not one positive whole number",)),
+    ("simulate-pixels-huge", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "1000000"], 2,
      ("smaller sensor",)),
     ("simulate-rays-huge", ["simulate", "quadpixel-white", "-o", "{o}/s", "--pixels", "64",
-                            "--rays", "100000000"], 1, ("smaller sensor",)),
+                            "--rays", "100000000"], 2, ("smaller sensor",)),
     ("simulate-rows-x-cols-for-one-number", ["simulate", "dualpixel-white", "-o", "{o}/s",
-                                             "--pixels", "64x96"], 1, ("pixels = '64x96'",)),
+                                             "--pixels", "64x96"], 2, ("pixels = '64x96'",)),
     ("simulate-param-nan", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param",
-                            "pitch_px=.nan"], 1, ("pitch_px = nan",)),
+                            "pitch_px=.nan"], 2, ("pitch_px = nan",)),
     ("simulate-param-text", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param", "size=abc"],
-     1, ("size = 'abc'",)),
-    ("simulate-pixels-tiny", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "2"], 1,
+     2, ("size = 'abc'",)),
+    ("simulate-pixels-tiny", ["simulate", "dualpixel", "-o", "{o}/s", "--pixels", "2"], 2,
      ("at least 16",)),
     ("simulate-pitch-negative", ["simulate", "hexgrid-white", "-o", "{o}/s", "--param",
-                                 "pitch_px=-3"], 1, ("pitch_px must be",)),
+                                 "pitch_px=-3"], 2, ("pitch_px must be",)),
     ("simulate-rig-empty-views", ["simulate", "stereo-rig", "-o", "{o}/s", "--param",
-                                  "view_shape=[0, 0]"], 1, ("view_shape must be",)),
-    ("simulate-raytrix-s-0", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param", "s=0"], 1,
+                                  "view_shape=[0, 0]"], 2, ("view_shape must be",)),
+    ("simulate-raytrix-s-0", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param", "s=0"], 2,
      ("s must be",)),
     ("simulate-raytrix-g-negative", ["simulate", "raytrix-scene", "-o", "{o}/s", "--param",
-                                     "g_true=-1"], 1, ("g_true must be > 0",)),
+                                     "g_true=-1"], 2, ("g_true must be > 0",)),
     ("simulate-noise-negative", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "noise=-5"],
-     1, ("noise must be in [0, 65535]", "got -5")),
+     2, ("noise must be in [0, 65535]", "got -5")),
     ("simulate-crosstalk-one", ["simulate", "dualpixel-prism", "-o", "{o}/s", "--pixels", "48",
-                                "--param", "crosstalk=1"], 1, ("crosstalk must be in [0, 1)",)),
+                                "--param", "crosstalk=1"], 2, ("crosstalk must be in [0, 1)",)),
     ("simulate-param-unknown", ["simulate", "dualpixel", "-o", "{o}/s", "--param", "nosie=1"],
-     1, ("does not take 'nosie'", "noise")),
+     2, ("does not take 'nosie'", "noise")),
     ("bias-crop-below-cfa-cell", ["bias", "{i}/frames.tif", "--crop", "1x1", "-o", "{o}/b.tif"],
      1, ("CFA cell",)),
     ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
@@ -550,6 +565,21 @@ def test_bad_input_is_one_line_and_leaves_nothing(case, inputs, tmp_path):
         assert result.exit_code == 0, result.output
     result = run_bad(inputs, tmp_path / "out", args)
     assert_one_line(result, code, words)
+
+
+@pytest.mark.parametrize("head", [b"II*\0", b"MM\0*", b"II*\0\x08\0\0", b"II+\0\x08\0\0\0"])
+@pytest.mark.parametrize("command", [["info"], ["info", "--json"], ["decode", "-o", "{o}/d.tif"],
+                                     ["decode", "--camera", "dng", "-o", "{o}/d.tif"],
+                                     ["bias", "-o", "{o}/b.tif"], ["sai", "-o", "{o}/s.tif"],
+                                     ["calibrate", "-o", "{o}/g.yaml"]])
+def test_a_tiff_cut_inside_its_header_is_damaged_not_an_internal_error(head, command, tmp_path):
+    # audit 7 I1: tifffile's struct.error ("unpack requires a buffer of 4 bytes") was an
+    # internal error in every command
+    cut = tmp_path / "in" / "cut.tif"
+    cut.parent.mkdir()
+    cut.write_bytes(head)
+    result = run_bad(tmp_path / "in", tmp_path / "out", [command[0], str(cut), *command[1:]])
+    assert_one_line(result, 1, ("damaged TIFF", "ends inside its header", "truncated"))
 
 
 def test_truncated_tiff_gives_no_stray_tifffile_line(inputs, tmp_path, capfd):
@@ -611,6 +641,20 @@ def test_an_output_named_for_another_format_is_refused(args, inputs, tmp_path):
     assert_one_line(result, 2, ("ending in",))
 
 
+@pytest.mark.parametrize("args,words", [
+    (["decode", "{i}/dp.dng", "-o", "{o}/.tif"], "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/.PNG"],
+     "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/nl\nname.tif"], "holds a control character ('\\n')"),
+    (["simulate", "dualpixel", "-o", "{o}/a\tb"], "holds a control character ('\\t')"),
+])
+def test_an_output_name_that_is_only_a_suffix_or_holds_a_newline_is_refused(args, words, inputs,
+                                                                              tmp_path):
+    # audit 7 E14: '-o .tif' was told to end in .tif; a newline split the one-line messages
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, (words,))
+
+
 def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
                  top: str = "") -> str:
     return (f"out: {out}\n{top}steps:\n"
@@ -630,6 +674,9 @@ def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str
     ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
                                    "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
     ("preview-not-png", {"extra_bias": "    preview: \"{out}/b.jpg\"\n"}, ("ending in .png",)),
+    ("frames-twice", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                      "    output: \"{out}/g.tif\"\n    frames: S,S\n"},
+     ("given twice",)),
 ])
 def test_config_structure_is_checked_before_any_step_runs(name, parts, words, inputs, tmp_path):
     out = tmp_path / "out"
@@ -649,6 +696,17 @@ def test_config_out_must_be_one_folder(value, inputs, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
 
 
+@pytest.mark.parametrize("value", ['"{out}"', '"runs/{name}"', '"{foo}/x"'])
+def test_config_out_may_hold_no_placeholder(value, inputs, tmp_path):
+    # audit 7 E15: out: "{out}" wrote into a folder literally named {out}
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"out: {out}", f"out: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("holds a placeholder",))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
 def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
     import errno
     from types import SimpleNamespace
@@ -661,6 +719,23 @@ def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
         tmp.write_bytes(b"half")
         raise OSError("6144 requested and 2992 written")  # numpy's short write: no errno
     assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "x.tif")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["x.json", ".x.tif.plenocli.json", "p.png"])
+def test_a_full_device_while_a_record_or_preview_is_written_names_it(tmp_path, name):
+    # audit 7 E16: a write without a file name (a record, a preview) said "no space left"
+    # without naming the file
+    import errno
+
+    from plenocli.errors import os_error_message
+    from plenocli.io import atomic
+
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / name) as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / name)
+    assert os_error_message(info.value).startswith(f"{tmp_path / name}: no space left")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -809,7 +884,6 @@ def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
 
 
 def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path):
-    from plenocli.pipeline.config import load_config
     from plenocli.pipeline.records import read_record, record_path
     from plenocli.pipeline.runner import plan
 
@@ -1214,8 +1288,26 @@ def test_an_output_record_that_cannot_be_written_is_refused_before_any_work(inpu
                                       str(inputs / "unmasked1.tif"), "--mixing-out",
                                       str(tmp_path / "m.tif"), "-o",
                                       str(tmp_path / ".m.tif.plenocli.json")])
-    assert_one_line(result, 1, ("is the record plenocli writes beside",))
+    assert_one_line(result, 2, ("is named as a plenocli record",))
     assert sorted(p.name for p in tmp_path.iterdir()) == [".b.tif.plenocli.json"]
+
+
+def test_no_output_may_take_a_records_name(inputs, tmp_path):
+    # audit 7 W6: crosstalk -o .f.tif.plenocli.json replaced f.tif's record (and in a config
+    # the pipeline never settled: every run remade both steps)
+    made = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                    str(tmp_path / "b.tif")])
+    assert made.exit_code == 0, made.output
+    record = (tmp_path / ".b.tif.plenocli.json").read_bytes()
+    result = CliRunner().invoke(cli, ["crosstalk", str(tmp_path / "b.tif"), "-o",
+                                      str(tmp_path / ".b.tif.plenocli.json")])
+    assert_one_line(result, 2, ("is named as a plenocli record",))
+    assert (tmp_path / ".b.tif.plenocli.json").read_bytes() == record
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  crosstalk: {{inputs: [{tmp_path / 'b.tif'}], "
+                      f"output: {tmp_path / 'o' / '.b.tif.plenocli.json'}}}\n")
+    with pytest.raises(ConfigError, match="is named as a plenocli record"):
+        load_config(config)
 
 
 # an option with no effect is refused when given, whatever its value (its default's included)

@@ -281,6 +281,28 @@ def test_expand_inputs(tmp_path):
         expand_inputs([str(tmp_path / "a.dng"), str(tmp_path / "sub" / "a.dng")])
 
 
+@pytest.mark.parametrize("text", ["", "# nothing yet\n\n"])
+def test_an_empty_list_of_captures_is_named_so(tmp_path, text):
+    # audit 7 E9: '@empty.txt' was told it "matches no file; quote globs"
+    (tmp_path / "list.txt").write_text(text)
+    with pytest.raises(InputError, match="list.txt lists no captures") as err:
+        expand_inputs([f"@{tmp_path / 'list.txt'}"])
+    assert "glob" not in str(err.value)
+
+
+def test_a_failed_capture_is_told_to_run_alone_as_a_batch(shoot, tmp_path):
+    # audit 7 E18: the advice was "plenocli run", which refuses a batch template
+    from plenocli.pipeline import batch
+
+    folder, config, captures = shoot
+    for message in (batch.timed_out(0.5), batch.CRASHED):
+        assert "plenocli run" not in message
+        assert "plenocli batch CONFIG --inputs CAPTURE -j 1" in message
+    alone = CliRunner().invoke(cli, ["batch", str(config), "--inputs", str(captures[0]), "-j",
+                                     "1", "--out", str(tmp_path / "out")])
+    assert alone.exit_code == 0, alone.output
+
+
 def test_scheduler_without_dask_is_one_line(shoot, monkeypatch):
     folder, config, captures = shoot
     monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed

@@ -232,3 +232,16 @@ def test_blown_highlights_are_the_enclosed_masked_pixels():
     everything = inside.copy()
     everything[:, :3] = True
     np.testing.assert_array_equal(dev.blown_highlights(scene, whole_frame=True), everything)
+
+
+@pytest.mark.parametrize("cfa, pages", [("RGGB", ["raw"]), (None, ["R", "G", "B"])])
+def test_values_too_small_for_float32_to_scale_are_refused_as_such(cfa, pages):
+    # audit 7 E13: finite denormal pixels (1e-44 .. 1e-40) were called "no finite pixel": the
+    # demosaic's and the exposure's 1 / value overflowed to inf
+    rng = np.random.default_rng(4)
+    data = (rng.uniform(1e-44, 1e-40, (len(pages), 16, 24))).astype(np.float32)
+    view = dev.colour_views(pages, cfa=cfa, view_colours=None)[0]
+    with pytest.raises(ValueError, match=r"largest value is 9.9\d*e-41, below float32.s normal"):
+        dev.camera_rgb(data, view, gains=np.ones(3))
+    normal = dev.camera_rgb(data * np.float32(1e30), view, gains=np.ones(3))
+    assert np.isfinite(normal).all()

@@ -42,7 +42,7 @@ def _outcome(convert, value):
 
 def _through_config(tmp_path: Path, stage: str, key: str, word: str, via_set: bool):
     extra = {"develop": "" if key == "view" else "    view: S\n",
-             "refocus": "    grid: g.yaml\n"}.get(stage, "")
+             "refocus": "    grid: g.yaml\n", "flat": "    white: w.tif\n"}.get(stage, "")
     inputs = "inputs" if stage == "stitch" else "input"
     out = "out.jpg" if stage == "develop" else "out.tif"
     text = f"steps:\n  {stage}:\n    {inputs}: in.tif\n    output: {out}\n{extra}"
@@ -198,14 +198,14 @@ def test_run_on_a_device_says_it_is_not_a_file():
 ])
 def test_simulate_refuses_what_has_no_truth_or_two_values(tmp_path, args, words):
     result = CliRunner().invoke(cli, ["simulate", *args, "-o", str(tmp_path / "s")])
-    assert result.exit_code == 1 and words in result.output, result.output
+    assert result.exit_code == 2 and words in result.output, result.output  # usage (E11)
     assert "internal error" not in result.output and not (tmp_path / "s").exists()
 
 
 def test_simulate_reads_an_exponent_as_a_number(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "hexgrid-white", "--param", "pitch_px=1e30",
                                       "-o", str(tmp_path / "s")])
-    assert result.exit_code == 1 and "pitch_px must be a number from 2" in result.output
+    assert result.exit_code == 2 and "pitch_px must be a number from 2" in result.output
 
 
 # ------------------------------------------------------------------ one file, two input roles

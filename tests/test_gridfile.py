@@ -120,6 +120,42 @@ def test_grids_that_describe_no_lattice_are_refused(tmp_path, change, words):
         gridfile.read_grid(tmp_path / "g.yaml")
 
 
+@pytest.mark.parametrize("field,text,words", [
+    ("pitch_px", "0x14", "pitch_px must be a number, got '0x14'"),
+    ("pitch_px", "2_0.2", "pitch_px must be a number, got '2_0.2'"),   # Python's float() took it
+    ("pitch_px", "'20.2'", "pitch_px must be a number, got '20.2'"),   # text, as in a camera file
+    ("angle_rad", "true", "angle_rad must be a number, got True"),
+    ("offset_xy", "[3.0, '4']", "offset_xy must be a number, got '4'"),
+    ("offset_xy", "5", "offset_xy must be two numbers"),
+    ("image_shape", "['480', 640]", "image_shape must hold whole numbers"),
+    ("lenses", "{rows: [[0, 0, a, 4.0]]}", "lenses.rows must be rows [i, j, x, y]"),
+    ("lenses", "{rows: [[0, 0, 3.0]]}", "lenses.rows must be rows [i, j, x, y]"),
+    ("lenses", "5", "lenses must be a mapping with rows"),
+])
+def test_grid_fields_of_the_wrong_kind_are_named_in_plenocli_words(tmp_path, field, text, words):
+    # audit 7 E12: "missing or bad could not convert string to float: '0x14'"; 2_0.2 read as 20.2
+    fields = {"lattice": "hex", "pitch_px": "20.0", "angle_rad": "0.0", "offset_xy": "[3.0, 4.0]",
+              field: text}
+    (tmp_path / "g.yaml").write_text("lens_grid:\n" + "".join(
+        f"  {key}: {value}\n" for key, value in fields.items()))
+    with pytest.raises(InputError) as err:
+        gridfile.read_grid(tmp_path / "g.yaml")
+    assert words in str(err.value) and "could not convert" not in str(err.value)
+    assert "missing or bad" not in str(err.value)
+
+
+@pytest.mark.parametrize("text,words", [("[1, 2]\n", "no lens_grid"),
+                                        ("lens_grid: 5\n", "lens_grid must be a mapping"),
+                                        ("lens_grid: {pitch_px: 20}\n", "no angle_rad")])
+def test_a_document_that_is_no_grid_says_what_is_missing(tmp_path, text, words):
+    (tmp_path / "g.yaml").write_text(text)
+    with pytest.raises(InputError, match=words):
+        gridfile.read_grid(tmp_path / "g.yaml")
+    (tmp_path / "l.yaml").write_bytes(b"lens_grid:\n  name: caf\xe9\n")
+    with pytest.raises(InputError, match=r"not UTF-8 text \(byte"):
+        gridfile.read_grid(tmp_path / "l.yaml")
+
+
 @pytest.mark.parametrize("centres,indices,words", [
     ([[1.0, np.nan]], [[0, 0]], "finite"),
     ([[1.0, 2.0], [3.0, 4.0]], [[0, 0], [0, 100000]], "compact block"),

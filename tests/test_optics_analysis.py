@@ -35,6 +35,16 @@ def test_table2_reproduces_the_papers_figures(report):
     assert report["spot_rms_um"][0]["rms_um"] < 3.0  # sharp on axis at the table's image plane
 
 
+def test_the_lens_files_comment_states_what_optics_computes(report):
+    # audit 7 E12: the comment said FOV 32.7 deg and |distortion| <= 0.38 % (the paraxial-focus
+    # figures) while optics gives 32.16 deg and -0.27 .. +0.21 %
+    comment = TABLE2.read_text().split("\nname:")[0]
+    fov = report["field_of_view_deg"]["horizontal"]
+    assert f"FOV {fov:.2f} deg" in comment
+    assert f"{report['efl_mm']:.3f} mm" in comment
+    assert f"{report['max_abs_distortion_percent']:.2f} %" in comment
+
+
 def _rows_reversed(doc):
     """The same physical lens turned round (light entering at row 6): the other row order."""
     rows = doc["surfaces"][1:]

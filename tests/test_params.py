@@ -144,8 +144,8 @@ def test_every_stage_runs_with_exactly_its_declared_parameters():
 def test_simulate_params_are_checked_alike_from_the_shell_and_yaml(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "s"),
                                       "--param", "noise=-5"])
-    assert result.exit_code == 1
-    shell_message = result.output.strip().removeprefix("Error: ")
+    assert result.exit_code == 2  # a usage error, as any option's bad value (audit 7 E11)
+    shell_message = result.output.strip().splitlines()[-1].removeprefix("Error: ")
     config = tmp_path / "c.yaml"
     config.write_text("steps:\n  simulate:\n    kind: dualpixel\n    output: s\n"
                       "    param: ['noise=-5']\n")
@@ -159,7 +159,7 @@ def test_simulate_params_are_checked_alike_from_the_shell_and_yaml(tmp_path):
 def test_simulate_refuses_a_noise_beyond_the_sample_range(tmp_path):
     result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "s"),
                                       "--param", "noise=1e30"])
-    assert result.exit_code == 1 and "noise must be in [0, 65535]" in result.output
+    assert result.exit_code == 2 and "noise must be in [0, 65535]" in result.output
 
 
 @pytest.mark.parametrize("stage, extra, words", [

@@ -58,6 +58,21 @@ def test_a_step_name_must_be_text(tmp_path, name):
         load_config(config)
 
 
+@pytest.mark.parametrize("first, second", [("1", "true"), ("1", "1.0"), ("0", "false")])
+def test_keys_one_in_python_but_two_in_yaml_are_not_called_a_duplicate(tmp_path, first, second):
+    # audit 7 E1: `1:` and `true:` were refused as "key True is given twice"; neither is
+    config = write(tmp_path, f"steps:\n  {first}: {{stage: decode, input: {{W}}, output: a.tif}}"
+                             f"\n  {second}: {{stage: bias, input: a.tif, output: b.tif}}\n")
+    with pytest.raises(ConfigError) as err:
+        load_config(config)
+    message = str(err.value)
+    assert "given twice" not in message and f"key {second} " in message
+    assert "quote the keys" in message
+    with pytest.raises(ConfigError, match="given twice"):   # the same key twice still is
+        load_config(write(tmp_path, f"steps:\n  {first}: {{stage: decode}}\n"
+                                    f"  {first}: {{stage: bias}}\n"))
+
+
 @pytest.mark.parametrize("key", ["input", "output"])
 def test_a_nul_in_a_path_is_refused(tmp_path, key):
     value = '"a\\0b.tif"'

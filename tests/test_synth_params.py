@@ -8,6 +8,7 @@ import re
 
 import pytest
 
+from plenocli.pipeline.schema.simulate import PARAMS as OPTIONS
 from plenocli.synth import KIND_NAMES, generator
 from plenocli.synth.params import PARAMS, Param, check_params
 
@@ -24,12 +25,32 @@ def test_every_generator_parameter_is_declared():
     ("raytrix-scene", {"s": 0.0}, "s must be in (0, 1]"),
     ("stereo-rig", {"view_shape": [200, 8]}, "view_shape must be >= 32"),
     ("dualpixel", {"seed": -1}, "seed must be in [0, 4.29497e+09)"),
-    ("dualpixel", {"noise": "loud"}, "noise = 'loud' is not a value like its default 2.0"),
+    ("dualpixel", {"noise": "loud"}, "noise = 'loud' is not a finite number (its default is 2.0)"),
+    ("hexgrid-white", {"size": "0x64"},
+     "size = '0x64' is not a whole number (its default is 1024)"),
     ("dualpixel", {"rays": 2}, "simulate dualpixel does not take 'rays'"),
 ])
 def test_values_out_of_range_are_refused_by_name(kind, params, words):
     with pytest.raises(ValueError, match=re.escape(words)):
         check_params(kind, generator(kind), params)
+
+
+def test_rows_x_cols_for_a_square_only_kind_says_so_and_help_names_the_kinds_that_take_it():
+    # audit 7 E4: --help promised ROWSxCOLS; quadpixel-pyramid said "not a value like its
+    # default 256"
+    with pytest.raises(ValueError, match=re.escape("pixels = '240x320': this kind's sensor is "
+                                                   "square; give one number, e.g. 256")):
+        check_params("quadpixel-pyramid", generator("quadpixel-pyramid"), {"pixels": "240x320"})
+    rectangular = []
+    for kind in KIND_NAMES:
+        pixels = inspect.signature(generator(kind)).parameters.get("pixels")
+        if pixels is not None and not isinstance(pixels.default, int):
+            check_params(kind, generator(kind), {"pixels": "64x96"})
+            rectangular.append(kind)
+    said = next(p.help for p in OPTIONS if p.name == "pixels")
+    assert "dualpixel and the -depth kinds" in said
+    assert rectangular and all(k == "dualpixel" or k.endswith("-depth") for k in rectangular)
+    assert {k for k in KIND_NAMES if k.endswith("-depth")} <= set(rectangular)
 
 
 def test_the_ends_of_a_range():

@@ -81,6 +81,7 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
     channels only are rebuilt (:func:`plenocli.colour.highlights.rebuild_partly_clipped`);
     those clipped in every channel stay NaN. ``out`` (rows, cols, 3) float32: written in place
     and returned."""
+    _check_scalable(pages, view.pages)
     if view.cfa is None:
         rgb = np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
         if out is None:
@@ -93,6 +94,17 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
     rgb = demosaic(frame, view.cfa, method=method, gains=gains, out=out)
     rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains))
     return rgb
+
+
+def _check_scalable(pages: np.ndarray, indices) -> None:
+    """Values too small for float32 to scale to a picture (denormals: 1 / value overflows, and
+    demosaicing and exposure divide by it) are refused as such, not left to become NaN."""
+    tiny = float(np.finfo(np.float32).tiny)
+    top = max(float(np.max(np.abs(pages[k]), where=np.isfinite(pages[k]), initial=0.0))
+              for k in indices)
+    if 0.0 < top < tiny:
+        raise ValueError(f"its largest value is {top:.3g}, below float32's normal range "
+                         f"({tiny:.3g}): too small to scale into a picture")
 
 
 def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,

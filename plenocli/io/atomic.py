@@ -6,7 +6,8 @@ succeeded, so a command's outputs land together or not at all. Temporaries are n
 ``.NAME.HOST-PID.XXXX.part``: one left by a killed run (its process gone) is removed the next time
 anything writes NAME. A NAME longer than :data:`LONG_NAME` bytes is shortened there to its start
 and a hash (:func:`short_name`), so that any name a file system with the common 255-byte limit
-takes has a temporary it takes too.
+takes has a temporary it takes too. An output that is a symbolic link is written through: its
+target is replaced and the link stays (as the shell's ``>`` does).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import hashlib
 import os
 import signal
 import socket
+import stat
 import tempfile
 import threading
 from collections.abc import Callable, Iterable, Iterator
@@ -48,7 +50,7 @@ NAME_MAX = 255   # the common file-name limit, when the file system does not say
 def short_name(name: str) -> str:
     """``name``, or for a name over LONG_NAME bytes its start and a hash of the whole: the
     part of a temporary's or side file's name that says whose it is (stable for one name)."""
-    raw = name.encode()
+    raw = os.fsencode(name)  # the bytes on disk (a name that is not UTF-8 too)
     if len(raw) <= LONG_NAME:
         return name
     digest = hashlib.sha256(raw).hexdigest()[:16]
@@ -128,10 +130,10 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     destination is left as it was. ``protect`` lists input files that must never be overwritten.
     Inside :func:`outputs_together` the rename waits for the end of the block.
     """
-    dest = Path(path)
+    dest = written_path(path)
     for other in protect:
         if other is not None and _same_file(Path(other), dest):
-            raise InputError(f"output {dest} is also an input; choose another output path "
+            raise InputError(f"output {path} is also an input; choose another output path "
                              "(plenocli never overwrites its inputs)")
     if dest.is_dir():
         raise InputError(f"output {dest} is a folder; give a file name")
@@ -149,7 +151,7 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, _new_mode(dest))
         if pending is not None:  # its record's sha256, taken while the stage writes the rest
             hash_ahead([tmp])
         if pending is None:
@@ -165,10 +167,47 @@ def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Pat
         if err.errno is None or (err.errno == errno.EFBIG and err.filename is None):
             # a short write with space left: a file size limit (ulimit -f), or a full disk
             raise OSError(errno.EFBIG, os.strerror(errno.EFBIG), str(dest)) from err
+        if err.filename is None or err.filename == str(tmp):
+            # a write into the open temporary (no name), or of the temporary: the output it is
+            raise OSError(err.errno, err.strerror, str(dest)) from err
         raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def written_path(path: str | os.PathLike) -> Path:
+    """The file a write to ``path`` replaces: the target of a symbolic link (written through,
+    as the shell's ``>`` and ``cp`` do; the link stays), else ``path`` itself."""
+    dest = Path(path)
+    return Path(os.path.realpath(dest)) if dest.is_symlink() else dest
+
+
+def _new_mode(dest: Path) -> int:
+    """The permissions a plain ``open(dest, "w")`` would leave: those of the file it replaces,
+    else 0666 less the umask (mkstemp makes its file 0600 whatever the umask)."""
+    with contextlib.suppress(OSError):
+        found = os.stat(dest)
+        if stat.S_ISREG(found.st_mode):
+            return stat.S_IMODE(found.st_mode)
+    return 0o666 & ~current_umask()
+
+
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (os.umask can only
+    be read by setting it, which another thread could see)."""
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    with _UMASK_LOCK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
 
 
 def write_bytes(path: str | os.PathLike, data: bytes, *, protect: tuple = ()) -> None:
@@ -197,7 +236,7 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
     for out in outputs:
         if out.is_dir():
             raise InputError(f"output {out} is a folder; give a file name")
-        _check_folder(out)
+        _check_folder(written_path(out))
 
 
 def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:
@@ -231,7 +270,11 @@ def _check_folder(out: Path) -> None:
     name_max = NAME_MAX
     folder = out.parent
     while not folder.exists():
-        if folder.is_symlink() or folder == folder.parent:
+        if folder.is_symlink():
+            raise InputError(f"cannot write {out}: folder {folder} is a symbolic link to "
+                             f"{os.readlink(folder)}, which does not exist; make that folder "
+                             "or choose another")
+        if folder == folder.parent:
             break
         folder = folder.parent
     if folder.exists() and not folder.is_dir():
@@ -240,7 +283,7 @@ def _check_folder(out: Path) -> None:
         name_max = os.pathconf(folder, "PC_NAME_MAX")
     temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
     names = [*out.parent.parts, out.name, temporary]
-    if any(len(p.encode()) > name_max for p in names):
+    if any(len(os.fsencode(p)) > name_max for p in names):
         raise InputError(f"cannot write {out}: a name in it is longer than this file system "
                          f"takes ({name_max} bytes); shorten it")
     if not os.access(folder, os.W_OK | os.X_OK):

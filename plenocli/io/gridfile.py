@@ -11,7 +11,7 @@ import yaml
 
 from plenocli.errors import InputError, not_a_file
 from plenocli.io.atomic import write_text
-from plenocli.io.yamlfile import DocumentError, load_yaml
+from plenocli.io.yamlfile import DocumentError, load_yaml, read_text
 from plenocli.model.lensgrid import FIELD_DEGREE, FIELD_MAX, MIN_PITCH_PX, LensGrid, fit_lattice
 from plenocli.model.provenance import json_safe
 
@@ -111,17 +111,20 @@ def read_grid(path: str | os.PathLike, *,
         except ValueError as err:
             raise InputError(f"{p}: not a usable lens grid ({err})") from err
     try:
-        text = p.read_text(encoding="utf-8")
+        text = read_text(p)
         doc = _fast_load(text)
         if doc is None:
             doc = load_yaml(text)
-        return LensGrid.from_dict(doc["lens_grid"])
-    except (DocumentError, UnicodeDecodeError) as err:
+    except DocumentError as err:
         reason = " ".join(str(err).split())
         raise InputError(f"{p}: not a YAML lens grid ({reason})") from err
-    except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
-        raise InputError(f"{p}: not a plenocli lens grid (missing or bad {err}); "
-                         "make one with plenocli calibrate") from err
+    try:
+        if not isinstance(doc, dict) or "lens_grid" not in doc:
+            raise ValueError("no lens_grid")
+        return LensGrid.from_dict(doc["lens_grid"])
+    except ValueError as err:
+        raise InputError(f"{p}: not a plenocli lens grid ({err}); make one with plenocli "
+                         "calibrate") from err
 
 
 def check_lens_rows(path, grid: LensGrid) -> None:

@@ -130,8 +130,8 @@ def _describe_yaml(p: Path) -> dict:
     if isinstance(doc, dict) and isinstance(doc.get("lens_grid"), dict):
         try:  # a grid no stage would accept is said so, not described
             LensGrid.from_dict(doc["lens_grid"])
-        except (KeyError, TypeError, ValueError, OverflowError, AttributeError) as err:
-            raise InputError(f"{p}: not a usable lens grid (missing or bad {err})") from err
+        except ValueError as err:
+            raise InputError(f"{p}: not a usable lens grid ({err})") from err
         grid = dict(doc["lens_grid"])
         lenses = grid.pop("lenses", None)
         others = {k: v for k, v in doc.items() if k not in ("lens_grid", "provenance")}

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 
 import numpy as np
 import tifffile
@@ -58,7 +59,7 @@ def camera_exif(path) -> dict:
                     out[name] = str(tags[name].value).strip("\0 ")
             if "Model" not in out and 50708 in tags:  # DNG UniqueCameraModel
                 out["Model"] = str(tags[50708].value).strip("\0 ")
-    except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError):
+    except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError, struct.error):
         return out
     for name, key in (("ExposureTime", "ExposureTime"), ("FNumber", "FNumber"),
                       ("FocalLength", "FocalLength")):

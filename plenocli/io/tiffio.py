@@ -23,6 +23,7 @@ import json
 import logging
 import os
 import re
+import struct
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -48,8 +49,9 @@ FORMAT_KEY = "plenocli_format"
 FORMAT_VERSION = 1
 # What reading a damaged file raises, from tifffile or the codec of a compressed page (zlib,
 # imagecodecs raise their own errors, RuntimeError subclasses); all of them mean "bad input".
+# struct.error: tifffile unpacks a header or an IFD count past the end of a cut file
 READ_ERRORS = (tifffile.TiffFileError, ValueError, OSError, EOFError, IndexError, KeyError,
-               RuntimeError, zlib.error)
+               RuntimeError, zlib.error, struct.error)
 
 
 def read_error(path, err: Exception, fallback: str) -> InputError:
@@ -178,6 +180,10 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
             except TypeError as err:  # a tag of the wrong count or type: tifffile trips on it
                 raise InputError(f"{p}: damaged TIFF (a malformed tag: {err}); copy or write "
                                  "it again") from err
+            except struct.error as err:  # cut inside its header or first IFD's offset
+                raise InputError(f"{p}: damaged TIFF (it ends inside its header, "
+                                 f"{p.stat().st_size} bytes); the file may be truncated: copy "
+                                 "or write it again") from err
             damage = [m for m in collect.messages
                       if any(w in m.lower() for w in ("offset", "truncat", "corrupt", "invalid"))]
             if damage:

@@ -8,7 +8,7 @@ and ``0o10`` (the shell's int() refuses them: left out of the core schema here s
 the same); a validator then reads that text exactly as it reads the shell's word, so a value
 means the same wherever it is written. A key given twice in one mapping or object is refused
 (PyYAML and ``json`` keep the last one silently: a file would be read with one of two values
-it states).
+it states); so are two keys that Python reads as one (``1``, ``1.0`` and ``true``).
 """
 
 from __future__ import annotations
@@ -92,18 +92,25 @@ def _number(kind, word_kind=None):
 
 
 def _unique_mapping(self, node, deep=False):
-    seen = set()
+    seen = {}  # key as Python compares it -> its YAML tag
     for key_node, _ in node.value:
         if key_node.tag == "tag:yaml.org,2002:merge":
             continue  # '<<: *base': the base's keys may be given again (YAML's merge)
         key = self.construct_object(key_node, deep=True)
         if not isinstance(key, (str, int, float, bool)):
             continue  # an unhashable key: the base loader reports it
-        if key in seen:
+        if key in seen and seen[key] == key_node.tag:
             raise yaml.constructor.ConstructorError(
                 None, None, f"key {key!r} is given twice in one mapping; keep one",
                 key_node.start_mark)
-        seen.add(key)
+        if key in seen:
+            # 1, 1.0 and true are three YAML keys but one Python key: a dict would keep one
+            # of the two entries silently
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key {getattr(key_node, 'value', key)} is read as the same key "
+                "as an earlier one (numbers and true/false as keys: 1, 1.0 and true are one); "
+                "quote the keys to make them text", key_node.start_mark)
+        seen[key] = key_node.tag
     return yaml.constructor.SafeConstructor.construct_mapping(self, node, deep=deep)
 
 

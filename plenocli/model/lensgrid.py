@@ -177,29 +177,62 @@ class LensGrid:
 
     @classmethod
     def from_dict(cls, data: dict) -> LensGrid:
+        """The grid of a lens-grid mapping (YAML); ValueError naming the field that is missing
+        or not of its kind. Numbers are YAML numbers: text such as '20.2' is refused, as in
+        every other side file (a number means the same wherever it is written)."""
+        if not isinstance(data, dict):
+            raise ValueError(f"lens_grid must be a mapping of fields, got {data!r}")
+        missing = [k for k in ("pitch_px", "angle_rad", "offset_xy") if k not in data]
+        if missing:
+            raise ValueError(f"no {missing[0]}")
         lenses = data.get("lenses")
         centres = indices = None
         if lenses:
-            table = np.asarray(lenses["rows"], float).reshape(-1, 4)
+            if not isinstance(lenses, dict) or "rows" not in lenses:
+                raise ValueError("lenses must be a mapping with rows [i, j, x, y]")
+            table = _lens_table(lenses["rows"])
             indices, centres = table[:, :2].astype(np.int64), table[:, 2:]
             if "count" in lenses and lenses["count"] != len(table):
                 raise ValueError(f"lenses.count {lenses['count']!r} for {len(table)} rows")
             if lenses.get("columns", LENS_COLUMNS) != LENS_COLUMNS:
                 raise ValueError(f"lenses.columns {lenses['columns']!r}: the rows are read as "
                                  f"{LENS_COLUMNS}")
-        if "angle_deg" in data and not abs(float(data["angle_deg"])
-                                           - np.degrees(float(data["angle_rad"]))) <= 1e-6:
+        angle_rad = _number("angle_rad", data["angle_rad"])
+        if "angle_deg" in data and not abs(_number("angle_deg", data["angle_deg"])
+                                           - np.degrees(angle_rad)) <= 1e-6:
             raise ValueError(f"angle_deg {data['angle_deg']!r} disagrees with angle_rad "
                              f"{data['angle_rad']!r}")
+        offset = data["offset_xy"]
+        if not isinstance(offset, (list, tuple)):
+            raise ValueError(f"offset_xy must be two numbers (x, y), got {offset!r}")
         shape = data.get("image_shape")
-        return cls(pitch_px=float(data["pitch_px"]), angle_rad=float(data["angle_rad"]),
-                   offset_xy=tuple(float(v) for v in data["offset_xy"]),
+        types = data.get("lens_type_of_coset")
+        return cls(pitch_px=_number("pitch_px", data["pitch_px"]), angle_rad=angle_rad,
+                   offset_xy=tuple(_number("offset_xy", v) for v in offset),
                    lattice=data.get("lattice", "hex"),
                    image_shape=_whole("image_shape", shape) if shape else None,
                    sensor_origin=_whole("sensor_origin", data.get("sensor_origin", (0, 0))),
                    centres_xy=centres, indices=indices,
-                   lens_type_of_coset=tuple(int(v) for v in data["lens_type_of_coset"])
-                   if data.get("lens_type_of_coset") is not None else None)
+                   lens_type_of_coset=_whole("lens_type_of_coset", types)
+                   if types is not None else None)
+
+
+def _number(name: str, value) -> float:
+    """A YAML number (not text, not true/false) as a float; ValueError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    return float(value)
+
+
+def _lens_table(rows) -> np.ndarray:
+    """(K, 4) float rows [i, j, x, y] of numbers (text, true/false or ragged rows refused)."""
+    try:
+        table = np.asarray(rows)
+    except ValueError:
+        table = None   # ragged rows
+    if table is None or table.dtype.kind not in "iuf" or table.size % 4:
+        raise ValueError("lenses.rows must be rows [i, j, x, y] of four numbers")
+    return table.astype(float).reshape(-1, 4)
 
 
 def fit_lattice(indices: np.ndarray, centres: np.ndarray, *, lattice: str = "hex",
@@ -293,10 +326,10 @@ def _check_centres(centres, indices) -> None:
 
 def _whole(name: str, values) -> tuple[int, ...]:
     """``values`` as whole numbers; a ValueError naming ``name`` for NaN, 1.5 or text."""
-    try:
-        numbers = [float(v) for v in values]
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"{name} must hold whole numbers, got {values!r}") from err
+    if not isinstance(values, (list, tuple)) or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) for v in values):
+        raise ValueError(f"{name} must hold whole numbers, got {values!r}")
+    numbers = [float(v) for v in values]
     if not all(v.is_integer() and abs(v) <= MAX_COORD_PX for v in numbers):
         raise ValueError(f"{name} must hold whole numbers, got {values!r}")
     return tuple(int(v) for v in numbers)

@@ -37,6 +37,19 @@ def view_of(name: str) -> str:
     return split[0] if split else name
 
 
+def name_problem(name: str) -> str | None:
+    """Why ``name``, given to name a page, would read as something else (a colour page, a sweep
+    page, a page number), or None when it names a page of its own."""
+    split = split_colour_page(name)
+    if split:
+        return f"{name!r} reads as colour page {split[1]} of a view {split[0]}"
+    if SWEEP_TAG in name:
+        return f"{name!r} holds {SWEEP_TAG!r}, the tag of a focal sweep's pages (left{SWEEP_TAG}4)"
+    if name.isdigit():
+        return f"{name!r} reads as a page number"
+    return None
+
+
 def pupil_views(names: list[str]) -> list[str]:
     """The views of a file's pages that are parts of the pupil, in page order: every view but
     the sum S of a dual-pixel file (S = A + B is no part of its own)."""

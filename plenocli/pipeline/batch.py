@@ -43,8 +43,9 @@ THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
               "NUMBA_NUM_THREADS", "VECLIB_MAXIMUM_THREADS")
 DASK_CONNECT_TIMEOUT = "20s"
 DASK_PROBE_SECONDS = 10  # a scheduler that does not accept a connection in this is not there
+ALONE = "plenocli batch CONFIG --inputs CAPTURE -j 1"  # in this process (run refuses templates)
 CRASHED = ("the worker process died while processing it (a crash in a decoder, or out of "
-           "memory); run it alone with plenocli run to see more")
+           f"memory); run it alone, in the batch's own process ({ALONE} --debug), to see more")
 WATCH_SECONDS = 0.25  # how often a worker checks that the batch still runs
 GRACE_SECONDS = 10.0  # after a stop request, how long a worker may take to clean up
 EXIT_OVERRAN = 128 + signal.SIGALRM  # a worker stopped by its watchdog past the time limit
@@ -55,8 +56,8 @@ class CaptureTimeout(BaseException):
 
 
 def timed_out(seconds: float) -> str:
-    return (f"ran past --timeout {seconds:g} s and was stopped; run it alone with plenocli run, "
-            "or give a larger --timeout")
+    return (f"ran past --timeout {seconds:g} s and was stopped; give a larger --timeout, or "
+            f"run it alone without one ({ALONE})")
 
 
 @dataclass(frozen=True)
@@ -109,6 +110,8 @@ def expand_inputs(patterns: Sequence[str]) -> list[Path]:
             lines = _list_lines(pattern, listing)
             found = [listing.parent / ln.strip() for ln in lines
                      if ln.strip() and not ln.lstrip().startswith("#")]
+            if not found:
+                raise InputError(f"--inputs {pattern}: {listing} lists no captures (one a line)")
         elif glob.has_magic(pattern):
             found = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
                      if Path(p).is_file()]

@@ -204,6 +204,10 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     out = doc.get("out")
     if out is not None and not isinstance(out, str):
         raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
+    if out is not None and _ANY_PLACEHOLDER.search(out):
+        # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
+        raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
+                          "(per-capture folders go in the steps, e.g. {out}/{name}/x.tif)")
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)

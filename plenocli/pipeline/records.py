@@ -27,11 +27,12 @@ from typing import Any
 
 from plenocli import __version__
 from plenocli.errors import InputError
-from plenocli.io.atomic import short_name, write_text
+from plenocli.io.atomic import short_name, write_text, written_path
 from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe, sha256_file
+from plenocli.pipeline.validators import RECORD_SUFFIX
 
-SUFFIX = ".plenocli.json"
+SUFFIX = RECORD_SUFFIX
 Roles = dict[str, list[Path]]  # a stage's file parameters by role, each a list of paths
 
 
@@ -99,7 +100,7 @@ def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Ro
     recorded = values(params, {**inputs, **outputs})
     for role, paths in outputs.items():
         for output in paths:
-            target = os.path.abspath(output)
+            target = os.path.abspath(written_path(output))  # a link's target: what landed
             files = {}
             for tmp, dest in landed:
                 full = os.path.abspath(dest)
@@ -122,6 +123,27 @@ def read_record(output: str | os.PathLike) -> dict | None:
     if not isinstance(doc, dict) or any(not isinstance(doc.get(k), t) for k, t in shape.items()):
         return None
     return doc
+
+
+def remove_replaced(folder: Path, earlier: dict | None, landed: list[tuple[Path, Path]]) -> list:
+    """After a stage filled ``folder`` again: remove the files its ``earlier`` record lists that
+    this run did not write and that are as that run left them (size and time), so the folder
+    holds one run's set, not two mixed (a simulation of another kind beside the new truth).
+    Files of anyone else, or changed since, are kept. Returns the names removed."""
+    if earlier is None:
+        return []
+    top = os.path.abspath(folder)
+    written = {os.path.relpath(os.path.abspath(dest), top) for _, dest in landed}
+    removed = []
+    for rel, state in earlier["output"].items():
+        path = Path(top) / rel
+        if rel in written or rel == "." or os.path.isabs(rel) or rel.startswith(".."):
+            continue
+        now = file_state(path, hashed=False)
+        if now is not None and isinstance(state, list) and now[:2] == state[:2]:
+            path.unlink(missing_ok=True)
+            removed.append(rel)
+    return removed
 
 
 def why_stale(stage: str, params: dict[str, Any], inputs: Roles,

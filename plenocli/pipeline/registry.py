@@ -30,6 +30,7 @@ from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
 from plenocli.pipeline.params import Param, names_by_role, resolve, unused_in
+from plenocli.progress import log
 
 # every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
 NAMES = ("decode", "bias", "flat", "calibrate", "refocus", "depth", "sai", "crosstalk", "unmix",
@@ -114,7 +115,12 @@ class Stage:
         hash_ahead([p for paths in inputs.values() for p in paths])
         started = records.input_states(inputs, hashed=False)
 
+        folders = self.paths(params, self.folder_outputs)
+        earlier = {folder: records.read_record(folder) for folder in folders}
+        landing: list = []
+
         def record(landed):
+            landing.extend(landed)
             records.write_records(self.name, params, inputs, outputs,
                                   records.with_digests(started, inputs), landed)
 
@@ -127,6 +133,11 @@ class Stage:
         finally:
             RESOLVED.reset(token)
             UNUSED.reset(hidden)
+        for folder in folders:  # landed: the earlier run's files it did not write again go
+            gone = records.remove_replaced(folder, earlier[folder], landing)
+            if gone:
+                log.info("%s: removed %s of the earlier %s run in %s", self.name,
+                         ", ".join(sorted(gone)), earlier[folder]["stage"], folder)
 
     def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""

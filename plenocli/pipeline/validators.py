@@ -12,7 +12,10 @@ import math
 import os
 from typing import Any
 
+from plenocli.model.views import name_problem
+
 TIFF = (".tif", ".tiff")
+RECORD_SUFFIX = ".plenocli.json"  # .NAME.plenocli.json: the record of NAME (pipeline/records)
 
 
 def shell_text(value: Any) -> str:
@@ -43,6 +46,26 @@ class Text(Validator):
         if not text.strip():
             raise ValueError(f"{text!r} is empty; give a value or leave the option out")
         return text
+
+
+class PageNames(Validator):
+    """Names for the pages a stage writes, comma separated: each distinct and read back as
+    itself (not a colour page ``S.R``, a sweep page ``S@g3`` or a page number)."""
+
+    def convert(self, value: Any) -> str:
+        text = Text().convert(value)
+        names = [n.strip() for n in text.split(",")]
+        if not all(names):
+            raise ValueError(f"{text!r} has an empty name; give names like S,A")
+        for name in names:
+            problem = name_problem(name)
+            if problem:
+                raise ValueError(f"{problem}; give names without .R/.G/.B, @g or digits "
+                                 "alone, like S,A")
+        if len(set(names)) < len(names):
+            twice = next(n for n in names if names.count(n) > 1)
+            raise ValueError(f"{twice!r} is given twice in {text!r}; give each page its own name")
+        return ",".join(names)
 
 
 class Flag(Validator):
@@ -157,6 +180,22 @@ class RowsCols(Validator):
         return f"{int(rows)}x{int(cols)}"
 
 
+class SensorSize(Validator):
+    """A sensor size: one positive whole number (a square) or ROWSxCOLS (kept as that text)."""
+
+    name = "N|ROWSxCOLS"
+
+    def convert(self, value: Any) -> str:
+        text = shell_text(value).strip()
+        if text.isdigit() and int(text) > 0:
+            return str(int(text))
+        try:
+            return RowsCols().convert(text)
+        except ValueError:
+            raise ValueError(f"{shell_text(value)!r} is not one positive whole number or "
+                             "ROWSxCOLS (e.g. 256 or 192x256)") from None
+
+
 class InputFile(Validator):
     """A file a stage reads. A folder is a usage error, like any value of the wrong kind;
     whether the file is there and can be read is the reader's to say (exit 1 with the reason),
@@ -181,7 +220,11 @@ class OutputFile(Validator):
         self.suffixes = suffixes
 
     def convert(self, value: Any) -> str:
-        path = _path_word(value, folder=False)
+        path = _output_word(value, folder=False)
+        name = os.path.basename(path)
+        if self.suffixes and name.lower() in self.suffixes:  # splitext: '.tif' is all stem
+            raise ValueError(f"{path!r} has no name before its suffix; give one, e.g. "
+                             f"out{self.suffixes[0]}")
         if self.suffixes and os.path.splitext(path)[1].lower() not in self.suffixes:
             raise ValueError(f"{path!r} is written as {self.suffixes[0][1:].upper()}; give a "
                              f"name ending in {' or '.join(self.suffixes)}")
@@ -196,7 +239,22 @@ class OutputFolder(Validator):
     is_path = True
 
     def convert(self, value: Any) -> str:
-        return _path_word(value, folder=True)
+        return _output_word(value, folder=True)
+
+
+def _output_word(value: Any, *, folder: bool) -> str:
+    """An output path as :func:`_path_word`, without control characters: a newline in a name
+    would split every one-line message that names it (and most scripts that list the files)."""
+    path = _path_word(value, folder=folder)
+    control = next((c for c in path if ord(c) < 32 or ord(c) == 127), None)
+    if control is not None:
+        raise ValueError(f"{path!r} holds a control character ({control!r}); give a name "
+                         "without one")
+    name = os.path.basename(os.path.normpath(path))
+    if name.startswith(".") and name.endswith(RECORD_SUFFIX):
+        raise ValueError(f"{path!r} is named as a plenocli record (.NAME{RECORD_SUFFIX} says "
+                         "how NAME was made, and the runner reads it); choose another name")
+    return path
 
 
 def _path_word(value: Any, *, folder: bool) -> str:

@@ -44,7 +44,8 @@ class Param:
 _FRACTION = {"low": 0.0, "high": 1.0, "open_high": True}
 PARAMS: dict[str, Param] = {
     "seed": Param("random seed", 0, 2 ** 32, open_high=True),
-    "pixels": Param("sensor size, ROWSxCOLS or one number"),  # checked by the generator
+    # checked by the generator (and _check_pixels: one number for a square-only kind)
+    "pixels": Param("sensor size, one number (square) or ROWSxCOLS where the kind takes it"),
     "rays": Param("rays per pixel", 1),
     "rows": Param("sensor rows, pixels", 16),
     "cols": Param("sensor columns, pixels", 16),
@@ -91,6 +92,8 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> di
         if key not in accepted:
             raise ValueError(f"simulate {kind} does not take {key!r}; it takes: "
                              f"{', '.join(accepted)}")
+        if key == "pixels":
+            _check_pixels(kind, value, accepted[key].default)
         _check_type(kind, key, value, accepted[key].default)
         _check_range(kind, key, value)
         if key in RULES and value is not None:
@@ -156,6 +159,13 @@ def _check_range(kind: str, key: str, value) -> None:
                              f"({param.meaning}), got {value!r}")
 
 
+def _check_pixels(kind: str, value, default) -> None:
+    """A kind whose default sensor size is one number makes square sensors only."""
+    if isinstance(default, int) and isinstance(value, str):
+        raise ValueError(f"simulate {kind}: pixels = {value!r}: this kind's sensor is square; "
+                         f"give one number, e.g. {default}")
+
+
 def _check_type(kind: str, key: str, value, default) -> None:
     """A value of the type the kind's default has (a whole number where the default is one,
     a list of as many numbers as the default's), every number finite."""
@@ -178,8 +188,22 @@ def _check_type(kind: str, key: str, value, default) -> None:
         ok = isinstance(value, type(default))
     if not ok:
         shown_default = list(default) if isinstance(default, tuple) else default
-        raise ValueError(f"simulate {kind}: {key} = {value!r} is not a value like its default "
-                         f"{shown_default!r} (finite numbers; whole where the default is)")
+        raise ValueError(f"simulate {kind}: {key} = {value!r} is not {_expected(default)} "
+                         f"(its default is {shown_default!r})")
+
+
+def _expected(default) -> str:
+    """What a value of ``default``'s type is, in words."""
+    if isinstance(default, bool):
+        return "true or false"
+    if isinstance(default, int):
+        return "a whole number"
+    if isinstance(default, float):
+        return "a finite number"
+    if isinstance(default, (tuple, list)):
+        whole = all(isinstance(d, int) for d in default)
+        return f"a list of {len(default)} {'whole' if whole else 'finite'} numbers"
+    return f"a {type(default).__name__}" if default is not None else "a finite value"
 
 
 def _check_size(kind: str, params: dict) -> None:

@@ -9,6 +9,7 @@ import yaml
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.pipeline.stages.calibrate import _pitch_error
 from plenocli.synth.whiteimage import white_image
 
 
@@ -171,3 +172,12 @@ def test_a_bayer_mosaic_without_its_pattern_is_refused(tmp_path):
     assert res.exit_code == 1, res.output
     assert "looks like a 2 x 2 Bayer mosaic" in res.output and "--cfa" in res.output
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("se, text", [(4.7267e-05, " (pitch +-0.000047 px)"),
+                                      (0.0046, " (pitch +-0.0046 px)"),
+                                      (0.0614, " (pitch +-0.061 px)"),
+                                      (0.0, ""), (float("inf"), "")])
+def test_the_pitch_error_of_a_scene_is_shown_as_measured(se, text):
+    # audit 7 E10: a standard error of 4.7e-05 px was printed "+-0.0000 px" (four decimals)
+    assert _pitch_error(se) == text

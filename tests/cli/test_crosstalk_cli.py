@@ -79,7 +79,7 @@ def test_refocus_and_crosstalk_frame_an_xml_grid_alike(capture, tmp_path):
 def test_sweep_needs_a_grid(capture, tmp_path):
     result = invoke("crosstalk", capture / "frames.tif", "--mask-widths", "0,1",
                     "-o", tmp_path / "x.json")
-    assert result.exit_code == 1
+    assert result.exit_code == 2  # a usage error, before any work (audit 7 E17)
     assert "--mask-widths needs --grid" in result.output
     assert not (tmp_path / "x.json").exists()
 

@@ -347,3 +347,22 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     own = invoke("depth", frames, "--grid", grid_path, "-o", tmp_path / "d.tif")
     assert own.exit_code == 0, own.output
     assert tiffio.read_meta(tmp_path / "d.tif")["depth"]["grid_checked"] is False
+
+
+@pytest.mark.parametrize("kind, views, what", [
+    ("quadpixel-depth", ["S00", "S01", "S10", "S11"], "colour quad-pixel SAIs"),
+    ("dualpixel-depth", ["A", "B"], "colour dual-pixel views")])
+def test_colour_views_are_refused_as_what_they_are(kind, views, what, tmp_path):
+    # audit 7 E8: sai of an RGB image (pages S00.R ... S11.B) was told it lacks S00 ... S11
+    simulate(kind, tmp_path / "sim", seed=1, pixels="64x64")
+    data, meta = tiffio.read_image(tmp_path / "sim" / "views.tif")
+    names = meta["views"]
+    pages = [data[names.index(v)] * gain for v in views for gain in (0.5, 1.0, 0.8)]
+    colour = tmp_path / "colour.tif"
+    tiffio.write_image(colour, np.stack(pages), {
+        **meta, "views": [f"{v}.{c}" for v in views for c in "RGB"], "color": "rgb",
+        "black_level": None, "white_level": None})
+    out = tmp_path / "d.tif"
+    result = invoke("depth", colour, "-o", out)
+    assert result.exit_code == 1 and what in result.output and "grey" in result.output
+    assert not out.exists()

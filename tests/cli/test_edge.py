@@ -12,6 +12,8 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import atomic
+from plenocli.pipeline.config import load_config
+from plenocli.pipeline.runner import plan
 
 ROOT = Path(__file__).resolve().parents[2]
 CAPTURE = ROOT / "fixtures" / "dualpixel" / "capture.dng"
@@ -178,3 +180,59 @@ def test_temporaries_of_killed_runs_are_removed(tmp_path, frames):
     live.write_bytes(b"another run still writing")
     assert invoke("bias", frames, "-o", out, "-q").exit_code == 0
     assert out.is_file() and not dead.exists() and live.exists()
+
+
+@pytest.mark.parametrize("mask", [0o077, 0o002, 0o022])
+def test_outputs_follow_the_umask_and_keep_the_mode_they_replace(tmp_path, frames, mask):
+    # audit 7 E5: every output was 0644 whatever the umask, and a 0600 output widened to 0644
+    old = os.umask(mask)
+    try:
+        assert atomic.current_umask() == mask
+        result = invoke("bias", frames, "-o", tmp_path / "b.tif", "-q")
+        assert result.exit_code == 0, result.output
+        for name in ("b.tif", ".b.tif.plenocli.json"):
+            assert (tmp_path / name).stat().st_mode & 0o777 == 0o666 & ~mask, name
+        (tmp_path / "b.tif").chmod(0o640)
+        result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--smooth", "3", "-q")
+        assert result.exit_code == 0, result.output
+        assert (tmp_path / "b.tif").stat().st_mode & 0o777 == 0o640
+    finally:
+        os.umask(old)
+
+
+def test_an_output_that_is_a_symbolic_link_is_written_through(tmp_path, frames):
+    # audit 7 E6: the message named the link's target but the link was replaced by the file
+    (tmp_path / "old.tif").write_text("old")
+    (tmp_path / "b.tif").symlink_to("old.tif")
+    (tmp_path / "p.png").symlink_to("nowhere.png")  # dangling: made, as the shell's > does
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", tmp_path / "p.png")
+    assert result.exit_code == 0, result.output
+    assert os.readlink(tmp_path / "b.tif") == "old.tif"
+    assert os.readlink(tmp_path / "p.png") == "nowhere.png"
+    assert (tmp_path / "old.tif").read_bytes()[:2] in (b"II", b"MM")
+    assert (tmp_path / "nowhere.png").read_bytes()[:4] == b"\x89PNG"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  bias: {{input: {frames}, output: {tmp_path / 'b.tif'}}}\n")
+    assert invoke("run", config).exit_code == 0
+    assert [d.reason for d in plan(load_config(config))] == ["up to date"]  # its record matches
+
+
+def test_an_output_folder_that_is_a_dangling_link_is_named_so(tmp_path, frames):
+    (tmp_path / "out").symlink_to("nowhere")
+    result = invoke("bias", frames, "-o", tmp_path / "out" / "b.tif")
+    assert result.exit_code == 1
+    assert "symbolic link to nowhere, which does not exist" in one_line(result)
+    assert not (tmp_path / "nowhere").exists()
+
+
+def test_an_output_name_that_is_not_utf8_is_written_with_its_record(tmp_path, frames):
+    # audit 7 I2: a Latin-1 byte in an output name (a lone surrogate to Python) was an internal
+    # error where the temporary's name was made; inputs with such names were read
+    name = os.fsdecode(b"lat\xe9.tif")
+    result = invoke("bias", frames, "-o", tmp_path / name, "--preview",
+                    tmp_path / os.fsdecode(b"p\xe9.png"), "-q")
+    assert result.exit_code == 0, result.output
+    made = set(os.listdir(os.fsencode(tmp_path)))
+    assert {b"lat\xe9.tif", b".lat\xe9.tif.plenocli.json", b"p\xe9.png"} <= made
+    result = invoke("bias", tmp_path / name, "-o", tmp_path / "again.tif", "-q")
+    assert result.exit_code == 1 and "is a `plenocli bias` output" in result.output  # read back

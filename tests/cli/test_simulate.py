@@ -92,10 +92,14 @@ def test_options_reach_the_generator(tmp_path):
 
 
 @pytest.mark.parametrize("args, code, words", [
-    (["quadpixel-pyramid", "--param", "colour=1"], 1, "does not take 'colour'"),
-    (["quadpixel-pyramid", "--param", "crosstalk"], 2, "expected KEY=VALUE"),  # usage
-    (["quadpixel-pyramid", "--pixels", "15"], 1, "pixels 15"),
-    (["dualpixel", "--pixels", "wide"], 1, "ROWSxCOLS"),
+    # every bad value is a usage error (audit 7 E11: the kind's own values were exit 1)
+    (["quadpixel-pyramid", "--param", "colour=1"], 2, "does not take 'colour'"),
+    (["quadpixel-pyramid", "--param", "crosstalk"], 2, "expected KEY=VALUE"),
+    (["quadpixel-pyramid", "--pixels", "15"], 2, "pixels 15"),
+    (["dualpixel", "--pixels", "wide"], 2, "ROWSxCOLS"),
+    (["dualpixel", "--pixels", "-5"], 2, "'-5' is not one positive whole number"),
+    (["hexgrid-white", "--param", "pitch_px=1000"], 2, "pitch_px must be"),
+    (["hexgrid-white", "--param", "size="], 2, "no value after '='"),
     (["moon-rig"], 2, "moon-rig"),
     (["quadpixel-pyramid", "--rays", "0"], 2, "rays"),
 ])
@@ -151,3 +155,18 @@ def test_a_pipeline_step_can_simulate(tmp_path):
     run_pipeline(load_config(config))
     truth = json.loads((tmp_path / "rig" / "truth.json").read_text())
     assert truth["seed"] == 4 and truth["view_shape"] == [48, 64]
+
+
+def test_a_folder_filled_again_holds_one_simulation_not_two(tmp_path):
+    # audit 7 E19: hexgrid-white's white.tif and grid_true.xml stayed beside dualpixel's truth
+    out = tmp_path / "sim"
+    assert invoke("hexgrid-white", "-o", out, "--param", "size=100").exit_code == 0
+    assert {"white.tif", "grid_true.xml"} <= {p.name for p in out.iterdir()}
+    (out / "mine.txt").write_text("the user's")
+    (out / "grid_true.xml").write_text("edited since")   # changed since plenocli wrote it: kept
+    assert invoke("dualpixel", "-o", out, "--pixels", 64).exit_code == 0
+    names = {p.name for p in out.iterdir()}
+    assert "white.tif" not in names and {"mine.txt", "grid_true.xml", "capture.dng"} <= names
+    assert json.loads((out / "truth.json").read_text())["kind"] == "dualpixel"
+    assert invoke("dualpixel", "-o", out, "--pixels", 64).exit_code == 0   # same set again
+    assert {p.name for p in out.iterdir()} == names

@@ -2,6 +2,7 @@
 
 from collections.abc import Collection
 
+from plenocli.errors import OptionError
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import (
@@ -64,3 +65,6 @@ def check(params: dict, given: Collection[str]) -> None:
         refuse_unused(PARAMS, given, ["views", "mixing_out"],
                       "does not apply to the --mask-widths sweep (it refocuses its own left and "
                       "right views); measure the mixing on refocused views of masked whites")
+        if not params.get("grid"):
+            raise OptionError("--mask-widths needs --grid: the lens grid of the capture (YAML "
+                              "from plenocli calibrate, or the camera's RayCalibData XML)")

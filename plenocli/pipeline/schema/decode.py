@@ -1,14 +1,15 @@
 """Parameters of ``plenocli decode``."""
 
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg
-from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Text
+from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, PageNames
 
 PARAMS = (
     input_arg(),
     OUTPUT,
     Param("camera", Choice(["auto", "canon-dp", "dng", "raytrix", "image"]),
           "Input kind; auto looks at the file's first bytes.", default="auto"),
-    Param("frames", Text(), "Names for the frames, comma separated (e.g. S,A)."),
+    Param("frames", PageNames(), "Names for the frames, comma separated and distinct (e.g. S,A; "
+          "not S.R, S@g3 or 1: those name other pages)."),
     Param("black", FiniteFloat(min=0), "Black level (DN) when the file has none."),
     Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN."),
     Param("cfa", Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),

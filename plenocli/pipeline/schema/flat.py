@@ -2,6 +2,7 @@
 
 from collections.abc import Collection
 
+from plenocli.errors import OptionError
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import TIFF, Choice, FiniteFloat, InputFile, Int, OutputFile
 
@@ -34,8 +35,12 @@ def shared_inputs(params) -> tuple[tuple[str, str], ...]:
 
 
 def check(params: dict, given: Collection[str]) -> None:
-    """Options of making a gain do nothing to a saved one (--gain: read, not made), and
+    """One source of the gain (--white or --gain: a usage error otherwise, before any work);
+    options of making a gain do nothing to a saved one (--gain: read, not made), and
     --percentile is only the percentile reference's."""
+    if (params.get("white") is None) == (params.get("gain") is None):
+        raise OptionError("give exactly one of --white (a bias-corrected white image) or "
+                          "--gain (a gain map saved with --save-gain)")
     if params.get("gain"):
         refuse_unused(PARAMS, given, ["median", "reference", "percentile", "floor"],
                       "makes a gain from --white; a saved --gain keeps the options it was "

@@ -6,9 +6,9 @@ from __future__ import annotations
 from collections.abc import Collection
 from typing import Any
 
-from plenocli.errors import ConfigError
+from plenocli.errors import OptionError
 from plenocli.pipeline.params import Param
-from plenocli.pipeline.validators import Choice, Flag, Int, OutputFolder, Text, Validator
+from plenocli.pipeline.validators import Choice, Flag, Int, OutputFolder, SensorSize, Validator
 from plenocli.synth import KIND_NAMES
 
 
@@ -31,7 +31,8 @@ PARAMS = (
     Param("output", OutputFolder(), "Folder for the capture files and truth.json.",
           role="folder", flags=("-o", "--output"), required=True),
     Param("seed", Int(min=0), "Random seed.", default=0),
-    Param("pixels", Text(), "Sensor size, ROWSxCOLS or one number."),
+    Param("pixels", SensorSize(), "Sensor size: one number (a square sensor), or ROWSxCOLS for the "
+          "kinds that take it (dualpixel and the -depth kinds)."),
     Param("rays", Int(min=1), "Rays per pixel (optical kinds)."),
     Param("no_prisms", Flag(), "Remove the prisms (optical kinds)."),
     Param("param", KeyValue(), "Another option of the kind (repeatable), e.g. --param noise=0.",
@@ -49,10 +50,8 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
 
     kwargs: dict[str, Any] = {"seed": params["seed"]}
     pixels = params.get("pixels")
-    if pixels is not None:  # one number, else ROWSxCOLS (the generator checks it)
-        kwargs["pixels"] = int(pixels) if str(pixels).strip().isdigit() else pixels
-        if kwargs["pixels"] == 0:
-            raise ConfigError("--pixels 0: give a sensor size, ROWSxCOLS or one number")
+    if pixels is not None:  # one number, else ROWSxCOLS (SensorSize checked the form)
+        kwargs["pixels"] = int(pixels) if str(pixels).isdigit() else pixels
     if params.get("rays") is not None:
         kwargs["rays"] = params["rays"]
     if params.get("no_prisms"):
@@ -62,17 +61,20 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
         key, _, value = item.partition("=")
         name = key.strip().replace("-", "_")
         if name in OWN_OPTIONS:
-            raise ConfigError(f"--param {item!r}: {name} has its own option; give "
+            raise OptionError(f"--param {item!r}: {name} has its own option; give "
                               f"--{name.replace('_', '-')} instead")
         if name in given:
-            raise ConfigError(f"--param {item!r}: {name} is given twice; keep one")
+            raise OptionError(f"--param {item!r}: {name} is given twice; keep one")
+        if not value.strip():
+            raise OptionError(f"--param {item!r}: no value after '='; give KEY=VALUE, "
+                              "e.g. noise=0")
         try:
             parsed = load_yaml(value)
             text = name in SYNTH_PARAMS and SYNTH_PARAMS[name].text
             kwargs[name] = given[name] = value.strip() if text and not isinstance(
                 parsed, str) else parsed
         except DocumentError as err:
-            raise ConfigError(f"--param {item!r}: the value is not valid YAML ({err}); "
+            raise OptionError(f"--param {item!r}: the value is not valid YAML ({err}); "
                               "quote it") from err
     return kwargs
 
@@ -85,5 +87,5 @@ def check(params: dict[str, Any], given: Collection[str]) -> None:
     kind = params["kind"]
     try:
         check_params(kind, generator(kind), generator_kwargs(params))
-    except ValueError as err:
-        raise ConfigError(str(err)) from err
+    except ValueError as err:  # a value the kind does not take: a usage error, as for a flag
+        raise OptionError(str(err)) from err

@@ -14,7 +14,7 @@ from plenocli.io.plainimage import read_plain_image
 from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import phase_gains, shift_pattern
 from plenocli.model.provenance import stage_record
-from plenocli.progress import log, shown
+from plenocli.progress import log, shown, significant
 
 
 def load_image(path: str) -> tuple[np.ndarray, str | None, float, tuple[int, int], dict]:
@@ -129,8 +129,8 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
     centres = (f"residual RMS {fit.residual_rms_px:.4f} px" if fit.centres_refined else
                "centres from the start's lattice on the lens centre the match judge measured"
                if report.lattice_from == calibration.KEPT else
-               f"a scene: centres from the lattice of {report.lattice_from} (pitch "
-               f"+-{fit.pitch_se_px:.4f} px); "
+               f"a scene: centres from the lattice of {report.lattice_from}"
+               f"{_pitch_error(fit.pitch_se_px)}; "
                f"the content moves the micro-images' own centres by {fit.residual_rms_px:.2f} "
                "px RMS")
     log.info("calibrate: %s -> %s: %s pitch %.4f px, angle %.4f deg, offset (%.3f, %.3f); "
@@ -151,3 +151,9 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
                      key.replace("_", " "), c["grid"], c["rms_px"], c["max_px"], c["lenses"],
                      *c["mean_shift_xy"])
     return extra
+
+
+def _pitch_error(se_px: float) -> str:
+    """The pitch's standard error as measured (two significant digits), or nothing when
+    there is none to show (0: the fit had no residual to tell it)."""
+    return f" (pitch +-{significant(se_px)} px)" if 0 < se_px < np.inf else ""

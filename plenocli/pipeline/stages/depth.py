@@ -11,7 +11,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
 from plenocli.model.provenance import stage_record
-from plenocli.model.views import ViewNames
+from plenocli.model.views import ViewNames, split_colour_page, view_of
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
@@ -78,6 +78,18 @@ def _check_not_views(input, data, meta) -> None:
     if set(DUAL) <= names or set(QUAD) <= names:
         raise InputError(f"{input} holds dual/quad-pixel views, not lenslet frames; drop --grid "
                          "for their disparity")
+
+
+def _refuse_colour(input, names: list[str]) -> None:
+    """Colour pages of the views depth measures (S00.R ...: sai of an RGB image) are refused as
+    what they are; depth measures grey views (a raw's, Bayer or not) only."""
+    found = {view_of(n) for n in names if split_colour_page(n)}
+    for wanted, what in ((QUAD, "quad-pixel SAIs"), (DUAL, "dual-pixel views")):
+        if set(wanted) <= found:
+            raise InputError(f"{input} holds colour {what} {', '.join(wanted)} (pages "
+                             f"{wanted[0]}.R ... {wanted[-1]}.B); depth measures grey views "
+                             "only: give the views of a grey or Bayer capture (sai or bias of "
+                             "its raw frames)")
 
 
 def _check_known(values, searched: str) -> None:
@@ -182,6 +194,7 @@ def _views(input, data, meta, max_disparity):
             d = views.disparity_x(data[have["A"]], data[have["B"]], max_disparity=max_disparity)
             pages, out = [d.disparity, d.confidence], ["disparity", "confidence"]
         else:
+            _refuse_colour(input, names)
             raise InputError(f"{input} holds views {', '.join(names)}; depth needs "
                              "dual-pixel views A, B, quad-pixel SAIs S00, S01, S10, S11, or "
                              "lenslet frames with --grid")

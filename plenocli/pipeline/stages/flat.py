@@ -16,9 +16,6 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         median: int = 5, reference: str = "max", percentile: float = 99.5, floor: float = 0.05,
         save_gain: str | None = None, preview: str | None = None) -> None:
     """Correct the views of ``input`` with a gain from ``white`` (or a saved ``gain`` file)."""
-    if (white is None) == (gain is None):
-        raise InputError("give exactly one of --white (a bias-corrected white image) "
-                         "or --gain (a gain map saved with --save-gain)")
     views, meta = tiffio.read_image(input)
     _check_bias_corrected(input, meta)
     source = white if white is not None else gain

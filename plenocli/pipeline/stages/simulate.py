@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, OptionError
 from plenocli.io.simfiles import write_simulation
 from plenocli.model.provenance import stage_record
 from plenocli.pipeline.schema.simulate import generator_kwargs
@@ -43,11 +43,11 @@ def simulate(kind: str, output: str | os.PathLike, **params) -> dict:
     try:
         params = check_params(kind, generate, params)
     except ValueError as err:
-        raise ConfigError(str(err)) from err
+        raise OptionError(str(err)) from err
     try:
         sim = generate(**params)
-    except (ValueError, TypeError) as err:
-        raise ConfigError(f"simulate {kind}: {err}") from err
+    except (ValueError, TypeError) as err:  # parameters that do not go together
+        raise OptionError(f"simulate {kind}: {err}") from err
     record = stage_record("simulate", {"kind": kind, **params}, {})
     truth = {**sim.truth, "provenance": record}
     write_simulation(output, sim.files, truth, record)
