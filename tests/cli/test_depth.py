@@ -366,3 +366,17 @@ def test_colour_views_are_refused_as_what_they_are(kind, views, what, tmp_path):
     result = invoke("depth", colour, "-o", out)
     assert result.exit_code == 1 and what in result.output and "grey" in result.output
     assert not out.exists()
+
+
+def test_dual_pixel_views_of_a_white_are_refused_not_matched_by_chance(tmp_path):
+    """The simulator's dual-pixel white (each half's own vignetting, independent noise): every
+    shift fits alike, the best is chance, and 80 % of the pixels came out 'known' over the
+    whole +-4 px search with exit 0. No pixel matches clearly, so nothing is written."""
+    from plenocli.pipeline.stages import bias, decode
+
+    simulate("dualpixel-white", tmp_path / "w", pixels=480)
+    decode.run(str(tmp_path / "w" / "capture.dng"), str(tmp_path / "f.tif"))
+    bias.run(str(tmp_path / "f.tif"), str(tmp_path / "b.tif"))
+    result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
+    assert result.exit_code == 1 and "share no texture" in result.output, result.output
+    assert not (tmp_path / "d.tif").exists()
