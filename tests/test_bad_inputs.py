@@ -1474,3 +1474,24 @@ def test_messages_name_what_is_wrong(inputs, tmp_path):
     cv2.imwrite(str(binary), np.where(rng.random((96, 128)) > 0.5, 255, 0).astype(np.uint8))
     result = run_bad(inputs, tmp_path / "out", ["calibrate", str(binary), "-o", "{o}/g.yaml"])
     assert result.exit_code == 1 and "Bayer" not in result.stderr
+
+
+def test_a_palette_png_is_refused_and_grey_with_alpha_is_one_grey_frame(inputs, tmp_path):
+    """audit 8 E1: OpenCV expands a palette PNG, and a grey PNG with alpha, into three colour
+    channels: the palette's indices were decoded as R, G, B light levels, and a grey image
+    became three identical frames, exit 0."""
+    from PIL import Image
+
+    side = tmp_path / "side"
+    side.mkdir()
+    grey = np.random.default_rng(5).integers(0, 255, (24, 32), dtype=np.uint8)
+    Image.fromarray(grey).convert("P", palette=Image.Palette.ADAPTIVE).save(side / "pal.png")
+    Image.fromarray(grey).convert("LA").save(side / "la.png")
+    result = run_bad(inputs, tmp_path / "out", ["decode", str(side / "pal.png"), "-o",
+                                                "{o}/p.tif"])
+    assert_one_line(result, 1, ("palette", "not light levels"))
+    result = CliRunner().invoke(cli, ["decode", str(side / "la.png"), "-o",
+                                      str(tmp_path / "l.tif")])
+    assert result.exit_code == 0, result.output
+    frames, _ = tiffio.read_image(tmp_path / "l.tif")
+    assert frames.shape == (1, 24, 32) and np.array_equal(frames[0], grey)

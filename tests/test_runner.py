@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, OptionError
 from plenocli.pipeline.config import load_config
 from plenocli.pipeline.runner import plan, run_pipeline
 
@@ -80,8 +80,9 @@ def test_unknown_top_level_key_and_bad_set(project):
         load_config(bad)
     with pytest.raises(ConfigError, match="has no step 'bais'.*did you mean 'bias'"):
         load_config(project, ["bais.smooth=3"])
-    with pytest.raises(ConfigError, match="expected STEP.PARAM=VALUE"):
-        load_config(project, ["smooth=3"])
+    for malformed in ("smooth=3", "bias.smooth"):  # audit 8 E3: a usage error (exit 2)
+        with pytest.raises(OptionError, match="expected STEP.PARAM=VALUE"):
+            load_config(project, [malformed])
 
 
 def test_missing_input_that_no_step_makes(tmp_path):

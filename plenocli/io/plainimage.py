@@ -32,6 +32,10 @@ def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
     import cv2
 
     p = Path(path)
+    png_colour = _png_colour_type(p)
+    if png_colour == PNG_PALETTE:
+        raise InputError(f"{p}: a palette (colour-index) PNG: its samples are indices into a "
+                         "colour table, not light levels; save the sensor image as grey or RGB")
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     with _codec_messages() as said:
         try:
@@ -51,9 +55,26 @@ def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
                          "of another type")
     for line in said:
         log.debug("%s: %s", p, line)
+    if png_colour == PNG_GREY_ALPHA and data.ndim == 3:
+        return data[..., 0]  # OpenCV spreads the grey over B, G, R (the alpha dropped)
     if data.ndim == 3 and data.shape[2] >= 3:
         data = np.concatenate([data[..., 2::-1], data[..., 3:]], axis=2)  # BGR(A) -> RGB(A)
     return data
+
+
+PNG_PALETTE, PNG_GREY_ALPHA = 3, 4  # IHDR colour types that OpenCV turns into colour
+
+
+def _png_colour_type(path: Path) -> int | None:
+    """The colour type in a PNG's header (byte 25), None for another file."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(26)
+    except OSError:
+        return None
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return head[25]
 
 
 @contextlib.contextmanager

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io.atomic import check_distinct
 from plenocli.io.yamlfile import DocumentError, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
@@ -330,7 +330,7 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         target, sep, value = item.partition("=")
         step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
         if not sep or not dot or not param:
-            raise ConfigError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
+            raise OptionError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
         if step not in steps:
             raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
