@@ -1495,3 +1495,15 @@ def test_a_palette_png_is_refused_and_grey_with_alpha_is_one_grey_frame(inputs, 
     assert result.exit_code == 0, result.output
     frames, _ = tiffio.read_image(tmp_path / "l.tif")
     assert frames.shape == (1, 24, 32) and np.array_equal(frames[0], grey)
+
+
+def test_a_focal_sweep_is_not_taken_for_pupil_views(inputs, tmp_path):
+    """audit 8 W2: crosstalk took a refocus sweep's planes (raw@g2 .. raw@g6: one view at nine
+    g) for views and reported r = 99.97 %, exit 0."""
+    side = tmp_path / "side"
+    side.mkdir()
+    planes = np.random.default_rng(6).uniform(100, 200, (3, 32, 48)).astype(np.float32)
+    _plenocli_tiff(side / "sweep.tif", planes, views=["raw@g3", "raw@g4", "raw@g5"])
+    result = run_bad(inputs, tmp_path / "out", ["crosstalk", str(side / "sweep.tif"), "-o",
+                                                "{o}/c.json"])
+    assert_one_line(result, 1, ("focal sweep", "@g3"))

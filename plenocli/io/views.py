@@ -13,7 +13,7 @@ import numpy as np
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area
-from plenocli.model.views import ViewNames, colour_page
+from plenocli.model.views import ViewNames, colour_page, split_sweep
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,11 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
     framing = active_area(meta, data.shape[1:])
     data, cfa = framing.crop(data), framing.cfa
     pages = ViewNames.of(meta, data.shape[0])
+    swept = sorted({split_sweep(n)[1] for n in pages.pages} - {""})
+    if swept:
+        raise InputError(f"{path}: its pages are planes of a focal sweep ({', '.join(swept[:3])}"
+                         f"{', ...' if len(swept) > 3 else ''}), one view at several g, not pupil "
+                         "views; refocus each view at one g (refocus --view left/right --g G)")
     grouped = pages.colour_layout()
     if grouped:
         names, channels = grouped
