@@ -43,7 +43,9 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
     except ValueError as err:
-        raise InputError(f"{input}: {err}") from err
+        hint = ("" if meta.get("provenance") else "; a plain (not plenocli) TIFF: `plenocli "
+                "decode` it first, which names an RGB image's pages R, G, B")
+        raise InputError(f"{input}: {err}{hint}") from err
     chosen = _choose(views, view, input)
     rebuilt = None
     if recover_highlights:
