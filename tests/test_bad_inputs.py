@@ -1507,3 +1507,16 @@ def test_a_focal_sweep_is_not_taken_for_pupil_views(inputs, tmp_path):
     result = run_bad(inputs, tmp_path / "out", ["crosstalk", str(side / "sweep.tif"), "-o",
                                                 "{o}/c.json"])
     assert_one_line(result, 1, ("focal sweep", "@g3"))
+
+
+@pytest.mark.parametrize("shape", [(4, 20000), (20000, 4)])
+def test_the_preview_of_a_very_elongated_frame_keeps_a_pixel_across(shape, tmp_path):
+    """audit 8 I1: shrunk to 2048 px, a 4 x 20000 frame's short side rounded to 0 and OpenCV's
+    resize failed: an "internal error" after the success line."""
+    tifffile.imwrite(tmp_path / "long.tif", np.arange(np.prod(shape), dtype=np.uint16)
+                     .reshape(shape))
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "long.tif"), "-o",
+                                      str(tmp_path / "f.tif"), "--preview",
+                                      str(tmp_path / "f.png")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "f.png").stat().st_size > 0

@@ -77,7 +77,8 @@ def write_png(path: str | os.PathLike, image: np.ndarray, *, cfa: str | None = N
     img = np.asarray(half_size_rgb(image, cfa) if cfa and image.ndim == 2 else image, np.float32)
     scale = max(img.shape[:2]) / max_side
     if scale > 1:  # shrink first: the stretch below then works on a few megapixels, not 60
-        size = (round(img.shape[1] / scale), round(img.shape[0] / scale))
+        # a side never below a pixel (a 4 x 20000 frame: 0.4 rows)
+        size = (max(1, round(img.shape[1] / scale)), max(1, round(img.shape[0] / scale)))
         img = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
     if img.ndim == 3:
         img = display_colour(img, colour)
@@ -184,7 +185,9 @@ def write_grid_overlay(path: str | os.PathLike, flat: np.ndarray, centres: np.nd
     grey = to_display(flat, gamma=1.0)
     scale = min(1.0, 2048 / max(grey.shape))
     if scale < 1:
-        grey = cv2.resize(grey, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        grey = cv2.resize(grey, (max(1, round(grey.shape[1] * scale)),
+                                 max(1, round(grey.shape[0] * scale))),
+                          interpolation=cv2.INTER_AREA)
     bgr = cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
     shift = 4  # sub-pixel drawing
     radius = max(1, int(pitch_px * scale / 8)) << shift
