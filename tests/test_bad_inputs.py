@@ -1174,6 +1174,25 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         assert words in result.stderr, (args, result.stderr)
 
 
+def test_decode_refuses_what_plenocli_made(inputs, tmp_path):
+    """audit 7 W2, E7: a plenocli TIFF (frames, views, of one page or several) or preview is not
+    a raw: decoding it dropped its history (flat then ran twice) or advised splitting its
+    pages; it is refused, naming its stage and the stages that take it."""
+    made = tmp_path / "made"
+    made.mkdir()
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "bias", inputs / "frames.tif", "-o", made / "views.tif", "--preview", made / "v.png"]])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    cases = [(inputs / "frames.tif", "`plenocli decode` output", "give it as it is to bias"),
+             (made / "views.tif", "`plenocli bias` output", "to flat, unmix"),
+             (made / "v.png", "plenocli preview", "decode the capture it shows")]
+    for path, what, where in cases:
+        result = run_bad(inputs, out, ["decode", str(path), "-o", "{o}/x.tif"])
+        assert_one_line(result, 1, (what, where, "not a raw capture or sensor image"
+                                    if path.suffix == ".tif" else "not a sensor image"))
+
+
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError
 
 def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):
