@@ -1193,6 +1193,38 @@ def test_decode_refuses_what_plenocli_made(inputs, tmp_path):
                                     if path.suffix == ".tif" else "not a sensor image"))
 
 
+@pytest.mark.parametrize("args", [
+    ["crosstalk", "{i}/frames.tif", "-o", "{o}/r.json"],
+    ["crosstalk", "{b}/views.tif", "--views", "A,B", "-o", "{o}/r.json"],
+    ["crosstalk", "{b}/views.tif", "{b}/views2.tif", "--mixing-out", "{o}/m.tif", "-o",
+     "{o}/r.json"],
+    ["unmix", "{b}/views.tif", "--mixing", "{d}/mixing.tif", "-o", "{o}/u.tif"],
+    ["sai", "{b}/frames.tif", "-n", "2", "-o", "{o}/s.tif"],
+    ["refocus", "{b}/frames.tif", "--grid", "{i}/rt/grid.yaml", "-o", "{o}/r.tif"],
+])
+def test_light_ratios_refuse_frames_whose_black_level_is_not_subtracted(args, inputs, infinite,
+                                                                        tmp_path):
+    """audit 7 W3: crosstalk measured r on decoded frames with their black level in the flux
+    (exit 0, r = 67 %); like flat, every stage that takes ratios of light (crosstalk, unmix)
+    or drops the level from its output (sai, refocus) refuses them."""
+    assert np.max(tiffio.read_meta(inputs / "frames.tif")["black_level"]) > 0
+    side = tmp_path / "black"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    levels = {"black_level": [[64.0] * 4] * 2, "white_level": [1e4] * 2}
+    _plenocli_tiff(side / "views.tif", clean + 64, views=["A", "B"], **levels)
+    _plenocli_tiff(side / "views2.tif", clean[::-1] + 64, views=["A", "B"], **levels)
+    frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
+    tifffile.imwrite(side / "frames.tif", frames.astype(np.float32) + 64, metadata=None,
+                     photometric="minisblack", description=json.dumps(
+                         {tiffio.FORMAT_KEY: 1, **meta, "black_level": [[64.0] * 4],
+                          "white_level": [100.0]}))
+    argv = [a.replace("{b}", str(side)).replace("{d}", str(infinite)) for a in args]
+    result = run_bad(inputs, tmp_path / "out", argv)
+    assert_one_line(result, 1, ("tif: black level", "not subtracted yet",
+                                "run plenocli bias first"))
+
+
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError
 
 def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):

@@ -107,6 +107,20 @@ def read_masked_whites(inputs: list[str], views: str | None
     return loaded, labels
 
 
+def check_black_subtracted(path: str, meta: dict, why: str) -> None:
+    """InputError unless the black level of ``path`` is gone (``plenocli bias``): the stages
+    that take ratios of light (flat, crosstalk, unmix), or drop the level from their output
+    (sai, refocus), would count it as light. ``why`` ends the message."""
+    try:
+        black = np.asarray(meta.get("black_level") or 0, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: black_level in the metadata is not a list of numbers; "
+                         "decode and bias the capture again") from None
+    if np.any(black != 0):
+        raise InputError(f"{path}: black level {np.nanmax(black):g} DN not subtracted yet; run "
+                         f"plenocli bias first ({why})")
+
+
 def check_named_once(names: list[str]) -> None:
     """A --views list names each view once (a view stacked twice is no second view)."""
     twice = sorted({n for n in names if names.count(n) > 1})

@@ -9,6 +9,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area, frame_grid
 from plenocli.io.preview import view_mosaic, write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
@@ -23,6 +24,8 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
         raise ConfigError(f"unknown --cfa-layout {cfa_layout!r}; choose one of "
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
+    check_black_subtracted(input, meta, "sub-aperture images record no black level: theirs "
+                           "would pass as light")
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
     _check_sensor_image(input, meta, pages, cfa_layout)
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel

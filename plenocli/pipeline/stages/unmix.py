@@ -22,6 +22,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import processing_of, stage_record
 from plenocli.model.views import ViewNames, colour_page, pupil_views, view_of
 from plenocli.progress import log, shown
@@ -34,6 +35,8 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
     pages, names, first = [], [], None
     for path in inputs:
         data, meta = tiffio.read_image(path)
+        check_black_subtracted(path, meta, "the mixing acts on light: a black level would be "
+                               "unmixed as light")
         first = first if first is not None else meta
         own = list(ViewNames.of(meta, data.shape[0]).pages)
         if len(inputs) > 1 and data.shape[0] == 1:
