@@ -20,6 +20,7 @@ from plenocli.io.photo import photo_record
 from plenocli.io.tiffio import open_tiff, read_meta
 from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
 from plenocli.model.lensgrid import LensGrid
+from plenocli.model.provenance import json_safe
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png")
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
@@ -28,7 +29,12 @@ TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
 
 
 def describe(path: str | os.PathLike) -> dict[str, Any]:
-    """A summary of ``path``: kind, sizes, levels, geometry and provenance (JSON-ready)."""
+    """A summary of ``path``: kind, sizes, levels, geometry and provenance (strict JSON values:
+    an infinite or NaN level, as files of older versions hold, is None)."""
+    return json_safe(_describe(path))
+
+
+def _describe(path: str | os.PathLike) -> dict[str, Any]:
     p = Path(path)
     if not p.is_file():
         raise not_a_file(p)
