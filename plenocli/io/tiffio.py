@@ -8,7 +8,8 @@ holds a JSON object with everything later stages need:
 ``origin``        ``[row, col]`` of pixel (0, 0) in full-sensor coordinates (margins included), so
                   that grid coordinates stay true after crops
 ``black_level``   per view, per 2 x 2 pattern position (DN), as read from the raw
-``white_level``   per view (DN): the clipping level of the raw
+``white_level``   per view (DN): the clipping level of the raw; null for a float image decoded
+                  without --white (none known: nothing is taken as clipped)
 ``active_area``   ``[top, left, bottom, right]`` of the light-sensitive area in this array
 ``masked_areas``  list of ``[top, left, bottom, right]`` over-scan (optical black) rectangles
 ``provenance``    this stage's record (plenocli version, stage, parameters, inputs with sha256)
