@@ -1225,6 +1225,36 @@ def test_light_ratios_refuse_frames_whose_black_level_is_not_subtracted(args, in
                                 "run plenocli bias first"))
 
 
+def test_a_noise_gain_map_is_a_map_of_its_own_refused_as_views(inputs, infinite, tmp_path):
+    """audit 7 P1: unmix --noise-map of views A, B, S wrote 2 pages with 3 views' levels (every
+    stage then called the untouched file "edited or damaged") under the record `unmix`, so
+    flat took it for an unmixed capture; it is now consistent and of a kind of its own."""
+    made = tmp_path / "made"
+    made.mkdir()
+    clean, meta = tiffio.read_image(infinite / "clean.tif")
+    levels = {"black_level": [[0.0] * 4] * 3, "white_level": [1e4] * 3}
+    _plenocli_tiff(made / "views.tif", np.concatenate([clean, clean.sum(0, keepdims=True)]),
+                   views=["A", "B", "S"], **levels)
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "unmix", made / "views.tif", "--mixing", infinite / "mixing.tif", "--noise-map",
+        made / "noise.tif", "-o", made / "clean.tif"]])
+    assert result.exit_code == 0, result.output
+    gains, meta = tiffio.read_image(made / "noise.tif")
+    assert gains.shape[0] == 2 and meta["views"] == ["A", "B"]
+    assert meta["provenance"]["stage"] == "unmix-noise-gain"
+    assert meta["black_level"] is None and meta["white_level"] is None
+    assert tiffio.read_meta(made / "clean.tif")["views"] == ["A", "B", "S"]
+    out = tmp_path / "out"
+    for args in (["stitch", made / "noise.tif", "-o", "{o}/p.tif"],
+                 ["flat", made / "noise.tif", "--white", inputs / "biased.tif", "-o",
+                  "{o}/f.tif"],
+                 ["develop", made / "noise.tif", "-o", "{o}/d.tif"],
+                 ["crosstalk", made / "noise.tif", "-o", "{o}/c.json"],
+                 ["decode", made / "noise.tif", "-o", "{o}/x.tif"]):
+        result = run_bad(inputs, out, [str(a) for a in args])
+        assert_one_line(result, 1, ("`plenocli unmix-noise-gain` output",))
+
+
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError
 
 def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):

@@ -37,6 +37,9 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "develop": {"input": PICTURES, "wb_from": CAPTURE, "recover_highlights": CAPTURE},
     "stitch": {"inputs": VIEWS},
 }
+# the maps stages write beside their result (their own stage names): never light levels
+MAPS = {"flat-gain": "a gain map, not an image",
+        "unmix-noise-gain": "a noise-gain map, not views"}
 # side files a stage reads besides ACCEPTS: (stage, option, producing stage)
 SIDE_FILES = (("flat", "gain", "flat-gain"),)
 PHOTOS = (".png", ".jpg", ".jpeg")
@@ -58,8 +61,9 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
                 raise InputError(_not_a_raw(path, made))
             if made[-1] not in accepted:
                 foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
-                raise InputError(f"{path} is a `plenocli {made[-1]}` output; {stage} takes as "
-                                 f"{role.replace('_', '-')} the output of "
+                what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
+                raise InputError(f"{path} is a `plenocli {made[-1]}` output{what}; {stage} "
+                                 f"takes as {role.replace('_', '-')} the output of "
                                  f"{', '.join(accepted)}{foreign}")
             if stage in ONCE and role in ("input", "inputs") and stage in made:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "

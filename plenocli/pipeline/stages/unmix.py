@@ -178,11 +178,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     protect = (*inputs, mixing)
     tiffio.write_image(output, out[kept], out_meta, protect=protect)
     if noise_map:
-        gain_meta = tiffio.derived_meta(meta, record, views=[names[k] for k in solved],
-                                        active_area=[0, 0, *gains.shape[1:]], unmix=summary,
-                                        content="noise gain per view: output noise std for "
-                                                "unit independent noise in every input view")
-        tiffio.write_image(noise_map, gains, gain_meta, protect=protect)
+        tiffio.write_image(noise_map, gains, _noise_meta(meta, params, inputs, mixing, framing,
+                                                         [names[k] for k in solved], summary),
+                           protect=protect)
     if preview:
         write_png(preview, _preview_views(framing.crop(out), groups, info),
                   cfa=cfa if info["layout"] == "cfa" else None, protect=protect,
@@ -194,6 +192,26 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
 
 
 PER_VIEW_KEYS = ("black_level", "white_level", "view_colours")  # metadata listed view by view
+
+
+def _noise_meta(meta: dict, params: dict, inputs: list[str], mixing: str, framing: Framing,
+                names: list[str], summary: dict) -> dict:
+    """The noise-gain map's metadata: a record of its own (``unmix-noise-gain``, so that no
+    stage takes it for views, as ``flat-gain`` for a gain), its pages' names, the active area
+    it covers and no light levels (a gain has none)."""
+    record = stage_record(NOISE_STAGE, params, {"inputs": inputs, "mixing": mixing})
+    colours = meta.get("view_colours")
+    return tiffio.derived_meta(
+        meta, record, views=names, cfa=framing.cfa, origin=list(framing.sensor_origin),
+        active_area=[0, 0, *framing.shape], masked_areas=[], black_level=None,
+        white_level=None, unmix=summary,
+        view_colours=[colours[meta["views"].index(n)] for n in names]
+        if isinstance(colours, list) and meta.get("views") else None,
+        content="noise gain per view: output noise std for unit independent noise in every "
+                "input view")
+
+
+NOISE_STAGE = "unmix-noise-gain"
 
 
 def _sum_again(out: np.ndarray, pages: np.ndarray, names: list[str],
