@@ -177,10 +177,11 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
 
 
 @pytest.mark.parametrize("second, words", [
-    (np.zeros((12, 40), np.uint16), "2 full-size pages .page shapes 12 x 40, 24 x 40"),
-    (np.zeros((24, 40), np.float32), "2 full-size pages"),
-    (np.zeros((24, 40, 3), np.uint16), "page shapes 24 x 40, 24 x 40 x 3"),
-    (np.ones((24, 40), np.uint16), "2 full-size pages .page shapes 24 x 40."),
+    (np.zeros((12, 40), np.uint16), "2 pages of different sizes .24 x 40, 12 x 40. not marked "
+                                    "as reduced-resolution previews"),
+    (np.zeros((24, 40), np.float32), "2 full-size pages .24 x 40 each"),
+    (np.zeros((24, 40, 3), np.uint16), "different sizes .24 x 40, 24 x 40 x 3"),
+    (np.ones((24, 40), np.uint16), "2 full-size pages .24 x 40 each."),
 ])
 def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, second, words):
     with tifffile.TiffWriter(tmp_path / "two.tif") as tif:
@@ -188,6 +189,20 @@ def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, secon
         tif.write(second)
     with pytest.raises(InputError, match=words):
         rawio.decode(tmp_path / "two.tif")
+
+
+def test_a_planar_rgb_tiff_decodes_as_its_contiguous_twin(tmp_path):
+    """audit 7 E3: PlanarConfiguration 2 (one plane per colour) was refused as an image of
+    shape (3, rows, cols); it is the same RGB image as the contiguous file."""
+    rgb = np.random.default_rng(6).integers(0, 60000, (24, 40, 3)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "contig.tif", rgb, photometric="rgb", planarconfig="contig")
+    tifffile.imwrite(tmp_path / "planar.tif", np.moveaxis(rgb, -1, 0), photometric="rgb",
+                     planarconfig="separate")
+    planar, meta = rawio.decode(tmp_path / "planar.tif")
+    contig, _ = rawio.decode(tmp_path / "contig.tif")
+    assert meta["views"] == ["R", "G", "B"]
+    np.testing.assert_array_equal(planar, np.moveaxis(rgb, -1, 0))
+    np.testing.assert_array_equal(planar, contig)
 
 
 def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_path):

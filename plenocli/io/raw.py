@@ -309,11 +309,19 @@ def _frame_pages(p: Path, tif) -> np.ndarray:
     others silently, and a plain TIFF does not say which page is which frame."""
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
     if len(pages) > 1:
-        shapes = sorted({" x ".join(map(str, page.shape)) for page in pages})
-        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shapes "
-                         f"{', '.join(shapes)}); decode reads a sensor image of one page: save "
-                         "each frame as its own file")
-    return pages[0].asarray()
+        shapes = [" x ".join(map(str, page.shape)) for page in pages]
+        if len(set(shapes)) > 1:
+            raise InputError(f"{p}: a TIFF of {len(pages)} pages of different sizes "
+                             f"({', '.join(shapes)}) not marked as reduced-resolution previews; "
+                             "decode cannot tell which is the sensor image: save it as a TIFF "
+                             "of its own")
+        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages ({shapes[0]} each); "
+                         "decode reads a sensor image of one page: save each frame as its own "
+                         "file")
+    data = pages[0].asarray()
+    if pages[0].axes[:1] == "S":   # planar samples (PlanarConfiguration 2): colour last
+        data = np.moveaxis(data, 0, -1)
+    return data
 
 
 def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
@@ -338,7 +346,8 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
         if cfa:
             raise InputError(f"{p}: an RGB image cannot carry a CFA pattern; drop --cfa")
     else:
-        raise InputError(f"{p}: image of shape {data.shape}; expected (rows, cols) or RGB")
+        raise InputError(f"{p}: image of shape {data.shape}; decode reads grey or Bayer "
+                         "(rows, cols) and RGB or RGBA (rows, cols, 3 or 4) sensor images")
     rows, cols = frames.shape[1:]
     return np.ascontiguousarray(frames), {
         "cfa": None, "origin": [0, 0], "black_level": None, "white_level": None,
