@@ -177,11 +177,11 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
 
 
 @pytest.mark.parametrize("second, words", [
-    (np.zeros((12, 40), np.uint16), "2 pages of different sizes .24 x 40, 12 x 40. not marked "
-                                    "as reduced-resolution previews"),
-    (np.zeros((24, 40), np.float32), "2 full-size pages .24 x 40 each"),
-    (np.zeros((24, 40, 3), np.uint16), "different sizes .24 x 40, 24 x 40 x 3"),
-    (np.ones((24, 40), np.uint16), "2 full-size pages .24 x 40 each."),
+    (np.zeros((12, 40), np.uint16), "2 pages of different sizes .page shapes 24 x 40, 12 x 40. "
+                                    "not marked as reduced-resolution previews"),
+    (np.zeros((24, 40), np.float32), "2 full-size pages .page shape 24 x 40."),
+    (np.zeros((24, 40, 3), np.uint16), "different sizes .page shapes 24 x 40, 24 x 40 x 3"),
+    (np.ones((24, 40), np.uint16), "2 full-size pages .page shape 24 x 40."),
 ])
 def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, second, words):
     with tifffile.TiffWriter(tmp_path / "two.tif") as tif:

@@ -311,11 +311,11 @@ def _frame_pages(p: Path, tif) -> np.ndarray:
     if len(pages) > 1:
         shapes = [" x ".join(map(str, page.shape)) for page in pages]
         if len(set(shapes)) > 1:
-            raise InputError(f"{p}: a TIFF of {len(pages)} pages of different sizes "
-                             f"({', '.join(shapes)}) not marked as reduced-resolution previews; "
-                             "decode cannot tell which is the sensor image: save it as a TIFF "
-                             "of its own")
-        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages ({shapes[0]} each); "
+            raise InputError(f"{p}: a TIFF of {len(pages)} pages of different sizes (page "
+                             f"shapes {', '.join(shapes)}) not marked as reduced-resolution "
+                             "previews; decode cannot tell which is the sensor image: save it "
+                             "as a TIFF of its own")
+        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shape {shapes[0]}); "
                          "decode reads a sensor image of one page: save each frame as its own "
                          "file")
     data = pages[0].asarray()
