@@ -9,10 +9,12 @@ PARAMS = (
     Param("camera", Choice(["auto", "canon-dp", "dng", "raytrix", "image"]),
           "Input kind; auto looks at the file's first bytes.", default="auto"),
     Param("frames", Text(), "Names for the frames, comma separated (e.g. S,A)."),
-    Param("black", FiniteFloat(min=0), "Black level (DN) when the file has none."),
-    Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN."),
+    Param("black", FiniteFloat(min=0), "Black level (DN) of a plain image (raws record "
+          "their own)."),
+    Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN of a plain "
+          "image (raws record their own)."),
     Param("cfa", Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
-          "Bayer pattern at pixel (0, 0), e.g. RGGB."),
+          "Bayer pattern at pixel (0, 0) of a plain image, e.g. RGGB (raws record their own)."),
     Param("calib", InputFile(), "Raytrix RayCalibData XML (with --camera raytrix); stored in "
           "the metadata.", role="input"),
     PREVIEW,
