@@ -1259,6 +1259,25 @@ def test_a_noise_gain_map_is_a_map_of_its_own_refused_as_views(inputs, infinite,
         assert_one_line(result, 1, ("`plenocli unmix-noise-gain` output",))
 
 
+def test_sais_of_a_per_pixel_bayer_frame_are_read_by_every_stage(inputs, tmp_path):
+    """audit 7 P3: sai -n 2 of a Bayer frame records one colour per view (R, G, G, B); the
+    reader took that for damage, so develop, stitch, depth and crosstalk all refused sai's own
+    untouched output as "edited or damaged"."""
+    made = tmp_path / "made"
+    made.mkdir()
+    runner = CliRunner()
+    for args in (["decode", inputs / "zlib.tif", "--cfa", "RGGB", "-o", made / "frames.tif"],
+                 ["sai", made / "frames.tif", "-n", "2", "-o", made / "sai.tif"],
+                 ["depth", made / "sai.tif", "-o", made / "depth.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, (args, result.output)
+    _, meta = tiffio.read_image(made / "sai.tif")
+    assert meta["view_colours"] == ["R", "G", "G", "B"]
+    result = run_bad(inputs, tmp_path / "out", ["develop", str(made / "sai.tif"), "--wb",
+                                                "1,1,1", "--matrix", "none", "-o", "{o}/d.png"])
+    assert_one_line(result, 1, ("each view holds a single colour",))
+
+
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError
 
 def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):

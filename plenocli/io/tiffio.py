@@ -8,6 +8,8 @@ holds a JSON object with everything later stages need:
 ``origin``        ``[row, col]`` of pixel (0, 0) in full-sensor coordinates (margins included), so
                   that grid coordinates stay true after crops
 ``black_level``   per view, per 2 x 2 pattern position (DN), as read from the raw
+``view_colours``  per view: its Bayer pattern, or the one colour it holds (R, G or B: the SAIs
+                  of a per-pixel Bayer sensor), or null
 ``white_level``   per view (DN): the clipping level of the raw; null for a float image decoded
                   without --white (none known: nothing is taken as clipped)
 ``active_area``   ``[top, left, bottom, right]`` of the light-sensitive area in this array
@@ -347,9 +349,11 @@ def check_levels(path, meta: dict, views: int) -> None:
                                  f"black level {max(black):g}; the file was edited or damaged")
     colours = meta.get("view_colours")
     if colours is not None and not (isinstance(colours, list) and len(colours) == views and all(
-            c is None or (isinstance(c, str) and is_bayer(c)) for c in colours)):
-        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern (or null) "
-                         f"per view ({views} views); the file was edited or damaged")
+            c is None or (isinstance(c, str) and (is_bayer(c) or c in ("R", "G", "B")))
+            for c in colours)):
+        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern, colour "
+                         f"(R, G, B: the SAIs of a per-pixel Bayer sensor) or null per view "
+                         f"({views} views); the file was edited or damaged")
     for key, kind in (("provenance", dict), ("history", list)):
         if meta.get(key) is not None and not isinstance(meta[key], kind):
             raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "
