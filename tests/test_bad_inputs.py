@@ -1273,6 +1273,9 @@ def test_sais_of_a_per_pixel_bayer_frame_are_read_by_every_stage(inputs, tmp_pat
         assert result.exit_code == 0, (args, result.output)
     _, meta = tiffio.read_image(made / "sai.tif")
     assert meta["view_colours"] == ["R", "G", "G", "B"]
+    # audit 7 W8: each SAI keeps its frame's white level (it was null: clipped pixels passed
+    # as light in develop); the black level is 0, as sai takes only frames without one
+    assert meta["white_level"] == [65535.0] * 4 and meta["black_level"] == [[0.0] * 4] * 4
     result = run_bad(inputs, tmp_path / "out", ["develop", str(made / "sai.tif"), "--wb",
                                                 "1,1,1", "--matrix", "none", "-o", "{o}/d.png"])
     assert_one_line(result, 1, ("each view holds a single colour",))

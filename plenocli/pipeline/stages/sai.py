@@ -57,7 +57,7 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=colours[0] if same else None, view_colours=colours,
         origin=None, active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
-        black_level=None, white_level=None,
+        **_levels(meta, len(pages), len(names)),
         sai={"n": n, "approximate": framing.grid is not None, "cfa_layout": cfa_layout,
              "crop_sensor_origin": list(framing.sensor_origin)})
     protect = (input,) + ((grid,) if grid else ())
@@ -82,3 +82,13 @@ def _check_sensor_image(path: str, meta: dict, pages: list[str], cfa_layout: str
     if cfa_layout == "micro-image" and not meta.get("cfa"):
         raise ConfigError(f"--cfa-layout micro-image: {path} has no CFA pattern (monochrome "
                           "or RGB frames); leave --cfa-layout at pixel")
+
+
+def _levels(meta: dict, pages: int, views: int) -> dict:
+    """The SAIs' levels: each output page is pixels of one input page, so it keeps that page's
+    white level (develop then masks what clipped); the black level is 0 (checked above)."""
+    if meta.get("white_level") is None:
+        return {"black_level": None, "white_level": None}
+    whites = tiffio.white_levels(meta, pages)
+    return {"black_level": [[0.0] * 4] * views,
+            "white_level": [whites[k % pages] for k in range(views)]}
