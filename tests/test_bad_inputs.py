@@ -1281,6 +1281,30 @@ def test_sais_of_a_per_pixel_bayer_frame_are_read_by_every_stage(inputs, tmp_pat
     assert_one_line(result, 1, ("each view holds a single colour",))
 
 
+def test_colour_channels_and_lenslet_pixels_are_not_taken_as_views(inputs, tmp_path):
+    """audit 7 W12: crosstalk took the pages R, G, B of one colour view as three views (r =
+    96 % "between" colours), and sai cut 2 x 2 pixel "SAIs" out of Raytrix (lenslet) frames."""
+    made = tmp_path / "made"
+    made.mkdir()
+    rng = np.random.default_rng(3)
+    tifffile.imwrite(made / "rgb.tif", rng.integers(100, 4000, (48, 64, 3)).astype(np.uint16),
+                     photometric="rgb")
+    frames, _ = tiffio.read_image(inputs / "rt" / "frames.tif")
+    _plain_tiff(made / "rt.tif", frames[0].astype(np.float32))
+    runner = CliRunner()
+    for args in (["decode", made / "rgb.tif", "-o", made / "rgb_frames.tif"],
+                 ["decode", made / "rt.tif", "--camera", "raytrix", "--calib",
+                  inputs / "rt" / "calib.xml", "--white", "1e4", "-o", made / "rt_frames.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    result = run_bad(inputs, out, ["crosstalk", str(made / "rgb_frames.tif"), "-o", "{o}/c.json"])
+    assert_one_line(result, 1, ("holds one view", "pages R, G, B are its colours"))
+    result = run_bad(inputs, out, ["sai", str(made / "rt_frames.tif"), "-n", "2", "-o",
+                                   "{o}/s.tif"])
+    assert_one_line(result, 1, ("focused plenoptic (Raytrix) camera", "plenocli refocus"))
+
+
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError
 
 def test_json_nested_too_deep_is_one_line_everywhere(inputs, tmp_path):

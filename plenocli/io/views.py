@@ -7,13 +7,14 @@ A views TIFF names its pages in the metadata (``views``): one page per view (``A
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area
-from plenocli.model.views import ViewNames, colour_page
+from plenocli.model.views import CHANNELS, ViewNames, colour_page
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,13 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
     framing = active_area(meta, data.shape[1:])
     data, cfa = framing.crop(data), framing.cfa
     pages = ViewNames.of(meta, data.shape[0])
+    if pages.is_rgb:   # pages R, G, B: the colours of one view (named after the file), not three
+        name = Path(path).stem
+        if views and _wanted(views) != [name]:
+            raise InputError(f"{path}: pages R, G, B are the colours of one view ({name}), "
+                             "not views; give one file per view")
+        return ColourViews(data[None].astype(np.float64), [name], list(CHANNELS), "channels",
+                           None)
     grouped = pages.colour_layout()
     if grouped:
         names, channels = grouped
@@ -86,7 +94,7 @@ def read_masked_whites(inputs: list[str], views: str | None
                        ) -> tuple[list[ColourViews], list[str]]:
     """The masked whites and a label for each. Files of one view each (refocused left/right
     images) come V to a masked white, in the order ``views`` names them."""
-    single = all(len(tiffio.read_meta(p).get("views") or [None, None]) == 1 for p in inputs)
+    single = all(_one_view(tiffio.read_meta(p).get("views")) for p in inputs)
     if not single:
         return [read_colour_views(p, views) for p in inputs], list(inputs)
     names = _wanted(views or "")
@@ -105,6 +113,11 @@ def read_masked_whites(inputs: list[str], views: str | None
                                   first.layout, first.cfa))
         labels.append("+".join(group))
     return loaded, labels
+
+
+def _one_view(names: list | None) -> bool:
+    """A file of one view: one page, or the pages R, G, B of one colour view."""
+    return names is not None and (len(names) == 1 or ViewNames(tuple(names)).is_rgb)
 
 
 def check_black_subtracted(path: str, meta: dict, why: str) -> None:

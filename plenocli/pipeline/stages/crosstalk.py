@@ -85,6 +85,10 @@ def _measure(path: str, views: str | None, intended: str | None, tile: int) -> d
     """The cross-talk of one masked capture, as its entry in the report. Colour pages of one
     view (A.R, A.G, A.B) are one view: r compares views, over the flux of every colour."""
     capture = read_colour_views(path, pupil_parts(path, views))
+    if len(capture.names) < 2:
+        raise InputError(f"{path} holds one view ({capture.names[0]}; pages R, G, B are its "
+                         "colours): cross-talk compares two or more views (sai, bias, or "
+                         "refocus --view left/right output)")
     idx = _intended_index(intended, capture.names, path)
     try:
         res = crosstalk_lib.crosstalk_ratio(capture.data.sum(axis=1), intended=idx,

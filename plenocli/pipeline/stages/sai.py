@@ -28,6 +28,10 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
                            "would pass as light")
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
     _check_sensor_image(input, meta, pages, cfa_layout)
+    if grid is None and (meta.get("camera") == "raytrix" or "raytrix_calib" in meta):
+        raise InputError(f"{input}: frames of a focused plenoptic (Raytrix) camera, whose "
+                         "micro-images are not N x N pixel blocks: Eq. 1 gives no sub-aperture "
+                         "images of them; render views with plenocli refocus (--view left/right)")
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
                else active_area(meta, data.shape[1:]))
