@@ -96,3 +96,16 @@ def test_decode_raytrix_without_calib_fails_cleanly(raytrix_png):
     assert result.exit_code == 1
     assert "needs the RayCalibData XML" in result.output
     assert not (folder / "frames.tif").exists()
+
+
+def test_sai_with_a_grid_refuses_a_bayer_mosaic(tmp_path):
+    """audit 7 W9: with a pitch that is not N pixels, the pixel nearest a sub-aperture centre
+    falls on R in one lens and G in the next; the views were labelled one colour each."""
+    frames = np.random.default_rng(1).random((ROWS, COLS)).astype(np.float32)
+    tiffio.write_image(tmp_path / "frames.tif", frames, {"views": ["raw"], "cfa": "RGGB"})
+    grid = LensGrid(PITCH, 0.0, OFFSET, lattice="square", image_shape=(ROWS, COLS))
+    write_grid(tmp_path / "grid.yaml", grid, {})
+    result = invoke("sai", tmp_path / "frames.tif", "-n", 2, "--grid", tmp_path / "grid.yaml",
+                    "-o", tmp_path / "views.tif")
+    assert result.exit_code == 1 and "would mix colours" in result.stderr, result.output
+    assert not (tmp_path / "views.tif").exists()

@@ -50,6 +50,11 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
             except ValueError as err:
                 raise InputError(f"{input}: {err}") from err
         per_page.append(out)
+    if framing.grid is not None and cfa:
+        raise InputError(f"{input}: a Bayer mosaic ({cfa}); with a pitch that is not N pixels "
+                         "the pixel nearest each sub-aperture centre falls on another colour "
+                         "from lens to lens, so approximate SAIs (--grid) would mix colours: "
+                         "give frames of one colour per pixel (monochrome or RGB)")
     # view-major pages: the channels of one view are consecutive, named VIEW.CHANNEL
     stack = np.stack(per_page, axis=1).reshape(-1, *per_page[0].shape[1:])
     names = (sai_mod.view_names(n) if len(pages) == 1
