@@ -1,5 +1,7 @@
 """Decoding: frames really are the file's frames, metadata is right, bad files are refused."""
 
+import re
+
 import numpy as np
 import pytest
 import rawpy
@@ -212,3 +214,16 @@ def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_p
         tif.write(image)
     frames, _ = rawio.decode(tmp_path / "one.tif")
     np.testing.assert_array_equal(frames[0], image)
+
+
+def test_a_camera_the_file_is_not_is_named_not_blamed_on_damage(capture, tmp_path):
+    """audit 7 E20: --camera image on a DNG said "truncated, damaged", --camera dng on a plain
+    TIFF "the DNG is damaged", --camera canon-dp on a dual-pixel DNG "not a dual-pixel file"."""
+    dng = capture[0]
+    tifffile.imwrite(tmp_path / "plain.tif", np.ones((8, 8), np.uint16))
+    for path, camera, words in ((dng, "image", "is a DNG, not a plain image"),
+                                (dng, "canon-dp", "is a DNG, not a Canon CR2 raw"),
+                                (tmp_path / "plain.tif", "dng", "is a plain image (TIFF, PNG or "
+                                                                "BMP), not a DNG")):
+        with pytest.raises(InputError, match=re.escape(words) + ".*use --camera"):
+            rawio.decode(path, camera=camera)

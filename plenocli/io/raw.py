@@ -78,7 +78,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     """
     if camera not in CAMERAS:
         raise InputError(f"unknown camera {camera!r}; choose one of {', '.join(CAMERAS)}")
-    kind = sniff(path) if camera == "auto" else camera
+    kind = sniff(path) if camera == "auto" else _check_camera(path, camera)
     if kind == "unknown":
         raise InputError(f"{path}: not a raw capture or sensor image plenocli can read "
                          "(expected CR2, DNG, TIFF, PNG or BMP)")
@@ -111,6 +111,22 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("colour") is not None:
         meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+KIND_NAMES = {"canon-dp": "a Canon CR2 raw", "dng": "a DNG", "raytrix": "a Raytrix sensor image",
+              "image": "a plain image (TIFF, PNG or BMP)"}
+
+
+def _check_camera(path, camera: str) -> str:
+    """``camera`` when the file's first bytes agree (a Raytrix image is a plain image); else an
+    InputError that says what the file is, not that it is damaged."""
+    found = sniff(path)
+    if found == camera or (camera == "raytrix" and found == "image"):
+        return camera
+    if found == "unknown":
+        return found   # refused below as no raw or image plenocli reads
+    raise InputError(f"{path} is {KIND_NAMES[found]}, not {KIND_NAMES[camera]}: use --camera "
+                     f"{found} or auto")
 
 
 def _warn(path, message: str) -> None:
