@@ -38,9 +38,12 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
         check_black_subtracted(path, meta, "the mixing acts on light: a black level would be "
                                "unmixed as light")
         first = first if first is not None else meta
-        own = list(ViewNames.of(meta, data.shape[0]).pages)
+        held = ViewNames.of(meta, data.shape[0])
+        own = list(held.pages)
         if len(inputs) > 1 and data.shape[0] == 1:
             own = [Path(path).stem]
+        elif len(inputs) > 1 and held.is_rgb:   # the colours of one view, named after the file
+            own = [colour_page(Path(path).stem, c) for c in own]
         if pages and data.shape[1:] != pages[0].shape[1:]:
             raise InputError(f"{path} is {data.shape[2]} x {data.shape[1]} but {inputs[0]} is "
                              f"{pages[0].shape[2]} x {pages[0].shape[1]}; unmix views of one "
@@ -73,10 +76,13 @@ def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
     for group in wanted:
         missing = [n for n in group if n not in names]
         if missing:
+            colour = info["layout"] != "channels" and colour_page(missing[0], "R") in names
             raise InputError(f"{', '.join(inputs)} has no view {missing[0]!r} (views: "
                              f"{','.join(names)}); the mixing expects {','.join(views)}"
                              + (" per channel (VIEW.R, VIEW.G, VIEW.B)"
-                                if info["layout"] == "channels" else ""))
+                                if info["layout"] == "channels" else "")
+                             + (" of one plane, measured on masked whites without colour "
+                                "pages: measure it on colour ones" if colour else ""))
     return [[names.index(n) for n in group] for group in wanted]
 
 
