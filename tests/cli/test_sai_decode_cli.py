@@ -109,3 +109,22 @@ def test_sai_with_a_grid_refuses_a_bayer_mosaic(tmp_path):
                     "-o", tmp_path / "views.tif")
     assert result.exit_code == 1 and "would mix colours" in result.stderr, result.output
     assert not (tmp_path / "views.tif").exists()
+
+
+def test_decode_raytrix_refuses_another_cameras_calibration(tmp_path):
+    """audit 7 P4: the RayCalibData was stored unchecked, so the frames' metadata could describe
+    another camera (diameter 70 px on frames of 23.2 px lenses); it is checked as refocus --grid
+    checks a grid."""
+    from plenocli.pipeline.stages.simulate import simulate
+
+    simulate("hexgrid-white", tmp_path / "w", seed=2)
+    calib = raytrix.read_calib(tmp_path / "w" / "grid_true.xml")
+    raytrix.write_calib(tmp_path / "other.xml", {**calib, "diameter": calib["diameter"] * 1.1})
+    white = tmp_path / "w" / "white.tif"
+    result = invoke("decode", white, "--camera", "raytrix", "--calib", tmp_path / "other.xml",
+                    "-o", tmp_path / "bad.tif")
+    assert result.exit_code == 1 and "does not fit the frames" in result.stderr, result.output
+    assert not (tmp_path / "bad.tif").exists()
+    result = invoke("decode", white, "--camera", "raytrix", "--calib",
+                    tmp_path / "w" / "grid_true.xml", "-o", tmp_path / "good.tif")
+    assert result.exit_code == 0, result.output

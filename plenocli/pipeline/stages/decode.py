@@ -18,6 +18,8 @@ def run(input: str, output: str, *, camera: str = "auto", frames: str | None = N
     names = [n.strip() for n in frames.split(",")] if frames else None
     data, meta = raw.decode(input, camera=camera, frame_names=names, black=black, white=white,
                             cfa=cfa, calib=calib)
+    if calib is not None:
+        _check_calib(calib, data, meta)
     params = dict(camera=camera, frames=frames, black=black, white=white, cfa=cfa, calib=calib)
     record = stage_record("decode", params, {"input": input, "calib": calib})
     tiffio.write_image(output, data, tiffio.derived_meta(meta, record), protect=(input,))
@@ -44,3 +46,15 @@ def _check_overrides(path: str, camera: str, **given) -> None:
         raise OptionError(f"{' and '.join(options)}: {path} is a raw ({kind}) that records its "
                           "own black and white levels and CFA pattern; leave "
                           f"{' and '.join(options)} out (they are for plain TIFF/PNG/BMP images)")
+
+
+def _check_calib(calib: str, data, meta: dict) -> None:
+    """The RayCalibData stored with the frames must describe them, as refocus --grid checks it:
+    another camera's XML would misinform every reader of the metadata."""
+    from plenocli.depth.lenslet import sensor_grey
+    from plenocli.io.framing import frame_grid
+    from plenocli.pipeline.fits import check_fits
+
+    framing = frame_grid(calib, meta, data.shape[1:])
+    check_fits(sensor_grey(framing.crop(data[:1]).astype("float32"), mosaic=bool(framing.cfa)),
+               framing.grid, calib)
