@@ -313,21 +313,25 @@ CASES = [
      ("black",)),
     ("decode-black-inf", ["decode", "{i}/f512.tif", "--black", "inf", "-o", "{o}/d.tif"], 2,
      ("black",)),
-    ("decode-white-neg", ["decode", "{i}/dp.dng", "--white=-5", "-o", "{o}/d.tif"], 2,
+    ("decode-white-neg", ["decode", "{i}/zlib.tif", "--white=-5", "-o", "{o}/d.tif"], 2,
      ("white",)),
-    ("decode-white-nan", ["decode", "{i}/dp.dng", "--white", "nan", "-o", "{o}/d.tif"], 2,
+    ("decode-white-nan", ["decode", "{i}/zlib.tif", "--white", "nan", "-o", "{o}/d.tif"], 2,
      ("white",)),
-    ("decode-black-above-white", ["decode", "{i}/dp.dng", "--black", "900", "--white", "800",
+    ("decode-black-above-white", ["decode", "{i}/zlib.tif", "--black", "900", "--white", "800",
                                   "-o", "{o}/d.tif"], 1, ("white level",)),
-    ("decode-black-negative", ["decode", "{i}/dp.dng", "--black=-3", "-o", "{o}/d.tif"], 2,
+    ("decode-black-negative", ["decode", "{i}/zlib.tif", "--black=-3", "-o", "{o}/d.tif"], 2,
      ("black",)),
     # a level the samples cannot reach: refused here, not written for bias to call damaged
-    ("decode-white-beyond-samples", ["decode", "{i}/dp.dng", "--white", "1e308", "-o",
+    ("decode-white-beyond-samples", ["decode", "{i}/zlib.tif", "--white", "1e308", "-o",
                                      "{o}/d.tif"], 1, ("(--white)", "uint16", "65535")),
-    ("decode-white-70000", ["decode", "{i}/dp.dng", "--white", "70000", "-o", "{o}/d.tif"], 1,
+    ("decode-white-70000", ["decode", "{i}/zlib.tif", "--white", "70000", "-o", "{o}/d.tif"], 1,
      ("(--white)", "65535")),
-    ("decode-black-huge", ["decode", "{i}/dp.dng", "--black", "1e308", "-o", "{o}/d.tif"], 1,
+    ("decode-black-huge", ["decode", "{i}/zlib.tif", "--black", "1e308", "-o", "{o}/d.tif"], 1,
      ("black level 1e+308 (--black)",)),
+    # a raw records its own levels and pattern: one value over them is not taken (audit 7 W7)
+    *[(f"decode-raw-{name}", ["decode", "{i}/dp.dng", f"--{name}", value, "-o", "{o}/d.tif"],
+       2, (f"--{name}", "records its own black and white levels and CFA pattern"))
+      for name, value in (("black", "100"), ("white", "9000"), ("cfa", "BGGR"))],
     *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, ("real",))
       for kind in ("complex", "bool", "int8")],
     ("decode-all-nan", ["decode", "{i}/nan_plain.tif", "-o", "{o}/d.tif"], 1, ("no valid",)),
@@ -1246,6 +1250,137 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         result = run_bad(inputs, out, [str(a) for a in args])
         assert_one_line(result, 1, ())
         assert words in result.stderr, (args, result.stderr)
+
+
+def test_decode_refuses_what_plenocli_made(inputs, tmp_path):
+    """audit 7 W2, E7: a plenocli TIFF (frames, views, of one page or several) or preview is not
+    a raw: decoding it dropped its history (flat then ran twice) or advised splitting its
+    pages; it is refused, naming its stage and the stages that take it."""
+    made = tmp_path / "made"
+    made.mkdir()
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "bias", inputs / "frames.tif", "-o", made / "views.tif", "--preview", made / "v.png"]])
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    cases = [(inputs / "frames.tif", "`plenocli decode` output", "give it as it is to bias"),
+             (made / "views.tif", "`plenocli bias` output", "to flat, unmix"),
+             (made / "v.png", "plenocli preview", "decode the capture it shows")]
+    for path, what, where in cases:
+        result = run_bad(inputs, out, ["decode", str(path), "-o", "{o}/x.tif"])
+        assert_one_line(result, 1, (what, where, "not a raw capture or sensor image"
+                                    if path.suffix == ".tif" else "not a sensor image"))
+
+
+@pytest.mark.parametrize("args", [
+    ["crosstalk", "{i}/frames.tif", "-o", "{o}/r.json"],
+    ["crosstalk", "{b}/views.tif", "--views", "A,B", "-o", "{o}/r.json"],
+    ["crosstalk", "{b}/views.tif", "{b}/views2.tif", "--mixing-out", "{o}/m.tif", "-o",
+     "{o}/r.json"],
+    ["unmix", "{b}/views.tif", "--mixing", "{d}/mixing.tif", "-o", "{o}/u.tif"],
+    ["sai", "{b}/frames.tif", "-n", "2", "-o", "{o}/s.tif"],
+    ["refocus", "{b}/frames.tif", "--grid", "{i}/rt/grid.yaml", "-o", "{o}/r.tif"],
+])
+def test_light_ratios_refuse_frames_whose_black_level_is_not_subtracted(args, inputs, infinite,
+                                                                        tmp_path):
+    """audit 7 W3: crosstalk measured r on decoded frames with their black level in the flux
+    (exit 0, r = 67 %); like flat, every stage that takes ratios of light (crosstalk, unmix)
+    or drops the level from its output (sai, refocus) refuses them."""
+    assert np.max(tiffio.read_meta(inputs / "frames.tif")["black_level"]) > 0
+    side = tmp_path / "black"
+    side.mkdir()
+    clean, _ = tiffio.read_image(infinite / "clean.tif")
+    levels = {"black_level": [[64.0] * 4] * 2, "white_level": [1e4] * 2}
+    _plenocli_tiff(side / "views.tif", clean + 64, views=["A", "B"], **levels)
+    _plenocli_tiff(side / "views2.tif", clean[::-1] + 64, views=["A", "B"], **levels)
+    frames, meta = tiffio.read_image(inputs / "rt" / "frames.tif")
+    tifffile.imwrite(side / "frames.tif", frames.astype(np.float32) + 64, metadata=None,
+                     photometric="minisblack", description=json.dumps(
+                         {tiffio.FORMAT_KEY: 1, **meta, "black_level": [[64.0] * 4],
+                          "white_level": [100.0]}))
+    argv = [a.replace("{b}", str(side)).replace("{d}", str(infinite)) for a in args]
+    result = run_bad(inputs, tmp_path / "out", argv)
+    assert_one_line(result, 1, ("tif: black level", "not subtracted yet",
+                                "run plenocli bias first"))
+
+
+def test_a_noise_gain_map_is_a_map_of_its_own_refused_as_views(inputs, infinite, tmp_path):
+    """audit 7 P1: unmix --noise-map of views A, B, S wrote 2 pages with 3 views' levels (every
+    stage then called the untouched file "edited or damaged") under the record `unmix`, so
+    flat took it for an unmixed capture; it is now consistent and of a kind of its own."""
+    made = tmp_path / "made"
+    made.mkdir()
+    clean, meta = tiffio.read_image(infinite / "clean.tif")
+    levels = {"black_level": [[0.0] * 4] * 3, "white_level": [1e4] * 3}
+    _plenocli_tiff(made / "views.tif", np.concatenate([clean, clean.sum(0, keepdims=True)]),
+                   views=["A", "B", "S"], **levels)
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "unmix", made / "views.tif", "--mixing", infinite / "mixing.tif", "--noise-map",
+        made / "noise.tif", "-o", made / "clean.tif"]])
+    assert result.exit_code == 0, result.output
+    gains, meta = tiffio.read_image(made / "noise.tif")
+    assert gains.shape[0] == 2 and meta["views"] == ["A", "B"]
+    assert meta["provenance"]["stage"] == "unmix-noise-gain"
+    assert meta["black_level"] is None and meta["white_level"] is None
+    assert tiffio.read_meta(made / "clean.tif")["views"] == ["A", "B", "S"]
+    out = tmp_path / "out"
+    for args in (["stitch", made / "noise.tif", "-o", "{o}/p.tif"],
+                 ["flat", made / "noise.tif", "--white", inputs / "biased.tif", "-o",
+                  "{o}/f.tif"],
+                 ["develop", made / "noise.tif", "-o", "{o}/d.tif"],
+                 ["crosstalk", made / "noise.tif", "-o", "{o}/c.json"],
+                 ["decode", made / "noise.tif", "-o", "{o}/x.tif"]):
+        result = run_bad(inputs, out, [str(a) for a in args])
+        assert_one_line(result, 1, ("`plenocli unmix-noise-gain` output",))
+
+
+def test_sais_of_a_per_pixel_bayer_frame_are_read_by_every_stage(inputs, tmp_path):
+    """audit 7 P3: sai -n 2 of a Bayer frame records one colour per view (R, G, G, B); the
+    reader took that for damage, so develop, stitch, depth and crosstalk all refused sai's own
+    untouched output as "edited or damaged"."""
+    made = tmp_path / "made"
+    made.mkdir()
+    runner = CliRunner()
+    for args in (["decode", inputs / "zlib.tif", "--cfa", "RGGB", "-o", made / "frames.tif"],
+                 ["sai", made / "frames.tif", "-n", "2", "-o", made / "sai.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, (args, result.output)
+    # depth and stitch read the file (on these noise views they may refuse what they find)
+    for args in (["depth", made / "sai.tif", "-o", made / "d.tif"],
+                 ["stitch", made / "sai.tif", "--layout", "2x2", "-o", made / "p.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert "edited or damaged" not in result.output + result.stderr, args
+    _, meta = tiffio.read_image(made / "sai.tif")
+    assert meta["view_colours"] == ["R", "G", "G", "B"]
+    # audit 7 W8: each SAI keeps its frame's white level (it was null: clipped pixels passed
+    # as light in develop); the black level is 0, as sai takes only frames without one
+    assert meta["white_level"] == [65535.0] * 4 and meta["black_level"] == [[0.0] * 4] * 4
+    result = run_bad(inputs, tmp_path / "out", ["develop", str(made / "sai.tif"), "--wb",
+                                                "1,1,1", "--matrix", "none", "-o", "{o}/d.png"])
+    assert_one_line(result, 1, ("each view holds a single colour",))
+
+
+def test_colour_channels_and_lenslet_pixels_are_not_taken_as_views(inputs, tmp_path):
+    """audit 7 W12: crosstalk took the pages R, G, B of one colour view as three views (r =
+    96 % "between" colours), and sai cut 2 x 2 pixel "SAIs" out of Raytrix (lenslet) frames."""
+    made = tmp_path / "made"
+    made.mkdir()
+    rng = np.random.default_rng(3)
+    tifffile.imwrite(made / "rgb.tif", rng.integers(100, 4000, (48, 64, 3)).astype(np.uint16),
+                     photometric="rgb")
+    frames, _ = tiffio.read_image(inputs / "rt" / "frames.tif")
+    _plain_tiff(made / "rt.tif", frames[0].astype(np.float32))
+    runner = CliRunner()
+    for args in (["decode", made / "rgb.tif", "-o", made / "rgb_frames.tif"],
+                 ["decode", made / "rt.tif", "--camera", "raytrix", "--calib",
+                  inputs / "rt" / "calib.xml", "--white", "1e4", "-o", made / "rt_frames.tif"]):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    result = run_bad(inputs, out, ["crosstalk", str(made / "rgb_frames.tif"), "-o", "{o}/c.json"])
+    assert_one_line(result, 1, ("holds one view", "pages R, G, B are its colours"))
+    result = run_bad(inputs, out, ["sai", str(made / "rt_frames.tif"), "-n", "2", "-o",
+                                   "{o}/s.tif"])
+    assert_one_line(result, 1, ("focused plenoptic (Raytrix) camera", "plenocli refocus"))
 
 
 # ------------------- JSON nested past any plenocli document: one line, never a RecursionError

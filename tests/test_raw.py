@@ -1,5 +1,7 @@
 """Decoding: frames really are the file's frames, metadata is right, bad files are refused."""
 
+import re
+
 import numpy as np
 import pytest
 import rawpy
@@ -177,10 +179,11 @@ def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
 
 
 @pytest.mark.parametrize("second, words", [
-    (np.zeros((12, 40), np.uint16), "2 full-size pages .page shapes 12 x 40, 24 x 40"),
-    (np.zeros((24, 40), np.float32), "2 full-size pages"),
-    (np.zeros((24, 40, 3), np.uint16), "page shapes 24 x 40, 24 x 40 x 3"),
-    (np.ones((24, 40), np.uint16), "2 full-size pages .page shapes 24 x 40."),
+    (np.zeros((12, 40), np.uint16), "2 pages of different sizes .page shapes 24 x 40, 12 x 40. "
+                                    "not marked as reduced-resolution previews"),
+    (np.zeros((24, 40), np.float32), "2 full-size pages .page shape 24 x 40."),
+    (np.zeros((24, 40, 3), np.uint16), "different sizes .page shapes 24 x 40, 24 x 40 x 3"),
+    (np.ones((24, 40), np.uint16), "2 full-size pages .page shape 24 x 40."),
 ])
 def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, second, words):
     with tifffile.TiffWriter(tmp_path / "two.tif") as tif:
@@ -190,6 +193,20 @@ def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, secon
         rawio.decode(tmp_path / "two.tif")
 
 
+def test_a_planar_rgb_tiff_decodes_as_its_contiguous_twin(tmp_path):
+    """audit 7 E3: PlanarConfiguration 2 (one plane per colour) was refused as an image of
+    shape (3, rows, cols); it is the same RGB image as the contiguous file."""
+    rgb = np.random.default_rng(6).integers(0, 60000, (24, 40, 3)).astype(np.uint16)
+    tifffile.imwrite(tmp_path / "contig.tif", rgb, photometric="rgb", planarconfig="contig")
+    tifffile.imwrite(tmp_path / "planar.tif", np.moveaxis(rgb, -1, 0), photometric="rgb",
+                     planarconfig="separate")
+    planar, meta = rawio.decode(tmp_path / "planar.tif")
+    contig, _ = rawio.decode(tmp_path / "contig.tif")
+    assert meta["views"] == ["R", "G", "B"]
+    np.testing.assert_array_equal(planar, np.moveaxis(rgb, -1, 0))
+    np.testing.assert_array_equal(planar, contig)
+
+
 def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_path):
     image = np.random.default_rng(4).integers(0, 4000, (24, 40)).astype(np.uint16)
     with tifffile.TiffWriter(tmp_path / "one.tif") as tif:
@@ -197,3 +214,16 @@ def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_p
         tif.write(image)
     frames, _ = rawio.decode(tmp_path / "one.tif")
     np.testing.assert_array_equal(frames[0], image)
+
+
+def test_a_camera_the_file_is_not_is_named_not_blamed_on_damage(capture, tmp_path):
+    """audit 7 E20: --camera image on a DNG said "truncated, damaged", --camera dng on a plain
+    TIFF "the DNG is damaged", --camera canon-dp on a dual-pixel DNG "not a dual-pixel file"."""
+    dng = capture[0]
+    tifffile.imwrite(tmp_path / "plain.tif", np.ones((8, 8), np.uint16))
+    for path, camera, words in ((dng, "image", "is a DNG, not a plain image"),
+                                (dng, "canon-dp", "is a DNG, not a Canon CR2 raw"),
+                                (tmp_path / "plain.tif", "dng", "is a plain image (TIFF, PNG or "
+                                                                "BMP), not a DNG")):
+        with pytest.raises(InputError, match=re.escape(words) + ".*use --camera"):
+            rawio.decode(path, camera=camera)

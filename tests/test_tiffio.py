@@ -169,3 +169,16 @@ def test_damaged_files_are_read_or_refused_in_one_line(pristine, tmp_path, name,
         except InputError as err:
             assert "\n" not in str(err)
 
+
+
+def test_a_record_names_each_input_by_an_absolute_path_too(tmp_path, monkeypatch):
+    """audit 7 P5: a shell run recorded its inputs as typed (relative), without the folder it
+    ran in, so the history could not find them from anywhere else."""
+    from plenocli.model.provenance import stage_record
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "in.tif").write_bytes(b"x")
+    monkeypatch.chdir(tmp_path)
+    (entry,) = stage_record("bias", {}, {"input": "sub/in.tif"})["inputs"]
+    assert entry["path"] == "sub/in.tif"
+    assert entry["absolute_path"] == str(tmp_path / "sub" / "in.tif")

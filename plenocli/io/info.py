@@ -16,9 +16,11 @@ import numpy as np
 
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import raw as raw_io
+from plenocli.io.photo import photo_record
 from plenocli.io.tiffio import open_tiff, read_meta
-from plenocli.io.yamlfile import DocumentError, load_json, read_json, read_yaml
+from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
 from plenocli.model.lensgrid import LensGrid
+from plenocli.model.provenance import json_safe
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png")
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
@@ -27,7 +29,12 @@ TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
 
 
 def describe(path: str | os.PathLike) -> dict[str, Any]:
-    """A summary of ``path``: kind, sizes, levels, geometry and provenance (JSON-ready)."""
+    """A summary of ``path``: kind, sizes, levels, geometry and provenance (strict JSON values:
+    an infinite or NaN level, as files of older versions hold, is None)."""
+    return json_safe(_describe(path))
+
+
+def _describe(path: str | os.PathLike) -> dict[str, Any]:
     p = Path(path)
     if not p.is_file():
         raise not_a_file(p)
@@ -39,14 +46,14 @@ def describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_xml(p)}
     if suffix == ".json":
         return {**head, **_describe_json(p)}
-    if suffix in PHOTO_SUFFIXES and _photo_record(p):
+    if suffix in PHOTO_SUFFIXES and photo_record(p):
         return {**head, **_describe_photo(p)}
     kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
         return {**head, **_describe_raw(p)}
     if kind == "image":
         meta = read_meta(p) if suffix in (".tif", ".tiff") else {}
-        if not meta and _photo_record(p):
+        if not meta and photo_record(p):
             return {**head, **_describe_photo(p)}
         return {**head, **(_describe_plenocli_tiff(p, meta) if meta else _describe_image(p))}
     raise InputError(f"{p}: plenocli does not know this kind of file (expected a raw, a TIFF, "
@@ -84,23 +91,6 @@ def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
             "extra": extra}
 
 
-def _photo_record(p: Path) -> dict | None:
-    """The provenance ``develop`` writes in a photograph's ImageDescription ({"plenocli":
-    record, "history": [...]}), or None."""
-    from PIL import Image
-
-    try:
-        with Image.open(p) as image:
-            text = image.getexif().get(270) or image.info.get("description")
-    except Exception:  # any failure of this probe: the image readers below say what it is
-        return None
-    try:
-        doc = load_json(text) if isinstance(text, str) else None
-    except DocumentError:
-        return None
-    return doc if isinstance(doc, dict) and isinstance(doc.get("plenocli"), dict) else None
-
-
 def _describe_photo(p: Path) -> dict:
     from PIL import Image, UnidentifiedImageError
 
@@ -110,7 +100,7 @@ def _describe_photo(p: Path) -> dict:
             mode, fmt = image.mode, image.format
     except (OSError, UnidentifiedImageError) as err:
         raise InputError(f"{p}: not a readable photograph ({err})") from err
-    doc = _photo_record(p) or {}
+    doc = photo_record(p) or {}
     return {"kind": "photo", "format": fmt, "rows": rows, "cols": cols, "mode": mode,
             "provenance": doc.get("plenocli"), "history": doc.get("history", [])}
 

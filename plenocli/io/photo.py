@@ -145,3 +145,22 @@ def _tiff_bytes(encoded: np.ndarray, icc: bytes, exif: dict, text: str) -> bytes
     tifffile.imwrite(buffer, data, photometric="rgb", description=text, metadata=None,
                      software=f"plenocli {__version__}", extratags=sorted(tags))
     return buffer.getvalue()
+
+
+def photo_record(path) -> dict | None:
+    """The provenance ``develop`` writes in a photograph's ImageDescription ({"plenocli":
+    record, "history": [...]}), or None."""
+    from PIL import Image
+
+    from plenocli.io.yamlfile import DocumentError, load_json
+
+    try:
+        with Image.open(path) as image:
+            text = image.getexif().get(270) or image.info.get("description")
+    except Exception:  # any failure of this probe: the image readers say what the file is
+        return None
+    try:
+        doc = load_json(text) if isinstance(text, str) else None
+    except DocumentError:
+        return None
+    return doc if isinstance(doc, dict) and isinstance(doc.get("plenocli"), dict) else None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import zlib
 
 import cv2
 import numpy as np
@@ -13,6 +14,10 @@ from plenocli.model.colour import camera_to_srgb, gains_from_neutral, normalised
 from plenocli.model.views import ViewNames
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
+# the tEXt chunk every preview carries: decode refuses a picture that says it is a preview
+# (display-stretched 8-bit levels are not the light a sensor recorded)
+PREVIEW_TEXT = ("Software", "plenocli preview")
+_PNG_HEADER = 8 + 25   # the signature and the IHDR chunk, always first
 
 
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
@@ -93,7 +98,14 @@ def write_picture(path: str | os.PathLike, picture: np.ndarray, *, protect: tupl
     ok, buf = cv2.imencode(".png", np.ascontiguousarray(picture, np.uint8))
     if not ok:
         raise OSError(f"could not encode PNG for {path}")
-    write_bytes(path, buf.tobytes(), protect=protect)
+    write_bytes(path, with_text(buf.tobytes(), *PREVIEW_TEXT), protect=protect)
+
+
+def with_text(png: bytes, keyword: str, text: str) -> bytes:
+    """``png`` with a tEXt chunk ``keyword`` = ``text`` after its header."""
+    body = b"tEXt" + keyword.encode("latin-1") + b"\0" + text.encode("latin-1")
+    chunk = (len(body) - 4).to_bytes(4, "big") + body + zlib.crc32(body).to_bytes(4, "big")
+    return png[:_PNG_HEADER] + chunk + png[_PNG_HEADER:]
 
 
 def write_heat_map(path: str | os.PathLike, maps: list[np.ndarray], titles: list[str], *,

@@ -78,7 +78,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     """
     if camera not in CAMERAS:
         raise InputError(f"unknown camera {camera!r}; choose one of {', '.join(CAMERAS)}")
-    kind = sniff(path) if camera == "auto" else camera
+    kind = sniff(path) if camera == "auto" else _check_camera(path, camera)
     if kind == "unknown":
         raise InputError(f"{path}: not a raw capture or sensor image plenocli can read "
                          "(expected CR2, DNG, TIFF, PNG or BMP)")
@@ -111,6 +111,22 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("colour") is not None:
         meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+KIND_NAMES = {"canon-dp": "a Canon CR2 raw", "dng": "a DNG", "raytrix": "a Raytrix sensor image",
+              "image": "a plain image (TIFF, PNG or BMP)"}
+
+
+def _check_camera(path, camera: str) -> str:
+    """``camera`` when the file's first bytes agree (a Raytrix image is a plain image); else an
+    InputError that says what the file is, not that it is damaged."""
+    found = sniff(path)
+    if found == camera or (camera == "raytrix" and found == "image"):
+        return camera
+    if found == "unknown":
+        return found   # refused below as no raw or image plenocli reads
+    raise InputError(f"{path} is {KIND_NAMES[found]}, not {KIND_NAMES[camera]}: use --camera "
+                     f"{found} or auto")
 
 
 def _warn(path, message: str) -> None:
@@ -309,11 +325,19 @@ def _frame_pages(p: Path, tif) -> np.ndarray:
     others silently, and a plain TIFF does not say which page is which frame."""
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
     if len(pages) > 1:
-        shapes = sorted({" x ".join(map(str, page.shape)) for page in pages})
-        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shapes "
-                         f"{', '.join(shapes)}); decode reads a sensor image of one page: save "
-                         "each frame as its own file")
-    return pages[0].asarray()
+        shapes = [" x ".join(map(str, page.shape)) for page in pages]
+        if len(set(shapes)) > 1:
+            raise InputError(f"{p}: a TIFF of {len(pages)} pages of different sizes (page "
+                             f"shapes {', '.join(shapes)}) not marked as reduced-resolution "
+                             "previews; decode cannot tell which is the sensor image: save it "
+                             "as a TIFF of its own")
+        raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shape {shapes[0]}); "
+                         "decode reads a sensor image of one page: save each frame as its own "
+                         "file")
+    data = pages[0].asarray()
+    if pages[0].axes[:1] == "S":   # planar samples (PlanarConfiguration 2): colour last
+        data = np.moveaxis(data, 0, -1)
+    return data
 
 
 def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
@@ -338,7 +362,8 @@ def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
         if cfa:
             raise InputError(f"{p}: an RGB image cannot carry a CFA pattern; drop --cfa")
     else:
-        raise InputError(f"{p}: image of shape {data.shape}; expected (rows, cols) or RGB")
+        raise InputError(f"{p}: image of shape {data.shape}; decode reads grey or Bayer "
+                         "(rows, cols) and RGB or RGBA (rows, cols, 3 or 4) sensor images")
     rows, cols = frames.shape[1:]
     return np.ascontiguousarray(frames), {
         "cfa": None, "origin": [0, 0], "black_level": None, "white_level": None,

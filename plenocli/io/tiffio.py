@@ -8,7 +8,10 @@ holds a JSON object with everything later stages need:
 ``origin``        ``[row, col]`` of pixel (0, 0) in full-sensor coordinates (margins included), so
                   that grid coordinates stay true after crops
 ``black_level``   per view, per 2 x 2 pattern position (DN), as read from the raw
-``white_level``   per view (DN): the clipping level of the raw
+``view_colours``  per view: its Bayer pattern, or the one colour it holds (R, G or B: the SAIs
+                  of a per-pixel Bayer sensor), or null
+``white_level``   per view (DN): the clipping level of the raw; null for a float image decoded
+                  without --white (none known: nothing is taken as clipped)
 ``active_area``   ``[top, left, bottom, right]`` of the light-sensitive area in this array
 ``masked_areas``  list of ``[top, left, bottom, right]`` over-scan (optical black) rectangles
 ``provenance``    this stage's record (plenocli version, stage, parameters, inputs with sha256)
@@ -43,6 +46,7 @@ from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used 
 )
 from plenocli.io.yamlfile import DocumentError, load_json
 from plenocli.model.cfa import is_bayer
+from plenocli.model.provenance import json_safe
 from plenocli.progress import log
 
 FORMAT_KEY = "plenocli_format"
@@ -88,8 +92,16 @@ def write_image(path: str | os.PathLike, views: np.ndarray, meta: dict, *,
 
 
 def describe(meta: dict) -> str:
-    """The first page's ImageDescription: the format's key and ``meta`` as JSON."""
-    return json.dumps({FORMAT_KEY: FORMAT_VERSION, **meta}, allow_nan=True)
+    """The first page's ImageDescription: the format's key and ``meta`` as strict JSON (a
+    float image's unknown white level, +inf in memory, is null: JSON has no infinity)."""
+    return json.dumps(json_safe({FORMAT_KEY: FORMAT_VERSION, **meta}), allow_nan=False)
+
+
+def white_levels(meta: dict, views: int) -> list[float]:
+    """The white level of each view, +inf where the file records none (null: a float image
+    decoded without --white clips nowhere)."""
+    whites = meta.get("white_level") or [None] * views
+    return [float("inf") if w is None else float(w) for w in whites]
 
 
 def check_result(path, data: np.ndarray, meta: dict) -> None:
@@ -223,6 +235,9 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
     whites = meta.get("white_level")
+    if whites and data.dtype.kind in "ui" and None in whites:  # null: a float image's only
+        raise InputError(f"{p}: white_level {whites!r} names no level for integer samples; the "
+                         "file was edited or damaged: decode the capture again")
     if whites and data.dtype.kind in "ui" and max(whites) > np.iinfo(data.dtype).max:
         raise InputError(f"{p}: white level {max(whites):g} is beyond what its {data.dtype} "
                          "samples can reach, so clipped pixels would pass as light; the file was "
@@ -338,19 +353,21 @@ def check_levels(path, meta: dict, views: int) -> None:
                          f"({views} views); the file was edited or damaged")
     if whites is not None and not (
             isinstance(whites, list) and len(whites) == views
-            and all(_number(w) and w == w for w in whites)):  # w == w: not NaN
+            and all(w is None or (_number(w) and w == w) for w in whites)):  # w == w: not NaN
         raise InputError(f"{path}: white_level {whites!r} is not one level per view "
                          f"({views} views); the file was edited or damaged")
     if blacks is not None and whites is not None:
         for k, (black, white) in enumerate(zip(blacks, whites, strict=True)):
-            if not white > max(black):
+            if white is not None and not white > max(black):
                 raise InputError(f"{path}: view {k}: white level {white:g} is not above its "
                                  f"black level {max(black):g}; the file was edited or damaged")
     colours = meta.get("view_colours")
     if colours is not None and not (isinstance(colours, list) and len(colours) == views and all(
-            c is None or (isinstance(c, str) and is_bayer(c)) for c in colours)):
-        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern (or null) "
-                         f"per view ({views} views); the file was edited or damaged")
+            c is None or (isinstance(c, str) and (is_bayer(c) or c in ("R", "G", "B")))
+            for c in colours)):
+        raise InputError(f"{path}: view_colours {colours!r} is not one Bayer pattern, colour "
+                         f"(R, G, B: the SAIs of a per-pixel Bayer sensor) or null per view "
+                         f"({views} views); the file was edited or damaged")
     for key, kind in (("provenance", dict), ("history", list)):
         if meta.get(key) is not None and not isinstance(meta[key], kind):
             raise InputError(f"{path}: {key} in the metadata is not a {kind.__name__}; the file "

@@ -7,13 +7,14 @@ A views TIFF names its pages in the metadata (``views``): one page per view (``A
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area
-from plenocli.model.views import ViewNames, colour_page, split_sweep
+from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,13 @@ def read_colour_views(path: str, views: str | None) -> ColourViews:
         raise InputError(f"{path}: its pages are planes of a focal sweep ({', '.join(swept[:3])}"
                          f"{', ...' if len(swept) > 3 else ''}), one view at several g, not pupil "
                          "views; refocus each view at one g (refocus --view left/right --g G)")
+    if pages.is_rgb:   # pages R, G, B: the colours of one view (named after the file), not three
+        name = Path(path).stem
+        if views and _wanted(views) != [name]:
+            raise InputError(f"{path}: pages R, G, B are the colours of one view ({name}), "
+                             "not views; give one file per view")
+        return ColourViews(data[None].astype(np.float64), [name], list(CHANNELS), "channels",
+                           None)
     grouped = pages.colour_layout()
     if grouped:
         names, channels = grouped
@@ -91,7 +99,7 @@ def read_masked_whites(inputs: list[str], views: str | None
                        ) -> tuple[list[ColourViews], list[str]]:
     """The masked whites and a label for each. Files of one view each (refocused left/right
     images) come V to a masked white, in the order ``views`` names them."""
-    single = all(len(tiffio.read_meta(p).get("views") or [None, None]) == 1 for p in inputs)
+    single = all(_one_view(tiffio.read_meta(p).get("views")) for p in inputs)
     if not single:
         return [read_colour_views(p, views) for p in inputs], list(inputs)
     names = _wanted(views or "")
@@ -110,6 +118,25 @@ def read_masked_whites(inputs: list[str], views: str | None
                                   first.layout, first.cfa))
         labels.append("+".join(group))
     return loaded, labels
+
+
+def _one_view(names: list | None) -> bool:
+    """A file of one view: one page, or the pages R, G, B of one colour view."""
+    return names is not None and (len(names) == 1 or ViewNames(tuple(names)).is_rgb)
+
+
+def check_black_subtracted(path: str, meta: dict, why: str) -> None:
+    """InputError unless the black level of ``path`` is gone (``plenocli bias``): the stages
+    that take ratios of light (flat, crosstalk, unmix), or drop the level from their output
+    (sai, refocus), would count it as light. ``why`` ends the message."""
+    try:
+        black = np.asarray(meta.get("black_level") or 0, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: black_level in the metadata is not a list of numbers; "
+                         "decode and bias the capture again") from None
+    if np.any(black != 0):
+        raise InputError(f"{path}: black level {np.nanmax(black):g} DN not subtracted yet; run "
+                         f"plenocli bias first ({why})")
 
 
 def check_named_once(names: list[str]) -> None:

@@ -104,7 +104,8 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
     """The provenance record of one stage run.
 
     ``inputs`` maps a role (``input``, ``white``, ...) to a path or a list of paths; each file is
-    hashed. Parameters that are paths are kept as given (the hashes identify the content).
+    hashed and recorded as given and as an absolute path. Parameters that are paths are kept as
+    given (the hashes identify the content).
     Inside a stage run the edge's fully resolved parameters are recorded, with ``parameters``
     on top (a stage may add derived values), but for those without effect in this run.
     """
@@ -119,8 +120,10 @@ def stage_record(stage: str, parameters: dict, inputs: dict[str, Any]) -> dict:
         for p in paths:
             if p is None:
                 continue
-            hashed.append({"role": role, "path": str(p), "sha256": sha256_file(p),
-                           "name": Path(p).name})
+            # the path as given (relative to where the command ran) and absolute, so that
+            # the history can find its inputs from another folder
+            hashed.append({"role": role, "path": str(p), "absolute_path": os.path.abspath(p),
+                           "sha256": sha256_file(p), "name": Path(p).name})
     return {
         "software": "plenocli",
         "version": __version__,

@@ -274,6 +274,12 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
     if not (math.isfinite(sensor_mm) and sensor_mm > 0):
         raise ValueError(f"sensor_mm {sensor_mm} must be a finite number > 0")
     par = paraxial(lens, wavelength_um=wavelength_um)
+    offset = (lens.image_z_mm - lens.vertex_z_mm[-1]) - par["bfd_mm"]
+    if not abs(offset) <= abs(par["efl_mm"]):
+        raise ValueError(f"the image plane lies {offset:+.6g} mm from the focus, beyond the "
+                         f"focal length ({par['efl_mm']:.6g} mm): the sensor is nowhere near "
+                         "focus and every figure (field, distortion, spots) would describe a "
+                         "blur; check image_distance_mm")
     half = half_field_deg(lens, sensor_mm / 2, wavelength_um=wavelength_um)
     half_diag = half_field_deg(lens, sensor_mm / math.sqrt(2), wavelength_um=wavelength_um)
     fractions = np.array([0.25, 0.5, 0.7, 0.85, 1.0])
@@ -288,7 +294,7 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
         "sensor_mm": sensor_mm,
         **par,
         "image_distance_mm": lens.image_z_mm - lens.vertex_z_mm[-1],
-        "focus_offset_mm": (lens.image_z_mm - lens.vertex_z_mm[-1]) - par["bfd_mm"],
+        "focus_offset_mm": offset,
         "field_of_view_deg": {"horizontal": 2 * half, "diagonal": 2 * half_diag,
                               "paraxial_horizontal": 2 * ideal_half},
         "distortion_percent": [{"field_deg": float(f), "percent": float(p)}

@@ -3,8 +3,10 @@
 Every plenocli TIFF records the stage that made it (``provenance.stage``, and the stages
 before it in ``history``), so a stage can refuse a file of the wrong kind (a depth map as
 views, a gain map as a white) or one it has already processed (unmix of an unmixed file,
-flat of a flat-fielded one): both would give a wrong result with exit 0. Foreign files (no
-plenocli record) are accepted as they are: their reader checks what it can.
+flat of a flat-fielded one): both would give a wrong result with exit 0. decode takes no
+plenocli file at all (frames, views, photographs and previews are not raws: decoding one again
+drops its history and its levels). Foreign files (no plenocli record) are accepted as they
+are: their reader checks what it can.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ PICTURES = (*VIEWS, "stitch", "develop")
 
 # stage -> input role -> the producing stages it accepts
 ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
+    "decode": {"input": ()},
     "bias": {"input": ("decode",)},
     "flat": {"input": CAPTURE, "white": ("decode", "bias", "simulate")},   # --gain: flat's own
     "unmix": {"inputs": VIEWS, "mixing": ("crosstalk", "simulate")},
@@ -34,6 +37,12 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "develop": {"input": PICTURES, "wb_from": CAPTURE, "recover_highlights": CAPTURE},
     "stitch": {"inputs": VIEWS},
 }
+# the maps stages write beside their result (their own stage names): never light levels
+MAPS = {"flat-gain": "a gain map, not an image",
+        "unmix-noise-gain": "a noise-gain map, not views"}
+# side files a stage reads besides ACCEPTS: (stage, option, producing stage)
+SIDE_FILES = (("flat", "gain", "flat-gain"),)
+PHOTOS = (".png", ".jpg", ".jpeg")
 # stages that read what only their producer records (bias: decode's areas and levels)
 RECORD_NEEDED = ("bias",)
 # stages a capture goes through once: applied again they correct what is already corrected
@@ -43,27 +52,76 @@ ONCE = ("bias", "flat", "unmix")
 def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
     """InputError for the first input whose recorded producer ``stage`` does not take in its
     role, or that already went through ``stage`` (one of ONCE)."""
-    from plenocli.io import tiffio
-
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
-            if Path(path).suffix.lower() not in TIFF or not Path(path).is_file():
-                continue
-            try:
-                meta = tiffio.read_meta(path)
-            except InputError:
-                continue   # the stage's reader says what is wrong with it
-            made = [r.get("stage") for r in (*(meta.get("history") or []),
-                                             meta.get("provenance") or {})
-                    if isinstance(r, dict)]
+            made = made_by(path)
             if not made or made[-1] is None:
                 continue
+            if not accepted:
+                raise InputError(_not_a_raw(path, made))
             if made[-1] not in accepted:
                 foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
-                raise InputError(f"{path} is a `plenocli {made[-1]}` output; {stage} takes as "
-                                 f"{role.replace('_', '-')} the output of "
+                what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
+                raise InputError(f"{path} is a `plenocli {made[-1]}` output{what}; {stage} "
+                                 f"takes as {role.replace('_', '-')} the output of "
                                  f"{', '.join(accepted)}{foreign}")
             if stage in ONCE and role in ("input", "inputs") and stage in made:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+
+
+def made_by(path: Path) -> list:
+    """The stages that made ``path``, oldest first, from its plenocli record (a TIFF's
+    metadata, a photograph's description, a preview's tag); [] for a foreign or unreadable
+    file (its reader says what is wrong with it)."""
+    from plenocli.io import tiffio
+    from plenocli.io.photo import photo_record
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in (*TIFF, *PHOTOS) or not Path(path).is_file():
+        return []
+    meta = {}
+    if suffix in TIFF:
+        try:
+            meta = tiffio.read_meta(path)
+        except InputError:
+            return []
+    if not meta:
+        meta = photo_record(path) or {}
+        meta = {"history": meta.get("history"), "provenance": meta.get("plenocli")}
+    if suffix == ".png" and _is_preview(path):
+        return ["preview"]
+    return [r.get("stage") for r in (*(meta.get("history") or []), meta.get("provenance") or {})
+            if isinstance(r, dict)]
+
+
+def _is_preview(path: Path) -> bool:
+    from PIL import Image
+
+    from plenocli.io.preview import PREVIEW_TEXT
+
+    try:
+        with Image.open(path) as image:
+            return image.info.get(PREVIEW_TEXT[0]) == PREVIEW_TEXT[1]
+    except Exception:  # any failure of this probe: decode's reader says what the file is
+        return False
+
+
+def _not_a_raw(path: Path, made: list) -> str:
+    """Why decode refuses a file plenocli made, and where it goes instead."""
+    stage = made[-1]
+    if stage == "preview":
+        return (f"{path} is a plenocli preview (display-stretched 8-bit levels), not a sensor "
+                "image: decode the capture it shows")
+    if stage == "develop":
+        return (f"{path} is a `plenocli develop` photograph (display-encoded), not a raw "
+                "capture or sensor image: decode the capture it came from")
+    takers = [name for name, roles in ACCEPTS.items()
+              if any(stage in accepted for accepted in roles.values())
+              and not (name in ONCE and name in made)]
+    takers += [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+    where = (f"give it as it is to {', '.join(takers)}" if takers
+             else "no stage reads it as an image; decode the capture it came from")
+    return (f"{path} is a `plenocli {stage}` output, not a raw capture or sensor image "
+            f"(decoding it again would drop its record and levels): {where}")

@@ -61,11 +61,12 @@ def check_transform_names(transform: dict, names: list[str], layout: str, *,
                          f"{transform.get('layout')}; drop --layout (the transform sets it)")
 
 
-def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
+def check_alignment(stack: np.ndarray, report, *, what: str,
+                    remedy: str = "register the views without it") -> list[float]:
     """Refuse a panorama whose applied transform (``report.transform``, with its rig canvases)
     does not line the views of ``stack`` (V, C, rows, cols) or (V, rows, cols) up within
-    ``TOLERANCE_PX`` in every overlap. ``what`` names the side file in the message. Returns
-    each pair's residual (px)."""
+    ``TOLERANCE_PX`` in every overlap. ``what`` names the side file (or the registration) in
+    the message, ``remedy`` what to do. Returns each pair's residual (px)."""
     stack = as_view_stack(stack)[0]
     rig = PrismRig.from_dict(report.rig) if report.rig else None
     transforms = [np.asarray(m, dtype=np.float64) for m in report.transform["view_to_reference"]]
@@ -79,8 +80,7 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
         shifts, corrs = _seam_shifts(stack, maps, (a, b), compose.intersect(boxes[a], boxes[b]))
         if not shifts:
             raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
-                             "(about 20 x 20 px); it cannot be vouched for: register the views "
-                             "without it")
+                             f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
         # per axis over the blocks that constrain it (NaN: the block's texture runs along it)
         squares = np.square(np.array(shifts))
         residual = float(np.sqrt(sum(np.nanmean(c) for c in squares.T if np.isfinite(c).any())))
@@ -88,7 +88,7 @@ def check_alignment(stack: np.ndarray, report, *, what: str) -> list[float]:
             shown = f"> {SEARCH_PX}" if residual > SEARCH_PX else f"{residual:.2f}"
             raise ValueError(f"{what} does not describe these views: views {a} and {b} are "
                              f"{shown} px apart in its overlap (correlation {min(corrs):.2f}; at "
-                             f"most {TOLERANCE_PX} px): register the views without it")
+                             f"most {TOLERANCE_PX} px): {remedy}")
         out.append(residual)
     return out
 

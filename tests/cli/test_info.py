@@ -125,3 +125,34 @@ def test_errors_are_one_line(tmp_path, content, message):
     result = _info(path)
     assert result.exit_code == 1
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def _strict_json(text: str):
+    def refuse(constant):
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_a_float_image_without_white_level_records_null_not_infinity(tmp_path):
+    """audit 7 P2: a float image decoded without --white has no white level; the file's
+    ImageDescription and info --json held `Infinity`, which strict JSON readers refuse."""
+    import numpy as np
+    import tifffile
+
+    rng = np.random.default_rng(4)
+    tifffile.imwrite(tmp_path / "f32.tif", rng.random((24, 32), np.float32) * 100,
+                     photometric="minisblack", metadata=None)
+    runner = CliRunner()
+    for args in (["decode", "f32.tif", "-o", "frames.tif"],
+                 ["bias", "frames.tif", "-o", "biased.tif"]):
+        result = runner.invoke(cli, [str(tmp_path / a) if a.endswith(".tif") else a
+                                     for a in args])
+        assert result.exit_code == 0, result.output
+    for name in ("frames.tif", "biased.tif"):
+        with tifffile.TiffFile(tmp_path / name) as tif:
+            meta = _strict_json(tif.pages[0].description)
+        assert meta["white_level"] == [None]
+        result = _info(tmp_path / name, "--json")
+        assert result.exit_code == 0, result.output
+        assert _strict_json(result.stdout)["white_level"] == [None]

@@ -104,3 +104,20 @@ def test_object_distances_the_trace_cannot_vouch_for(tmp_path):
     far = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm",
                                    "1e15"])
     assert far.exit_code == 2 and "'--object-distance-mm'" in far.output
+
+
+@pytest.mark.parametrize("distance", ["1e9", "20"])
+def test_a_sensor_nowhere_near_focus_is_refused(distance, tmp_path):
+    """audit 7 W4: image_distance_mm 1e9 gave a figure sheet of zeros (field of view 0.00 deg,
+    spots of 1.8e11 um) with exit 0; an image plane more than a focal length from focus is
+    refused."""
+    import yaml
+
+    doc = yaml.safe_load(Path(TABLE2).read_text())
+    doc["image_distance_mm"] = float(distance)
+    lens = tmp_path / "far.yaml"
+    lens.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "far.json"
+    res = CliRunner().invoke(cli, ["optics", str(lens), "--json", str(out)])
+    assert res.exit_code == 1 and "nowhere near focus" in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not out.exists()

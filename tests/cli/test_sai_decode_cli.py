@@ -96,3 +96,35 @@ def test_decode_raytrix_without_calib_fails_cleanly(raytrix_png):
     assert result.exit_code == 1
     assert "needs the RayCalibData XML" in result.output
     assert not (folder / "frames.tif").exists()
+
+
+def test_sai_with_a_grid_refuses_a_bayer_mosaic(tmp_path):
+    """audit 7 W9: with a pitch that is not N pixels, the pixel nearest a sub-aperture centre
+    falls on R in one lens and G in the next; the views were labelled one colour each."""
+    frames = np.random.default_rng(1).random((ROWS, COLS)).astype(np.float32)
+    tiffio.write_image(tmp_path / "frames.tif", frames, {"views": ["raw"], "cfa": "RGGB"})
+    grid = LensGrid(PITCH, 0.0, OFFSET, lattice="square", image_shape=(ROWS, COLS))
+    write_grid(tmp_path / "grid.yaml", grid, {})
+    result = invoke("sai", tmp_path / "frames.tif", "-n", 2, "--grid", tmp_path / "grid.yaml",
+                    "-o", tmp_path / "views.tif")
+    assert result.exit_code == 1 and "would mix colours" in result.stderr, result.output
+    assert not (tmp_path / "views.tif").exists()
+
+
+def test_decode_raytrix_refuses_another_cameras_calibration(tmp_path):
+    """audit 7 P4: the RayCalibData was stored unchecked, so the frames' metadata could describe
+    another camera (diameter 70 px on frames of 23.2 px lenses); it is checked as refocus --grid
+    checks a grid."""
+    from plenocli.pipeline.stages.simulate import simulate
+
+    simulate("hexgrid-white", tmp_path / "w", seed=2)
+    calib = raytrix.read_calib(tmp_path / "w" / "grid_true.xml")
+    raytrix.write_calib(tmp_path / "other.xml", {**calib, "diameter": calib["diameter"] * 1.1})
+    white = tmp_path / "w" / "white.tif"
+    result = invoke("decode", white, "--camera", "raytrix", "--calib", tmp_path / "other.xml",
+                    "-o", tmp_path / "bad.tif")
+    assert result.exit_code == 1 and "does not fit the frames" in result.stderr, result.output
+    assert not (tmp_path / "bad.tif").exists()
+    result = invoke("decode", white, "--camera", "raytrix", "--calib",
+                    tmp_path / "w" / "grid_true.xml", "-o", tmp_path / "good.tif")
+    assert result.exit_code == 0, result.output

@@ -273,3 +273,30 @@ def test_a_mixing_of_views_processed_otherwise_is_refused(rig):
                   "--intended", "A,B", "--tile", 8, "-o", tmp / "d.json", "--mixing-out",
                   tmp / "m2.tif")
     assert res.exit_code == 1 and "process the masked whites alike" in res.output
+
+
+def test_colour_views_given_one_file_each_are_unmixed(tmp_path):
+    """audit 7 E22: left.tif and right.tif of pages R, G, B each (refocus --view left/right of
+    colour frames) were refused as "repeated view names (R,G,B,R,G,B)"; each file is one view
+    named after it, its pages that view's colours."""
+    import tifffile
+
+    rng = np.random.default_rng(5)
+    clean = (100 + 50 * rng.random((2, 3, 32, 32))).astype(np.float32)
+    m = np.array([[1.0, 0.2], [0.1, 1.0]])
+    mixed = np.einsum("kj,jcyx->kcyx", m, clean).astype(np.float32)
+    for name, views in zip(("left", "right"), mixed, strict=True):
+        tifffile.imwrite(tmp_path / f"{name}.tif", views, photometric="minisblack",
+                         metadata=None, description=json.dumps(
+                             {tiffio.FORMAT_KEY: 1, "views": ["R", "G", "B"], "cfa": None}))
+    nodes = m[None, :, :, None, None] * np.ones((3, 1, 1, 2, 2))
+    field = MixingField(nodes, np.array([7.5, 23.5]), np.array([7.5, 23.5]), (32, 32),
+                        ("left", "right"), ("R", "G", "B"))
+    write_mixing(tmp_path / "mixing.tif", field, layout="channels", cfa=None, meta={})
+    result = CliRunner().invoke(cli, ["unmix"] + [str(tmp_path / a) for a in (
+        "left.tif", "right.tif")] + ["--mixing", str(tmp_path / "mixing.tif"), "-o",
+                                     str(tmp_path / "clean.tif")])
+    assert result.exit_code == 0, result.output
+    out, meta = tiffio.read_image(tmp_path / "clean.tif")
+    assert meta["views"] == ["left.R", "left.G", "left.B", "right.R", "right.G", "right.B"]
+    np.testing.assert_allclose(out.reshape(2, 3, 32, 32), clean, rtol=1e-4)

@@ -10,10 +10,12 @@ PARAMS = (
           "Input kind; auto looks at the file's first bytes.", default="auto"),
     Param("frames", PageNames(), "Names for the frames, comma separated and distinct (e.g. S,A; "
           "not S.R, S@g3 or 1: those name other pages)."),
-    Param("black", FiniteFloat(min=0), "Black level (DN) when the file has none."),
-    Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN."),
+    Param("black", FiniteFloat(min=0), "Black level (DN) of a plain image (raws record "
+          "their own)."),
+    Param("white", FiniteFloat(min=0, min_open=True), "White (clipping) level in DN of a plain "
+          "image (raws record their own)."),
     Param("cfa", Choice(["RGGB", "BGGR", "GRBG", "GBRG"], case_sensitive=False),
-          "Bayer pattern at pixel (0, 0), e.g. RGGB."),
+          "Bayer pattern at pixel (0, 0) of a plain image, e.g. RGGB (raws record their own)."),
     Param("calib", InputFile(), "Raytrix RayCalibData XML (with --camera raytrix); stored in "
           "the metadata.", role="input"),
     PREVIEW,

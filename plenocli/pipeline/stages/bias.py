@@ -34,8 +34,8 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
         corrected = capture_views(
             frames, names=list(meta["views"]), active_area=meta["active_area"],
             masked_areas=meta.get("masked_areas"), black_level=meta["black_level"],
-            white_level=meta["white_level"], cfa=cfa, overscan=overscan, smooth=smooth,
-            guard=guard)
+            white_level=tiffio.white_levels(meta, len(frames)), cfa=cfa, overscan=overscan,
+            smooth=smooth, guard=guard)
     except ValueError as err:
         raise InputError(f"{input}: {err}") from err
     del frames

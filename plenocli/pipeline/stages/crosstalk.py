@@ -15,7 +15,7 @@ from plenocli.io.atomic import write_text
 from plenocli.io.framing import frame_grid, sensor_image
 from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
-from plenocli.io.views import read_colour_views, read_masked_whites
+from plenocli.io.views import check_black_subtracted, read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
 from plenocli.model.provenance import json_safe, processing_of, stage_record
 from plenocli.model.views import ViewNames, pupil_views, view_of
@@ -42,6 +42,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, views: str | None =
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     if not inputs:
         raise InputError("no input given; pass one views TIFF per masked capture")
+    for path in inputs:
+        check_black_subtracted(path, tiffio.read_meta(path),
+                               "r is a ratio of light: a black level would count as light")
     if grid and not mask_widths:
         raise ConfigError("--grid is used only with --mask-widths (the Raytrix sweep); leave it "
                           "out, or give --mask-widths")
@@ -82,6 +85,10 @@ def _measure(path: str, views: str | None, intended: str | None, tile: int) -> d
     """The cross-talk of one masked capture, as its entry in the report. Colour pages of one
     view (A.R, A.G, A.B) are one view: r compares views, over the flux of every colour."""
     capture = read_colour_views(path, pupil_parts(path, views))
+    if len(capture.names) < 2:
+        raise InputError(f"{path} holds one view ({capture.names[0]}; pages R, G, B are its "
+                         "colours): cross-talk compares two or more views (sai, bias, or "
+                         "refocus --view left/right output)")
     idx = _intended_index(intended, capture.names, path)
     try:
         res = crosstalk_lib.crosstalk_ratio(capture.data.sum(axis=1), intended=idx,

@@ -101,7 +101,7 @@ def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
         return data
     out = data.astype(np.float32)
     blacks = meta.get("black_level") or [[0.0] * 4] * len(data)
-    whites = meta.get("white_level") or [float("inf")] * len(data)
+    whites = tiffio.white_levels(meta, len(data))
     for k, frame in enumerate(out):
         np.copyto(frame, np.nan, where=data[k] >= whites[k])
         for p in range(4):

@@ -8,8 +8,11 @@ from plenocli.errors import InputError
 from plenocli.flatfield import apply_gain, check_gains, white_gains
 from plenocli.io import tiffio
 from plenocli.io.preview import colour_pages, write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import stage_record
 from plenocli.progress import log, shown
+
+FLAT_WHY = "flat corrects bias-corrected views"
 
 
 def run(input: str, output: str, *, white: str | None = None, gain: str | None = None,
@@ -17,11 +20,11 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         save_gain: str | None = None, preview: str | None = None) -> None:
     """Correct the views of ``input`` with a gain from ``white`` (or a saved ``gain`` file)."""
     views, meta = tiffio.read_image(input)
-    _check_bias_corrected(input, meta)
+    check_black_subtracted(input, meta, FLAT_WHY)
     source = white if white is not None else gain
     ref, ref_meta = tiffio.read_image(source)
     if white is not None:
-        _check_bias_corrected(white, ref_meta)
+        check_black_subtracted(white, ref_meta, FLAT_WHY)
     _check_match(input, meta, views, source, ref_meta, ref)
     if white is not None:
         try:
@@ -61,19 +64,6 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
         rgb = colour_pages(corrected, meta.get("views"))  # R, G, B pages: one colour picture
         write_png(preview, corrected[:2] if rgb is None else rgb, cfa=meta.get("cfa"),
                   protect=(input, source), colour=meta.get("colour"))
-
-
-def _check_bias_corrected(path: str, meta: dict) -> None:
-    """A gain is a ratio of light: the black level must be gone first (plenocli bias), or the
-    offset is divided by the gain with the signal."""
-    try:
-        black = np.asarray(meta.get("black_level") or 0, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: black_level in the metadata is not a list of numbers; "
-                         "decode and bias the capture again") from None
-    if np.any(black != 0):
-        raise InputError(f"{path}: black level {np.nanmax(black):g} DN not subtracted yet; run "
-                         "plenocli bias first (flat corrects bias-corrected views)")
 
 
 def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:

@@ -13,6 +13,7 @@ from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
@@ -36,6 +37,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     except ValueError as err:
         raise ConfigError(f"refocus: {err}") from err
     data, meta = tiffio.read_image(input)
+    check_black_subtracted(input, meta, "refocused views record no black level: theirs would "
+                           "pass as light")
     framing = frame_grid(grid, meta, data.shape[1:], frames_path=input)
     if view != "full":
         try:

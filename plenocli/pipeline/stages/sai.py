@@ -9,6 +9,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import active_area, frame_grid
 from plenocli.io.preview import view_mosaic, write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
@@ -23,8 +24,14 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
         raise ConfigError(f"unknown --cfa-layout {cfa_layout!r}; choose one of "
                           f"{', '.join(sai_mod.CFA_LAYOUTS)}")
     data, meta = tiffio.read_image(input)
+    check_black_subtracted(input, meta, "sub-aperture images record no black level: theirs "
+                           "would pass as light")
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
     _check_sensor_image(input, meta, pages, cfa_layout)
+    if grid is None and (meta.get("camera") == "raytrix" or "raytrix_calib" in meta):
+        raise InputError(f"{input}: frames of a focused plenoptic (Raytrix) camera, whose "
+                         "micro-images are not N x N pixel blocks: Eq. 1 gives no sub-aperture "
+                         "images of them; render views with plenocli refocus (--view left/right)")
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
                else active_area(meta, data.shape[1:]))
@@ -43,6 +50,11 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
             except ValueError as err:
                 raise InputError(f"{input}: {err}") from err
         per_page.append(out)
+    if framing.grid is not None and cfa:
+        raise InputError(f"{input}: a Bayer mosaic ({cfa}); with a pitch that is not N pixels "
+                         "the pixel nearest each sub-aperture centre falls on another colour "
+                         "from lens to lens, so approximate SAIs (--grid) would mix colours: "
+                         "give frames of one colour per pixel (monochrome or RGB)")
     # view-major pages: the channels of one view are consecutive, named VIEW.CHANNEL
     stack = np.stack(per_page, axis=1).reshape(-1, *per_page[0].shape[1:])
     names = (sai_mod.view_names(n) if len(pages) == 1
@@ -54,7 +66,7 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=colours[0] if same else None, view_colours=colours,
         origin=None, active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
-        black_level=None, white_level=None,
+        **_levels(meta, len(pages), len(names)),
         sai={"n": n, "approximate": framing.grid is not None, "cfa_layout": cfa_layout,
              "crop_sensor_origin": list(framing.sensor_origin)})
     protect = (input,) + ((grid,) if grid else ())
@@ -79,3 +91,13 @@ def _check_sensor_image(path: str, meta: dict, pages: list[str], cfa_layout: str
     if cfa_layout == "micro-image" and not meta.get("cfa"):
         raise ConfigError(f"--cfa-layout micro-image: {path} has no CFA pattern (monochrome "
                           "or RGB frames); leave --cfa-layout at pixel")
+
+
+def _levels(meta: dict, pages: int, views: int) -> dict:
+    """The SAIs' levels: each output page is pixels of one input page, so it keeps that page's
+    white level (develop then masks what clipped); the black level is 0 (checked above)."""
+    if meta.get("white_level") is None:
+        return {"black_level": None, "white_level": None}
+    whites = tiffio.white_levels(meta, pages)
+    return {"black_level": [[0.0] * 4] * views,
+            "white_level": [whites[k % pages] for k in range(views)]}

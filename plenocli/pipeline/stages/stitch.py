@@ -148,9 +148,9 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               distortion_k1=distortion, transform=transform, blend=blend,
                               rig=prism_rig, overlap=overlap,
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate)
-        if transform_in or rig:  # a side file may make the panorama refused, never wrong
-            _verified(verify.check_alignment, stack, result,
-                      what=f"the transform {transform_in}" if transform_in else f"the rig {rig}")
+        # a side file may make the panorama refused, never wrong; a registration is checked
+        # the same way (a weak false match, correlation just over the floor, lines up nowhere)
+        _verified(verify.check_alignment, stack, result, **_claim(transform_in, rig))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                       overlap_tolerance=overlap_tolerance)
@@ -177,6 +177,16 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), width, height, _alignment(rep))
+
+
+def _claim(transform_in: str | None, rig: str | None) -> dict:
+    """What placed the views, as verify.check_alignment names it, and what to do if it fails."""
+    if transform_in or rig:
+        return {"what": f"the transform {transform_in}" if transform_in else f"the rig {rig}"}
+    return {"what": "the registration", "remedy": "a false match, or views that no shift "
+            "lines up: give the rig (--rig), the expected overlap (--overlap) or the lens "
+            "distortion (--distortion), try --model homography, check the views' order "
+            "(--views)"}
 
 
 def _levels(meta: dict, pages: int) -> dict:

@@ -22,6 +22,7 @@ from plenocli.io import tiffio
 from plenocli.io.framing import Framing, active_area
 from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
+from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import processing_of, stage_record
 from plenocli.model.views import ViewNames, colour_page, pupil_views, view_of
 from plenocli.progress import log, shown
@@ -34,10 +35,15 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
     pages, names, first = [], [], None
     for path in inputs:
         data, meta = tiffio.read_image(path)
+        check_black_subtracted(path, meta, "the mixing acts on light: a black level would be "
+                               "unmixed as light")
         first = first if first is not None else meta
-        own = list(ViewNames.of(meta, data.shape[0]).pages)
+        held = ViewNames.of(meta, data.shape[0])
+        own = list(held.pages)
         if len(inputs) > 1 and data.shape[0] == 1:
             own = [Path(path).stem]
+        elif len(inputs) > 1 and held.is_rgb:   # the colours of one view, named after the file
+            own = [colour_page(Path(path).stem, c) for c in own]
         if pages and data.shape[1:] != pages[0].shape[1:]:
             raise InputError(f"{path} is {data.shape[2]} x {data.shape[1]} but {inputs[0]} is "
                              f"{pages[0].shape[2]} x {pages[0].shape[1]}; unmix views of one "
@@ -70,10 +76,13 @@ def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
     for group in wanted:
         missing = [n for n in group if n not in names]
         if missing:
+            colour = info["layout"] != "channels" and colour_page(missing[0], "R") in names
             raise InputError(f"{', '.join(inputs)} has no view {missing[0]!r} (views: "
                              f"{','.join(names)}); the mixing expects {','.join(views)}"
                              + (" per channel (VIEW.R, VIEW.G, VIEW.B)"
-                                if info["layout"] == "channels" else ""))
+                                if info["layout"] == "channels" else "")
+                             + (" of one plane, measured on masked whites without colour "
+                                "pages: measure it on colour ones" if colour else ""))
     return [[names.index(n) for n in group] for group in wanted]
 
 
@@ -175,11 +184,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     protect = (*inputs, mixing)
     tiffio.write_image(output, out[kept], out_meta, protect=protect)
     if noise_map:
-        gain_meta = tiffio.derived_meta(meta, record, views=[names[k] for k in solved],
-                                        active_area=[0, 0, *gains.shape[1:]], unmix=summary,
-                                        content="noise gain per view: output noise std for "
-                                                "unit independent noise in every input view")
-        tiffio.write_image(noise_map, gains, gain_meta, protect=protect)
+        tiffio.write_image(noise_map, gains, _noise_meta(meta, params, inputs, mixing, framing,
+                                                         [names[k] for k in solved], summary),
+                           protect=protect)
     if preview:
         write_png(preview, _preview_views(framing.crop(out), groups, info),
                   cfa=cfa if info["layout"] == "cfa" else None, protect=protect,
@@ -191,6 +198,26 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
 
 
 PER_VIEW_KEYS = ("black_level", "white_level", "view_colours")  # metadata listed view by view
+
+
+def _noise_meta(meta: dict, params: dict, inputs: list[str], mixing: str, framing: Framing,
+                names: list[str], summary: dict) -> dict:
+    """The noise-gain map's metadata: a record of its own (``unmix-noise-gain``, so that no
+    stage takes it for views, as ``flat-gain`` for a gain), its pages' names, the active area
+    it covers and no light levels (a gain has none)."""
+    record = stage_record(NOISE_STAGE, params, {"inputs": inputs, "mixing": mixing})
+    colours = meta.get("view_colours")
+    return tiffio.derived_meta(
+        meta, record, views=names, cfa=framing.cfa, origin=list(framing.sensor_origin),
+        active_area=[0, 0, *framing.shape], masked_areas=[], black_level=None,
+        white_level=None, unmix=summary,
+        view_colours=[colours[meta["views"].index(n)] for n in names]
+        if isinstance(colours, list) and meta.get("views") else None,
+        content="noise gain per view: output noise std for unit independent noise in every "
+                "input view")
+
+
+NOISE_STAGE = "unmix-noise-gain"
 
 
 def _sum_again(out: np.ndarray, pages: np.ndarray, names: list[str],
