@@ -57,8 +57,8 @@ def white_gain(white: np.ndarray, *, cfa: str | None = None, median_px: int = 5,
     plane_side = min(white.shape) // step
     if median_px > plane_side:  # before any filter allocates its windows
         largest = max(plane_side - 1 + plane_side % 2, 1)
-        raise ValueError(f"median_px {median_px} is larger than the image ({plane_side} pixels "
-                         f"of one colour across); use at most {largest}")
+        raise ValueError(f"the median window of {median_px} px is larger than the image "
+                         f"({plane_side} pixels of one colour across); use at most {largest}")
     gain = np.full(white.shape, np.nan, np.float32)
     for r, c in positions(cfa):
         plane = np.asarray(white[r::step, c::step], np.float32)

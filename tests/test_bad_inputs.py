@@ -341,6 +341,9 @@ CASES = [
                                   "{o}/d.tif"], 2, ("colour page R of a view S",)),
     ("decode-frame-sweep-page", ["decode", "{i}/dp.dng", "--frames", "S@g3,A", "-o",
                                  "{o}/d.tif"], 2, ("'@g'",)),
+    # audit 8 E9: a newline in a name split every later one-line message naming the view
+    ("decode-frame-control", ["decode", "{i}/dp.dng", "--frames", "S\nError: x,A", "-o",
+                              "{o}/d.tif"], 2, ("control character",)),
     ("decode-frame-number", ["decode", "{i}/dp.dng", "--frames", "S,1", "-o", "{o}/d.tif"], 2,
      ("page number",)),
     ("decode-frame-twice", ["decode", "{i}/dp.dng", "--frames", "S,S", "-o", "{o}/d.tif"], 2,

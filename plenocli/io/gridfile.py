@@ -88,6 +88,27 @@ def _fast_load(text: str) -> dict | None:
     return doc
 
 
+def measured_on(path: str | os.PathLike) -> set[str]:
+    """The sha256 of the images a YAML grid was calibrated on (its record's inputs), empty for
+    an XML or a grid of no record: a grid measured on the very frames it is used on is checked
+    by construction."""
+    try:
+        text = read_text(Path(path))
+    except (OSError, InputError):
+        return set()
+    start = text.find("\nprovenance:")
+    if start < 0:
+        return set()
+    try:
+        record = load_yaml(text[start:]).get("provenance") or {}
+    except (DocumentError, AttributeError):
+        return set()
+    if not isinstance(record, dict) or record.get("stage") != "calibrate":
+        return set()
+    return {str(i.get("sha256")) for i in record.get("inputs") or []
+            if isinstance(i, dict) and i.get("sha256")}
+
+
 def read_grid(path: str | os.PathLike, *,
               image_shape: tuple[int, int] | None = None) -> LensGrid:
     """Read a lens grid from plenocli YAML or from a Raytrix RayCalibData XML.

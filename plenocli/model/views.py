@@ -47,6 +47,8 @@ def name_problem(name: str) -> str | None:
         return f"{name!r} holds {SWEEP_TAG!r}, the tag of a focal sweep's pages (left{SWEEP_TAG}4)"
     if name.isdigit():
         return f"{name!r} reads as a page number"
+    if not name.isprintable():  # a newline splits every one-line message naming the page
+        return f"{name!r} holds a control character"
     return None
 
 

@@ -6,25 +6,32 @@ import numpy as np
 
 from plenocli.depth.gridcheck import centred, lattice_misfit
 from plenocli.errors import InputError
+from plenocli.io.gridfile import measured_on
+from plenocli.model.provenance import sha256_file
 from plenocli.progress import log
 
 
-def check_fits(frame: np.ndarray, grid, grid_path: str, *, for_depth: bool = False) -> bool:
+def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | None = None,
+               for_depth: bool = False) -> bool:
     """InputError saying how ``grid`` (read from ``grid_path``) disagrees with the frame
     (docs/depth.md, "Grid check"); depth and refocus call it before using a grid. Returns
-    whether the frame could check it (it shows a lattice): else the stage says so
-    (:func:`warn_unchecked`) and records it."""
+    whether the grid is checked: the frame shows its lattice, or the grid was calibrated on the
+    file ``frames_path`` itself; else the stage says so (:func:`warn_unchecked`) and records
+    it."""
     shows, misfit = lattice_misfit(frame, grid, for_depth=for_depth)
     if misfit:
         raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
                          "`plenocli calibrate` on a white image (or these frames)")
+    if not shows and frames_path is not None:
+        shows = sha256_file(frames_path) in measured_on(grid_path)
     return shows
 
 
 def warn_unchecked(grid_path: str) -> None:
-    log.warning("%s: the frames show no micro-image lattice to check it against (too few "
-                "lenses, or micro-images without vignetting): it is used unchecked; make sure "
-                "it is this camera's grid (plenocli calibrate on its white image)", grid_path)
+    log.warning("%s: the frames' centre shows no micro-image lattice the grid check can vouch "
+                "for (too few lenses, micro-images without vignetting or overlapping): it is "
+                "used unchecked; make sure it is this camera's grid (plenocli calibrate on these "
+                "frames or on the camera's white image)", grid_path)
 
 
 def centred_on(frame: np.ndarray, grid, grid_path: str):

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -322,8 +325,21 @@ def test_a_grid_of_another_camera_is_refused(lenslet, tmp_path):
         assert "plenocli calibrate" in result.output and not out.exists()
 
 
-def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refused(tmp_path,
-                                                                                  caplog):
+@contextlib.contextmanager
+def _warnings_of_plenocli():
+    """The messages plenocli logs inside the block (its logger does not propagate to pytest's
+    capture, and its stream handler keeps the stderr of the first command a test ran)."""
+    said: list[str] = []
+    handler = logging.Handler(logging.WARNING)
+    handler.emit = lambda record: said.append(record.getMessage())
+    logging.getLogger("plenocli").addHandler(handler)
+    try:
+        yield said
+    finally:
+        logging.getLogger("plenocli").removeHandler(handler)
+
+
+def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refused(tmp_path):
     """The simulator's scene frames show no micro-image lattice (no vignetting): the grid is
     used unchecked, which refocus says and records; depth vouches for it by the matches (its
     own grid: median lens confidence 0.98) and refuses a grid turned by 2 deg (0.3-0.4)."""
@@ -336,10 +352,11 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     grid = read_grid(grid_path)
     write_grid(tmp_path / "turned.yaml", replace(grid, angle_rad=grid.angle_rad + np.radians(2)),
                {})
-    result = invoke("refocus", frames, "--grid", tmp_path / "turned.yaml", "-o",
-                    tmp_path / "r.tif")
+    with _warnings_of_plenocli() as said:
+        result = invoke("refocus", frames, "--grid", tmp_path / "turned.yaml", "-o",
+                        tmp_path / "r.tif")
     assert result.exit_code == 0, result.output
-    assert any("used unchecked" in r.getMessage() for r in caplog.records)
+    assert any("used unchecked" in line for line in said)
     assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is False
     refused = invoke("depth", frames, "--grid", tmp_path / "turned.yaml", "-o", tmp_path / "d.tif")
     assert refused.exit_code == 1 and "not this camera's" in refused.output
@@ -380,3 +397,22 @@ def test_dual_pixel_views_of_a_white_are_refused_not_matched_by_chance(tmp_path)
     result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
     assert result.exit_code == 1 and "share no texture" in result.output, result.output
     assert not (tmp_path / "d.tif").exists()
+
+
+def test_a_grid_calibrated_on_these_very_frames_is_checked(tmp_path):
+    """audit 8 E5: a grid whose record says calibrate measured it on this file (its sha256)
+    was called unchecked where the fold check could not vouch for the lattice (Boys2)."""
+    from plenocli.io.gridfile import read_grid, write_grid
+    from plenocli.model.provenance import sha256_file
+
+    simulate("raytrix-scene", tmp_path / "sim", seed=3, rows=240, cols=320, g_true=4.5)
+    frames = tmp_path / "sim" / "frames.tif"
+    record = {"stage": "calibrate", "inputs": [{"role": "input", "path": str(frames),
+                                                "sha256": sha256_file(frames)}]}
+    write_grid(tmp_path / "own.yaml", read_grid(tmp_path / "sim" / "grid.yaml"), record)
+    with _warnings_of_plenocli() as said:
+        result = invoke("refocus", frames, "--grid", tmp_path / "own.yaml", "-o",
+                        tmp_path / "r.tif")
+    assert result.exit_code == 0, result.output
+    assert not any("used unchecked" in line for line in said)
+    assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is True

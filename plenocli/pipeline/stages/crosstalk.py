@@ -162,7 +162,7 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
 
     frame = framing.crop(sensor_image(data, meta))
     grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
-    if not check_fits(grey, framing.grid, grid):
+    if not check_fits(grey, framing.grid, grid, frames_path=inputs[0]):
         warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     try:

@@ -124,7 +124,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     try:
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
-        checked = check_fits(grey, framing.grid, grid_path, for_depth=True)
+        checked = check_fits(grey, framing.grid, grid_path, frames_path=input, for_depth=True)
         lens_grid, moved = centred_on(grey, framing.grid, grid_path)
         ranges = _type_ranges(grid_path, framing.grid)
         result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,

@@ -52,7 +52,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
     grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
-    checked = check_fits(grey, framing.grid, grid)
+    checked = check_fits(grey, framing.grid, grid, frames_path=input)
     if not checked:
         warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
