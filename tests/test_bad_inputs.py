@@ -681,6 +681,10 @@ def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str
     ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
                                    "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
     ("preview-not-png", {"extra_bias": "    preview: \"{out}/b.jpg\"\n"}, ("ending in .png",)),
+    # audit 8 W4: a YAML set was taken as its Python repr, in hash order ("{'A'", "'S'}")
+    ("frames-set", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                    "    output: \"{out}/g.tif\"\n    frames: !!set {S, A}\n"},
+     ("plain value",)),
     ("frames-twice", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
                                       "    output: \"{out}/g.tif\"\n    frames: S,S\n"},
      ("given twice",)),

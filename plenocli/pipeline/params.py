@@ -145,8 +145,10 @@ def convert(param: Param, value: Any) -> Any:
 
 
 def _plain(param: Param, value: Any) -> Any:
-    if isinstance(value, (list, tuple, Mapping)):
-        raise ConfigError(f"{param.label}: expected a plain value, got {value!r}")
+    # a YAML set, date or binary would be taken as Python's repr of it (a set in hash order)
+    if not isinstance(value, (str, int, float)):
+        raise ConfigError(f"{param.label}: expected a plain value (text, a number, true or "
+                          f"false), got {value!r}")
     if "\0" in str(value):
         raise ConfigError(f"{param.label}: {value!r} holds a NUL character, which no shell "
                           "word (and no file name) can")
