@@ -355,3 +355,12 @@ def test_overlap_area_from_the_geometry_is_that_of_the_maps():
             whole += int(np.count_nonzero((feather(xa, ya, shape, None, None) > 0)
                                           & (feather(xb, yb, shape, None, None) > 0)))
         assert _covered_by_both(maps[0], maps[1], region, None, None) == whole
+
+
+def test_views_of_one_field_are_told_there_is_nothing_to_extend():
+    """audit 8 E11: two views of one field 3 px apart (a stereo or dual-pixel pair) were told
+    they may not overlap; they overlap almost whole, past the 70 % the search reaches."""
+    texture = ndimage.gaussian_filter(np.random.default_rng(4).random((300, 420)), 2.0)
+    views = np.stack([texture[:, :400], texture[:, 3:403]]).astype(np.float32)
+    with pytest.raises(StitchError, match="show one field"):
+        stitch(views)

@@ -14,6 +14,7 @@ import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -193,7 +194,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     if layout == "auto" and n_views == 4:
         layout = "2x2"
     elif layout == "auto":
-        with _prism_hint(rig):
+        with _prism_hint(rig, luma):
             layout = auto_layout(luma, limits, overlap, overlap_tolerance)
     tolerance = search["tolerance_px"]
     if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
@@ -212,7 +213,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               windows[(a, b)], across[(a, b)])
-    with _prism_hint(rig):
+    with _prism_hint(rig, luma):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
                                                   limits, windows)
     for info in pair_info:  # the report keeps the rig's own prediction
@@ -223,16 +224,37 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
 
 
 @contextlib.contextmanager
-def _prism_hint(rig: PrismRig | None):
-    """Without a rig, an overlap not found gets the way out for views seen through prisms."""
+def _prism_hint(rig: PrismRig | None, luma: np.ndarray):
+    """Without a rig, an overlap not found gets the way out: views that show one field (a
+    stereo or dual-pixel pair: nothing to extend), or views seen through prisms."""
     try:
         yield
     except StitchError as err:
         if rig is None and ("no reliable overlap" in str(err) or "no overlap" in str(err)):
+            if _same_field(luma):
+                raise StitchError(f"{err}; the views show one field, shifted by a few pixels "
+                                  "at most (a stereo or dual-pixel pair, not views through "
+                                  "prisms): there is nothing to extend; plenocli depth "
+                                  "measures their disparity") from err
             raise StitchError(f"{err}; views seen through prisms can hide their overlap (the "
                              "prisms' distortion bends it): pass the rig (--rig RIG.yaml, see "
                              "configs/rigs/)") from err
         raise
+
+
+SAME_FIELD = 0.5  # correlation of the views' reduced texture, unshifted: they show one field
+SAME_FIELD_REDUCE = 8  # a few pixels of disparity are a fraction of a pixel reduced this much
+
+
+def _same_field(luma: np.ndarray) -> bool:
+    """Whether the first two views' textures, reduced 8 x, correlate unshifted: the search for
+    an overlap reaches 70 % of the view at most, so views of one field are never matched."""
+    rows, cols = luma.shape[1:]
+    size = (max(8, cols // SAME_FIELD_REDUCE), max(8, rows // SAME_FIELD_REDUCE))
+    small = [cv2.resize(np.nan_to_num(v.astype(np.float32)), size, interpolation=cv2.INTER_AREA)
+             for v in luma[:2]]
+    a, b = (v - cv2.GaussianBlur(v, (0, 0), 4.0) for v in small)
+    return bool(ncc(a.ravel(), b.ravel()) >= SAME_FIELD)
 
 
 def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int]) -> None:
