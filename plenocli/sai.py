@@ -36,8 +36,10 @@ MIN_LENSES = 4  # micro-images per side: fewer make views too small to be images
 
 
 def view_names(n: int) -> list[str]:
-    """Names of the N x N views in order i * N + j: S00, S01, ..."""
-    return [f"S{i}{j}" for i in range(n) for j in range(n)]
+    """Names of the N x N views in order i * N + j: S00, S01, ...; from N = 10 on, i and j
+    take two digits each (S0011 is i 0, j 11: S011 could be either)."""
+    width = len(str(n - 1))
+    return [f"S{i:0{width}d}{j:0{width}d}" for i in range(n) for j in range(n)]
 
 
 def _check_n(n) -> int:

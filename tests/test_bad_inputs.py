@@ -1662,3 +1662,17 @@ def test_the_preview_of_a_very_elongated_frame_keeps_a_pixel_across(shape, tmp_p
                                       str(tmp_path / "f.png")])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "f.png").stat().st_size > 0
+
+
+def test_no_command_writes_a_page_name_twice():
+    """audit 8 P2: refocus --g 4,4 wrote two pages raw@g4 and sai -n 12 named views S111 for
+    (1, 11) and (11, 1): every later command called the file edited or damaged."""
+    from plenocli.model.focus import parse_g
+    from plenocli.sai import view_names
+
+    with pytest.raises(ValueError, match="g 4 is given twice"):
+        parse_g("4,4")
+    for n in (2, 9, 10, 12):
+        names = view_names(n)
+        assert len(set(names)) == n * n
+    assert view_names(2) == ["S00", "S01", "S10", "S11"]

@@ -34,7 +34,11 @@ def parse_g(text: str | float) -> list[float]:
                           or all(math.isfinite(v) and v < 0 for v in values)):
         raise ValueError(f"g must hold finite non-zero numbers of one sign (paper: 4; "
                          f"negative, e.g. -4, for a Galilean camera), got {text!r}")
-    return [round(v, 10) for v in values]
+    values = [round(v, 10) for v in values]
+    twice = sorted({v for v in values if values.count(v) > 1})
+    if twice:  # one page each: a page twice would be two pages of one name
+        raise ValueError(f"g {twice[0]:g} is given twice in {text!r}; give each g once")
+    return values
 
 
 def _g_values(spec: str, text) -> list[float]:
