@@ -386,6 +386,9 @@ CASES = [
     # a value the option's own rule refuses, or an option with no effect: usage errors naming it
     ("flat-median-even", ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--median",
                           "10", "-o", "{o}/f.tif"], 2, ("'--median'", "10 is not odd")),
+    # audit 8 W6: S = A + B named in --views beside A only passed (r = 68 %, exit 0)
+    ("crosstalk-views-sum", ["crosstalk", "{i}/biased.tif", "--views", "A,S", "-o",
+                             "{o}/c.json"], 1, ("S is the sum A + B",)),
     ("crosstalk-tile-odd", ["crosstalk", "{i}/biased.tif", "--tile", "3", "-o", "{o}/c.json"], 2,
      ("'--tile'", "3 is not even")),
     # audit 7 E17: one source of the gain is a usage error, as other option pairs are
@@ -1676,3 +1679,18 @@ def test_no_command_writes_a_page_name_twice():
         names = view_names(n)
         assert len(set(names)) == n * n
     assert view_names(2) == ["S00", "S01", "S10", "S11"]
+
+
+def test_crosstalk_refuses_a_capture_whose_open_part_is_outshone_in_some_tiles(inputs,
+                                                                               tmp_path):
+    """audit 8 W6: an unmasked scene passed as a masked white gave r = 95 % with tiles up to
+    176 %, exit 0: somewhere the 'open' part was the darker view, which no masked white is."""
+    side = tmp_path / "side"
+    side.mkdir()
+    a = np.full((64, 64), 1000.0, np.float32)
+    b = np.full((64, 64), 300.0, np.float32)
+    b[:, 48:] = 1500.0  # brighter than A in the right quarter only: A is brightest overall
+    _plenocli_tiff(side / "scene.tif", np.stack([a, b]), views=["A", "B"])
+    result = run_bad(inputs, tmp_path / "out", ["crosstalk", str(side / "scene.tif"),
+                                                "--tile", "16", "-o", "{o}/c.json"])
+    assert_one_line(result, 1, ("not brighter than the others everywhere", "r up to 150 %"))

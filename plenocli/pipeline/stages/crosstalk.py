@@ -95,7 +95,7 @@ def _measure(path: str, views: str | None, intended: str | None, tile: int) -> d
                                             tile_px=tile, cfa=capture.cfa)
     except ValueError as err:
         raise InputError(f"{path}: {err}") from err
-    _check_open_part(path, capture.names[res["intended"]], res["r"])
+    _check_open_part(path, capture.names[res["intended"]], max(res["r"], res["map_max"]))
     return _capture_entry(path, capture.names, res, tile, capture.cfa)
 
 
@@ -103,7 +103,9 @@ def pupil_parts(path: str, views: str | None) -> str | None:
     """The views to compare: ``views`` as given; by default a dual-pixel file's A and B, since
     its sum S = A + B is no pupil part of its own (it would count as "another view")."""
     if views is not None:
-        if {"A", "B", "S"} <= {v.strip() for v in views.split(",")}:
+        named = tiffio.read_meta(path).get("views") or []
+        dual = {"A", "B", "S"} <= {view_of(n) for n in named}
+        if dual and "S" in {v.strip() for v in views.split(",")}:
             raise ConfigError(f"--views {views}: S is the sum A + B, not a pupil part of its "
                               "own; leave it out (--views A,B)")
         return views
@@ -185,11 +187,13 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
 
 
 def _check_open_part(path: str, name: str, r: float) -> None:
-    """The open part of a masked white must be its brightest: r >= 1 makes M singular."""
+    """The open part of a masked white must be its brightest, over the whole frame and in
+    every tile (``r`` the largest of them): r >= 1 makes M singular, and a tile where another
+    view outshines it is a scene or the wrong view, not a white with that part open."""
     if not r < 1:
         raise InputError(f"{path}: the open part {name} is not brighter than the others "
-                         f"(r = {100 * r:.0f} %): not a white with only that part open; check "
-                         "--intended and the mask")
+                         f"everywhere (r up to {100 * r:.0f} %): not a white with only that part "
+                         "open; check --intended and the mask")
 
 
 def _processing(inputs: list[str]) -> list[str] | None:
