@@ -1694,3 +1694,14 @@ def test_crosstalk_refuses_a_capture_whose_open_part_is_outshone_in_some_tiles(i
     result = run_bad(inputs, tmp_path / "out", ["crosstalk", str(side / "scene.tif"),
                                                 "--tile", "16", "-o", "{o}/c.json"])
     assert_one_line(result, 1, ("not brighter than the others everywhere", "r up to 150 %"))
+
+
+def test_an_unwritable_output_folder_is_named_not_a_file_x_in_it(inputs, tmp_path):
+    """audit 8 E7: a folder a stage fills was checked through a file 'x' in it, and the
+    message named that file ('cannot write link/x'), which the user never gave."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "link").symlink_to(tmp_path / "nowhere")
+    result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "out" / "link"),
+                                      "--pixels", "64"])
+    assert result.exit_code == 1
+    assert "cannot write into" in result.output and "/x" not in result.output

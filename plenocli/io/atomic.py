@@ -231,7 +231,7 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
     for folder in (Path(p) for p in folders):
         if folder.exists() and not folder.is_dir():
             raise InputError(f"output folder {folder} is a file; give a folder")
-        _check_folder(folder / "x")
+        _check_folder(folder / "x", shown=f"into {folder}")  # any name in it
     check_distinct(outputs, inputs)
     for out in outputs:
         if out.is_dir():
@@ -266,28 +266,29 @@ def _temporary_prefix(dest: Path) -> str:
     return f".{short_name(dest.name)}.{_HOST}-"
 
 
-def _check_folder(out: Path) -> None:
+def _check_folder(out: Path, *, shown: str | None = None) -> None:
+    shown = shown or str(out)
     name_max = NAME_MAX
     folder = out.parent
     while not folder.exists():
         if folder.is_symlink():
-            raise InputError(f"cannot write {out}: folder {folder} is a symbolic link to "
+            raise InputError(f"cannot write {shown}: folder {folder} is a symbolic link to "
                              f"{os.readlink(folder)}, which does not exist; make that folder "
                              "or choose another")
         if folder == folder.parent:
             break
         folder = folder.parent
     if folder.exists() and not folder.is_dir():
-        raise InputError(f"cannot write {out}: {folder} is a file, not a folder")
+        raise InputError(f"cannot write {shown}: {folder} is a file, not a folder")
     with contextlib.suppress(OSError, ValueError):
         name_max = os.pathconf(folder, "PC_NAME_MAX")
     temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
     names = [*out.parent.parts, out.name, temporary]
     if any(len(os.fsencode(p)) > name_max for p in names):
-        raise InputError(f"cannot write {out}: a name in it is longer than this file system "
+        raise InputError(f"cannot write {shown}: a name in it is longer than this file system "
                          f"takes ({name_max} bytes); shorten it")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise InputError(f"cannot write {out}: folder {folder} is not writable "
+        raise InputError(f"cannot write {shown}: folder {folder} is not writable "
                          "(permission or a read-only file system); choose another folder")
 
 
