@@ -78,3 +78,13 @@ def test_a_whole_number_where_the_default_is_a_fraction_is_that_fraction(tmp_pat
 def test_lenslet_depth_refuses_what_it_cannot_render(params, words):
     with pytest.raises(ValueError, match=re.escape(words)):
         generator("lenslet-depth")(**params)
+
+
+def test_rays_are_bounded_with_the_kinds_default_sensor():
+    """audit 8 E13: --rays 100000 on a kind's default 256 px sensor (6.6e9 rays) passed the
+    size check, which counted the sensor as 1 x 1 when --pixels was not given."""
+    from plenocli.synth import kinds
+
+    generate = kinds()["quadpixel-white"]
+    with pytest.raises(ValueError, match="256 x 256 pixels x 100000 rays"):
+        check_params("quadpixel-white", generate, {"rays": 100000})

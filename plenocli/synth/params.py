@@ -100,7 +100,11 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> di
             problem = RULES[key](value)
             if problem:
                 raise ValueError(f"simulate {kind}: {key} = {value!r}: {problem}")
-    _check_size(kind, params)
+    # the size asked for, the generator's defaults filling what is not given (a default 256 px
+    # sensor times --rays 100000 is 6.6e9 rays)
+    defaults = {k: v.default for k, v in accepted.items()
+                if v.default is not inspect.Parameter.empty}
+    _check_size(kind, {**defaults, **params})
     return {key: _as_default(value, accepted[key].default) for key, value in params.items()}
 
 
@@ -213,7 +217,7 @@ def _check_size(kind: str, params: dict) -> None:
     if rows * cols > MAX_PIXELS or rows * cols * rays > MAX_RAYS:
         raise ValueError(f"simulate {kind}: {rows} x {cols} pixels x {rays} rays is beyond what "
                          f"a simulation holds ({MAX_PIXELS:.3g} pixels, {MAX_RAYS:.3g} rays); "
-                         "simulate a smaller sensor")
+                         "simulate a smaller sensor or fewer rays")
 
 
 def _sensor_shape(params: dict) -> tuple[int, int]:
