@@ -182,3 +182,18 @@ def test_a_record_names_each_input_by_an_absolute_path_too(tmp_path, monkeypatch
     (entry,) = stage_record("bias", {}, {"input": "sub/in.tif"})["inputs"]
     assert entry["path"] == "sub/in.tif"
     assert entry["absolute_path"] == str(tmp_path / "sub" / "in.tif")
+
+
+@pytest.mark.parametrize("planar", ["contig", "separate"])
+def test_samples_of_one_page_are_views_whatever_their_layout(planar, tmp_path):
+    """audit 8 E6: a plenocli file rewritten as one page of three planar samples was read as
+    128 views (the samples-first axis taken for the last)."""
+    views = np.random.default_rng(0).random((3, 16, 24)).astype(np.float32)
+    description = json.dumps({tiffio.FORMAT_KEY: tiffio.FORMAT_VERSION,
+                              "views": ["A", "B", "S"]})
+    data = views if planar == "separate" else np.moveaxis(views, 0, -1)
+    tifffile.imwrite(tmp_path / "p.tif", data, planarconfig=planar, photometric="minisblack",
+                     extrasamples=[0, 0] if planar == "contig" else None,
+                     description=description, metadata=None)
+    read, meta = tiffio.read_image(tmp_path / "p.tif")
+    assert np.array_equal(read, views) and meta["views"] == ["A", "B", "S"]

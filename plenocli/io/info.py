@@ -82,11 +82,14 @@ def _describe_raw(p: Path) -> dict:
 def _describe_plenocli_tiff(p: Path, meta: dict) -> dict:
     with open_tiff(p) as tif:
         page = tif.pages[0]
-        shape, dtype, count = page.shape, str(page.dtype), len(tif.pages)
+        dtype, count = str(page.dtype), len(tif.pages)
+        rows, cols = page.imagelength, page.imagewidth
+        if page.samplesperpixel > 1:  # samples are views (as the reader takes them)
+            count *= page.samplesperpixel
     extra = {k: v for k, v in meta.items()
              if k not in (*IMAGE_KEYS, "provenance", "history")}
-    return {"kind": "plenocli-tiff", "pages": count, "rows": int(shape[0]),
-            "cols": int(shape[1]), "dtype": dtype, **{k: meta.get(k) for k in IMAGE_KEYS},
+    return {"kind": "plenocli-tiff", "pages": count, "rows": int(rows),
+            "cols": int(cols), "dtype": dtype, **{k: meta.get(k) for k in IMAGE_KEYS},
             "provenance": meta.get("provenance"), "history": meta.get("history", []),
             "extra": extra}
 

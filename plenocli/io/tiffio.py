@@ -227,7 +227,7 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
-                data = _stack_pages(p, [page.asarray() for page in tif.pages])
+                data = _stack_pages(p, list(tif.pages))
     except READ_ERRORS as err:
         raise read_error(p, err, f"{p}: not a readable TIFF image ({err}); pass an image "
                                  "written by plenocli or a plain TIFF") from err
@@ -395,14 +395,17 @@ def rects_overlap(a, b) -> bool:
     return max(a[0], b[0]) < min(a[2], b[2]) and max(a[1], b[1]) < min(a[3], b[3])
 
 
-def _stack_pages(path: Path, pages: list[np.ndarray]) -> np.ndarray:
-    """Pages of a foreign TIFF as (views, rows, cols): interleaved samples (RGB) become views."""
+def _stack_pages(path: Path, pages: list) -> np.ndarray:
+    """Pages of a foreign TIFF as (views, rows, cols): each sample (R, G, B) becomes a view,
+    interleaved (rows, cols, samples) or planar (samples, rows, cols)."""
     arrays = []
     for page in pages:
-        if page.ndim == 3:
-            arrays.extend(np.moveaxis(page, -1, 0))
+        data = page.asarray()
+        if data.ndim == 3:
+            planar = page.axes.startswith("S")  # PlanarConfiguration 2: samples first
+            arrays.extend(data if planar else np.moveaxis(data, -1, 0))
         else:
-            arrays.append(page)
+            arrays.append(data)
     if len({a.shape for a in arrays}) != 1:
         raise InputError(f"{path}: the pages have different sizes; plenocli expects equal-sized "
                          "views")
