@@ -100,10 +100,11 @@ def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Ro
     recorded = values(params, {**inputs, **outputs})
     for role, paths in outputs.items():
         for output in paths:
-            target = os.path.abspath(written_path(output))  # a link's target: what landed
+            # a link's target is what landed; a folder's files landed through its link too
+            target = os.path.realpath(written_path(output))
             files = {}
             for tmp, dest in landed:
-                full = os.path.abspath(dest)
+                full = os.path.realpath(dest)
                 if full == target or full.startswith(target + os.sep):
                     files[os.path.relpath(full, target)] = file_state(tmp)
             if not files:

@@ -170,3 +170,16 @@ def test_a_folder_filled_again_holds_one_simulation_not_two(tmp_path):
     assert json.loads((out / "truth.json").read_text())["kind"] == "dualpixel"
     assert invoke("dualpixel", "-o", out, "--pixels", 64).exit_code == 0   # same set again
     assert {p.name for p in out.iterdir()} == names
+
+
+def test_a_folder_given_as_a_link_gets_its_record_and_is_filled_again_whole(tmp_path):
+    """audit 8 P1: through a symbolic link to a folder no record was written (the files landed
+    under the link, the record was looked for under its target), so a second simulation left
+    the first one's files beside its own."""
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    assert invoke("hexgrid-white", "-o", tmp_path / "link", "--param", "size=100").exit_code == 0
+    assert (tmp_path / ".link.plenocli.json").is_file()
+    assert invoke("dualpixel", "-o", tmp_path / "link", "--pixels", 64).exit_code == 0
+    names = {p.name for p in (tmp_path / "real").iterdir()}
+    assert "white.tif" not in names and "capture.dng" in names
