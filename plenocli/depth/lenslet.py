@@ -336,44 +336,57 @@ def _coarse(cost: np.ndarray, qs: np.ndarray,
     return q0, conf
 
 
-def _check_sign(frame, grid, g_range, lenses: LensDepth) -> None:
-    """ValueError when the frame matches far better with g of the other sign (a Galilean
-    camera searched with a Keplerian range, or the reverse): every g found would be wrong."""
+@dataclass(frozen=True)
+class SignEvidence:
+    """The micro-images match far better with g in ``other`` (min, max) than in the range
+    searched: a camera of the other kind (``kind``); median lens confidences of both."""
+
+    other: tuple[float, float]
+    kind: str
+    theirs: float
+    ours: float
+
+    def __str__(self) -> str:
+        return (f"the micro-images match far better with g in {self.other[0]:g}:"
+                f"{self.other[1]:g} (median confidence {self.theirs:.2f} against "
+                f"{self.ours:.2f}): a {self.kind} camera")
+
+
+def _other_sign(frame, grid, g_range, lenses: LensDepth) -> SignEvidence | None:
+    """Evidence that the frame matches far better with g of the other sign (a Galilean camera
+    searched with a Keplerian range, or the reverse), or None."""
     ours = float(np.median(lenses.confidence))
     if ours >= CLEAR_MATCH:
-        return
+        return None
     other = (-g_range[1], -g_range[0])
     theirs = float(np.median(lens_depth(frame, grid, g_range=other).confidence))
-    if theirs > ours + SIGN_MARGIN:
-        kind = "Galilean (inverted micro-images)" if other[0] < 0 else "Keplerian"
-        raise ValueError(f"the micro-images match far better with g in {other[0]:g}:"
-                         f"{other[1]:g} (median confidence {theirs:.2f} against {ours:.2f}): "
-                         f"a {kind} camera; pass --g {other[0]:g}:{other[1]:g}")
+    if theirs <= ours + SIGN_MARGIN:
+        return None
+    kind = "Galilean (inverted micro-images)" if other[0] < 0 else "Keplerian"
+    return SignEvidence(other, kind, theirs, ours)
 
 
 SIGN_CHECK_PX = 512    # side of the central region whose micro-images tell refocus g's sign
 
 
-def check_g_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> None:
-    """ValueError when the micro-images of ``frame``'s central region match their neighbours
-    far better with g of the other sign than ``sign``'s (a Galilean camera's inverted
-    micro-images refocused at g > 0, or the reverse: no plane of the scene is in focus then).
-    Frames that match neither clearly (a white, too few lenses) are not judged."""
+def contradicted_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> SignEvidence | None:
+    """Evidence that the micro-images of ``frame``'s central region match their neighbours far
+    better with g of the other sign than ``sign``'s (a Galilean camera's inverted micro-images
+    refocused at g > 0, or the reverse: no plane of the scene is in focus then), or None.
+    Frames that match neither clearly (a white) or hold too few lenses are not judged."""
     side = int(max(SIGN_CHECK_PX, 12 * grid.pitch_px))  # hundreds of lenses
     rows, cols = frame.shape
     top, left = max(0, (rows - side) // 2), max(0, (cols - side) // 2)
-    crop = frame[top:top + side, left:left + side]
+    crop, sub = frame[top:top + side, left:left + side], grid.shifted(left, top)
     limit = min(8.0, grid.pitch_px / MIN_SHIFT_PX)
     if limit <= 2.0:
-        return
+        return None
     ours = (2.0, limit) if sign > 0 else (-limit, -2.0)
     try:
-        lenses = lens_depth(crop, grid.shifted(left, top), g_range=ours)
-        _check_sign(crop, grid.shifted(left, top), ours, lenses)
-    except ValueError as err:
-        if "match far better" in str(err):
-            raise
-        return  # too few lenses in the region to judge
+        lenses = lens_depth(crop, sub, g_range=ours)
+    except ValueError:  # too few lenses in the region to judge
+        return None
+    return _other_sign(crop, sub, ours, lenses)
 
 
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
@@ -414,7 +427,9 @@ def depth_map(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2,
         raise ValueError(f"min_confidence must be 0 to 1, got {min_confidence}")
     check_measurable(check_range(g_range), grid.pitch_px)
     lenses = lens_depth(frame, grid, g_range=g_range, type_ranges=type_ranges)
-    _check_sign(frame, grid, g_range, lenses)
+    evidence = _other_sign(frame, grid, g_range, lenses)
+    if evidence is not None:   # every g found would be wrong
+        raise ValueError(f"{evidence}; pass --g {evidence.other[0]:g}:{evidence.other[1]:g}")
     rows_out, cols_out = output_shape(np.shape(frame), s)
     weight = np.where(lenses.confidence >= max(min_confidence, 1e-6), lenses.confidence, 0.0)
     sg, sw, sc = kn.render_footprints(lenses.centres[:, 0].copy(), lenses.centres[:, 1].copy(),

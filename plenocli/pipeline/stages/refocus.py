@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.depth.lenslet import check_g_sign, sensor_grey
+from plenocli.depth.lenslet import contradicted_sign, sensor_grey
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -132,11 +132,10 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
 
 def _check_sign(grey: np.ndarray, grid, g: float) -> None:
     """Refused: g of the sign the frames' micro-images contradict."""
-    try:
-        check_g_sign(grey, grid, g)
-    except ValueError as err:
-        raise InputError(f"refocus: --g {g:g}: {err.args[0].split('; pass --g')[0]}; refocus "
-                         f"at g of that sign (e.g. --g {-g:g})") from err
+    evidence = contradicted_sign(grey, grid, g)
+    if evidence is not None:
+        raise InputError(f"refocus: --g {g:g}: {evidence}; refocus at g of that sign (e.g. "
+                         f"--g {-g:g})")
 
 
 def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
