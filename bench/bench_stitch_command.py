@@ -15,7 +15,9 @@ demosaiced once, in this process:
   not the stitch's work and is printed apart).
 
 With ``--batch N``, a transform saved by the first command is reapplied to N captures
-(``--transform-in``): the time per capture against the footprint floor.
+(``--transform-in``): the time per capture against the footprint floor, as N separate commands
+and as one ``plenocli batch`` over N copies of the capture (``--jobs 1`` and ``2``: the way a
+shoot is processed, the start-up paid once per worker).
 
 Memory: peak RSS of the command as a multiple of the bytes of the views (float32 RGB) plus the
 panorama (float32 RGB). Run ``uptime`` first: the ratios are meaningful on a loaded machine,
@@ -33,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -133,6 +136,41 @@ def batch(views: Path, folder: Path, runs: list[tuple[Path, Path]],
     return [(sum(t[0] for t in ts) / n, sum(t[2] for t in ts) / n) for ts in times]
 
 
+BATCH_CONFIG = """steps:
+  stitch:
+    inputs: ["{{capture}}"]
+    views: A,B
+    rig: {rig}
+    transform-in: {transform}
+    output: "{{out}}/{{name}}/panorama.tif"
+"""
+
+
+def batch_command(views: Path, folder: Path, transform: Path, n: int, jobs: int) -> float:
+    """Wall seconds per capture of one ``plenocli batch --jobs JOBS`` over ``n`` copies of the
+    capture (copies: a capture is hashed for its record, as a new one would be). No CPU time:
+    the workers are the fork server's children, not the command's."""
+    captures = folder / "captures"
+    captures.mkdir(exist_ok=True)
+    for k in range(n):
+        if not (captures / f"c{k:02d}.tif").exists():
+            shutil.copyfile(views, captures / f"c{k:02d}.tif")
+    config = folder / "batch_stitch.yaml"
+    config.write_text(BATCH_CONFIG.format(rig=RIG, transform=transform))
+    out = folder / f"batch_out_j{jobs}"
+    argv = [sys.executable, "-m", "plenocli", "batch", str(config), "--inputs",
+            str(captures / "*.tif"), "--out", str(out), "--jobs", str(jobs), "-q"]
+    start = time.perf_counter()
+    proc = subprocess.Popen(argv, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stderr=subprocess.PIPE)
+    _, status, _ = os.wait4(proc.pid, 0)
+    seconds = time.perf_counter() - start
+    if status:
+        raise RuntimeError(f"plenocli batch failed:\n{proc.stderr.read().decode()}")
+    shutil.rmtree(out)
+    return seconds / n
+
+
 def print_batch(label: str, n: int, per: tuple[float, float], base: dict) -> None:
     print(f"{label} batch of {n} with --transform-in: {per[0]:.2f} s per capture (CPU "
           f"{per[1]:.2f} s) = {per[0] / base['footprint']:.2f} x the footprint floor, "
@@ -205,6 +243,11 @@ def main() -> None:
             for (label, _), per in zip(runs, batch(views, folder, [r for _, r in runs],
                                                    args.batch), strict=True):
                 print_batch(label, args.batch, per, base)
+            for jobs in (1, 2):
+                per = batch_command(views, folder, transform, args.batch, jobs)
+                print(f"this checkout, plenocli batch --jobs {jobs} of {args.batch} with "
+                      f"--transform-in: {per:.2f} s per capture = "
+                      f"{per / base['footprint']:.2f} x the footprint floor")
         print("load:", os.getloadavg())
 
 

@@ -117,6 +117,25 @@ def test_fit_lattice_is_exact_on_a_perfect_lattice():
     assert off == pytest.approx((10.2, 20.7), abs=1e-9)
 
 
+def test_the_border_lattice_error_is_the_scatter_of_its_estimate():
+    # the autocorrelation peaks are fitted with their mirror images; the standard error must
+    # count each peak once (it was sqrt(2) too small)
+    from plenocli.calibration.fit import lattice_from_lags
+
+    rng = np.random.default_rng(3)
+    idx = np.array([(i, j) for i in range(-3, 4) for j in range(-3, 4) if (i, j) > (0, 0)], float)
+    b1 = 20.0 * np.array([np.cos(0.1), np.sin(0.1)])
+    turn = LATTICES["hex"]
+    b2 = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]]) @ b1
+    true = idx[:, :1] * b1 + idx[:, 1:] * b2
+    fits = [lattice_from_lags(true + rng.normal(0, 0.3, true.shape), idx, np.ones(len(idx)),
+                              lattice="hex") for _ in range(1000)]
+    pitches, angles = np.array([f[0] for f in fits]), np.array([f[1] for f in fits])
+    se = np.array([f[2] for f in fits])
+    assert np.mean(se[:, 0]) == pytest.approx(np.std(pitches), rel=0.1)
+    assert np.mean(se[:, 1]) == pytest.approx(np.std(angles), rel=0.1)
+
+
 @pytest.mark.slow
 def test_large_image_accuracy():
     image, _ = white_image((2048, 2048), pitch_px=47.3, angle_rad=2.2, offset_xy=(1030.4, 1019.9),

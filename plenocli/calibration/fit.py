@@ -20,7 +20,9 @@ def lattice_from_lags(lags: np.ndarray, indices: np.ndarray, weights: np.ndarray
     pitch, angle, _, se = fit_lattice(np.vstack([indices, -indices]),
                                       np.vstack([lags, -lags]), lattice=lattice,
                                       weights=np.concatenate([weights, weights]), return_se=True)
-    return pitch, angle, se
+    # each peak enters twice (with its mirror image, which pins the lattice to the origin), but
+    # a mirror image is no new measurement: counted once, the variances are twice the fit's
+    return pitch, angle, (se[0] * np.sqrt(2.0), se[1] * np.sqrt(2.0))
 
 
 def reindexed(pitch: float, angle: float, offset: tuple[float, float], lattice: str,
