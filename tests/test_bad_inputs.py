@@ -1664,10 +1664,17 @@ def test_no_command_writes_a_page_name_twice():
     """audit 8 P2: refocus --g 4,4 wrote two pages raw@g4 and sai -n 12 named views S111 for
     (1, 11) and (11, 1): every later command called the file edited or damaged."""
     from plenocli.model.focus import parse_g
+    from plenocli.model.views import sweep_page
     from plenocli.sai import view_names
 
     with pytest.raises(ValueError, match="g 4 is given twice"):
         parse_g("4,4")
+    # audit 9 P2: values that differ beyond the page name's 6 digits named one page too
+    for text in ("4,4.0000001", "4:4.00001:0.000001"):
+        with pytest.raises(ValueError, match="would name one sweep page"):
+            parse_g(text)
+    assert len({sweep_page("raw", g) for g in parse_g("4,4.00001")}) == 2
+    assert len({sweep_page("raw", g) for g in parse_g("2:3:0.1")}) == 11
     for n in (2, 9, 10, 12):
         names = view_names(n)
         assert len(set(names)) == n * n

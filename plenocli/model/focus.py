@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+from plenocli.model.views import g_label
+
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
 # (x sign, y sign) of the kept half-planes: -1 keeps d < -m/2, +1 keeps d > m/2, 0 keeps all.
 VIEWS = {
@@ -35,9 +37,17 @@ def parse_g(text: str | float) -> list[float]:
         raise ValueError(f"g must hold finite non-zero numbers of one sign (paper: 4; "
                          f"negative, e.g. -4, for a Galilean camera), got {text!r}")
     values = [round(v, 10) for v in values]
-    twice = sorted({v for v in values if values.count(v) > 1})
-    if twice:  # one page each: a page twice would be two pages of one name
-        raise ValueError(f"g {twice[0]:g} is given twice in {text!r}; give each g once")
+    # one page each, named by its g: two values a page name cannot tell apart would be two
+    # pages of one name
+    labels = [g_label(v) for v in values]
+    twice = next((label for label in labels if labels.count(label) > 1), None)
+    if twice is not None:
+        same = sorted({v for v, label in zip(values, labels, strict=True) if label == twice})
+        if len(same) == 1:
+            raise ValueError(f"g {twice} is given twice in {text!r}; give each g once")
+        raise ValueError(f"g {same[0]!r} and {same[1]!r} in {text!r} would name one sweep page "
+                         f"(@g{twice}: a page names its g to 6 significant digits); give g "
+                         "values that differ within their first 6 digits")
     return values
 
 

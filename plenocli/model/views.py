@@ -63,7 +63,12 @@ def pupil_views(names: list[str]) -> list[str]:
 
 def sweep_page(label: str, g: float) -> str:
     """A page of a focal sweep: ``label`` at g (``left.R``, 4 -> ``left.R@g4``)."""
-    return f"{label}{SWEEP_TAG}{g:g}"
+    return f"{label}{SWEEP_TAG}{g_label(g)}"
+
+
+def g_label(g: float) -> str:
+    """How a sweep page names its g: 6 significant digits (``4``, ``3.5``, ``2.33333``)."""
+    return f"{g:g}"
 
 
 def split_sweep(name: str) -> tuple[str, str]:
