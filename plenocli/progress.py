@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import logging
 import sys
 import threading
@@ -14,6 +15,41 @@ from typing import TypeVar
 log = logging.getLogger("plenocli")
 T = TypeVar("T")
 _step = {"text": ""}  # what the running stage is doing now, shown by :func:`working`
+_HELD: contextvars.ContextVar[list[logging.LogRecord] | None] = contextvars.ContextVar(
+    "plenocli_held_messages", default=None)
+
+
+class _HoldBack(logging.Filter):
+    """Keep INFO messages logged inside :func:`messages_held` for later (warnings pass)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        held = _HELD.get()
+        if held is None or record.levelno != logging.INFO:
+            return True
+        held.append(record)
+        return False
+
+
+log.addFilter(_HoldBack())
+
+
+@contextlib.contextmanager
+def messages_held() -> Iterator[list[logging.LogRecord]]:
+    """Hold back the INFO messages (a stage's "IN -> OUT" line) logged in the block, in this
+    thread: they report outputs that have not landed yet. The caller passes the list to
+    :func:`release` once they have, and drops it when they did not (nothing was written)."""
+    held: list[logging.LogRecord] = []
+    token = _HELD.set(held)
+    try:
+        yield held
+    finally:
+        _HELD.reset(token)
+
+
+def release(held: list[logging.LogRecord]) -> None:
+    """Emit messages held by :func:`messages_held`, in the order they were logged."""
+    for record in held:
+        log.handle(record)
 
 
 def step(text: str) -> None:

@@ -350,6 +350,9 @@ CASES = [
      ("given twice",)),
     ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
      ("truncated",)),
+    # audit 9 E3: a view named twice in --views was exit 1, --frames S,S a usage error
+    ("stitch-views-twice", ["stitch", "{i}/biased.tif", "--views", "A,A", "-o", "{o}/p.tif"], 2,
+     ("'A' is named twice",)),
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
     ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1,
      ("empty.tif", "not a raw capture")),
@@ -450,8 +453,8 @@ CASES = [
                                 "-n", "3", "-o", "{o}/v.tif"], 1, ("sub-apertures",)),
     ("info-grid-origin-nan", ["info", "{i}/grid_origin_nan.yaml"], 1, ("sensor_origin",)),
     # crosstalk
-    ("crosstalk-views-twice", ["crosstalk", "{i}/biased.tif", "--views", "A,A", "-o",
-                               "{o}/c.json"], 1, ("twice",)),
+    ("crosstalk-views-twice", ["crosstalk", "{i}/biased.tif", "--views", "B, B", "-o",
+                               "{o}/c.json"], 2, ("'B' is named twice",)),  # audit 9 E3
     ("crosstalk-views-twice-by-number", ["crosstalk", "{i}/biased.tif", "--views", "A,0", "-o",
                                          "{o}/c.json"], 1, ("twice",)),
     ("crosstalk-same-white-twice", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked0.tif",
@@ -614,6 +617,16 @@ def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
         **step, "input": str(inputs / "frames.tif"), "output": "{out}/b.tif"}}}))
     result = run_bad(inputs, out, ["run", str(config)])
     assert_one_line(result, 1, words)
+
+
+def test_a_view_named_twice_in_yaml_is_refused_like_the_flag(inputs, tmp_path):
+    # audit 9 E3: --views is checked when read, as --frames is
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"stitch": {
+        "inputs": [str(inputs / "biased.tif")], "views": "A, A", "output": "{out}/p.tif"}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("--views", "'A' is named twice"))
 
 
 def test_simulate_params_from_yaml_are_checked_like_flags(inputs, tmp_path):

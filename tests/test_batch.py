@@ -18,7 +18,8 @@ from click.testing import CliRunner
 from plenocli.cli.main import cli
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.dng import write_dng
-from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
+from plenocli.pipeline.batch import format_summary, run_batch
+from plenocli.pipeline.captures import expand_inputs
 from plenocli.pipeline.config import load_config, read_template
 from plenocli.synth.dualpixel import dng_options, dualpixel_capture
 
@@ -279,6 +280,30 @@ def test_expand_inputs(tmp_path):
     (tmp_path / "sub" / "a.dng").write_bytes(b"x")
     with pytest.raises(InputError, match="same name 'a'"):
         expand_inputs([str(tmp_path / "a.dng"), str(tmp_path / "sub" / "a.dng")])
+
+
+def test_a_glob_that_matches_the_batchs_own_outputs_leaves_them_out(tmp_path):
+    # audit 8 E12: the second run took the first run's outputs under --out for captures
+    config, captures = make_shoot(tmp_path, 2, corrupt=None)
+    out = tmp_path / "captures" / "out"
+    args = ["batch", str(config), "--inputs", str(tmp_path / "captures" / "**" / "*"),
+            "--out", str(out), "-j", "1"]
+    first = CliRunner().invoke(cli, args)
+    assert first.exit_code == 0, first.output
+    assert (out / "shot01" / "views.tif").is_file() and (out / "gain.tif").is_file()
+    second = CliRunner().invoke(cli, args)
+    assert second.exit_code == 0, second.output
+    assert "2 captures: 0 done, 2 skipped" in second.output
+    template = read_template(config)
+    got = expand_inputs([str(tmp_path / "captures" / "**" / "*")], template=template,
+                        out=str(out))
+    assert got == captures
+    with pytest.raises(InputError, match="matches only files this batch writes"):
+        expand_inputs([str(out / "**" / "*.tif")], template=template, out=str(out))
+    # a file under --out that the batch does not write is a capture like any other
+    (out / "extra.dng").write_bytes(captures[0].read_bytes())
+    assert expand_inputs([str(out / "*")], template=template, out=str(out)) == [
+        out / "extra.dng"]
 
 
 @pytest.mark.parametrize("text", ["", "# nothing yet\n\n"])

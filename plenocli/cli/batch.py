@@ -29,8 +29,9 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     In CONFIG, per-capture steps read "{capture}" and write under "{out}/{name}/" ({name} is the
     capture's file name without suffix); steps without {capture}/{name} (white image,
     calibration) run once and every capture reuses them. Up-to-date outputs are skipped, so a
-    rerun after a failure only redoes what is missing. Prints a table (done / skipped / failed
-    with the reason); exit status 1 when a capture failed.
+    rerun after a failure only redoes what is missing (a glob's matches that the batch writes
+    are left out of the captures). Prints a table (done / skipped / failed with the reason);
+    exit status 1 when a capture failed.
 
     \b
     Example:
@@ -40,13 +41,16 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     import os
 
     from plenocli.errors import PlenocliError
-    from plenocli.pipeline.batch import expand_inputs, format_summary, run_batch
+    from plenocli.pipeline.batch import format_summary, run_batch
+    from plenocli.pipeline.captures import expand_inputs
+    from plenocli.pipeline.config import read_template
     from plenocli.progress import log
 
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     # SIGTERM and Ctrl-C: the edge (options.stage_command) stops the workers and says so
-    report = run_batch(config, expand_inputs(patterns), overrides=overrides, out=out,
+    captures = expand_inputs(patterns, template=read_template(config, overrides), out=out)
+    report = run_batch(config, captures, overrides=overrides, out=out,
                        force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler,
                        timeout=timeout)
     if log.isEnabledFor(logging.INFO):  # -q keeps only the failures

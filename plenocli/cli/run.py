@@ -49,9 +49,9 @@ def run(config, force, dry_run, overrides, out, print_make, patterns):
             raise click.UsageError(f"--inputs: {config} is not a batch template (no step uses "
                                    "{capture} or {name}); leave --inputs out")
         if patterns:
-            from plenocli.pipeline.batch import expand_inputs
+            from plenocli.pipeline.captures import expand_inputs
 
-            captures = [str(c) for c in expand_inputs(patterns)]
+            captures = [str(c) for c in expand_inputs(patterns, template=template, out=out)]
             template.check_captures_apart(captures, out=out)
             steps = template.steps(out=out, only="shared")
             for capture in captures:

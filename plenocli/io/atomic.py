@@ -2,12 +2,13 @@
 
 Every file is written to a temporary beside its destination and renamed only on success. Inside
 :func:`outputs_together` (what every stage runs in), the renames wait until the whole stage has
-succeeded, so a command's outputs land together or not at all. Temporaries are named
-``.NAME.HOST-PID.XXXX.part``: one left by a killed run (its process gone) is removed the next time
-anything writes NAME. A NAME longer than :data:`LONG_NAME` bytes is shortened there to its start
-and a hash (:func:`short_name`), so that any name a file system with the common 255-byte limit
-takes has a temporary it takes too. An output that is a symbolic link is written through: its
-target is replaced and the link stays (as the shell's ``>`` does).
+succeeded, so a command's outputs land together or not at all (and the messages that report them
+are shown only once they have). Temporaries are named ``.NAME.HOST-PID.XXXX.part``: one left by
+a killed run (its process gone) is removed the next time anything writes NAME. A NAME longer than
+:data:`LONG_NAME` bytes is shortened there to its start and a hash (:func:`short_name`), so that
+any name a file system with the common 255-byte limit takes has a temporary it takes too. An
+output that is a symbolic link is written through: its target is replaced and the link stays (as
+the shell's ``>`` does).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from pathlib import Path
 
 from plenocli.errors import InputError, check_terminated
 from plenocli.model.provenance import hash_ahead
+from plenocli.progress import messages_held, release
 
 
 @dataclass
@@ -77,10 +79,11 @@ def outputs_together(
     pending = _Pending()
     token = _PENDING.set(pending)
     try:
-        yield
-        if before_landing is not None:
-            before_landing(list(pending.files))
-        check_terminated()  # a SIGTERM whose exception was lost still stops the landing
+        with messages_held() as held:  # "IN -> OUT" is said once OUT has landed
+            yield
+            if before_landing is not None:
+                before_landing(list(pending.files))
+            check_terminated()  # a SIGTERM whose exception was lost still stops the landing
     except BaseException:
         _discard(pending.files)
         _remove_empty(pending.folders)
@@ -96,6 +99,7 @@ def outputs_together(
     except BaseException:
         _discard(pending.files[landed:])
         raise
+    release(held)
 
 
 @contextlib.contextmanager

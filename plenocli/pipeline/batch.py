@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import glob
 import logging
 import multiprocessing
 import os
@@ -80,55 +79,6 @@ class BatchReport:
     @property
     def failed(self) -> list[CaptureResult]:
         return [r for r in self.results if r.status == "failed"]
-
-
-def _list_lines(pattern: str, listing: Path) -> list[str]:
-    """The lines of an ``@LIST`` file, refused in one line when it is no text file."""
-    from plenocli.errors import not_a_file, os_error_message
-    from plenocli.io.yamlfile import DocumentError, read_text
-
-    if not listing.is_file():
-        raise InputError(f"--inputs {pattern}: {not_a_file(listing)} (the list of captures)")
-    try:
-        return read_text(listing).splitlines()
-    except OSError as err:
-        raise InputError(f"--inputs {pattern}: {os_error_message(err)}") from err
-    except DocumentError as err:
-        raise InputError(f"--inputs {pattern}: {listing} is not a list of captures, one path "
-                         f"a line ({err})") from err
-
-
-def expand_inputs(patterns: Sequence[str]) -> list[Path]:
-    """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
-
-    Order is kept (globs sorted), duplicates dropped; a pattern that matches nothing is an error.
-    """
-    captures: list[Path] = []
-    for pattern in patterns:
-        if pattern.startswith("@"):
-            listing = Path(pattern[1:])
-            lines = _list_lines(pattern, listing)
-            found = [listing.parent / ln.strip() for ln in lines
-                     if ln.strip() and not ln.lstrip().startswith("#")]
-            if not found:
-                raise InputError(f"--inputs {pattern}: {listing} lists no captures (one a line)")
-        elif glob.has_magic(pattern):
-            found = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
-                     if Path(p).is_file()]
-        else:
-            found = [Path(pattern)]
-        if not found:
-            raise InputError(f"--inputs {pattern!r} matches no file; quote globs so that "
-                             "plenocli expands them, e.g. --inputs 'shoot/*.CR2'")
-        captures.extend(found)
-    unique = list(dict.fromkeys(p.resolve() for p in captures))
-    stems: dict[str, Path] = {}
-    for p in unique:
-        if p.stem in stems:
-            raise InputError(f"captures {stems[p.stem]} and {p} have the same name {p.stem!r} "
-                             "and would share an output folder; rename one or run them apart")
-        stems[p.stem] = p
-    return unique
 
 
 def run_capture(config: str, capture: str, *, overrides: Sequence[str] = (),

@@ -150,22 +150,57 @@ class Template:
                           for p in step.input_paths()})
             taken.update({os.path.abspath(p): f"the output of shared step {step.name!r}"
                           for p in step.output_paths()})
-        base, stages = self.path.resolve().parent, get_stages()
-        outputs = {}
+        for capture, name, path in self._per_capture_outputs(captures, out):
+            what = taken.get(path)
+            if what:
+                raise ConfigError(f"capture {capture}: step {name!r} would write {path}, "
+                                  f"{what}; give {self.path} per-capture outputs apart, "
+                                  "e.g. under {out}/{name}/")
+
+    def outputs_of(self, captures: list[str], *, out: str | None = None) -> set[str]:
+        """The absolute paths a batch of ``captures`` writes: the shared steps' outputs and
+        every capture's own."""
+        made = {os.path.abspath(p) for step in self.steps(out=out, only="shared")
+                for p in step.output_paths()}
+        made.update(path for _, _, path in self._per_capture_outputs(captures, out))
+        return made
+
+    def written_by(self, *, out: str | None = None) -> re.Pattern:
+        """What the files a batch of any captures writes match (absolute paths, a file in or
+        under an output): the shared steps' outputs and every capture's own, its {name} and
+        {capture} standing for any."""
+        marks = {"name": "\x01name\x01", "capture": "/\x01capture\x01"}
+        values = {**self._values(None, out), **marks}
+        base = self.path.resolve().parent
+        shared = [os.path.abspath(p) for step in self.steps(out=out, only="shared")
+                  for p in step.output_paths()]
+        alternatives = [re.escape(p) for p in shared]
         for name in self.per_capture_steps():
-            stage = stages.get(self.raw_steps[name].get("stage", name))
-            roles = stage.outputs if stage is not None else ()  # unknown: said by steps()
-            outputs[name] = [v for k, v in self.raw_steps[name].items()
-                             if str(k).replace("-", "_") in roles]
+            items = self._outputs_of_step(name)
+            if _placeholders(items) - set(values):
+                continue  # no {out}: the batch refuses the config, with the reason
+            for path in _flat(_resolve(base, _fill(items, values))):
+                pattern = re.escape(os.path.normpath(path))
+                for mark, stands_for in ((marks["name"], "[^/]+"), (marks["capture"], "/.+")):
+                    pattern = pattern.replace(re.escape(mark), stands_for)
+                alternatives.append(pattern)
+        return re.compile("(?:" + "|".join(alternatives or ["(?!)"]) + ")(?:/.*)?", re.S)
+
+    def _outputs_of_step(self, name: str) -> list:
+        """The output values of step ``name`` as written (placeholders kept)."""
+        stage = get_stages().get(self.raw_steps[name].get("stage", name))
+        roles = stage.outputs if stage is not None else ()  # unknown: said by steps()
+        return [v for k, v in self.raw_steps[name].items() if str(k).replace("-", "_") in roles]
+
+    def _per_capture_outputs(self, captures: list[str], out: str | None):
+        """(capture, step name, absolute output path) of every per-capture step."""
+        base = self.path.resolve().parent
+        outputs = {name: self._outputs_of_step(name) for name in self.per_capture_steps()}
         for capture in captures:
             values = self._values(capture, out)
             for name, items in outputs.items():
                 for path in _flat(_resolve(base, _fill(items, values))):
-                    what = taken.get(os.path.abspath(path))
-                    if what:
-                        raise ConfigError(f"capture {capture}: step {name!r} would write {path}, "
-                                          f"{what}; give {self.path} per-capture outputs apart, "
-                                          "e.g. under {out}/{name}/")
+                    yield capture, name, os.path.abspath(path)
 
 
 def read_template(path: str | Path, overrides: list[str] = ()) -> Template:

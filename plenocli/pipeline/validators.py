@@ -68,6 +68,19 @@ class PageNames(Validator):
         return ",".join(names)
 
 
+class ViewList(Validator):
+    """Views to read, by name or page number, comma separated: each named once (a view
+    stacked twice is no second view). Whether they are in the file is the stage's check."""
+
+    def convert(self, value: Any) -> str:
+        text = Text().convert(value)
+        names = [n.strip() for n in text.split(",") if n.strip()]
+        twice = next((n for n in names if names.count(n) > 1), None)
+        if twice is not None:
+            raise ValueError(f"view {twice!r} is named twice in {text!r}; name each view once")
+        return text
+
+
 class Flag(Validator):
     """An on/off switch: true or false."""
 

@@ -3,6 +3,7 @@ errors and signals as one line, temporaries of killed runs cleaned."""
 
 import errno
 import hashlib
+import logging
 import os
 import signal
 from pathlib import Path
@@ -71,6 +72,47 @@ def test_when_the_second_output_fails_the_first_is_not_left(tmp_path, frames, mo
     assert result.exit_code == 1
     assert "no space left" in one_line(result)
     assert sorted(p.name for p in tmp_path.iterdir()) == FRAMES_ONLY  # no b.tif, no .part
+
+
+class _Said(logging.Handler):
+    """The messages of the plenocli log, each with whether ``watched`` existed when it came."""
+
+    def __init__(self, watched: Path):
+        super().__init__()
+        self.watched, self.said = watched, []
+
+    def emit(self, record):
+        self.said.append((record.getMessage(), self.watched.exists()))
+
+
+@pytest.fixture
+def said(tmp_path):
+    from plenocli.progress import log
+
+    handler = _Said(tmp_path / "b.tif")
+    log.addHandler(handler)
+    yield handler
+    log.removeHandler(handler)
+
+
+def test_the_success_line_comes_after_the_outputs_landed(tmp_path, frames, said):
+    # audit 8 E8: "bias: IN -> OUT" was said while OUT was still a temporary
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", tmp_path / "b.png")
+    assert result.exit_code == 0, result.output
+    assert [landed for text, landed in said.said if text.startswith("bias: ")] == [True]
+
+
+def test_no_success_line_when_a_later_output_fails(tmp_path, frames, monkeypatch, said):
+    # audit 8 E8: the success line was printed, then "Error: ...: no space left"
+    import plenocli.pipeline.stages.bias as stage
+
+    def disk_full(path, *args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(stage, "write_png", disk_full)
+    result = invoke("bias", frames, "-o", tmp_path / "b.tif", "--preview", tmp_path / "b.png")
+    assert result.exit_code == 1 and "no space left" in one_line(result)
+    assert [text for text, _ in said.said if text.startswith("bias: ")] == []
 
 
 def _under_a_file(folder: Path) -> Path:

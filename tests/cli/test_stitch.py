@@ -172,7 +172,8 @@ def test_a_view_named_twice_is_refused(tmp_path):
     tiffio.write_image(tmp_path / "v.tif", views, {"views": ["A", "B"], "cfa": None})
     result = CliRunner().invoke(cli, ["stitch", str(tmp_path / "v.tif"), "--views", "A,A",
                                       "-o", str(tmp_path / "p.tif")])
-    assert result.exit_code == 1 and "twice" in result.output, result.output
+    # a usage error (audit 9 E3): the value alone is wrong, as for decode --frames S,S
+    assert result.exit_code == 2 and "twice" in result.output, result.output
     assert not (tmp_path / "p.tif").exists()
 
 

@@ -13,6 +13,7 @@ from plenocli.pipeline.validators import (
     OutputFile,
     Text,
     Validator,
+    ViewList,
     shell_text,
 )
 
@@ -33,7 +34,7 @@ class MaskWidths(Validator):
 PARAMS = (
     inputs_arg(),
     output_param(".json"),
-    Param("views", Text(), "Views to compare, by name or page number, e.g. A,B (leaves out the "
+    Param("views", ViewList(), "Views to compare, by name or page number, e.g. A,B (leaves out the "
           "sum view S that bias writes); default: all pages."),
     Param("intended", Text(), "Name of the view whose pupil part was open (one, or one per "
           "input, comma separated); default: the brightest view. With --mask-widths: "

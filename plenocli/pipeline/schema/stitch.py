@@ -3,14 +3,21 @@
 from collections.abc import Collection
 
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, inputs_arg, refuse_unused
-from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, OutputFile, Text
+from plenocli.pipeline.validators import (
+    Choice,
+    FiniteFloat,
+    InputFile,
+    OutputFile,
+    ViewList,
+)
 
 _FRACTION = FiniteFloat(min=0, max=1, min_open=True, max_open=True)
 
 PARAMS = (
     inputs_arg(),
     OUTPUT,
-    Param("views", Text(), "Views to stitch, by name or page number, comma separated (e.g. A,B)."),
+    Param("views", ViewList(), "Views to stitch, by name or page number, comma separated "
+          "(e.g. A,B)."),
     Param("layout", Choice(["auto", "1x2", "2x1", "2x2"]),
           "Arrangement, views row-major (2x2: S00,S01,S10,S11).", default="auto"),
     Param("model", Choice(["translation", "homography"]), "Geometric model between views.",

@@ -1,0 +1,96 @@
+"""The captures of a batch: ``--inputs`` globs, plain paths and ``@LIST`` files.
+
+A glob is matched against the files there are now, and a batch writes its outputs (often under
+the folder a glob walks, ``'shoot/**/*.tif'`` with ``--out shoot/out``): the files the batch
+itself writes are left out of a glob's matches (said in a message), so that a second run is the
+same batch as the first, not one whose outputs have become captures.
+"""
+
+from __future__ import annotations
+
+import glob
+from collections.abc import Sequence
+from pathlib import Path
+
+from plenocli.errors import InputError
+from plenocli.pipeline.config import Template
+from plenocli.progress import log, shown
+
+
+def _list_lines(pattern: str, listing: Path) -> list[str]:
+    """The lines of an ``@LIST`` file, refused in one line when it is no text file."""
+    from plenocli.errors import not_a_file, os_error_message
+    from plenocli.io.yamlfile import DocumentError, read_text
+
+    if not listing.is_file():
+        raise InputError(f"--inputs {pattern}: {not_a_file(listing)} (the list of captures)")
+    try:
+        return read_text(listing).splitlines()
+    except OSError as err:
+        raise InputError(f"--inputs {pattern}: {os_error_message(err)}") from err
+    except DocumentError as err:
+        raise InputError(f"--inputs {pattern}: {listing} is not a list of captures, one path "
+                         f"a line ({err})") from err
+
+
+def expand_inputs(patterns: Sequence[str], *, template: Template | None = None,
+                  out: str | None = None) -> list[Path]:
+    """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
+
+    Order is kept (globs sorted), duplicates dropped; a pattern that matches nothing is an error.
+    With the batch's ``template`` (and its ``out`` root), a glob's matches that the batch writes
+    (a shared step's output, or a capture's output, in or under its folder) are left out.
+    """
+    found: list[tuple[str, list[Path], bool]] = []  # pattern, its files, whether a glob
+    for pattern in patterns:
+        if pattern.startswith("@"):
+            listing = Path(pattern[1:])
+            files = [listing.parent / ln.strip() for ln in _list_lines(pattern, listing)
+                     if ln.strip() and not ln.lstrip().startswith("#")]
+            if not files:
+                raise InputError(f"--inputs {pattern}: {listing} lists no captures (one a line)")
+        elif glob.has_magic(pattern):
+            files = [Path(p) for p in sorted(glob.glob(pattern, recursive=True))
+                     if Path(p).is_file()]
+        else:
+            files = [Path(pattern)]
+        if not files:
+            raise InputError(f"--inputs {pattern!r} matches no file; quote globs so that "
+                             "plenocli expands them, e.g. --inputs 'shoot/*.CR2'")
+        found.append((pattern, files, glob.has_magic(pattern) and not pattern.startswith("@")))
+    if template is not None:
+        found = _without_outputs(found, template, out)
+    unique = list(dict.fromkeys(p.resolve() for _, files, _ in found for p in files))
+    stems: dict[str, Path] = {}
+    for p in unique:
+        if p.stem in stems:
+            raise InputError(f"captures {stems[p.stem]} and {p} have the same name {p.stem!r} "
+                             "and would share an output folder; rename one or run them apart")
+        stems[p.stem] = p
+    return unique
+
+
+def _without_outputs(found: list[tuple[str, list[Path], bool]], template: Template,
+                     out: str | None) -> list[tuple[str, list[Path], bool]]:
+    """``found`` with the files this batch writes for the captures found left out of the
+    globs' matches; a glob that matches only files a batch of any captures writes is refused."""
+    candidates = list(dict.fromkeys(str(p.resolve()) for _, files, _ in found for p in files))
+    made = template.outputs_of(candidates, out=out)
+    written = template.written_by(out=out)
+
+    def ours(path: Path) -> bool:
+        full = str(path.resolve())
+        return full in made or any(str(parent) in made for parent in Path(full).parents)
+
+    kept = []
+    for pattern, files, is_glob in found:
+        if is_glob and all(written.fullmatch(str(p.resolve())) for p in files):
+            raise InputError(f"--inputs {pattern!r} matches only files this batch writes "
+                             f"({len(files)}, e.g. {shown(files[0])}): its own outputs, not "
+                             "captures; give a pattern that matches the captures alone")
+        left_out = [p for p in files if is_glob and ours(p)]
+        if left_out:
+            log.info("--inputs %r: %d file(s) this batch writes (e.g. %s) left out of the "
+                     "captures", pattern, len(left_out), shown(left_out[0]))
+        kept.append((pattern, [p for p in files if p not in left_out], is_glob))
+    return kept
