@@ -194,3 +194,22 @@ def test_a_lenslet_white_has_no_depth_of_either_sign(tmp_path, g_range):
                   g=g_range)
     assert "Galilean" not in str(refused.value) and "Keplerian" not in str(refused.value)
     assert not (tmp_path / "d.tif").exists()
+
+
+@pytest.mark.parametrize("quad", [False, True])
+@pytest.mark.parametrize("reach", [4.0, 6.0])
+def test_disparity_a_pixel_inside_the_search_bound_reads_right_or_unknown(quad, reach):
+    """A disparity one pixel inside --max-disparity lies inside the search: it reads right
+    (or is unknown), never half a pixel out (the coarse search's bound was its minimum)."""
+    disparities = [-(reach - 1), -(reach - 0.5), reach - 1, reach - 0.5]
+    views, names, truth = disparity_views((192, 448), disparities, quad=quad, seed=4)
+    results = (quad_disparity(views, max_disparity=reach) if quad
+               else (disparity_x(views[0], views[1], max_disparity=reach),))
+    band = 448 // len(disparities)
+    for result in results:
+        for k, d in enumerate(disparities):
+            cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
+            known = np.isfinite(cut)
+            assert known.mean() > 0.9, (names, d, known.mean())
+            # measured <= 0.144 (quad y, averaged pairs); it read 0.5 out before
+            assert abs(np.median(cut[known]) - d) <= 0.15, (names, d, np.median(cut[known]))

@@ -121,11 +121,13 @@ def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.nd
     Lucas-Kanade at full size."""
     rows, cols = pa.shape
     half = (max(1, cols // 2), max(1, rows // 2))
+    # one shift past the bound: a disparity just inside it then has a cost on both sides
+    # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown)
     d2, conf2 = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
                         cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
-                        max(1, (reach + 1) // 2))
+                        (reach + 1) // 2 + 1)
     d = 2 * cv2.resize(d2, (cols, rows), interpolation=cv2.INTER_LINEAR)
-    conf = cv2.resize(conf2, (cols, rows), interpolation=cv2.INTER_LINEAR)
+    conf = cv2.resize(conf2, (cols, rows), interpolation=cv2.INTER_NEAREST)
     return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf
 
 
@@ -158,6 +160,7 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.
         frac = np.where(inner, 0.5 * (left - right) / np.where(inner, curv, 1), 0.0)
         conf = np.clip(1.0 - best / (total / len(shifts)), 0.0, 1.0)
     d = (k_best - reach + np.clip(frac, -0.5, 0.5)).astype(np.float32)
+    conf[~inner] = 0.0
     return d, np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
 
 
