@@ -64,6 +64,19 @@ def test_mask_width_sweep_recovers_the_leak(capture, tmp_path, grid_name):
     assert doc["provenance"]["stage"] == "crosstalk"
 
 
+def test_mask_width_sweep_refuses_the_wrong_open_half(capture, tmp_path):
+    """audit 9 W6: the sweep vouched r = 1169 % for --intended naming the masked half; as every
+    measurement of a masked white, the open half must be the brighter one everywhere."""
+    out = tmp_path / "sweep.json"
+    result = invoke("crosstalk", capture / "frames.tif", "--mask-widths", "0,2",
+                    "--grid", capture / "grid.yaml", "--s", 0.5, "--g", 1, "--tile", 8,
+                    "--intended", "right", "-o", out)
+    assert result.exit_code == 1, result.output
+    assert "the open part right is not brighter than the others" in result.output
+    assert "mask width 0 px" in result.output and "check --intended" in result.output
+    assert not out.exists()
+
+
 def test_refocus_and_crosstalk_frame_an_xml_grid_alike(capture, tmp_path):
     """refocus --grid calib.xml and the sweep's left view are the same image."""
     args = ("--grid", capture / "calib.xml", "--s", 0.5, "--g", 1)

@@ -172,6 +172,9 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
                                                  intended=side, tile_px=tile)
     except ValueError as err:
         raise ConfigError(f"crosstalk --mask-widths: {err}") from err
+    for row in sweep:  # as in every measurement: the open half is the brighter one everywhere
+        _check_open_part(f"{inputs[0]} (mask width {row['mask_width']:g} px)", side,
+                         max(row["r"], row["map_max"]))
     params = dict(intended=side, tile=tile, mask_widths=mask_widths, grid=grid, s=s, g=g)
     record = stage_record("crosstalk", params, {"inputs": inputs, "grid": grid})
     doc = {"sweep": sweep, "intended": side, "provenance": record,
