@@ -158,3 +158,20 @@ def test_a_hash_started_ahead_is_the_file_s_and_follows_a_change(tmp_path):
     os.utime(path, ns=(1, 1))
     hash_ahead([path])
     assert sha256_file(path) == hashlib.sha256(b"changed").hexdigest()
+
+
+def test_a_record_leaves_out_the_parameters_the_provenance_leaves_out(built):
+    """audit 9 P3: records listed parameters without effect in the run (flat's --percentile with
+    --reference max) that the output's own provenance leaves out; now both agree (and the
+    pipeline, built, is still up to date: the comparison leaves them out too)."""
+    import json
+
+    from plenocli.io import tiffio
+
+    views = out_dir(built) / "views.tif"
+    recorded = json.loads((views.parent / ".views.tif.plenocli.json").read_text())["parameters"]
+    provenance = tiffio.read_meta(views)["provenance"]["parameters"]
+    assert "percentile" not in recorded and "percentile" not in provenance
+    assert set(recorded) <= set(provenance)
+    photo = json.loads((views.parent / ".S.jpg.plenocli.json").read_text())["parameters"]
+    assert "wb" not in photo  # --wb-from gives the white balance

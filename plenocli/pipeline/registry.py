@@ -119,13 +119,13 @@ class Stage:
         earlier = {folder: records.read_record(folder) for folder in folders}
         landing: list = []
 
+        unused = self.unused(params)
+
         def record(landed):
             landing.extend(landed)
-            records.write_records(self.name, params, inputs, outputs,
+            records.write_records(self.name, _without(params, unused), inputs, outputs,
                                   records.with_digests(started, inputs), landed)
 
-        check = getattr(self.schema, "check", None)
-        unused = unused_in(check, params) if check is not None else frozenset()
         token, hidden = RESOLVED.set(dict(params)), UNUSED.set(unused)
         try:
             with outputs_together(before_landing=record):
@@ -143,11 +143,23 @@ class Stage:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""
         return {name: self.paths(params, (name,)) for name in roles}
 
+    def unused(self, params: dict[str, Any]) -> frozenset:
+        """The parameters without effect in a run with ``params`` (the schema's check names
+        them): neither the outputs' provenance nor their records hold them, so changing one
+        does not make a step run again."""
+        check = getattr(self.schema, "check", None)
+        return unused_in(check, params) if check is not None else frozenset()
+
     def why_stale(self, params: dict[str, Any]) -> str | None:
         """Why the step's existing outputs cannot stand for a run with ``params`` now (their
         records, :mod:`plenocli.pipeline.records`); None when they can."""
-        return records.why_stale(self.name, params, self.by_role(params, self.inputs),
+        return records.why_stale(self.name, _without(params, self.unused(params)),
+                                 self.by_role(params, self.inputs),
                                  self.by_role(params, self.outputs))
+
+
+def _without(params: dict[str, Any], names: frozenset) -> dict[str, Any]:
+    return {k: v for k, v in params.items() if k not in names}
 
 
 def _check_inputs_apart(params: dict[str, Any], declared: tuple[Param, ...],
