@@ -20,6 +20,9 @@ from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 
+MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
+
+
 def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = "4",
         view: str = "full", mask_width: float = 2.0, kernel: str = "lanczos3",
         radius: float | None = None, min_weight: float = 0.25,
@@ -71,6 +74,13 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         radius=radius, min_weight=min_weight, **options)
     finite = [sc for sc in scores if np.isfinite(sc["sharpness"])]
     best = max(finite, key=lambda sc: sc["sharpness"])["g"] if finite else None
+    falloff = _micro_image_falloff(grey, framing.grid) if sweep else 0.0
+    if falloff > MAX_FALLOFF:
+        log.warning("refocus: the micro-images of %s darken by %.0f %% towards their rims: "
+                    "that vignetting pulls the sharpest g of a sweep towards smaller g (by "
+                    "0.2-0.5 on the simulator's planes); flat-field the frames with a white "
+                    "image first, or measure g with plenocli depth", shown(input),
+                    100 * falloff)
     params = dict(grid=grid, s=s, g=g, view=view, mask_width=mask_width, kernel=kernel,
                   radius=radius, min_weight=min_weight, depth=depth)
     record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
@@ -95,6 +105,21 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
                   protect=protect, colour=meta.get("colour"))
+
+
+def _micro_image_falloff(grey: np.ndarray, grid) -> float:
+    """How much darker the mean micro-image is at the rim of its usable disc than at its
+    brightest (0: flat-fielded, or vignetting divided out otherwise)."""
+    from plenocli.depth.lenslet import lens_table, micro_profile
+
+    _, centres = lens_table(grid, grey.shape)
+    try:
+        profile, *_ = micro_profile(np.ascontiguousarray(grey, np.float32), centres,
+                                    grid.pitch_px)
+    except ValueError:  # too few or too dark micro-images to say
+        return 0.0
+    values = profile[np.isfinite(profile)]
+    return float(1.0 - values.min() / values.max()) if values.size else 0.0
 
 
 def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[float], *,
