@@ -19,7 +19,6 @@ from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, 
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
-
 MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
 
 
@@ -74,13 +73,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         radius=radius, min_weight=min_weight, **options)
     finite = [sc for sc in scores if np.isfinite(sc["sharpness"])]
     best = max(finite, key=lambda sc: sc["sharpness"])["g"] if finite else None
-    falloff = _micro_image_falloff(grey, framing.grid) if sweep else 0.0
-    if falloff > MAX_FALLOFF:
-        log.warning("refocus: the micro-images of %s darken by %.0f %% towards their rims: "
-                    "that vignetting pulls the sharpest g of a sweep towards smaller g (by "
-                    "0.2-0.5 on the simulator's planes); flat-field the frames with a white "
-                    "image first, or measure g with plenocli depth", shown(input),
-                    100 * falloff)
+    if sweep:
+        _warn_vignetted(input, grey, framing.grid)
     params = dict(grid=grid, s=s, g=g, view=view, mask_width=mask_width, kernel=kernel,
                   radius=radius, min_weight=min_weight, depth=depth)
     record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
@@ -105,6 +99,15 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
                   protect=protect, colour=meta.get("colour"))
+
+
+def _warn_vignetted(path: str, grey: np.ndarray, grid) -> None:
+    falloff = _micro_image_falloff(grey, grid)
+    if falloff > MAX_FALLOFF:
+        log.warning("refocus: the micro-images of %s darken by %.0f %% towards their rims: "
+                    "that vignetting pulls the sharpest g of a sweep towards smaller g (by "
+                    "0.2-0.5 on the simulator's planes); flat-field the frames with a white "
+                    "image first, or measure g with plenocli depth", shown(path), 100 * falloff)
 
 
 def _micro_image_falloff(grey: np.ndarray, grid) -> float:
