@@ -20,6 +20,17 @@ PREVIEW_TEXT = ("Software", "plenocli preview")
 _PNG_HEADER = 8 + 25   # the signature and the IHDR chunk, always first
 
 
+def is_preview(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a PNG that says it is a plenocli preview (:data:`PREVIEW_TEXT`)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return image.info.get(PREVIEW_TEXT[0]) == PREVIEW_TEXT[1]
+    except Exception:  # any failure of this probe: the file's reader says what it is
+        return False
+
+
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
                gamma: float = 2.2) -> np.ndarray:
     """Stretch an image to uint8 between two percentiles, with a display gamma; NaN shows black."""

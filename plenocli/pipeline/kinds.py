@@ -77,6 +77,7 @@ def made_by(path: Path) -> list:
     file (its reader says what is wrong with it)."""
     from plenocli.io import tiffio
     from plenocli.io.photo import photo_record
+    from plenocli.io.preview import is_preview
 
     suffix = Path(path).suffix.lower()
     if suffix not in (*TIFF, *PHOTOS) or not Path(path).is_file():
@@ -90,22 +91,10 @@ def made_by(path: Path) -> list:
     if not meta:
         meta = photo_record(path) or {}
         meta = {"history": meta.get("history"), "provenance": meta.get("plenocli")}
-    if suffix == ".png" and _is_preview(path):
+    if suffix == ".png" and is_preview(path):
         return ["preview"]
     return [r.get("stage") for r in (*(meta.get("history") or []), meta.get("provenance") or {})
             if isinstance(r, dict)]
-
-
-def _is_preview(path: Path) -> bool:
-    from PIL import Image
-
-    from plenocli.io.preview import PREVIEW_TEXT
-
-    try:
-        with Image.open(path) as image:
-            return image.info.get(PREVIEW_TEXT[0]) == PREVIEW_TEXT[1]
-    except Exception:  # any failure of this probe: decode's reader says what the file is
-        return False
 
 
 def _not_a_raw(path: Path, made: list) -> str:
