@@ -782,7 +782,29 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     text = _config_text(inputs, out).replace("  bias:\n", "  bias.v2:\n    stage: bias\n")
     config.write_text(text)
     result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
-    assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))
+    assert_one_line(result, 2, ("step 'bias.v2'", "--smooth"))  # the value alone: a usage error
+
+
+@pytest.mark.parametrize("word, code, words", [
+    # audit 9 E5: ' 2 : 8 ' read as the YAML mapping {2: 8}: "expected a value, got a mapping"
+    (" 2 : 4 ", 0, ()),
+    ("a: b", 2, ("--set 'depth.g=a: b': step 'depth'", "got 'a: b'")),
+    ("abc", 2, ("--set 'depth.g=abc': step 'depth'", "Invalid value for '--g'")),
+    ("[2", 2, ("--set 'depth.g=[2'", "not valid YAML")),
+])
+def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words, inputs,
+                                                                tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    output: {out}/d.tif\n")
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", f"depth.g={word}"])
+    if code == 0:
+        assert result.exit_code == 0, result.output
+        step = load_config(config, [f"depth.g={word}"])[0]
+        assert step.params["g"].replace(" ", "") == "2:4"
+    else:
+        assert_one_line(result, code, words)
 
 
 # ---- issue 21, class 8: unreadable inputs, lists for one path, empty values, cycles, long names
@@ -875,7 +897,7 @@ def test_an_empty_or_null_value_is_refused_not_taken_for_the_default(how, words,
     flags = how if isinstance(how, list) else []
     for mode in (["--dry-run"], ["--print-make"], []):
         result = run_bad(inputs, out, ["run", str(config), *flags, *mode])
-        assert_one_line(result, 1, words)
+        assert_one_line(result, 2 if flags else 1, words)  # a --set value: a usage error
 
 
 @pytest.mark.parametrize("steps", [
