@@ -350,6 +350,20 @@ CASES = [
      ("given twice",)),
     ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
      ("truncated",)),
+    # audit 9 E6: a raw DNG was "a monochrome capture" and "a plain (not plenocli) TIFF" to
+    # develop, and stitch, crosstalk, depth, sai, calibrate each said something else
+    ("develop-raw", ["develop", "{i}/dp.dng", "-o", "{o}/x.jpg"], 1,
+     ("is a raw capture (DNG)", "develop takes as input", "decode it first")),
+    ("bias-raw", ["bias", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("flat-white-raw", ["flat", "{i}/biased.tif", "--white", "{i}/dp.dng", "-o", "{o}/x.tif"], 1,
+     ("raw capture (DNG)", "flat takes as white")),
+    ("stitch-raw", ["stitch", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("crosstalk-raw", ["crosstalk", "{i}/dp.dng", "-o", "{o}/x.json"], 1,
+     ("raw capture (DNG)",)),
+    ("depth-raw", ["depth", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("sai-raw", ["sai", "{i}/dp.dng", "-n", "2", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("calibrate-raw", ["calibrate", "{i}/dp.dng", "-o", "{o}/g.yaml"], 1,
+     ("raw capture (DNG)",)),
     # audit 9 E3: a view named twice in --views was exit 1, --frames S,S a usage error
     ("stitch-views-twice", ["stitch", "{i}/biased.tif", "--views", "A,A", "-o", "{o}/p.tif"], 2,
      ("'A' is named twice",)),

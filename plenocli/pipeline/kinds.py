@@ -5,8 +5,8 @@ before it in ``history``), so a stage can refuse a file of the wrong kind (a dep
 views, a gain map as a white) or one it has already processed (unmix of an unmixed file,
 flat of a flat-fielded one): both would give a wrong result with exit 0. decode takes no
 plenocli file at all (frames, views, photographs and previews are not raws: decoding one again
-drops its history and its levels). Foreign files (no plenocli record) are accepted as they
-are: their reader checks what it can.
+drops its history and its levels), and only decode takes a raw capture (DNG, CR2). Other
+foreign files (no plenocli record) are accepted as they are: their reader checks what it can.
 """
 
 from __future__ import annotations
@@ -55,6 +55,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             made = made_by(path)
+            if not made and stage != "decode":
+                _check_not_raw(path, stage, role)
             if not made or made[-1] is None:
                 continue
             if not accepted:
@@ -69,6 +71,22 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+
+
+def _check_not_raw(path: Path, stage: str, role: str) -> None:
+    """A raw capture (DNG, CR2) holds no views or frames a stage after decode reads: its
+    pages are the sensor's data as stored, margins and black level included."""
+    from plenocli.io import raw as raw_io
+
+    try:
+        kind = raw_io.sniff(path)
+    except (InputError, OSError):
+        return  # the stage's reader says what is wrong with it
+    if kind in ("canon-dp", "dng"):
+        name = "DNG" if kind == "dng" else "Canon dual-pixel CR2"
+        raise InputError(f"{path} is a raw capture ({name}), not the decoded frames or views "
+                         f"{stage} takes as {role.replace('_', '-')}: decode it first "
+                         f"(plenocli decode{'' if stage == 'bias' else ', then plenocli bias'})")
 
 
 def made_by(path: Path) -> list:
