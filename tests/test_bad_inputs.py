@@ -492,6 +492,11 @@ CASES = [
     ("crosstalk-mask-widths-infinite", ["crosstalk", "{i}/rt/frames.tif", "--grid",
                                         "{i}/rt/grid.yaml", "--mask-widths", "0,inf", "-o",
                                         "{o}/c.json"], 2, ("'--mask-widths'", ">= 0 px")),
+    # audit 9 E8: the sweep wrote no preview and said nothing
+    ("crosstalk-mask-widths-preview", ["crosstalk", "{i}/rt/frames.tif", "--grid",
+                                       "{i}/rt/grid.yaml", "--mask-widths", "0,1", "-o",
+                                       "{o}/c.json", "--preview", "{o}/c.png"], 2,
+     ("--preview is not drawn for the --mask-widths sweep",)),
     ("crosstalk-mask-widths-twice", ["crosstalk", "{i}/rt/frames.tif", "--grid",
                                      "{i}/rt/grid.yaml", "--mask-widths", "0,1,1", "-o",
                                      "{o}/c.json"], 2, ("'--mask-widths'", "each once")),
