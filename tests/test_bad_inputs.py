@@ -1328,6 +1328,30 @@ def test_decode_refuses_what_plenocli_made(inputs, tmp_path):
                                     if path.suffix == ".tif" else "not a sensor image"))
 
 
+def test_decode_names_only_the_stages_that_take_the_file(inputs, tmp_path):
+    """audit 9 E9: decode sent a depth map to refocus (as INPUT), a focal sweep to unmix,
+    crosstalk, develop and stitch, and SAIs back to sai: each refuses that very file."""
+    made = tmp_path / "made"
+    simulate("dualpixel-depth", made / "dd", pixels="96x128", seed=2)
+    rt = inputs / "rt"
+    for args in (["depth", rt / "frames.tif", "--grid", rt / "grid.yaml", "-o", made / "g.tif"],
+                 ["depth", made / "dd" / "views.tif", "-o", made / "disp.tif"],
+                 ["refocus", rt / "frames.tif", "--grid", rt / "grid.yaml", "--g", "3,4", "-o",
+                  made / "sweep.tif"],
+                 ["sai", rt / "frames.tif", "-n", "2", "-o", made / "sai.tif"]):
+        result = CliRunner().invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    cases = [("g.tif", "give it as it is to refocus --depth"),
+             ("disp.tif", "no stage reads it as an image"),
+             ("sweep.tif", "no stage reads it as an image"),
+             ("sai.tif", "give it as it is to unmix, crosstalk, depth, develop, stitch")]
+    for name, where in cases:
+        result = run_bad(inputs, out, ["decode", str(made / name), "-o", "{o}/x.tif"])
+        assert_one_line(result, 1, (where,))
+        assert result.output.rstrip().endswith(where) or "decode the capture" in result.output
+
+
 @pytest.mark.parametrize("args", [
     ["crosstalk", "{i}/frames.tif", "-o", "{o}/r.json"],
     ["crosstalk", "{b}/views.tif", "--views", "A,B", "-o", "{o}/r.json"],

@@ -122,13 +122,42 @@ def _not_a_raw(path: Path, made: list) -> str:
         return (f"{path} is a plenocli preview (display-stretched 8-bit levels), not a sensor "
                 "image: decode the capture it shows")
     if stage == "develop":
-        return (f"{path} is a `plenocli develop` photograph (display-encoded), not a raw "
-                "capture or sensor image: decode the capture it came from")
-    takers = [name for name, roles in ACCEPTS.items()
-              if any(stage in accepted for accepted in roles.values())
-              and not (name in ONCE and name in made)]
-    takers += [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+        return (f"{path} is a `plenocli develop` output (a photograph, or its scene-referred "
+                "linear TIFF), not a raw capture or sensor image: decode the capture it came "
+                "from")
+    takers = _takers(path, stage, made)
     where = (f"give it as it is to {', '.join(takers)}" if takers
              else "no stage reads it as an image; decode the capture it came from")
     return (f"{path} is a `plenocli {stage}` output, not a raw capture or sensor image "
             f"(decoding it again would drop its record and levels): {where}")
+
+
+# stages that read lenslet frames (micro-images), not views cut from them
+FRAMES_ONLY = ("calibrate", "sai", "refocus")
+
+
+def _takers(path: Path, stage: str, made: list) -> list[str]:
+    """The stages (with the option, for a side input) that take this output of ``stage`` as
+    it is: not one it went through already, not a frames reader for views, and none for what
+    every taker refuses (a focal sweep, a dual/quad-pixel disparity map)."""
+    from plenocli.io import tiffio
+    from plenocli.model.views import split_sweep
+
+    try:
+        names = [str(n) for n in tiffio.read_meta(path).get("views") or []]
+    except InputError:
+        names = []
+    if any(split_sweep(n)[1] for n in names):
+        return []  # one view at several g: refocus each view at one g instead
+    if stage == "depth":
+        return ["refocus --depth"] if names[:1] == ["g"] else []
+    views_only = "sai" in made or stage in ("sai", "refocus")
+    takers = []
+    for name, roles in ACCEPTS.items():
+        if name in made or (views_only and name in FRAMES_ONLY):
+            continue
+        for role, accepted in roles.items():
+            if stage in accepted:
+                takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
+                break
+    return takers + [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
