@@ -107,6 +107,9 @@ def test_range_is_checked():
         check_range((-3, 4))
     with pytest.raises(ValueError, match="MIN < MAX"):
         check_range((5, 3))
+    for bounds in ((2, float("inf")), (float("nan"), 8)):  # audit 9 E12: "MIN < MAX" for 2:inf
+        with pytest.raises(ValueError, match="MIN:MAX of finite numbers"):
+            check_range(bounds)
     assert check_range((-8, -2)) == (-8.0, -2.0)
 
 
