@@ -1341,8 +1341,12 @@ def test_decode_names_only_the_stages_that_take_the_file(inputs, tmp_path):
                  ["sai", rt / "frames.tif", "-n", "2", "-o", made / "sai.tif"]):
         result = CliRunner().invoke(cli, [str(a) for a in args])
         assert result.exit_code == 0, result.output
+    names = [f"S{i}{j}.{c}" for i in "01" for j in "01" for c in "RGB"]
+    _plenocli_tiff(made / "colour_sai.tif", np.ones((12, 16, 16), np.float32), views=names,
+                   provenance={"stage": "sai"})
     out = tmp_path / "out"
-    cases = [("g.tif", "give it as it is to refocus --depth"),
+    cases = [("colour_sai.tif", "give it as it is to unmix, crosstalk, develop, stitch"),
+             ("g.tif", "give it as it is to refocus --depth"),
              ("disp.tif", "no stage reads it as an image"),
              ("sweep.tif", "no stage reads it as an image"),
              ("sai.tif", "give it as it is to unmix, crosstalk, depth, develop, stitch")]

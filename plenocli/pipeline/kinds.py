@@ -138,10 +138,10 @@ FRAMES_ONLY = ("calibrate", "sai", "refocus")
 
 def _takers(path: Path, stage: str, made: list) -> list[str]:
     """The stages (with the option, for a side input) that take this output of ``stage`` as
-    it is: not one it went through already, not a frames reader for views, and none for what
-    every taker refuses (a focal sweep, a dual/quad-pixel disparity map)."""
+    it is: not one it went through already, not a frames reader for views, not depth for
+    colour views, and none for what every taker refuses (a focal sweep, a disparity map)."""
     from plenocli.io import tiffio
-    from plenocli.model.views import split_sweep
+    from plenocli.model.views import split_colour_page, split_sweep
 
     try:
         names = [str(n) for n in tiffio.read_meta(path).get("views") or []]
@@ -152,9 +152,10 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
     if stage == "depth":
         return ["refocus --depth"] if names[:1] == ["g"] else []
     views_only = "sai" in made or stage in ("sai", "refocus")
+    colour = any(split_colour_page(n) for n in names)  # depth measures grey views only
     takers = []
     for name, roles in ACCEPTS.items():
-        if name in made or (views_only and name in FRAMES_ONLY):
+        if name in made or (views_only and name in FRAMES_ONLY) or (colour and name == "depth"):
             continue
         for role, accepted in roles.items():
             if stage in accepted:
