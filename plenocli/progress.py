@@ -8,14 +8,14 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TypeVar
 
 log = logging.getLogger("plenocli")
 T = TypeVar("T")
 _step = {"text": ""}  # what the running stage is doing now, shown by :func:`working`
-_HELD: contextvars.ContextVar[list[logging.LogRecord] | None] = contextvars.ContextVar(
+_HELD: contextvars.ContextVar[list | None] = contextvars.ContextVar(
     "plenocli_held_messages", default=None)
 
 
@@ -34,11 +34,11 @@ log.addFilter(_HoldBack())
 
 
 @contextlib.contextmanager
-def messages_held() -> Iterator[list[logging.LogRecord]]:
+def messages_held() -> Iterator[list]:
     """Hold back the INFO messages (a stage's "IN -> OUT" line) logged in the block, in this
     thread: they report outputs that have not landed yet. The caller passes the list to
     :func:`release` once they have, and drops it when they did not (nothing was written)."""
-    held: list[logging.LogRecord] = []
+    held: list = []  # log records, and actions of when_landed
     token = _HELD.set(held)
     try:
         yield held
@@ -46,10 +46,23 @@ def messages_held() -> Iterator[list[logging.LogRecord]]:
         _HELD.reset(token)
 
 
-def release(held: list[logging.LogRecord]) -> None:
-    """Emit messages held by :func:`messages_held`, in the order they were logged."""
-    for record in held:
-        log.handle(record)
+def when_landed(action: Callable[[], None]) -> None:
+    """Run ``action`` (a command printing its report) once the outputs of the running stage
+    have landed, after its messages; at once when no outputs are pending."""
+    held = _HELD.get()
+    if held is None:
+        action()
+    else:
+        held.append(action)
+
+
+def release(held: list) -> None:
+    """Emit messages (and run actions) held by :func:`messages_held`, in the order they came."""
+    for item in held:
+        if isinstance(item, logging.LogRecord):
+            log.handle(item)
+        else:
+            item()
 
 
 def step(text: str) -> None:

@@ -350,6 +350,20 @@ CASES = [
      ("given twice",)),
     ("decode-truncated", ["decode", "{i}/truncated.tif", "-o", "{o}/d.tif"], 1,
      ("truncated",)),
+    # audit 9 E6: a raw DNG was "a monochrome capture" and "a plain (not plenocli) TIFF" to
+    # develop, and stitch, crosstalk, depth, sai, calibrate each said something else
+    ("develop-raw", ["develop", "{i}/dp.dng", "-o", "{o}/x.jpg"], 1,
+     ("is a raw capture (DNG)", "develop takes as input", "decode it first")),
+    ("bias-raw", ["bias", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("flat-white-raw", ["flat", "{i}/biased.tif", "--white", "{i}/dp.dng", "-o", "{o}/x.tif"], 1,
+     ("raw capture (DNG)", "flat takes as white")),
+    ("stitch-raw", ["stitch", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("crosstalk-raw", ["crosstalk", "{i}/dp.dng", "-o", "{o}/x.json"], 1,
+     ("raw capture (DNG)",)),
+    ("depth-raw", ["depth", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("sai-raw", ["sai", "{i}/dp.dng", "-n", "2", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    ("calibrate-raw", ["calibrate", "{i}/dp.dng", "-o", "{o}/g.yaml"], 1,
+     ("raw capture (DNG)",)),
     # audit 9 E3: a view named twice in --views was exit 1, --frames S,S a usage error
     ("stitch-views-twice", ["stitch", "{i}/biased.tif", "--views", "A,A", "-o", "{o}/p.tif"], 2,
      ("'A' is named twice",)),
@@ -478,6 +492,11 @@ CASES = [
     ("crosstalk-mask-widths-infinite", ["crosstalk", "{i}/rt/frames.tif", "--grid",
                                         "{i}/rt/grid.yaml", "--mask-widths", "0,inf", "-o",
                                         "{o}/c.json"], 2, ("'--mask-widths'", ">= 0 px")),
+    # audit 9 E8: the sweep wrote no preview and said nothing
+    ("crosstalk-mask-widths-preview", ["crosstalk", "{i}/rt/frames.tif", "--grid",
+                                       "{i}/rt/grid.yaml", "--mask-widths", "0,1", "-o",
+                                       "{o}/c.json", "--preview", "{o}/c.png"], 2,
+     ("--preview is not drawn for the --mask-widths sweep",)),
     ("crosstalk-mask-widths-twice", ["crosstalk", "{i}/rt/frames.tif", "--grid",
                                      "{i}/rt/grid.yaml", "--mask-widths", "0,1,1", "-o",
                                      "{o}/c.json"], 2, ("'--mask-widths'", "each once")),
@@ -782,7 +801,29 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     text = _config_text(inputs, out).replace("  bias:\n", "  bias.v2:\n    stage: bias\n")
     config.write_text(text)
     result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
-    assert_one_line(result, 1, ("step 'bias.v2'", "--smooth"))
+    assert_one_line(result, 2, ("step 'bias.v2'", "--smooth"))  # the value alone: a usage error
+
+
+@pytest.mark.parametrize("word, code, words", [
+    # audit 9 E5: ' 2 : 8 ' read as the YAML mapping {2: 8}: "expected a value, got a mapping"
+    (" 2 : 4 ", 0, ()),
+    ("a: b", 2, ("--set 'depth.g=a: b': step 'depth'", "got 'a: b'")),
+    ("abc", 2, ("--set 'depth.g=abc': step 'depth'", "Invalid value for '--g'")),
+    ("[2", 2, ("--set 'depth.g=[2'", "not valid YAML")),
+])
+def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words, inputs,
+                                                                tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    output: {out}/d.tif\n")
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", f"depth.g={word}"])
+    if code == 0:
+        assert result.exit_code == 0, result.output
+        step = load_config(config, [f"depth.g={word}"])[0]
+        assert step.params["g"].replace(" ", "") == "2:4"
+    else:
+        assert_one_line(result, code, words)
 
 
 # ---- issue 21, class 8: unreadable inputs, lists for one path, empty values, cycles, long names
@@ -875,7 +916,7 @@ def test_an_empty_or_null_value_is_refused_not_taken_for_the_default(how, words,
     flags = how if isinstance(how, list) else []
     for mode in (["--dry-run"], ["--print-make"], []):
         result = run_bad(inputs, out, ["run", str(config), *flags, *mode])
-        assert_one_line(result, 1, words)
+        assert_one_line(result, 2 if flags else 1, words)  # a --set value: a usage error
 
 
 @pytest.mark.parametrize("steps", [
@@ -1285,6 +1326,34 @@ def test_decode_refuses_what_plenocli_made(inputs, tmp_path):
         result = run_bad(inputs, out, ["decode", str(path), "-o", "{o}/x.tif"])
         assert_one_line(result, 1, (what, where, "not a raw capture or sensor image"
                                     if path.suffix == ".tif" else "not a sensor image"))
+
+
+def test_decode_names_only_the_stages_that_take_the_file(inputs, tmp_path):
+    """audit 9 E9: decode sent a depth map to refocus (as INPUT), a focal sweep to unmix,
+    crosstalk, develop and stitch, and SAIs back to sai: each refuses that very file."""
+    made = tmp_path / "made"
+    simulate("dualpixel-depth", made / "dd", pixels="96x128", seed=2)
+    rt = inputs / "rt"
+    for args in (["depth", rt / "frames.tif", "--grid", rt / "grid.yaml", "-o", made / "g.tif"],
+                 ["depth", made / "dd" / "views.tif", "-o", made / "disp.tif"],
+                 ["refocus", rt / "frames.tif", "--grid", rt / "grid.yaml", "--g", "3,4", "-o",
+                  made / "sweep.tif"],
+                 ["sai", rt / "frames.tif", "-n", "2", "-o", made / "sai.tif"]):
+        result = CliRunner().invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 0, result.output
+    names = [f"S{i}{j}.{c}" for i in "01" for j in "01" for c in "RGB"]
+    _plenocli_tiff(made / "colour_sai.tif", np.ones((12, 16, 16), np.float32), views=names,
+                   provenance={"stage": "sai"})
+    out = tmp_path / "out"
+    cases = [("colour_sai.tif", "give it as it is to unmix, crosstalk, develop, stitch"),
+             ("g.tif", "give it as it is to refocus --depth"),
+             ("disp.tif", "no stage reads it as an image"),
+             ("sweep.tif", "no stage reads it as an image"),
+             ("sai.tif", "give it as it is to unmix, crosstalk, depth, develop, stitch")]
+    for name, where in cases:
+        result = run_bad(inputs, out, ["decode", str(made / name), "-o", "{o}/x.tif"])
+        assert_one_line(result, 1, (where,))
+        assert result.output.rstrip().endswith(where) or "decode the capture" in result.output
 
 
 @pytest.mark.parametrize("args", [

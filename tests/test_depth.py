@@ -107,6 +107,9 @@ def test_range_is_checked():
         check_range((-3, 4))
     with pytest.raises(ValueError, match="MIN < MAX"):
         check_range((5, 3))
+    for bounds in ((2, float("inf")), (float("nan"), 8)):  # audit 9 E12: "MIN < MAX" for 2:inf
+        with pytest.raises(ValueError, match="MIN:MAX of finite numbers"):
+            check_range(bounds)
     assert check_range((-8, -2)) == (-8.0, -2.0)
 
 
@@ -155,10 +158,22 @@ def test_depth_picture_has_alpha_and_scale_bar():
     conf = np.ones_like(g)
     conf[:, :10] = 0.0
     g[0, 0] = np.nan
-    pic = depth_picture(g, conf)
-    assert pic.shape[2] == 4 and pic.shape[1] > 60
-    assert pic[5, 5, 3] == 0 and pic[20, 30, 3] == 255
-    assert (pic[:, 60:, 3] == 255).all()  # the bar is opaque
+    pic = depth_picture(g, conf)  # 40 rows: each pixel a 3 x 3 block, 120 rows for the bar
+    assert pic.shape[2] == 4 and pic.shape[:2] == (120, 180 + 72)
+    assert pic[5, 5, 3] == 0 and pic[60, 90, 3] == 255 and pic[1, 29, 3] == 0
+    assert (pic[:, 180:, 3] == 255).all()  # the bar is opaque
+
+
+@pytest.mark.parametrize("shape, drawn", [((24, 24), (120, 120)), ((32, 24), (128, 96)),
+                                          ((4, 3000), (4, 3000)), ((40, 472), (120, 1416))])
+def test_a_depth_preview_of_a_small_or_flat_map_has_room_for_its_bar(shape, drawn):
+    """audit 9 I1: a 24 x 24 map's preview was an internal error (the bar did not fit), and
+    below 96 rows its labels ran into each other: the map is drawn in whole-pixel blocks to
+    120 rows where its width allows, else padded below, transparent."""
+    g = np.random.default_rng(1).uniform(2, 6, shape)
+    pic = depth_picture(g, np.ones(shape))
+    assert pic.shape == (max(120, drawn[0]), drawn[1] + 72, 4)
+    assert (pic[drawn[0]:, :drawn[1], 3] == 0).all() and (pic[:drawn[0], :drawn[1], 3] == 255).all()
 
 
 @pytest.mark.parametrize("options", [dict(pitch_px=30.0, galilean=True, g_true=3.0),

@@ -364,3 +364,14 @@ def test_views_of_one_field_are_told_there_is_nothing_to_extend():
     views = np.stack([texture[:, :400], texture[:, 3:403]]).astype(np.float32)
     with pytest.raises(StitchError, match="show one field"):
         stitch(views)
+
+
+def test_a_vertical_pair_forced_side_by_side_is_told_its_layout():
+    """audit 9 E7: a vertical pair given --layout 1x2 was an "ambiguous overlap (a periodic
+    scene?)"; it registers one above the other, so that is what is said."""
+    views, _, truth = make_rig(layout="2x1", view_shape=(300, 400), overlap=0.3, seed=5)
+    _, report = stitch(views, layout="2x1")
+    assert np.abs(np.array(report.shifts_px) - np.array(truth["shifts_px"])).max() < 0.1
+    with pytest.raises(StitchError, match=r"show no overlap side by side \(--layout 1x2\) but "
+                                          r"register one above the other: give --layout 2x1"):
+        stitch(views, layout="1x2")

@@ -147,3 +147,21 @@ def test_a_block_of_one_direction_s_texture_places_nothing_along_it():
     spots = np.sin(0.9 * yy) * np.sin(0.7 * xx) + rng.normal(0, 0.01, yy.shape)
     shift, _ = verify._block_shift(spots, spots, np.ones(a.shape, bool))
     assert np.all(np.abs(shift) < 0.05)
+
+
+def test_a_rig_refused_under_a_users_distortion_names_the_distortion():
+    """audit 9 E10: with --distortion the rig's check blamed the rig, which stitches these
+    views without it."""
+    from plenocli.pipeline.stages.stitch import _claim
+
+    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
+    views = np.stack([np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)])
+    cam = truth["camera"]
+    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
+    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
+                   optics, cam["aperture_mm"], cam["object_distance_mm"])
+    _, report = stitch(views, rig=rig, distortion_k1=0.05)
+    with pytest.raises(ValueError, match=r"the rig r.yaml on views with --distortion 0.05 "
+                                         r"removed does not describe these views.*check "
+                                         r"--distortion, or leave it out"):
+        verify.check_alignment(views, report, **_claim(None, "r.yaml", 0.05))

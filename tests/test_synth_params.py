@@ -35,6 +35,30 @@ def test_values_out_of_range_are_refused_by_name(kind, params, words):
         check_params(kind, generator(kind), params)
 
 
+@pytest.mark.parametrize("kind, params, words", [
+    # audit 9 E1: g of the steps scene, and g beside distance_m, were recorded and ignored
+    ("lenslet-depth", {"g": 2.5}, "g = 2.5 is not used: only the plane scene is placed by g"),
+    ("lenslet-depth", {"scene": "plane", "g": 4.0, "distance_m": 0.9},
+     "g = 4.0 is not used: distance_m = 0.9 places the plane"),
+    ("lenslet-depth", {"scene": "slanted", "distance_m": 0.9},
+     "distance_m = 0.9 is not used: distance_m places the plane scene (scene is 'slanted')"),
+    ("dualpixel-white", {"prism_apex_deg": 20.0}, "prism_apex_deg = 20.0 is not used"),
+    ("dualpixel-prism", {"no_prisms": True, "prism_apex_deg": 20.0}, "the prisms are left out"),
+])
+def test_a_parameter_the_other_values_leave_unused_is_refused(kind, params, words):
+    with pytest.raises(ValueError, match=re.escape(words)):
+        check_params(kind, generator(kind), params)
+
+
+@pytest.mark.parametrize("kind, params", [
+    ("lenslet-depth", {"scene": "plane", "g": 2.5}),
+    ("lenslet-depth", {"scene": "plane", "distance_m": 0.9}),
+    ("dualpixel-prism", {"prism_apex_deg": 20.0}),
+])
+def test_a_parameter_its_kind_uses_is_taken(kind, params):
+    assert check_params(kind, generator(kind), params) == params
+
+
 def test_rows_x_cols_for_a_square_only_kind_says_so_and_help_names_the_kinds_that_take_it():
     # audit 7 E4: --help promised ROWSxCOLS; quadpixel-pyramid said "not a value like its
     # default 256"
@@ -72,7 +96,6 @@ def test_a_whole_number_where_the_default_is_a_fraction_is_that_fraction(tmp_pat
 
 @pytest.mark.parametrize("params, words", [
     ({"pitch_px": 1e6}, "leaves fewer than 4 micro-images across"),
-    ({"distance_m": 3.0}, "distance_m places the plane scene; give scene=plane"),
     ({"distance_m": 0.01, "scene": "plane"}, "inside the main lens's focal length"),
 ])
 def test_lenslet_depth_refuses_what_it_cannot_render(params, words):

@@ -49,7 +49,8 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     # SIGTERM and Ctrl-C: the edge (options.stage_command) stops the workers and says so
-    captures = expand_inputs(patterns, template=read_template(config, overrides), out=out)
+    captures = expand_inputs(patterns, template=lambda: read_template(config, overrides),
+                             out=out)
     report = run_batch(config, captures, overrides=overrides, out=out,
                        force=force, dry_run=dry_run, jobs=jobs or 1, scheduler=scheduler,
                        timeout=timeout)

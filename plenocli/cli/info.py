@@ -20,6 +20,7 @@ def info(file, as_json):
     import json
 
     from plenocli.io.info import describe, format_info
+    from plenocli.pipeline.records import read_record
 
-    described = describe(file)
+    described = describe(file, record=read_record(file))
     click.echo(json.dumps(described, indent=2, default=str) if as_json else format_info(described))

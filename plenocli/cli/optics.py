@@ -19,5 +19,7 @@ def optics(**params):
       plenocli optics configs/lenses/paper_table2.yaml --sensor-mm 3.6 --json table2.json
     """
     from plenocli.pipeline.stages.optics import format_report, run
+    from plenocli.progress import when_landed
 
-    click.echo(format_report(run(**params)))
+    report = format_report(run(**params))
+    when_landed(lambda: click.echo(report))  # once --json has landed

@@ -42,10 +42,25 @@ class Declared(click.ParamType):
         return "[" + "|".join(choices) + "]"
 
     def convert(self, value, param, ctx):
+        if isinstance(value, str) and _is_option_of(ctx, value) and \
+                getattr(param, "param_type_name", None) == "option":
+            # `--linear -o out.tif`: the option swallowed the next one as its value
+            self.fail(f"got the option {value!r} as its value; give {param.opts[-1]} its own "
+                      f"value ({param.opts[-1]} {param.make_metavar(ctx)})", param, ctx)
         try:
             return self.validator.convert(value)
         except ValueError as err:
             self.fail(str(err), param, ctx)
+
+
+def _is_option_of(ctx: click.Context | None, word: str) -> bool:
+    """Whether ``word`` is one of the command's own option names (-o, --output, --help)."""
+    if ctx is None or not word.startswith("-"):
+        return False
+    names = {*ctx.help_option_names}
+    for p in ctx.command.params:
+        names.update(p.opts, p.secondary_opts)
+    return word in names
 
 
 class DeclaredOption(click.Option):

@@ -392,7 +392,9 @@ def contradicted_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> SignEvi
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:
     """(min, max) of a valid search range or ValueError saying what is wrong."""
     gmin, gmax = (float(v) for v in g_range)
-    if not (math.isfinite(gmin) and math.isfinite(gmax) and gmin < gmax):
+    if not (math.isfinite(gmin) and math.isfinite(gmax)):
+        raise ValueError(f"g range must be MIN:MAX of finite numbers, got {gmin:g}:{gmax:g}")
+    if not gmin < gmax:
         raise ValueError(f"g range must be MIN:MAX with MIN < MAX, got {gmin:g}:{gmax:g}")
     if gmin * gmax <= 0 or min(abs(gmin), abs(gmax)) <= 1.0:
         raise ValueError(f"g range {gmin:g}:{gmax:g}: both bounds need one sign and |g| > 1 "

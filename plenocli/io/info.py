@@ -17,6 +17,7 @@ import numpy as np
 from plenocli.errors import InputError, not_a_file
 from plenocli.io import raw as raw_io
 from plenocli.io.photo import photo_record
+from plenocli.io.preview import is_preview
 from plenocli.io.tiffio import open_tiff, read_meta
 from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
 from plenocli.model.lensgrid import LensGrid
@@ -28,10 +29,18 @@ IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_ar
 TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
 
 
-def describe(path: str | os.PathLike) -> dict[str, Any]:
+def describe(path: str | os.PathLike, *, record: dict | None = None) -> dict[str, Any]:
     """A summary of ``path``: kind, sizes, levels, geometry and provenance (strict JSON values:
-    an infinite or NaN level, as files of older versions hold, is None)."""
-    return json_safe(_describe(path))
+    an infinite or NaN level, as files of older versions hold, is None). ``record``: the
+    record plenocli keeps beside an output it wrote (:mod:`plenocli.pipeline.records`), shown
+    for a file that carries no provenance of its own (a preview, a report, a grid)."""
+    info = _describe(path)
+    if record is not None and not info.get("provenance"):
+        info["record"] = {key: record.get(key) for key in ("version", "stage", "role",
+                                                           "parameters")}
+        info["record"]["inputs"] = {role: [str(state[-1]) for state in states]
+                                    for role, states in record.get("inputs", {}).items()}
+    return json_safe(info)
 
 
 def _describe(path: str | os.PathLike) -> dict[str, Any]:
@@ -48,6 +57,8 @@ def _describe(path: str | os.PathLike) -> dict[str, Any]:
         return {**head, **_describe_json(p)}
     if suffix in PHOTO_SUFFIXES and photo_record(p):
         return {**head, **_describe_photo(p)}
+    if suffix == ".png" and is_preview(p):
+        return {**head, **_describe_photo(p), "kind": "preview"}
     kind = raw_io.sniff(p)  # a damaged or truncated TIFF is refused here, not described
     if kind in ("canon-dp", "dng"):
         return {**head, **_describe_raw(p)}
@@ -207,6 +218,14 @@ def format_info(info: dict) -> str:
         fields += [(f"input {item.get('role')}",
                     f"{item.get('path')} (sha256 {str(item.get('sha256'))[:12]}...)")
                    for item in record.get("inputs", [])]
+    made = info.get("record")
+    if made:  # the record beside the file: no time or paths, the digests of its inputs
+        lines += _field_lines(fields)
+        lines.append(f"  made by        plenocli {made.get('version')} {made.get('stage')} "
+                     f"(its {made.get('role')}, says the record beside the file)")
+        fields = [("parameters", made.get("parameters"))]
+        fields += [(f"input {role}", ", ".join(f"sha256 {d[:12]}..." for d in digests))
+                   for role, digests in (made.get("inputs") or {}).items()]
     fields += [(f"history {k}", f"{past.get('stage')} {_short(past.get('parameters'))} "
                                 f"on {past.get('created')}")
                for k, past in enumerate(info.get("history") or [], 1)]
@@ -275,7 +294,7 @@ def _photo_fields(info: dict) -> list[tuple[str, object]]:
 _KIND_FIELDS = {"raw": _image_fields, "plenocli-tiff": _image_fields, "image": _image_fields,
                 "lens-grid": _grid_fields, "pipeline-config": _config_fields,
                 "raytrix-calibration": _raytrix_fields, "xml": _xml_fields,
-                "photo": _photo_fields}
+                "photo": _photo_fields, "preview": _photo_fields}
 
 
 def _title(info: dict) -> str:
@@ -287,6 +306,10 @@ def _title(info: dict) -> str:
         return "plenocli image" + (f" from stage {stage}" if stage else "")
     if kind == "photo":
         return f"photograph ({info['format']})"
+    if kind == "preview":
+        stage = (info.get("record") or {}).get("stage")
+        return (f"plenocli preview ({info['format']}, display-stretched 8-bit levels, not "
+                "sensor data" + (f"; of a {stage} output" if stage else "") + ")")
     return {"image": "sensor image", "lens-grid": "lens grid", "xml": "XML document",
             "pipeline-config": "pipeline config", "json": "JSON document",
             "yaml": "YAML document"}.get(kind, kind)

@@ -17,7 +17,19 @@ _FONT = cv2.FONT_HERSHEY_SIMPLEX
 # the tEXt chunk every preview carries: decode refuses a picture that says it is a preview
 # (display-stretched 8-bit levels are not the light a sensor recorded)
 PREVIEW_TEXT = ("Software", "plenocli preview")
+BAR_ROWS = 120  # a depth preview's height at least: its scale bar's labels apart, none cut
 _PNG_HEADER = 8 + 25   # the signature and the IHDR chunk, always first
+
+
+def is_preview(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a PNG that says it is a plenocli preview (:data:`PREVIEW_TEXT`)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as image:
+            return image.info.get(PREVIEW_TEXT[0]) == PREVIEW_TEXT[1]
+    except Exception:  # any failure of this probe: the file's reader says what it is
+        return False
 
 
 def to_display(image: np.ndarray, *, low: float = 0.5, high: float = 99.5,
@@ -223,7 +235,7 @@ def depth_picture(values: np.ndarray, confidence: np.ndarray, *, label: str = "g
     scaled = np.clip(np.nan_to_num((values - lo) / (hi - lo), nan=0.0), 0, 1)
     bgr = cv2.applyColorMap(np.round(255 * scaled).astype(np.uint8), cv2.COLORMAP_TURBO)
     alpha = np.where(known, np.clip(np.nan_to_num(confidence, nan=0.0), 0, 1), 0.0)
-    image = np.dstack([bgr, np.round(255 * alpha).astype(np.uint8)])
+    image = _tall_enough(np.dstack([bgr, np.round(255 * alpha).astype(np.uint8)]))
     rows = image.shape[0]
     bar = np.full((rows, bar_width, 4), 255, np.uint8)
     ramp = np.linspace(1, 0, max(rows - 24, 2))[:, None]
@@ -234,9 +246,21 @@ def depth_picture(values: np.ndarray, confidence: np.ndarray, *, label: str = "g
         y = 12 + int(round((1 - frac) * (len(ramp) - 1)))
         cv2.putText(bar, f"{lo + frac * (hi - lo):.3g}", (21, min(max(y + 4, 10), rows - 2)),
                     _FONT, 0.35, (0, 0, 0, 255), 1, cv2.LINE_AA)
-    cv2.putText(bar, label[:10], (2, rows - 1), _FONT, 0.3, (0, 0, 0, 255), 1, cv2.LINE_AA)
+    cv2.putText(bar, label[:10], (2, rows - 4), _FONT, 0.3, (0, 0, 0, 255), 1, cv2.LINE_AA)
     bar[..., 3] = 255
     return np.hstack([image, bar])
+
+
+def _tall_enough(image: np.ndarray, rows: int = BAR_ROWS, max_cols: int = 2048) -> np.ndarray:
+    """``image`` (rows, cols, 4) enlarged by a whole factor (each pixel a block) to at least
+    ``rows`` tall where its width allows, then padded below with transparent rows to that."""
+    height, width = image.shape[:2]
+    factor = max(1, min(-(-rows // height), max_cols // max(width, 1)))
+    if factor > 1:
+        image = np.repeat(np.repeat(image, factor, axis=0), factor, axis=1)
+    if image.shape[0] < rows:
+        image = np.pad(image, ((0, rows - image.shape[0]), (0, 0), (0, 0)))
+    return image
 
 
 def write_depth_png(path: str | os.PathLike, values: np.ndarray, confidence: np.ndarray, *,

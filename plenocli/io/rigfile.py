@@ -17,7 +17,10 @@ def read_rig(path: str | Path) -> PrismRig:
     """The rig of a file, refused in one line naming the file and the key otherwise."""
     data = read_side_file(path, "YAML rig", hint="see configs/rigs/ for examples")
     if isinstance(data, dict) and isinstance(data.get("rig"), dict):
-        data = data["rig"]
+        data = data["rig"]  # a stitch report: the rig it used
+    elif isinstance(data, dict) and isinstance(data.get("transform"), dict):
+        raise InputError(f"{path} is a stitch transform (saved by --transform-out), not a rig: "
+                         "pass it with --transform-in")
     try:
         return PrismRig.from_dict(data)
     except ValueError as err:

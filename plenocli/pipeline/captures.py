@@ -9,7 +9,7 @@ same batch as the first, not one whose outputs have become captures.
 from __future__ import annotations
 
 import glob
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from plenocli.errors import InputError
@@ -33,13 +33,15 @@ def _list_lines(pattern: str, listing: Path) -> list[str]:
                          f"a line ({err})") from err
 
 
-def expand_inputs(patterns: Sequence[str], *, template: Template | None = None,
+def expand_inputs(patterns: Sequence[str], *,
+                  template: Template | Callable[[], Template] | None = None,
                   out: str | None = None) -> list[Path]:
     """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
 
     Order is kept (globs sorted), duplicates dropped; a pattern that matches nothing is an error.
     With the batch's ``template`` (and its ``out`` root), a glob's matches that the batch writes
-    (a shared step's output, or a capture's output, in or under its folder) are left out.
+    (a shared step's output, or a capture's output, in or under its folder) are left out; a
+    function giving the template is called only when a glob matched (the config is read then).
     """
     found: list[tuple[str, list[Path], bool]] = []  # pattern, its files, whether a glob
     for pattern in patterns:
@@ -58,8 +60,9 @@ def expand_inputs(patterns: Sequence[str], *, template: Template | None = None,
             raise InputError(f"--inputs {pattern!r} matches no file; quote globs so that "
                              "plenocli expands them, e.g. --inputs 'shoot/*.CR2'")
         found.append((pattern, files, glob.has_magic(pattern) and not pattern.startswith("@")))
-    if template is not None:
-        found = _without_outputs(found, template, out)
+    if template is not None and any(is_glob for _, _, is_glob in found):
+        found = _without_outputs(found, template if isinstance(template, Template)
+                                 else template(), out)
     unique = list(dict.fromkeys(p.resolve() for _, files, _ in found for p in files))
     stems: dict[str, Path] = {}
     for p in unique:

@@ -380,10 +380,36 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         for key in [k for k in steps[step] if str(k).replace("-", "_") == norm]:
             del steps[step][key]
         try:  # an empty value is the empty word, as --smooth= in the shell
-            steps[step][param] = _unflow(load_yaml(value, words=True)) if value != "" else ""
+            parsed = _unflow(load_yaml(value, words=True)) if value != "" else ""
         except DocumentError as err:
-            raise ConfigError(f"--set {item!r}: the value is not valid YAML ({err}); "
+            raise OptionError(f"--set {item!r}: the value is not valid YAML ({err}); "
                               "quote it") from err
+        if isinstance(parsed, Mapping):  # 'g= 2 : 8' reads as YAML's {2: 8}: no shell word
+            parsed = value
+        _check_set_value(f"--set {item!r}: step {step!r}", path, steps[step].get("stage", step),
+                         norm, parsed)
+        steps[step][param] = parsed
+
+
+def _check_set_value(said: str, path: Path, stage_name: str, name: str, value: Any) -> None:
+    """A --set value gets its parameter's check now, as its flag would: a value wrong by itself
+    is a usage error (OptionError). Values with placeholders wait to be filled per capture; an
+    unknown key is the step's to refuse."""
+    from plenocli.pipeline.params import convert
+
+    stage = get_stages().get(stage_name)
+    param = {p.name: p for p in stage.params}.get(name) if stage is not None else None
+    if param is None or _placeholders(value):
+        return
+    if value is None:  # the shell has no word for "no value": null would mean the default
+        raise OptionError(f"{said}: {name.replace('_', '-')} has no value (null or "
+                          "empty); give one, or leave the --set out for the config's value")
+    if param.type.is_path:
+        value = _resolve(path.resolve().parent, value)  # as the step will read it
+    try:
+        convert(param, value)
+    except ConfigError as err:
+        raise OptionError(f"{said}: {err}") from err
 
 
 def _make_step(path: Path, base: Path, name: str, body: dict, stages: dict) -> Step:

@@ -5,8 +5,8 @@ before it in ``history``), so a stage can refuse a file of the wrong kind (a dep
 views, a gain map as a white) or one it has already processed (unmix of an unmixed file,
 flat of a flat-fielded one): both would give a wrong result with exit 0. decode takes no
 plenocli file at all (frames, views, photographs and previews are not raws: decoding one again
-drops its history and its levels). Foreign files (no plenocli record) are accepted as they
-are: their reader checks what it can.
+drops its history and its levels), and only decode takes a raw capture (DNG, CR2). Other
+foreign files (no plenocli record) are accepted as they are: their reader checks what it can.
 """
 
 from __future__ import annotations
@@ -55,6 +55,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             made = made_by(path)
+            if not made and stage != "decode":
+                _check_not_raw(path, stage, role)
             if not made or made[-1] is None:
                 continue
             if not accepted:
@@ -71,12 +73,29 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
                                  "from before it")
 
 
+def _check_not_raw(path: Path, stage: str, role: str) -> None:
+    """A raw capture (DNG, CR2) holds no views or frames a stage after decode reads: its
+    pages are the sensor's data as stored, margins and black level included."""
+    from plenocli.io import raw as raw_io
+
+    try:
+        kind = raw_io.sniff(path)
+    except (InputError, OSError):
+        return  # the stage's reader says what is wrong with it
+    if kind in ("canon-dp", "dng"):
+        name = "DNG" if kind == "dng" else "Canon dual-pixel CR2"
+        raise InputError(f"{path} is a raw capture ({name}), not the decoded frames or views "
+                         f"{stage} takes as {role.replace('_', '-')}: decode it first "
+                         f"(plenocli decode{'' if stage == 'bias' else ', then plenocli bias'})")
+
+
 def made_by(path: Path) -> list:
     """The stages that made ``path``, oldest first, from its plenocli record (a TIFF's
     metadata, a photograph's description, a preview's tag); [] for a foreign or unreadable
     file (its reader says what is wrong with it)."""
     from plenocli.io import tiffio
     from plenocli.io.photo import photo_record
+    from plenocli.io.preview import is_preview
 
     suffix = Path(path).suffix.lower()
     if suffix not in (*TIFF, *PHOTOS) or not Path(path).is_file():
@@ -90,22 +109,10 @@ def made_by(path: Path) -> list:
     if not meta:
         meta = photo_record(path) or {}
         meta = {"history": meta.get("history"), "provenance": meta.get("plenocli")}
-    if suffix == ".png" and _is_preview(path):
+    if suffix == ".png" and is_preview(path):
         return ["preview"]
     return [r.get("stage") for r in (*(meta.get("history") or []), meta.get("provenance") or {})
             if isinstance(r, dict)]
-
-
-def _is_preview(path: Path) -> bool:
-    from PIL import Image
-
-    from plenocli.io.preview import PREVIEW_TEXT
-
-    try:
-        with Image.open(path) as image:
-            return image.info.get(PREVIEW_TEXT[0]) == PREVIEW_TEXT[1]
-    except Exception:  # any failure of this probe: decode's reader says what the file is
-        return False
 
 
 def _not_a_raw(path: Path, made: list) -> str:
@@ -115,13 +122,43 @@ def _not_a_raw(path: Path, made: list) -> str:
         return (f"{path} is a plenocli preview (display-stretched 8-bit levels), not a sensor "
                 "image: decode the capture it shows")
     if stage == "develop":
-        return (f"{path} is a `plenocli develop` photograph (display-encoded), not a raw "
-                "capture or sensor image: decode the capture it came from")
-    takers = [name for name, roles in ACCEPTS.items()
-              if any(stage in accepted for accepted in roles.values())
-              and not (name in ONCE and name in made)]
-    takers += [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+        return (f"{path} is a `plenocli develop` output (a photograph, or its scene-referred "
+                "linear TIFF), not a raw capture or sensor image: decode the capture it came "
+                "from")
+    takers = _takers(path, stage, made)
     where = (f"give it as it is to {', '.join(takers)}" if takers
              else "no stage reads it as an image; decode the capture it came from")
     return (f"{path} is a `plenocli {stage}` output, not a raw capture or sensor image "
             f"(decoding it again would drop its record and levels): {where}")
+
+
+# stages that read lenslet frames (micro-images), not views cut from them
+FRAMES_ONLY = ("calibrate", "sai", "refocus")
+
+
+def _takers(path: Path, stage: str, made: list) -> list[str]:
+    """The stages (with the option, for a side input) that take this output of ``stage`` as
+    it is: not one it went through already, not a frames reader for views, not depth for
+    colour views, and none for what every taker refuses (a focal sweep, a disparity map)."""
+    from plenocli.io import tiffio
+    from plenocli.model.views import split_colour_page, split_sweep
+
+    try:
+        names = [str(n) for n in tiffio.read_meta(path).get("views") or []]
+    except InputError:
+        names = []
+    if any(split_sweep(n)[1] for n in names):
+        return []  # one view at several g: refocus each view at one g instead
+    if stage == "depth":
+        return ["refocus --depth"] if names[:1] == ["g"] else []
+    views_only = "sai" in made or stage in ("sai", "refocus")
+    colour = any(split_colour_page(n) for n in names)  # depth measures grey views only
+    takers = []
+    for name, roles in ACCEPTS.items():
+        if name in made or (views_only and name in FRAMES_ONLY) or (colour and name == "depth"):
+            continue
+        for role, accepted in roles.items():
+            if stage in accepted:
+                takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
+                break
+    return takers + [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]

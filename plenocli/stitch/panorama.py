@@ -191,6 +191,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     overlap, overlap_tolerance = search["overlap"], search["overlap_tolerance"]
     if k1:
         luma = np.stack([undistort(v, k1) for v in luma])
+    forced = layout if rig is None and n_views == 2 and layout != "auto" else None
     if layout == "auto" and n_views == 4:
         layout = "2x2"
     elif layout == "auto":
@@ -213,7 +214,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               windows[(a, b)], across[(a, b)])
-    with _prism_hint(rig, luma):
+    with _layout_hint(forced, luma, limits, overlap, overlap_tolerance), _prism_hint(rig, luma):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
                                                   limits, windows)
     for info in pair_info:  # the report keeps the rig's own prediction
@@ -221,6 +222,27 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         if prior is not None:
             info["expected_shift_px"] = list(prior)
     return transforms, layout, "estimated", pair_info, closure
+
+
+@contextlib.contextmanager
+def _layout_hint(forced: str | None, luma: np.ndarray, limits: dict, overlap: float | None,
+                 overlap_tolerance: float):
+    """Two views given a --layout they do not have: when the pair is not found that way but
+    registers the other way, say so (not "no overlap", nor "a periodic scene?")."""
+    try:
+        yield
+    except StitchError:
+        if forced not in ("1x2", "2x1"):
+            raise
+        try:
+            found = auto_layout(luma, limits, overlap, overlap_tolerance)
+        except StitchError:
+            found = None
+        if found is None or found == forced:
+            raise
+        ways = {"1x2": "side by side", "2x1": "one above the other"}
+        raise StitchError(f"views 0 and 1 show no overlap {ways[forced]} (--layout {forced}) "
+                          f"but register {ways[found]}: give --layout {found}, or auto") from None
 
 
 @contextlib.contextmanager

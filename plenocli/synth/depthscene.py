@@ -153,10 +153,7 @@ def simulate_lenslet_depth(*, seed: int = 0, pixels: str | int | None = None,
     ``distance_m`` > 0 puts the ``plane`` scene at that distance (its g from the camera)."""
     from plenocli.refocus import output_shape
 
-    if distance_m > 0:
-        if scene != "plane":
-            raise ValueError(f"distance_m places the plane scene; give scene=plane (scene is "
-                             f"{scene!r})")
+    if distance_m > 0:  # with scene=plane only (synth.params.UNUSED_WHEN)
         if 1000.0 * distance_m <= CAMERA["focal_length_mm"]:
             raise ValueError(f"distance_m = {distance_m} m is inside the main lens's focal "
                              f"length ({CAMERA['focal_length_mm']:g} mm): nothing is imaged")

@@ -1,8 +1,9 @@
 """The parameters of the simulated kinds, declared once: what each name means and the values it
 may take. ``check_params`` refuses, before any generator runs, a name the kind does not take, a
 value not of its default's type and a value out of its range, whatever the values came from
-(``simulate --param``, a YAML step, a test). A generator still checks what depends on its other
-parameters (e.g. a pitch of at most a quarter of the sensor).
+(``simulate --param``, a YAML step, a test), and one given that the kind's other values leave
+unused (g of a scene that is not the plane: recorded, yet changing nothing). A generator still
+checks what depends on its other parameters (e.g. a pitch of at most a quarter of the sensor).
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> di
     defaults = {k: v.default for k, v in accepted.items()
                 if v.default is not inspect.Parameter.empty}
     _check_size(kind, {**defaults, **params})
+    _check_used(kind, params, {**defaults, **params})
     return {key: _as_default(value, accepted[key].default) for key, value in params.items()}
 
 
@@ -149,6 +151,46 @@ RULES: dict[str, Callable[[object], str | None]] = {
     "g": _g,
     "g_true": _g,
 }
+
+
+def _g_unused(values: dict) -> str | None:
+    if values.get("distance_m"):
+        return (f"distance_m = {values['distance_m']!r} places the plane (its g from the "
+                "simulated camera); give g or distance_m, not both")
+    if values.get("scene") != "plane":
+        return f"only the plane scene is placed by g (scene is {values.get('scene')!r}); give " \
+               "scene=plane"
+    return None
+
+
+def _distance_unused(values: dict) -> str | None:
+    if values.get("scene") != "plane":
+        return (f"distance_m places the plane scene (scene is {values.get('scene')!r}); give "
+                "scene=plane")
+    return None
+
+
+def _apex_unused(values: dict) -> str | None:
+    if values.get("no_prisms"):
+        return ("the prisms are left out (no_prisms, or a kind without prisms); leave "
+                "prism_apex_deg out, or simulate a kind with prisms")
+    return None
+
+
+# a value the kind's other values leave unused: it would change nothing, yet be recorded
+UNUSED_WHEN: dict[str, Callable[[dict], str | None]] = {
+    "g": _g_unused,
+    "distance_m": _distance_unused,
+    "prism_apex_deg": _apex_unused,
+}
+
+
+def _check_used(kind: str, given: dict, values: dict) -> None:
+    """Refuse a parameter given that the other values (given or default) leave unused."""
+    for key, unused in UNUSED_WHEN.items():
+        problem = unused(values) if key in given else None
+        if problem:
+            raise ValueError(f"simulate {kind}: {key} = {given[key]!r} is not used: {problem}")
 
 
 def _check_range(kind: str, key: str, value) -> None:

@@ -49,6 +49,22 @@ def test_bad_images(tmp_path, kind):
     assert not out.exists()
 
 
+def test_a_white_with_unknown_pixels_is_refused_with_what_to_give(tmp_path):
+    """audit 9 E11: a flat or bias output holding NaN (floored, clipped) was told "pass a
+    decoded frame"; it is told which pixels and which file calibrate takes."""
+    image, _ = white_image((256, 256), pitch_px=15.3, angle_rad=0.2, offset_xy=(120.3, 130.1),
+                           seed=1)
+    image = image.astype(np.float32)
+    image[10, 20] = image[100, 7] = np.nan
+    src, out = tmp_path / "in.tif", tmp_path / "out.yaml"
+    tifffile.imwrite(src, image)
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out)])
+    assert res.exit_code == 1 and not out.exists()
+    assert res.output.strip() == (f"Error: {src}: 2 pixel(s) are unknown (NaN: clipped, or below "
+                                  "flat's --floor); calibrate reads every pixel: give the decode "
+                                  "output of this capture (its black level is subtracted here)")
+
+
 def test_corrupt_xml(tmp_path):
     image, _ = white_image((256, 256), pitch_px=15.0, angle_rad=0.2, offset_xy=(128, 128))
     src, bad, out = tmp_path / "w.tif", tmp_path / "bad.xml", tmp_path / "o.yaml"

@@ -73,6 +73,21 @@ def test_bad_input_is_refused_in_one_line(lenslet, tmp_path):
     assert not out.exists()
 
 
+def test_the_docs_g_of_the_plane_at_0_9_m_is_the_thin_lens_one():
+    # audit 9 E2: docs/depth.md said g = 3.6; F 50 mm, z_f 2 m, B 0.4 mm give 4.148
+    import re
+    from pathlib import Path
+
+    from plenocli.synth.depthscene import virtual_depth
+
+    f, z_f, gap, z = 50.0, 2000.0, 0.4, 900.0
+    g = (f * z / (z - f) - f * z_f / (z_f - f)) / gap
+    assert virtual_depth(0.9) == pytest.approx(g, abs=1e-12)
+    text = (Path(__file__).resolve().parents[2] / "docs" / "depth.md").read_text()
+    said = re.search(r"distance_m=0\.9`.*?B = 0\.4 mm, g = ([0-9.]+)\)", text, re.S)
+    assert said and float(said.group(1)) == pytest.approx(g, abs=0.005)
+
+
 def test_metric_depth_on_the_simulated_camera(tmp_path):
     truth = simulate("lenslet-depth", tmp_path / "sim", seed=6, pixels="300x400",
                      scene="plane", distance_m=0.9)

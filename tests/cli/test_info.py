@@ -53,6 +53,26 @@ def test_plenocli_tiff_shows_provenance_and_history(tmp_path):
     assert "plenocli image from stage bias" in text and "history 1      decode" in text
 
 
+def test_a_preview_is_named_so_with_the_record_beside_it(tmp_path):
+    # audit 9 E4: a preview PNG was a "sensor image" of views R, G, B, without provenance
+    raw, truth = dualpixel_capture(seed=3, rows=32, cols=48, top=8, left=16)
+    write_dng(tmp_path / "c.dng", raw, **dng_options(truth))
+    runner = CliRunner()
+    runner.invoke(cli, ["decode", str(tmp_path / "c.dng"), "-o", str(tmp_path / "f.tif")])
+    result = runner.invoke(cli, ["bias", str(tmp_path / "f.tif"), "--smooth", "3", "-o",
+                                 str(tmp_path / "b.tif"), "--preview", str(tmp_path / "b.png")])
+    assert result.exit_code == 0, result.output
+    info = json.loads(_info(tmp_path / "b.png", "--json").stdout)
+    assert info["kind"] == "preview" and info["format"] == "PNG" and info["mode"] == "RGB"
+    assert info["record"]["stage"] == "bias" and info["record"]["role"] == "preview"
+    assert info["record"]["parameters"]["smooth"] == 3
+    assert list(info["record"]["inputs"]) == ["input"]
+    text = _info(tmp_path / "b.png").stdout
+    assert "plenocli preview (PNG, display-stretched 8-bit levels, not sensor data; of a bias " \
+           "output)" in text and "made by        plenocli" in text
+    assert "sensor image" not in text
+
+
 @pytest.mark.parametrize("suffix,fmt", [(".jpg", "JPEG"), (".tif", "TIFF"), (".png", "PNG")])
 def test_a_photograph_shows_develop_and_every_stage_before(suffix, fmt, tmp_path):
     """develop's record and history, the stage that made its input included (bias here)."""

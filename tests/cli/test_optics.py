@@ -25,6 +25,23 @@ def test_prints_the_figures_and_writes_json(tmp_path):
     assert doc["provenance"]["inputs"][0]["name"] == "paper_table2.yaml"
 
 
+def test_the_figures_are_printed_only_once_the_json_landed(tmp_path, monkeypatch):
+    # audit 8 E8 (every command): the report was printed, then the JSON's landing failed
+    import errno
+    import os
+
+    from plenocli.pipeline import records
+
+    def disk_full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp_path / "rec"))
+
+    monkeypatch.setattr(records, "write_records", disk_full)
+    out = tmp_path / "t2.json"
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--sensor-mm", "3.6", "--json", str(out)])
+    assert res.exit_code == 1 and "no space left" in res.output
+    assert "effective focal length" not in res.output and not out.exists()
+
+
 def test_bad_lens_file_is_one_line_and_leaves_nothing(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("surfaces:\n  - {radius: 3.0, glass: unobtainium, thickness: 1}\n")

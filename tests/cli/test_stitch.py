@@ -289,3 +289,23 @@ def test_a_weak_false_registration_is_refused_not_written(tmp_path):
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "--views",
                                    "L,R", "-o", str(out / "pano.tif")])
     assert res.exit_code == 0, res.output
+
+
+def test_a_saved_transform_given_as_the_rig_is_named_for_what_it_is(tmp_path):
+    # audit 9 E12: "the rig has an unknown key 'provenance'"
+    views, _ = _saved_transform(tmp_path)
+    out = tmp_path / "q.tif"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "--rig", str(tmp_path / "t.json"),
+                                   "-o", str(out)])
+    assert res.exit_code == 1 and not out.exists()
+    assert res.output.strip() == (f"Error: {tmp_path / 't.json'} is a stitch transform (saved by "
+                                  "--transform-out), not a rig: pass it with --transform-in")
+
+
+def test_an_option_taken_as_the_value_of_the_one_before_is_said_so(tmp_path):
+    # audit 9 E12: `--linear -o x.tif` said "'-o' is written as TIF; give a name ending in .tif"
+    res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "v.tif"), "--report", "-o",
+                                   str(tmp_path / "p.tif")])
+    assert res.exit_code == 2
+    assert ("Invalid value for '--report': got the option '-o' as its value; give --report its "
+            "own value (--report FILE)") in res.output

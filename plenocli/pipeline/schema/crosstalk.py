@@ -66,6 +66,9 @@ def check(params: dict, given: Collection[str]) -> None:
         refuse_unused(PARAMS, given, ["views", "mixing_out"],
                       "does not apply to the --mask-widths sweep (it refocuses its own left and "
                       "right views); measure the mixing on refocused views of masked whites")
+        refuse_unused(PARAMS, given, ["preview"],
+                      "is not drawn for the --mask-widths sweep (its r per mask width is in the "
+                      "JSON report); leave it out")
         if not params.get("grid"):
             raise OptionError("--mask-widths needs --grid: the lens grid of the capture (YAML "
                               "from plenocli calibrate, or the camera's RayCalibData XML)")

@@ -69,6 +69,17 @@ def _refuse_hidden_mosaic(path: str, image: np.ndarray) -> None:
                          "calibrate the decoded frames")
 
 
+def _refuse_unknown_pixels(path: str, image: np.ndarray) -> None:
+    """The lattice search reads every pixel (a spectrum, the micro-images' borders): NaN pixels
+    (clipped by bias, below flat's --floor) cannot be measured around, so they are refused with
+    the file that has none (inf too: no reader makes it)."""
+    unknown = int(np.count_nonzero(~np.isfinite(image)))
+    if unknown:
+        raise InputError(f"{path}: {unknown} pixel(s) are unknown (NaN: clipped, or below "
+                         "flat's --floor); calibrate reads every pixel: give the decode output "
+                         "of this capture (its black level is subtracted here)")
+
+
 def _is_xml(path: str) -> bool:
     with open(path, "rb") as f:
         return Path(path).suffix.lower() == ".xml" or f.read(64).lstrip().startswith(b"<")
@@ -84,6 +95,7 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
                          "use --lattice hex or auto")
     image, cfa, black, origin, meta = load_image(input)
+    _refuse_unknown_pixels(input, image)
     if cfa is None:
         _refuse_hidden_mosaic(input, image)
     other = gridfile.read_grid(compare, image_shape=image.shape) if compare else None

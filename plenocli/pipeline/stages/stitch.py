@@ -150,7 +150,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate)
         # a side file may make the panorama refused, never wrong; a registration is checked
         # the same way (a weak false match, correlation just over the floor, lines up nowhere)
-        _verified(verify.check_alignment, stack, result, **_claim(transform_in, rig))
+        _verified(verify.check_alignment, stack, result,
+                  **_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                       overlap_tolerance=overlap_tolerance)
@@ -179,8 +180,12 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
              ",".join(names), width, height, _alignment(rep))
 
 
-def _claim(transform_in: str | None, rig: str | None) -> dict:
+def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0) -> dict:
     """What placed the views, as verify.check_alignment names it, and what to do if it fails."""
+    if rig and distortion:  # the user's K1 moves the views the rig places
+        return {"what": f"the rig {rig} on views with --distortion {distortion:g} removed",
+                "remedy": "check --distortion, or leave it out (the rig places the views as "
+                          "the camera recorded them); else register the views without the rig"}
     if transform_in or rig:
         return {"what": f"the transform {transform_in}" if transform_in else f"the rig {rig}"}
     return {"what": "the registration", "remedy": "a false match, or views that no shift "
