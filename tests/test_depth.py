@@ -210,6 +210,23 @@ def test_disparity_a_pixel_inside_the_search_bound_reads_right_or_unknown(quad, 
         for k, d in enumerate(disparities):
             cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
             known = np.isfinite(cut)
-            assert known.mean() > 0.9, (names, d, known.mean())
+            assert known.mean() > 0.8, (names, d, known.mean())  # measured >= 0.85
             # measured <= 0.144 (quad y, averaged pairs); it read 0.5 out before
             assert abs(np.median(cut[known]) - d) <= 0.15, (names, d, np.median(cut[known]))
+
+
+@pytest.mark.parametrize("g", [1.3, 1.7, -1.3])
+def test_a_plane_nearer_than_neighbours_share_content_is_unknown(g):
+    """At |g| 1.3-1.7 neighbouring micro-images (pitch 20.2, usable over about 12 px) are
+    shifted past their common content: their g read 1.55-1.78 with 98 % known; now the search
+    stops where the usable discs still overlap and those lenses are unknown."""
+    frame, grid, _ = _scene("plane", g=g, seed=1)
+    lenses = depth_map(frame, grid, s=S, g_range=(1.1, 8) if g > 0 else (-8, -1.1)).lenses
+    known = np.isfinite(lenses.g)
+    assert known.mean() < 0.25, (known.mean(), np.median(lenses.g[known]))  # measured 0.03-0.05
+
+
+def test_a_range_wholly_nearer_than_neighbours_share_content_is_refused():
+    frame, grid, _ = _scene("plane", g=1.3, seed=1)
+    with pytest.raises(ValueError, match=r"neighbours share content for \|g\| > 2\.19 only"):
+        depth_map(frame, grid, s=S, g_range=(1.1, 2.1))
