@@ -26,6 +26,7 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
+from plenocli.io.folderlock import folders_locked
 from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
@@ -116,6 +117,12 @@ class Stage:
         started = records.input_states(inputs, hashed=False)
 
         folders = self.paths(params, self.folder_outputs)
+        with folders_locked(folders):
+            yield from self._filled(params, inputs, outputs, started, folders)
+
+    def _filled(self, params, inputs, outputs, started, folders) -> Iterator[None]:
+        """guard's run: its outputs landed together with their records; the earlier files of
+        each output folder that this run did not write again removed."""
         earlier = {folder: records.read_record(folder) for folder in folders}
         landing: list = []
 

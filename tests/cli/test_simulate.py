@@ -183,3 +183,24 @@ def test_a_folder_given_as_a_link_gets_its_record_and_is_filled_again_whole(tmp_
     assert invoke("dualpixel", "-o", tmp_path / "link", "--pixels", 64).exit_code == 0
     names = {p.name for p in (tmp_path / "real").iterdir()}
     assert "white.tif" not in names and "capture.dng" in names
+
+
+def test_a_run_filling_a_folder_another_run_fills_waits_for_it(tmp_path):
+    """Two simulate runs into one folder at the same moment each read the folder's record
+    before the other landed, and each kept the other's files: a mixed set, both exit 0 (5 of
+    16 tries). A run now waits while another fills the folder (the lock held here)."""
+    import subprocess
+    import sys
+
+    from plenocli.io.folderlock import folders_locked
+
+    out = tmp_path / "cc"
+    with folders_locked([out]):
+        proc = subprocess.Popen([sys.executable, "-m", "plenocli", "simulate", "hexgrid-white",
+                                 "-o", str(out), "--param", "size=100"],
+                                stderr=subprocess.PIPE, text=True)
+        first = proc.stderr.readline()
+        assert "waiting for another run writing into" in first, first
+        assert not (out / "truth.json").exists()
+    assert proc.wait(timeout=120) == 0, proc.stderr.read()
+    assert sorted(p.name for p in out.iterdir()) == ["grid_true.xml", "truth.json", "white.tif"]
