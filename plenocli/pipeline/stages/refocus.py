@@ -20,6 +20,9 @@ from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 
+MIN_COVERED = 0.25  # share of the output that must be covered (as depth's MIN_KNOWN)
+
+
 def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = "4",
         view: str = "full", mask_width: float = 2.0, kernel: str = "lanczos3",
         radius: float | None = None, min_weight: float = 0.25,
@@ -76,6 +79,12 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
     stack = np.stack(out_pages).astype(np.float32)
     covered = float(np.isfinite(stack).mean())
+    if covered < MIN_COVERED:
+        raise InputError(f"refocus: only {100 * covered:.1f} % of the output is covered (the "
+                         f"rest has no pixel of a micro-image within reach); --radius, "
+                         "--view, --mask-width or --s leave too few pixels of the "
+                         f"{framing.grid.pitch_px:.3g} px micro-images: use more of them "
+                         "(a larger --radius, a smaller --s); nothing was written")
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=None, origin=None, black_level=None, white_level=None,
         active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
