@@ -128,7 +128,7 @@ class Stage:
 
         def record(landed):
             landing.extend(landed)
-            records.write_records(self.name, params, inputs, outputs,
+            records.write_records(self.name, self.recorded(params), inputs, outputs,
                                   records.with_digests(started, inputs), landed)
 
         check = getattr(self.schema, "check", None)
@@ -150,10 +150,18 @@ class Stage:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""
         return {name: self.paths(params, (name,)) for name in roles}
 
+    def recorded(self, params: dict[str, Any]) -> dict[str, Any]:
+        """What an output's record holds of ``params``: the declared parameters and, where
+        the schema resolves more (``recorded``: simulate's kind parameters, defaults
+        included), those too."""
+        more = getattr(self.schema, "recorded", None)
+        return {**params, **more(params)} if more is not None else params
+
     def why_stale(self, params: dict[str, Any]) -> str | None:
         """Why the step's existing outputs cannot stand for a run with ``params`` now (their
         records, :mod:`plenocli.pipeline.records`); None when they can."""
-        return records.why_stale(self.name, params, self.by_role(params, self.inputs),
+        return records.why_stale(self.name, self.recorded(params),
+                                 self.by_role(params, self.inputs),
                                  self.by_role(params, self.outputs))
 
 

@@ -204,3 +204,24 @@ def test_a_run_filling_a_folder_another_run_fills_waits_for_it(tmp_path):
         assert not (out / "truth.json").exists()
     assert proc.wait(timeout=120) == 0, proc.stderr.read()
     assert sorted(p.name for p in out.iterdir()) == ["grid_true.xml", "truth.json", "white.tif"]
+
+
+def test_the_record_holds_the_kinds_parameters_defaults_included(tmp_path):
+    """The record and truth.json's provenance held only the options given (--param size=96),
+    not the kind's own defaults (pitch, angle, jitter): every output records its fully
+    resolved parameters."""
+    from plenocli.pipeline.registry import get_stages
+
+    out = tmp_path / "hx"
+    result = CliRunner().invoke(cli, ["simulate", "hexgrid-white", "-o", str(out), "--param",
+                                      "size=96"])
+    assert result.exit_code == 0, result.output
+    want = {"size": 96, "pitch_px": 20.2, "angle_deg": 7.0, "jitter_px": 0.05, "cfa": "RGGB",
+            "lattice": "hex", "seed": 0}
+    record = json.loads((tmp_path / ".hx.plenocli.json").read_text())
+    assert record["parameters"]["kind_parameters"] == want
+    provenance = json.loads((out / "truth.json").read_text())["provenance"]["parameters"]
+    assert {k: provenance[k] for k in want} == want
+    params = {"kind": "hexgrid-white", "output": str(out), "seed": 0, "pixels": None,
+              "rays": None, "no_prisms": False, "param": ("size=96",)}
+    assert get_stages()["simulate"].why_stale(params) is None   # up to date as recorded
