@@ -123,13 +123,25 @@ class Stage:
     def _filled(self, params, inputs, outputs, started, folders) -> Iterator[None]:
         """guard's run: its outputs landed together with their records; the earlier files of
         each output folder that this run did not write again removed."""
-        earlier = {folder: records.read_record(folder) for folder in folders}
+        # a folder reached by another name (a symbolic link, or the folder a link points to)
+        # has its earlier run's record under that name
+        earlier = {(folder, name): records.read_record(name) for folder in folders
+                   for name in dict.fromkeys([folder, Path(os.path.realpath(folder))])}
         landing: list = []
 
         def record(landed):
             landing.extend(landed)
-            records.write_records(self.name, self.recorded(params), inputs, outputs,
-                                  records.with_digests(started, inputs), landed)
+            states = records.with_digests(started, inputs)
+            records.write_records(self.name, self.recorded(params), inputs, outputs, states,
+                                  landed)
+            # a folder written through a link gets its record under its own name too, where
+            # a run given that name looks for the earlier run's
+            real = {role: [Path(os.path.realpath(p)) for p in outputs[role]
+                           if os.path.realpath(p) != os.path.abspath(p)]
+                    for role in self.folder_outputs}
+            if any(real.values()):
+                records.write_records(self.name, self.recorded(params), inputs, real, states,
+                                      landed)
 
         check = getattr(self.schema, "check", None)
         unused = unused_in(check, params) if check is not None else frozenset()
@@ -140,11 +152,11 @@ class Stage:
         finally:
             RESOLVED.reset(token)
             UNUSED.reset(hidden)
-        for folder in folders:  # landed: the earlier run's files it did not write again go
-            gone = records.remove_replaced(folder, earlier[folder], landing)
+        for (folder, _), before in earlier.items():  # landed: the earlier run's files
+            gone = records.remove_replaced(folder, before, landing)  # it did not write again
             if gone:
                 log.info("%s: removed %s of the earlier %s run in %s", self.name,
-                         ", ".join(sorted(gone)), earlier[folder]["stage"], folder)
+                         ", ".join(sorted(gone)), before["stage"], folder)
 
     def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""

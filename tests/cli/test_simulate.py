@@ -225,3 +225,22 @@ def test_the_record_holds_the_kinds_parameters_defaults_included(tmp_path):
     params = {"kind": "hexgrid-white", "output": str(out), "seed": 0, "pixels": None,
               "rays": None, "no_prisms": False, "param": ("size=96",)}
     assert get_stages()["simulate"].why_stale(params) is None   # up to date as recorded
+
+
+@pytest.mark.parametrize("first", ["real", "link"])
+def test_a_folder_filled_by_its_name_and_through_a_link_holds_one_set(tmp_path, first):
+    """The earlier run's files are removed by what its record lists; the record was keyed by
+    the name given, so a run through a symbolic link to the folder (or by the folder's own
+    name after one through a link) found none and left a mixed set, exit 0."""
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    names = [real, link] if first == "real" else [link, real]
+    runner = CliRunner()
+    for out, kind, extra in ((names[0], "lenslet-depth", []),
+                             (names[1], "hexgrid-white", ["--param", "size=96"])):
+        result = runner.invoke(cli, ["simulate", kind, "-o", str(out), *extra])
+        assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in real.iterdir()) == ["grid_true.xml", "truth.json",
+                                                       "white.tif"]
