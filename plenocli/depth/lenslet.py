@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from plenocli.depth import kernels as kn
+from plenocli.depth.nearlimit import drop_alone, measurable_q
 from plenocli.model.lensgrid import LensGrid
 
 RINGS = {"hex": ([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)],
@@ -49,7 +50,6 @@ USABLE_LEVEL = 0.5    # micro-image pixels below this share of the profile's pea
 MIN_JUDGED = 10       # lenses in and out of their type's range needed to judge the ranges
 OVERLAP_RISE = 0.05   # a mean micro-image this much brighter than nearer its centre: overlap
 MIN_SHIFT_PX = 0.5    # smallest shift between neighbouring micro-images that measures a g
-MIN_SHARED = 0.05     # share of the usable disc neighbours must have in common at the nearest g
 
 
 @dataclass(frozen=True)
@@ -212,8 +212,8 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
         coarse, fine, baseline = ring2[:len(ring2) // 2], ring2, math.sqrt(3)
     q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
     q_trusted = math.inf
-    if grid.lens_type_of_coset is None:  # multi-focus arrays: see _measurable_q
-        q_lo, q_hi, q_trusted = _measurable_q(q_lo, q_hi, grid.pitch_px, r_use)
+    if grid.lens_type_of_coset is None:  # multi-focus arrays: see measurable_q
+        q_lo, q_hi, q_trusted = measurable_q(q_lo, q_hi, grid.pitch_px, r_use, SHIFT_STEP_PX)
     n_q = max(3, int(math.ceil((q_hi - q_lo) * baseline * grid.pitch_px / SHIFT_STEP_PX)) + 1)
     qs = np.linspace(q_lo, q_hi, n_q)
     # q = 0 (no shift: the scene at infinity, or no scene) scored too: see _coarse
@@ -235,7 +235,7 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
         prefer, used = _in_focus(flat, indices, centres, r_use, g, confidence,
                                  grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
     if math.isfinite(q_trusted):
-        g = _drop_alone(g, neighbours(indices, ring1))
+        g = drop_alone(g, neighbours(indices, ring1))
     g = lens_median(g, confidence, neighbours(indices, ring1), prefer=prefer)
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used)
 
@@ -284,16 +284,6 @@ def _sharpness(flat: np.ndarray, centres: np.ndarray, r_use: float) -> np.ndarra
     c = np.clip(np.rint(centres[:, 0]).astype(np.int64), 0, flat.shape[1] - 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count[r, c] > 0.5, total[r, c] / count[r, c], np.nan)
-
-
-def _drop_alone(g: np.ndarray, nb: np.ndarray) -> np.ndarray:
-    """g without the lenses most of whose first ring found none. Where a search is cut short
-    (_measurable_q), the lenses whose depth lies past the cut still find a minimum here and
-    there by chance (5-10 % of a plane at g 1.3-2.0, wrong by 0.3-1.8); where micro-images
-    share content, their neighbours find it too."""
-    ring = np.append(g, np.nan)[np.where(nb >= 0, nb, -1)]
-    alone = np.isfinite(ring).sum(axis=1) < 0.5 * (nb >= 0).sum(axis=1)
-    return np.where(alone, np.nan, g)
 
 
 def lens_median(g: np.ndarray, confidence: np.ndarray, nb: np.ndarray,
@@ -404,42 +394,6 @@ def contradicted_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> SignEvi
     except ValueError:  # too few lenses in the region to judge
         return None
     return _other_sign(crop, sub, ours, lenses)
-
-
-def _overlap_share(shift: float, radius: float) -> float:
-    """Share of a disc of ``radius`` that the same disc moved by ``shift`` covers."""
-    h = min(1.0, shift / (2 * radius))
-    return (2 * math.acos(h) - 2 * h * math.sqrt(1 - h * h)) / math.pi
-
-
-def _measurable_q(q_lo: float, q_hi: float, pitch_px: float, r_use: float
-                  ) -> tuple[float, float, float]:
-    """The search's (q_lo, q_hi) cut at the largest |q| (nearest |g|) whose shift between
-    neighbours ``pitch_px`` apart still leaves two usable discs MIN_SHARED in common, and the
-    largest |q| trusted: one candidate step (SHIFT_STEP_PX) inside a cut, inf without one.
-    Past the cut neighbours share too little content and the best match lands near where
-    they last do (usable disc 11.7 px, pitch 20.2: a plane at g 1.3 read 1.57, 1.5 read
-    1.66, 1.7 read 1.78, 98 % known), so a lens found there is unknown (now 5-10 % known;
-    from g 2.3 on 98 % as before). ValueError when the whole range lies past the cut.
-
-    Not applied to a multi-focus array, matched across the second ring (sqrt(3) pitches):
-    its cut would lie at g 3.4 on the simulator, whose slanted plane reads within 0.07-0.16
-    RMS down to g 2.5 and would lose that part to a fifth of its lenses, wrong by 1.5."""
-    lo, hi = 0.0, 2 * r_use
-    for _ in range(40):  # the share falls monotonically with the shift
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _overlap_share(mid, r_use) >= MIN_SHARED else (lo, mid)
-    q_max = lo / pitch_px
-    trusted = q_max - SHIFT_STEP_PX / pitch_px
-    if min(abs(q_lo), abs(q_hi)) >= trusted:
-        g_lo, g_hi = sorted((1 / q_lo, 1 / q_hi))
-        raise ValueError(f"g range {g_lo:g}:{g_hi:g} lies nearer than these micro-images "
-                         f"measure: usable over {2 * r_use:.1f} px of a {pitch_px:.4g} px "
-                         f"pitch, neighbours share content for |g| > {1 / trusted:.3g} only; "
-                         "search farther")
-    if max(abs(q_lo), abs(q_hi)) <= q_max:
-        return q_lo, q_hi, math.inf
-    return max(q_lo, -q_max), min(q_hi, q_max), trusted
 
 
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:

@@ -19,7 +19,6 @@ from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, 
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
-
 MIN_COVERED = 0.25  # share of the output that must be covered (as depth's MIN_KNOWN)
 
 
@@ -78,13 +77,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
                   radius=radius, min_weight=min_weight, depth=depth)
     record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
     stack = np.stack(out_pages).astype(np.float32)
-    covered = float(np.isfinite(stack).mean())
-    if covered < MIN_COVERED:
-        raise InputError(f"refocus: only {100 * covered:.1f} % of the output is covered (the "
-                         f"rest has no pixel of a micro-image within reach); --radius, "
-                         "--view, --mask-width or --s leave too few pixels of the "
-                         f"{framing.grid.pitch_px:.3g} px micro-images: use more of them "
-                         "(a larger --radius, a smaller --s); nothing was written")
+    covered = _covered(stack, framing.grid.pitch_px)
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=None, origin=None, black_level=None, white_level=None,
         active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
@@ -107,6 +100,18 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
                   protect=protect, colour=meta.get("colour"))
+
+
+def _covered(stack: np.ndarray, pitch_px: float) -> float:
+    """The share of the output covered, or InputError under MIN_COVERED."""
+    covered = float(np.isfinite(stack).mean())
+    if covered < MIN_COVERED:
+        raise InputError(f"refocus: only {100 * covered:.1f} % of the output is covered (the "
+                         f"rest has no pixel of a micro-image within reach); --radius, "
+                         "--view, --mask-width or --s leave too few pixels of the "
+                         f"{pitch_px:.3g} px micro-images: use more of them (a larger "
+                         "--radius, a smaller --s); nothing was written")
+    return covered
 
 
 def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[float], *,
