@@ -87,16 +87,13 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
                  "grid_moved_px": None if moved is None else list(moved),
                  "grid_checked": checked, "covered_fraction": covered},
         sharpness={"measure": "mean(Lap(I_s)^2) / var(I_s), I_s = Gaussian(sigma = s * pitch / 2)",
-                   "lens_period_px": period, "scores": scores, "best_g": best,
-                   "note": "the g of the highest score, not a measured depth: on vignetted "
-                           "micro-images it lies up to 0.5 below the plane's g (docs/refocus.md)"})
+                   "lens_period_px": period, "scores": scores, "best_g": best})
     protect = (input, grid) + ((depth,) if depth else ())
     tiffio.write_image(output, stack, out_meta, protect=protect)
     log.info("refocus: %s -> %s (%d page(s) of %d x %d, view %s, %.1f %% covered%s)",
              shown(input), shown(output), stack.shape[0], stack.shape[2], stack.shape[1], view,
              100 * covered,
-             f", highest focus score at g = {best:g} (a focus measure, not a depth: "
-             "plenocli depth measures g)" if sweep and best is not None else "")
+             f", sharpest g = {best:g}" if sweep and best is not None else "")
     if preview:
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
                   protect=protect, colour=meta.get("colour"))
