@@ -138,8 +138,10 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     if not np.isfinite(result.g).any():
         raise InputError(f"depth: no micro-image of {input} matched its neighbours with "
                          f"confidence >= {min_confidence:g} for g in {g_range[0]:g}:"
-                         f"{g_range[1]:g}; check the grid, or widen --g (a Galilean camera, "
-                         "with inverted micro-images, needs a negative range such as -8:-2)")
+                         f"{g_range[1]:g} (the depth lies at a bound of the search or nearer "
+                         "than the micro-images measure, or the frame has no texture): widen "
+                         "the range (--g; a Galilean camera, with inverted micro-images, "
+                         "needs a negative one such as -8:-2), or check the grid")
     lens = result.lenses
     info = {"method": "disparity between neighbouring micro-images, q = 1/g",
             "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
