@@ -225,6 +225,42 @@ def test_disparity_a_pixel_inside_the_search_bound_reads_right_or_unknown(quad, 
         for k, d in enumerate(disparities):
             cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
             known = np.isfinite(cut)
-            assert known.mean() > 0.9, (names, d, known.mean())
+            assert known.mean() > 0.8, (names, d, known.mean())  # measured >= 0.85
             # measured <= 0.144 (quad y, averaged pairs); it read 0.5 out before
             assert abs(np.median(cut[known]) - d) <= 0.15, (names, d, np.median(cut[known]))
+
+
+@pytest.mark.parametrize(("g", "g_range"), [(1.3, (1.1, 8)), (1.7, (1.1, 8)),
+                                            (-1.3, (-8, -1.1)), (1.9, (2, 8)),
+                                            (1.105, (2, 8))])
+def test_a_plane_nearer_than_neighbours_share_content_is_unknown(g, g_range):
+    """At |g| 1.3-1.7 neighbouring micro-images (pitch 20.2, usable over about 12 px) are
+    shifted past their common content: their g read 1.55-1.78 with 98 % known; now the search
+    stops where the usable discs still overlap and those lenses are unknown. A plane just
+    nearer than the range's own near bound read inside it (1.9 as 2.06 with --g 2:8, 59 %
+    known; 1.105 as 2.36, 31 %): within a candidate step of the near bound g is unknown too."""
+    frame, grid, _ = _scene("plane", g=g, seed=1)
+    lenses = depth_map(frame, grid, s=S, g_range=g_range).lenses
+    known = np.isfinite(lenses.g)
+    assert known.mean() < 0.25, (known.mean(), np.median(lenses.g[known]))  # measured 0.03-0.05
+
+
+def test_a_range_wholly_nearer_than_neighbours_share_content_is_refused():
+    frame, grid, _ = _scene("plane", g=1.3, seed=1)
+    with pytest.raises(ValueError, match=r"neighbours share content for \|g\| > 2\.19 only"):
+        depth_map(frame, grid, s=S, g_range=(1.1, 2.1))
+
+
+def test_depth_with_the_grid_calibrate_measures_on_the_same_scene():
+    """calibrate on a scene: its content moves each micro-image's symmetry centre (0.33 px RMS
+    here), and the lenslet-depth scene's residuals from the lattice were small enough to pass
+    for a white's: depth then used those centres and read the plane 0.14 off (median). The
+    micro-images are not point-symmetric, so it is a scene and the centres are the lattice's."""
+    from plenocli import calibration
+
+    frame, grid, truth = _scene("plane", g=4.0, seed=1)
+    measured, report = calibration.calibrate(frame)
+    assert not report.fit.centres_refined
+    found = depth_map(frame, measured, s=S, g_range=(2, 8)).g
+    ok = np.isfinite(found) & _inner(truth.shape)
+    assert np.median(np.abs(found[ok] - truth[ok])) <= 0.03  # measured 0.01

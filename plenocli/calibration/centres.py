@@ -90,6 +90,62 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
     return out_x, out_y, ok
 
 
+@numba.njit(parallel=True, cache=True)
+def _asymmetries(values, cx, cy, radius, inner):  # pragma: no cover - compiled
+    """sum w (I(x_k) - I(2c - x_k))^2 over the pixels within ``inner`` x ``radius`` of each
+    centre c / (2 sum w (I(x_k) - mean)^2) over the disc of ``radius`` (w and I(2c - x_k) as
+    in _symmetry_centres); NaN where the disc or its mirror leaves the image."""
+    rows, cols = values.shape
+    out = np.full(cx.shape[0], np.nan)
+    r2 = radius * radius
+    for k in numba.prange(cx.shape[0]):
+        x, y = cx[k], cy[k]
+        r_lo, r_hi = int(np.ceil(y - radius)), int(np.floor(y + radius))
+        c_lo, c_hi = int(np.ceil(x - radius)), int(np.floor(x + radius))
+        if (r_lo < 1 or c_lo < 1 or r_hi > rows - 2 or c_hi > cols - 2
+                or 2 * y - r_hi < 0 or 2 * x - c_hi < 0
+                or 2 * y - r_lo > rows - 2 or 2 * x - c_lo > cols - 2):
+            continue
+        fx2, fy2 = np.floor(2 * x), np.floor(2 * y)
+        fx, fy = 2 * x - fx2, 2 * y - fy2
+        ix2, iy2 = int(fx2), int(fy2)
+        sw = swv = swvv = swe = 0.0
+        for r in range(r_lo, r_hi + 1):
+            dy = r - y
+            j0 = iy2 - r
+            for c in range(c_lo, c_hi + 1):
+                dx = c - x
+                t = max(1.0 - (dx * dx + dy * dy) / r2, 0.0)
+                w = t * t
+                i0 = ix2 - c
+                top = values[j0, i0] + fx * (values[j0, i0 + 1] - values[j0, i0])
+                bot = values[j0 + 1, i0] + fx * (values[j0 + 1, i0 + 1] - values[j0 + 1, i0])
+                e = values[r, c] - (top + fy * (bot - top))
+                v = values[r, c]
+                sw += w
+                swv += w * v
+                swvv += w * v * v
+                if dx * dx + dy * dy <= inner * inner * r2:
+                    swe += w * e * e
+        spread = swvv - swv * swv / sw if sw > 0 else 0.0
+        if spread > 0:
+            out[k] = swe / (2 * spread)
+    return out
+
+
+def asymmetries(flat: np.ndarray, centres: np.ndarray, radius: float, *,
+                inner: float = 1.0) -> np.ndarray:
+    """(K,) how far each micro-image is from point symmetry about its centre (K, 2): the
+    squared differences from its mirror image within ``inner`` x ``radius`` over twice its
+    variance within ``radius`` (the rim, which carries most of a white's variance, sets the
+    scale, and the inside, where a scene's content lies, is compared): 0 round, about 1
+    uncorrelated with its mirror image; NaN at the border."""
+    return _asymmetries(np.ascontiguousarray(flat, np.float32),
+                        np.ascontiguousarray(centres[:, 0], np.float64),
+                        np.ascontiguousarray(centres[:, 1], np.float64), float(radius),
+                        float(inner))
+
+
 def refine_centres(flat: np.ndarray, grid: LensGrid, *, window: float = 0.6,
                    n_iter: int = 5, near: tuple[np.ndarray, float] | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

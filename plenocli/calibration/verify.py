@@ -463,6 +463,9 @@ def doubt(verdict: Verdict) -> str | None:
     if verdict.contrast < MIN_CONTRAST or verdict.contrast < NULL_RATIO * verdict.control:
         return "no micro-lens lattice found (no hypothesis shows micro-image borders repeated " \
                "over the frame)"
+    if verdict.undecided and not verdict.rivals:   # see search.judged
+        return (f"unsure lattice: {verdict.lattice.describe()} (contrast "
+                f"{verdict.contrast:.2f}) does not hold still when measured again")
     if verdict.undecided or verdict.margin < WIN_RATIO:
         rival, c = verdict.rivals[0]
         return (f"unsure lattice: {verdict.lattice.describe()} (contrast "

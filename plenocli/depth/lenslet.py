@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from plenocli.depth import kernels as kn
+from plenocli.depth.nearlimit import drop_alone, measurable_q
 from plenocli.model.lensgrid import LensGrid
 
 RINGS = {"hex": ([(1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)],
@@ -210,6 +211,9 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
         # coset), blurred alike at every depth, so the match is not pulled by a blur difference
         coarse, fine, baseline = ring2[:len(ring2) // 2], ring2, math.sqrt(3)
     q_lo, q_hi = sorted((1.0 / gmin, 1.0 / gmax))
+    q_trusted = math.inf
+    if grid.lens_type_of_coset is None:  # multi-focus arrays: see measurable_q
+        q_lo, q_hi, q_trusted = measurable_q(q_lo, q_hi, grid.pitch_px, r_use, SHIFT_STEP_PX)
     n_q = max(3, int(math.ceil((q_hi - q_lo) * baseline * grid.pitch_px / SHIFT_STEP_PX)) + 1)
     qs = np.linspace(q_lo, q_hi, n_q)
     # q = 0 (no shift: the scene at infinity, or no scene) scored too: see _coarse
@@ -223,12 +227,15 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
                     q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
+    at_bound |= np.abs(q) > q_trusted
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
     prefer, used = None, None
     if grid.lens_type_of_coset is not None:
         prefer, used = _in_focus(flat, indices, centres, r_use, g, confidence,
                                  grid.lens_types(indices[:, 0], indices[:, 1]), type_ranges)
+    if math.isfinite(q_trusted):
+        g = drop_alone(g, neighbours(indices, ring1))
     g = lens_median(g, confidence, neighbours(indices, ring1), prefer=prefer)
     return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used)
 

@@ -115,6 +115,28 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
     return Disparity(d, conf)
 
 
+def consistent_share(disparity: np.ndarray, confidence: np.ndarray, *,
+                     clear: float = 0.5, tolerance: float = 1.0, reach: int = 3) -> float:
+    """Share of the clear matches (confidence >= ``clear``) whose disparity agrees, within
+    ``tolerance`` px, with the mean of the clear matches around them: in a square of
+    ``reach`` WINDOWs, less the WINDOW of their own (whose matches share their pixels, so
+    agree whatever they measure). 1.0 when there are no clear matches."""
+    d = np.asarray(disparity, np.float32)
+    sure = (np.asarray(confidence) >= clear) & np.isfinite(d)
+    if not sure.any():
+        return 1.0
+    value = np.where(sure, d, 0).astype(np.float32)
+
+    def sums(img, side):
+        return cv2.boxFilter(img, -1, (side, side), normalize=False,
+                             borderType=cv2.BORDER_CONSTANT)[sure]
+
+    outer, inner = reach * WINDOW, WINDOW
+    count = sums(sure.astype(np.float32), outer) - sums(sure.astype(np.float32), inner)
+    local = (sums(value, outer) - sums(value, inner)) / np.maximum(count, 1)
+    return float(np.mean((count > 0.5) & (np.abs(d[sure] - local) < tolerance)))
+
+
 def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
     """Disparity and confidence of one tile: the coarse search on the tile shrunk by two
     (disparities halve, so do the shifts to try, on a quarter of the pixels), then

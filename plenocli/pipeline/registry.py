@@ -26,6 +26,7 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError
 from plenocli.io.atomic import check_outputs, outputs_together
+from plenocli.io.folderlock import folders_locked
 from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
@@ -116,15 +117,33 @@ class Stage:
         started = records.input_states(inputs, hashed=False)
 
         folders = self.paths(params, self.folder_outputs)
-        earlier = {folder: records.read_record(folder) for folder in folders}
+        with folders_locked(folders):
+            yield from self._filled(params, inputs, outputs, started, folders)
+
+    def _filled(self, params, inputs, outputs, started, folders) -> Iterator[None]:
+        """guard's run: its outputs landed together with their records; the earlier files of
+        each output folder that this run did not write again removed."""
+        # a folder reached by another name (a symbolic link, or the folder a link points to)
+        # has its earlier run's record under that name
+        earlier = {(folder, name): records.read_record(name) for folder in folders
+                   for name in dict.fromkeys([folder, Path(os.path.realpath(folder))])}
         landing: list = []
 
         unused = self.unused(params)
 
         def record(landed):
             landing.extend(landed)
-            records.write_records(self.name, _without(params, unused), inputs, outputs,
-                                  records.with_digests(started, inputs), landed)
+            states = records.with_digests(started, inputs)
+            records.write_records(self.name, self.recorded(params), inputs, outputs, states,
+                                  landed)
+            # a folder written through a link gets its record under its own name too, where
+            # a run given that name looks for the earlier run's
+            real = {role: [Path(os.path.realpath(p)) for p in outputs[role]
+                           if os.path.realpath(p) != os.path.abspath(p)]
+                    for role in self.folder_outputs}
+            if any(real.values()):
+                records.write_records(self.name, self.recorded(params), inputs, real, states,
+                                      landed)
 
         token, hidden = RESOLVED.set(dict(params)), UNUSED.set(unused)
         try:
@@ -133,11 +152,11 @@ class Stage:
         finally:
             RESOLVED.reset(token)
             UNUSED.reset(hidden)
-        for folder in folders:  # landed: the earlier run's files it did not write again go
-            gone = records.remove_replaced(folder, earlier[folder], landing)
+        for (folder, _), before in earlier.items():  # landed: the earlier run's files
+            gone = records.remove_replaced(folder, before, landing)  # it did not write again
             if gone:
                 log.info("%s: removed %s of the earlier %s run in %s", self.name,
-                         ", ".join(sorted(gone)), earlier[folder]["stage"], folder)
+                         ", ".join(sorted(gone)), before["stage"], folder)
 
     def by_role(self, params: dict[str, Any], roles: tuple[str, ...]) -> dict[str, list[Path]]:
         """The file paths of each parameter named in ``roles`` ([] when not given)."""
@@ -150,10 +169,18 @@ class Stage:
         check = getattr(self.schema, "check", None)
         return unused_in(check, params) if check is not None else frozenset()
 
+    def recorded(self, params: dict[str, Any]) -> dict[str, Any]:
+        """What an output's record holds of ``params``: the declared parameters with an effect
+        in this run (:meth:`unused`) and, where the schema resolves more (``recorded``:
+        simulate's kind parameters, defaults included), those too."""
+        kept = _without(params, self.unused(params))
+        more = getattr(self.schema, "recorded", None)
+        return {**kept, **more(params)} if more is not None else kept
+
     def why_stale(self, params: dict[str, Any]) -> str | None:
         """Why the step's existing outputs cannot stand for a run with ``params`` now (their
         records, :mod:`plenocli.pipeline.records`); None when they can."""
-        return records.why_stale(self.name, _without(params, self.unused(params)),
+        return records.why_stale(self.name, self.recorded(params),
                                  self.by_role(params, self.inputs),
                                  self.by_role(params, self.outputs))
 

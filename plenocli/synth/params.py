@@ -110,6 +110,16 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> di
     return {key: _as_default(value, accepted[key].default) for key, value in params.items()}
 
 
+def resolved_params(generate: Callable[..., object], params: dict) -> dict:
+    """Every keyword of ``generate``: ``params`` (as :func:`check_params` returns them) over
+    the generator's defaults."""
+    accepted = inspect.signature(generate).parameters
+    defaults = {k: v.default for k, v in accepted.items()
+                if v.default is not inspect.Parameter.empty}
+    return {**defaults, **{key: _as_default(value, accepted[key].default)
+                           for key, value in params.items() if key in accepted}}
+
+
 def _as_default(value, default):
     if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
         return float(value)

@@ -431,3 +431,18 @@ def test_a_grid_calibrated_on_these_very_frames_is_checked(tmp_path):
     assert result.exit_code == 0, result.output
     assert not any("used unchecked" in line for line in said)
     assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is True
+
+
+def test_dual_pixel_views_of_two_fields_are_refused_when_their_matches_scatter(tmp_path):
+    """The simulated dual-pixel + prism camera: A and B look in different directions. 2.75 %
+    of the pixels still match clearly by chance, over the whole +-4 px search, and the map was
+    written 32 % 'known' with exit 0. Those matches disagree with the ones around them (45 %
+    agree within 1 px; a surface's 72-100 %), so nothing is written."""
+    from plenocli.pipeline.stages import bias, decode
+
+    simulate("dualpixel-prism", tmp_path / "p")
+    decode.run(str(tmp_path / "p" / "capture.dng"), str(tmp_path / "f.tif"))
+    bias.run(str(tmp_path / "f.tif"), str(tmp_path / "b.tif"))
+    result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
+    assert result.exit_code == 1 and "do not agree" in result.output, result.output
+    assert not (tmp_path / "d.tif").exists()

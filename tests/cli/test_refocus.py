@@ -104,6 +104,21 @@ def test_a_radius_beyond_the_micro_images_keeps_every_pixel(scene, tmp_path):
     np.testing.assert_array_equal(images[0], images[1])
 
 
+def test_a_radius_that_covers_little_of_the_output_is_refused(scene, tmp_path):
+    """--radius 0.3 px keeps a few pixels of each 20 px micro-image: the image was written
+    with most of it NaN (a fifth covered at radius 0.3, 2 % at smaller ones). Under a
+    quarter covered it is refused, as depth refuses a map mostly unknown."""
+    folder, _ = scene
+    out = tmp_path / "r.tif"
+    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                    "--radius", "0.3", "-o", out)
+    assert result.exit_code == 1 and "of the output is covered" in result.output, result.output
+    assert not out.exists()
+    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                    "--radius", "3", "-o", out)
+    assert result.exit_code == 0, result.output
+
+
 def test_grid_and_frame_sizes_that_disagree(scene, tmp_path):
     folder, _ = scene
     grid = read_grid(folder / "grid.yaml")

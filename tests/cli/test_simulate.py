@@ -183,3 +183,64 @@ def test_a_folder_given_as_a_link_gets_its_record_and_is_filled_again_whole(tmp_
     assert invoke("dualpixel", "-o", tmp_path / "link", "--pixels", 64).exit_code == 0
     names = {p.name for p in (tmp_path / "real").iterdir()}
     assert "white.tif" not in names and "capture.dng" in names
+
+
+def test_a_run_filling_a_folder_another_run_fills_waits_for_it(tmp_path):
+    """Two simulate runs into one folder at the same moment each read the folder's record
+    before the other landed, and each kept the other's files: a mixed set, both exit 0 (5 of
+    16 tries). A run now waits while another fills the folder (the lock held here)."""
+    import subprocess
+    import sys
+
+    from plenocli.io.folderlock import folders_locked
+
+    out = tmp_path / "cc"
+    with folders_locked([out]):
+        proc = subprocess.Popen([sys.executable, "-m", "plenocli", "simulate", "hexgrid-white",
+                                 "-o", str(out), "--param", "size=100"],
+                                stderr=subprocess.PIPE, text=True)
+        first = proc.stderr.readline()
+        assert "waiting for another run writing into" in first, first
+        assert not (out / "truth.json").exists()
+    assert proc.wait(timeout=120) == 0, proc.stderr.read()
+    assert sorted(p.name for p in out.iterdir()) == ["grid_true.xml", "truth.json", "white.tif"]
+
+
+def test_the_record_holds_the_kinds_parameters_defaults_included(tmp_path):
+    """The record and truth.json's provenance held only the options given (--param size=96),
+    not the kind's own defaults (pitch, angle, jitter): every output records its fully
+    resolved parameters."""
+    from plenocli.pipeline.registry import get_stages
+
+    out = tmp_path / "hx"
+    result = CliRunner().invoke(cli, ["simulate", "hexgrid-white", "-o", str(out), "--param",
+                                      "size=96"])
+    assert result.exit_code == 0, result.output
+    want = {"size": 96, "pitch_px": 20.2, "angle_deg": 7.0, "jitter_px": 0.05, "cfa": "RGGB",
+            "lattice": "hex", "seed": 0}
+    record = json.loads((tmp_path / ".hx.plenocli.json").read_text())
+    assert record["parameters"]["kind_parameters"] == want
+    provenance = json.loads((out / "truth.json").read_text())["provenance"]["parameters"]
+    assert {k: provenance[k] for k in want} == want
+    params = {"kind": "hexgrid-white", "output": str(out), "seed": 0, "pixels": None,
+              "rays": None, "no_prisms": False, "param": ("size=96",)}
+    assert get_stages()["simulate"].why_stale(params) is None   # up to date as recorded
+
+
+@pytest.mark.parametrize("first", ["real", "link"])
+def test_a_folder_filled_by_its_name_and_through_a_link_holds_one_set(tmp_path, first):
+    """The earlier run's files are removed by what its record lists; the record was keyed by
+    the name given, so a run through a symbolic link to the folder (or by the folder's own
+    name after one through a link) found none and left a mixed set, exit 0."""
+    real = tmp_path / "real"
+    real.mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    names = [real, link] if first == "real" else [link, real]
+    runner = CliRunner()
+    for out, kind, extra in ((names[0], "lenslet-depth", []),
+                             (names[1], "hexgrid-white", ["--param", "size=96"])):
+        result = runner.invoke(cli, ["simulate", kind, "-o", str(out), *extra])
+        assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in real.iterdir()) == ["grid_true.xml", "truth.json",
+                                                       "white.tif"]

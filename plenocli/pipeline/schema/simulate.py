@@ -89,3 +89,13 @@ def check(params: dict[str, Any], given: Collection[str]) -> None:
         check_params(kind, generator(kind), generator_kwargs(params))
     except ValueError as err:  # a value the kind does not take: a usage error, as for a flag
         raise OptionError(str(err)) from err
+
+
+def recorded(params: dict[str, Any]) -> dict[str, Any]:
+    """The kind's generator parameters as the run resolves them, defaults included (every
+    output records its fully resolved parameters): beside the command's own in the record."""
+    from plenocli.synth import generator
+    from plenocli.synth.params import resolved_params
+
+    return {"kind_parameters": resolved_params(generator(params["kind"]),
+                                               generator_kwargs(params))}

@@ -20,6 +20,7 @@ from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
+MIN_COVERED = 0.25  # share of the output that must be covered (as depth's MIN_KNOWN)
 
 
 def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = "4",
@@ -79,7 +80,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
                   radius=radius, min_weight=min_weight, depth=depth)
     record = stage_record("refocus", params, {"input": input, "grid": grid, "depth": depth})
     stack = np.stack(out_pages).astype(np.float32)
-    covered = float(np.isfinite(stack).mean())
+    covered = _covered(stack, framing.grid.pitch_px)
     out_meta = tiffio.derived_meta(
         meta, record, views=names, cfa=None, origin=None, black_level=None, white_level=None,
         active_area=[0, 0, stack.shape[1], stack.shape[2]], masked_areas=[],
@@ -123,6 +124,18 @@ def _micro_image_falloff(grey: np.ndarray, grid) -> float:
         return 0.0
     values = profile[np.isfinite(profile)]
     return float(1.0 - values.min() / values.max()) if values.size else 0.0
+
+
+def _covered(stack: np.ndarray, pitch_px: float) -> float:
+    """The share of the output covered, or InputError under MIN_COVERED."""
+    covered = float(np.isfinite(stack).mean())
+    if covered < MIN_COVERED:
+        raise InputError(f"refocus: only {100 * covered:.1f} % of the output is covered (the "
+                         f"rest has no pixel of a micro-image within reach); --radius, "
+                         "--view, --mask-width or --s leave too few pixels of the "
+                         f"{pitch_px:.3g} px micro-images: use more of them (a larger "
+                         "--radius, a smaller --s); nothing was written")
+    return covered
 
 
 def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[float], *,

@@ -35,7 +35,7 @@ def simulate(kind: str, output: str | os.PathLike, **params) -> dict:
     Returns the truth as written to ``truth.json`` (with its ``provenance``).
     """
     from plenocli.synth import KIND_NAMES, generator
-    from plenocli.synth.params import check_params
+    from plenocli.synth.params import check_params, resolved_params
 
     if kind not in KIND_NAMES:
         raise ConfigError(f"simulate: unknown kind {kind!r}; use one of {', '.join(KIND_NAMES)}")
@@ -48,7 +48,8 @@ def simulate(kind: str, output: str | os.PathLike, **params) -> dict:
         sim = generate(**params)
     except (ValueError, TypeError) as err:  # parameters that do not go together
         raise OptionError(f"simulate {kind}: {err}") from err
-    record = stage_record("simulate", {"kind": kind, **params}, {})
+    # the kind's defaults too: every output records its fully resolved parameters
+    record = stage_record("simulate", {"kind": kind, **resolved_params(generate, params)}, {})
     truth = {**sim.truth, "provenance": record}
     write_simulation(output, sim.files, truth, record)
     return truth
