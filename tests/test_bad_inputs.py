@@ -469,6 +469,9 @@ CASES = [
     # crosstalk
     ("crosstalk-views-twice", ["crosstalk", "{i}/biased.tif", "--views", "B, B", "-o",
                                "{o}/c.json"], 2, ("'B' is named twice",)),  # audit 9 E3
+    # audit 9 E12: one view named was "holds one view (A; pages R, G, B are its colours)"
+    ("crosstalk-views-one", ["crosstalk", "{i}/biased.tif", "--views", "A", "-o", "{o}/c.json"],
+     2, ("--views names one view (A): cross-talk compares two or more",)),
     ("crosstalk-views-twice-by-number", ["crosstalk", "{i}/biased.tif", "--views", "A,0", "-o",
                                          "{o}/c.json"], 1, ("twice",)),
     ("crosstalk-same-white-twice", ["crosstalk", "{i}/unmasked0.tif", "{i}/unmasked0.tif",

@@ -193,6 +193,25 @@ def test_a_multi_page_tiff_is_refused_not_read_as_its_first_page(tmp_path, secon
         rawio.decode(tmp_path / "two.tif")
 
 
+def test_grey_pages_each_named_by_frames_are_the_frames(tmp_path):
+    """audit 9 E14: two images of a dual-pixel pair (the Pixel 4's PNGs) could not become one
+    A/B file; a TIFF of grey pages of one size and type, one --frames name each, can."""
+    pages = np.random.default_rng(2).integers(0, 4000, (2, 24, 40)).astype(np.uint16)
+    with tifffile.TiffWriter(tmp_path / "pair.tif") as tif:
+        for page in pages:
+            tif.write(page)
+    frames, meta = rawio.decode(tmp_path / "pair.tif", frame_names=["A", "B"])
+    np.testing.assert_array_equal(frames, pages)
+    assert meta["views"] == ["A", "B"]
+    with pytest.raises(InputError, match="or grey pages each named by --frames .2 names"):
+        rawio.decode(tmp_path / "pair.tif")
+    with tifffile.TiffWriter(tmp_path / "mixed.tif") as tif:
+        tif.write(pages[0])
+        tif.write(pages[1].astype(np.float32))
+    with pytest.raises(InputError, match="2 full-size pages"):
+        rawio.decode(tmp_path / "mixed.tif", frame_names=["A", "B"])
+
+
 def test_a_planar_rgb_tiff_decodes_as_its_contiguous_twin(tmp_path):
     """audit 7 E3: PlanarConfiguration 2 (one plane per colour) was refused as an image of
     shape (3, rows, cols); it is the same RGB image as the contiguous file."""

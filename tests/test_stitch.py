@@ -375,3 +375,15 @@ def test_a_vertical_pair_forced_side_by_side_is_told_its_layout():
     with pytest.raises(StitchError, match=r"show no overlap side by side \(--layout 1x2\) but "
                                           r"register one above the other: give --layout 2x1"):
         stitch(views, layout="1x2")
+
+
+def test_a_pair_not_found_within_the_users_overlap_is_told_the_overlap_found_without_it():
+    """audit 9 E7: a wrong --overlap was "ambiguous overlap (a periodic scene?); give the
+    expected overlap (--overlap)"; the search the user restricted is named, and what a search
+    without it finds."""
+    views, _, truth = make_rig(layout="1x2", view_shape=(300, 400), overlap=0.3, seed=3)
+    found = f"{1 - truth['shifts_px'][1][1] / 400:.2f}"  # 1 - the shift over the view's width
+    with pytest.raises(StitchError, match=rf"no overlap within --overlap 0.7 \+- 0.1 of the view; "
+                                          rf"searched without it they overlap by {found} side by "
+                                          rf"side: give --overlap {found}, or leave it out"):
+        stitch(views, overlap=0.7, overlap_tolerance=0.1)

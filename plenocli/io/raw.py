@@ -87,7 +87,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     elif kind == "dng":
         frames, meta = _decode_dng(path)
     else:
-        frames, meta = _decode_image(path, cfa=cfa)
+        frames, meta = _decode_image(path, cfa=cfa, named=len(frame_names or ()))
     if kind == "raytrix":
         from plenocli.io import raytrix
 
@@ -319,11 +319,15 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
 
 
-def _frame_pages(p: Path, tif) -> np.ndarray:
+def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
     """The one full-resolution page of a TIFF (reduced-resolution previews beside it are not
-    the image). A TIFF of several such pages is refused: keeping the first would drop the
-    others silently, and a plain TIFF does not say which page is which frame."""
+    the image), or (pages, rows, cols) when --frames names each of its grey pages (two images
+    of a dual-pixel pair). Several pages otherwise are refused: keeping the first would drop
+    the others silently, and a plain TIFF does not say which page is which frame."""
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
+    same = len({(page.shape, str(page.dtype)) for page in pages}) == 1
+    if len(pages) > 1 and named == len(pages) and same and len(pages[0].shape) == 2:
+        return np.stack([page.asarray() for page in pages]), True
     if len(pages) > 1:
         shapes = [" x ".join(map(str, page.shape)) for page in pages]
         if len(set(shapes)) > 1:
@@ -332,30 +336,33 @@ def _frame_pages(p: Path, tif) -> np.ndarray:
                              "previews; decode cannot tell which is the sensor image: save it "
                              "as a TIFF of its own")
         raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shape {shapes[0]}); "
-                         "decode reads a sensor image of one page: save each frame as its own "
-                         "file")
+                         "decode reads a sensor image of one page, or grey pages each named by "
+                         f"--frames ({len(pages)} names, e.g. --frames A,B for a dual-pixel "
+                         "pair)")
     data = pages[0].asarray()
     if pages[0].axes[:1] == "S":   # planar samples (PlanarConfiguration 2): colour last
         data = np.moveaxis(data, 0, -1)
-    return data
+    return data, False
 
 
-def _decode_image(path, *, cfa: str | None) -> tuple[np.ndarray, dict]:
+def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray, dict]:
     p = Path(path)
-    data = None
+    data, stacked = None, False
     if p.suffix.lower() in (".tif", ".tiff"):
         try:
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
                     tiffio.check_light_levels(p, page)
-                data = _frame_pages(p, tif)
+                data, stacked = _frame_pages(p, tif, named)
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "
                                             "truncated") from err
     else:
         data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
-    if data.ndim == 2:
+    if stacked:  # pages named by --frames (renamed by _apply_user_values)
+        frames, views = data, [f"page{k}" for k in range(len(data))]
+    elif data.ndim == 2:
         frames, views = data[np.newaxis], ["raw"]
     elif data.ndim == 3 and data.shape[-1] in (3, 4):
         frames, views = np.moveaxis(data[..., :3], -1, 0), ["R", "G", "B"]

@@ -26,6 +26,7 @@ from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
 from plenocli.stitch.rig import PrismRig, canvases, rig_axis_and_field, rig_strips
+from plenocli.stitch.translation import estimate_translation
 from plenocli.stitch.views import (
     BLENDS,
     LAYOUTS,
@@ -192,10 +193,12 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     if k1:
         luma = np.stack([undistort(v, k1) for v in luma])
     forced = layout if rig is None and n_views == 2 and layout != "auto" else None
+    restricted = overlap is not None and rig is None and n_views == 2  # by the user's --overlap
+    hint = functools.partial(_overlap_hint, luma if restricted else None, search, layout)
     if layout == "auto" and n_views == 4:
         layout = "2x2"
     elif layout == "auto":
-        with _prism_hint(rig, luma):
+        with hint(), _prism_hint(rig, luma):
             layout = auto_layout(luma, limits, overlap, overlap_tolerance)
     tolerance = search["tolerance_px"]
     if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
@@ -214,7 +217,8 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               windows[(a, b)], across[(a, b)])
-    with _layout_hint(forced, luma, limits, overlap, overlap_tolerance), _prism_hint(rig, luma):
+    with hint(), _layout_hint(forced, luma, limits, overlap, overlap_tolerance), \
+            _prism_hint(rig, luma):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
                                                   limits, windows)
     for info in pair_info:  # the report keeps the rig's own prediction
@@ -222,6 +226,35 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         if prior is not None:
             info["expected_shift_px"] = list(prior)
     return transforms, layout, "estimated", pair_info, closure
+
+
+WAYS = {"1x2": "side by side", "2x1": "one above the other"}
+
+
+@contextlib.contextmanager
+def _overlap_hint(luma: np.ndarray | None, search: dict, layout: str):
+    """Two views not found within the user's --overlap: when a search without it finds them,
+    say by how much they overlap (not "a periodic scene?", nor "give --overlap")."""
+    try:
+        yield
+    except StitchError:
+        if luma is None:
+            raise
+        limits = {k: search[k] for k in ("max_overlap", "min_overlap_px", "min_correlation")}
+        found = []
+        for name, direction in (("1x2", "h"), ("2x1", "v")):
+            if layout in ("auto", name):
+                with contextlib.suppress(StitchError):
+                    info = estimate_translation(luma[0], luma[1], direction=direction,
+                                                **limits)[2]
+                    found.append((info["correlation"], name, info["overlap_fraction"]))
+        if not found:
+            raise
+        _, name, fraction = max(found)
+        raise StitchError(f"views 0 and 1 show no overlap within --overlap "
+                          f"{search['overlap']:g} +- {search['overlap_tolerance']:g} of the view; "
+                          f"searched without it they overlap by {fraction:.2f} {WAYS[name]}: "
+                          f"give --overlap {fraction:.2f}, or leave it out") from None
 
 
 @contextlib.contextmanager
@@ -240,9 +273,8 @@ def _layout_hint(forced: str | None, luma: np.ndarray, limits: dict, overlap: fl
             found = None
         if found is None or found == forced:
             raise
-        ways = {"1x2": "side by side", "2x1": "one above the other"}
-        raise StitchError(f"views 0 and 1 show no overlap {ways[forced]} (--layout {forced}) "
-                          f"but register {ways[found]}: give --layout {found}, or auto") from None
+        raise StitchError(f"views 0 and 1 show no overlap {WAYS[forced]} (--layout {forced}) "
+                          f"but register {WAYS[found]}: give --layout {found}, or auto") from None
 
 
 @contextlib.contextmanager

@@ -62,6 +62,10 @@ def check(params: dict, given: Collection[str]) -> None:
     if not params.get("mask_widths"):
         refuse_unused(PARAMS, given, ["s", "g", "grid"],
                       "applies to the --mask-widths sweep only")
+        named = [n.strip() for n in (params.get("views") or "").split(",") if n.strip()]
+        if len(named) == 1:
+            raise OptionError(f"--views names one view ({named[0]}): cross-talk compares two "
+                              "or more; name them all, e.g. --views A,B")
     else:
         refuse_unused(PARAMS, given, ["views", "mixing_out"],
                       "does not apply to the --mask-widths sweep (it refocuses its own left and "
