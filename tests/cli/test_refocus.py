@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import logging
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -42,18 +45,33 @@ def test_refocus_writes_the_image_and_preview(scene, tmp_path):
     assert png.stat().st_size > 0
 
 
-def test_focal_sweep_finds_the_true_g(scene, tmp_path, caplog):
+def test_focal_sweep_finds_the_true_g(scene, tmp_path):
     folder, truth = scene
     out = tmp_path / "sweep.tif"
-    result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
-                    "--g", "2:6:0.5", "-o", out)
+    with _plenocli_messages() as said:
+        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                        "--g", "2:6:0.5", "-o", out)
     assert result.exit_code == 0, result.output
     image, meta = tiffio.read_image(out)
     assert image.shape[0] == 9 and meta["views"][4] == "raw@g4"
     scores = meta["sharpness"]["scores"]
     assert [s["g"] for s in scores] == pytest.approx(np.arange(2, 6.01, 0.5))
     assert meta["sharpness"]["best_g"] == pytest.approx(truth["g_true"])
-    assert any("g = 4  sharpness" in r.getMessage() for r in caplog.records)
+    assert any("g = 4  sharpness" in m for m in said)
+
+
+@contextlib.contextmanager
+def _plenocli_messages(level: int = logging.INFO):
+    """The messages plenocli logs inside the block (its logger does not propagate to pytest's
+    capture, and its stream handler keeps the stderr of the first command a test ran)."""
+    said: list[str] = []
+    handler = logging.Handler(level)
+    handler.emit = lambda record: said.append(record.getMessage())
+    logging.getLogger("plenocli").addHandler(handler)
+    try:
+        yield said
+    finally:
+        logging.getLogger("plenocli").removeHandler(handler)
 
 
 def test_bayer_frames_give_rgb_pages(tmp_path):
@@ -227,13 +245,7 @@ def test_a_galilean_frame_is_refocused_at_negative_g_and_refused_at_positive(tmp
 def test_a_sweep_of_vignetted_micro_images_is_said_to_lean_low(scene, tmp_path):
     """audit 9 W5: on unflattened micro-images (darker at their rims) the sweep's sharpest g
     leans low (3.7 for a plane at 4); such a sweep says so, one of flat micro-images does not."""
-    import logging
-
-    said: list[str] = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = lambda record: said.append(record.getMessage())
-    logging.getLogger("plenocli").addHandler(handler)
-    try:
+    with _plenocli_messages(logging.WARNING) as said:
         folder, _ = scene  # raytrix-scene: micro-images without vignetting
         assert invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
                       "--g", "3:5:1", "-o", tmp_path / "flat_sweep.tif").exit_code == 0
@@ -244,5 +256,3 @@ def test_a_sweep_of_vignetted_micro_images_is_said_to_lean_low(scene, tmp_path):
                         tmp_path / "ld" / "grid.yaml", "--g", "3:5:1", "-o", tmp_path / "sw.tif")
         assert result.exit_code == 0, result.output
         assert [m for m in said if "darken by" in m and "flat-field" in m]
-    finally:
-        logging.getLogger("plenocli").removeHandler(handler)
