@@ -446,3 +446,18 @@ def test_dual_pixel_views_of_two_fields_are_refused_when_their_matches_scatter(t
     result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
     assert result.exit_code == 1 and "do not agree" in result.output, result.output
     assert not (tmp_path / "d.tif").exists()
+
+
+def test_a_frame_of_a_few_lenses_leaves_the_grid_unchecked_not_refused(tmp_path):
+    """On 95 x 95 px (4.7 lenses across) the fold's lattice is not precise to the 0.2 % depth
+    asks: the simulator's own grid folded 0.39 % off and was refused as not fitting the
+    frames. It is used unchecked (said so), and the plane reads right."""
+    simulate("lenslet-depth", tmp_path / "s", pixels="95x95", scene="plane")
+    result = invoke("depth", tmp_path / "s" / "frames.tif", "--grid", tmp_path / "s" / "grid.yaml",
+                    "-o", tmp_path / "d.tif")
+    assert result.exit_code == 0, result.output
+    data, meta = tiffio.read_image(tmp_path / "d.tif")
+    truth, _ = tiffio.read_image(tmp_path / "s" / "depth.tif")
+    g = data[meta["views"].index("g")]
+    ok = np.isfinite(g)
+    assert ok.mean() > 0.9 and np.median(np.abs(g[ok] - truth[0][ok])) <= 0.03
