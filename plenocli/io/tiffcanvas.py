@@ -27,7 +27,6 @@ import tifffile
 from plenocli import __version__
 from plenocli.io.atomic import atomic_path
 from plenocli.io.tiffio import check_summary, describe
-from plenocli.model.provenance import hash_ahead
 
 # Linux writes at most this many bytes in one call
 _WRITE_CHUNK = 1 << 30
@@ -92,9 +91,6 @@ class ImageCanvas:
         self.close()
         tifffile.tiffcomment(self._tmp, describe(meta))
         self.finished = True
-        # the file is final: its record's sha256 (a second at the 5D Mark IV's size) is taken
-        # beside what the stage still does with it (a preview reads it whole)
-        hash_ahead([self._tmp])
 
     def close(self) -> None:
         if self._fd is not None:
