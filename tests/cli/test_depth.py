@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import logging
-
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -12,6 +9,7 @@ from click.testing import CliRunner
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
 from plenocli.pipeline.stages.simulate import simulate
+from tests.logs import plenocli_messages
 
 
 def invoke(*args):
@@ -340,20 +338,6 @@ def test_a_grid_of_another_camera_is_refused(lenslet, tmp_path):
         assert "plenocli calibrate" in result.output and not out.exists()
 
 
-@contextlib.contextmanager
-def _warnings_of_plenocli():
-    """The messages plenocli logs inside the block (its logger does not propagate to pytest's
-    capture, and its stream handler keeps the stderr of the first command a test ran)."""
-    said: list[str] = []
-    handler = logging.Handler(logging.WARNING)
-    handler.emit = lambda record: said.append(record.getMessage())
-    logging.getLogger("plenocli").addHandler(handler)
-    try:
-        yield said
-    finally:
-        logging.getLogger("plenocli").removeHandler(handler)
-
-
 def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refused(tmp_path):
     """The simulator's scene frames show no micro-image lattice (no vignetting): the grid is
     used unchecked, which refocus says and records; depth vouches for it by the matches (its
@@ -367,7 +351,7 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     grid = read_grid(grid_path)
     write_grid(tmp_path / "turned.yaml", replace(grid, angle_rad=grid.angle_rad + np.radians(2)),
                {})
-    with _warnings_of_plenocli() as said:
+    with plenocli_messages() as said:
         result = invoke("refocus", frames, "--grid", tmp_path / "turned.yaml", "-o",
                         tmp_path / "r.tif")
     assert result.exit_code == 0, result.output
@@ -400,20 +384,6 @@ def test_colour_views_are_refused_as_what_they_are(kind, views, what, tmp_path):
     assert not out.exists()
 
 
-def test_dual_pixel_views_of_a_white_are_refused_not_matched_by_chance(tmp_path):
-    """The simulator's dual-pixel white (each half's own vignetting, independent noise): every
-    shift fits alike, the best is chance, and 80 % of the pixels came out 'known' over the
-    whole +-4 px search with exit 0. No pixel matches clearly, so nothing is written."""
-    from plenocli.pipeline.stages import bias, decode
-
-    simulate("dualpixel-white", tmp_path / "w", pixels=480)
-    decode.run(str(tmp_path / "w" / "capture.dng"), str(tmp_path / "f.tif"))
-    bias.run(str(tmp_path / "f.tif"), str(tmp_path / "b.tif"))
-    result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
-    assert result.exit_code == 1 and "share no texture" in result.output, result.output
-    assert not (tmp_path / "d.tif").exists()
-
-
 def test_a_grid_calibrated_on_these_very_frames_is_checked(tmp_path):
     """audit 8 E5: a grid whose record says calibrate measured it on this file (its sha256)
     was called unchecked where the fold check could not vouch for the lattice (Boys2)."""
@@ -425,7 +395,7 @@ def test_a_grid_calibrated_on_these_very_frames_is_checked(tmp_path):
     record = {"stage": "calibrate", "inputs": [{"role": "input", "path": str(frames),
                                                 "sha256": sha256_file(frames)}]}
     write_grid(tmp_path / "own.yaml", read_grid(tmp_path / "sim" / "grid.yaml"), record)
-    with _warnings_of_plenocli() as said:
+    with plenocli_messages() as said:
         result = invoke("refocus", frames, "--grid", tmp_path / "own.yaml", "-o",
                         tmp_path / "r.tif")
     assert result.exit_code == 0, result.output
@@ -433,18 +403,24 @@ def test_a_grid_calibrated_on_these_very_frames_is_checked(tmp_path):
     assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is True
 
 
-def test_dual_pixel_views_of_two_fields_are_refused_when_their_matches_scatter(tmp_path):
-    """The simulated dual-pixel + prism camera: A and B look in different directions. 2.75 %
-    of the pixels still match clearly by chance, over the whole +-4 px search, and the map was
-    written 32 % 'known' with exit 0. Those matches disagree with the ones around them (45 %
-    agree within 1 px; a surface's 72-100 %), so nothing is written."""
+@pytest.mark.parametrize("kind, params, words", [
+    # the simulator's dual-pixel white (each half's own vignetting, independent noise): every
+    # shift fits alike, the best is chance, and 80 % of the pixels came out 'known' over the
+    # whole +-4 px search with exit 0; no pixel matches clearly
+    ("dualpixel-white", {"pixels": 480}, "share no texture"),
+    # the dual-pixel + prism camera: A and B look in different directions; 2.75 % of the
+    # pixels still match clearly by chance, over the whole search, and the map was written 32 %
+    # 'known'; those matches disagree with the ones around them (45 % agree within 1 px; a
+    # surface's 72-100 %)
+    ("dualpixel-prism", {}, "do not agree")])
+def test_dual_pixel_views_that_match_only_by_chance_are_refused(kind, params, words, tmp_path):
     from plenocli.pipeline.stages import bias, decode
 
-    simulate("dualpixel-prism", tmp_path / "p")
+    simulate(kind, tmp_path / "p", **params)
     decode.run(str(tmp_path / "p" / "capture.dng"), str(tmp_path / "f.tif"))
     bias.run(str(tmp_path / "f.tif"), str(tmp_path / "b.tif"))
     result = invoke("depth", tmp_path / "b.tif", "-o", tmp_path / "d.tif")
-    assert result.exit_code == 1 and "do not agree" in result.output, result.output
+    assert result.exit_code == 1 and words in result.output, result.output
     assert not (tmp_path / "d.tif").exists()
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import logging
 
 import numpy as np
@@ -16,6 +15,7 @@ from plenocli.model.lensgrid import LensGrid
 from plenocli.pipeline.registry import get_stages
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.sai import view_names
+from tests.logs import plenocli_messages
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_refocus_writes_the_image_and_preview(scene, tmp_path):
 def test_focal_sweep_finds_the_true_g(scene, tmp_path):
     folder, truth = scene
     out = tmp_path / "sweep.tif"
-    with _plenocli_messages() as said:
+    with plenocli_messages(logging.INFO) as said:
         result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
                         "--g", "2:6:0.5", "-o", out)
     assert result.exit_code == 0, result.output
@@ -58,20 +58,6 @@ def test_focal_sweep_finds_the_true_g(scene, tmp_path):
     assert [s["g"] for s in scores] == pytest.approx(np.arange(2, 6.01, 0.5))
     assert meta["sharpness"]["best_g"] == pytest.approx(truth["g_true"])
     assert any("g = 4  sharpness" in m for m in said)
-
-
-@contextlib.contextmanager
-def _plenocli_messages(level: int = logging.INFO):
-    """The messages plenocli logs inside the block (its logger does not propagate to pytest's
-    capture, and its stream handler keeps the stderr of the first command a test ran)."""
-    said: list[str] = []
-    handler = logging.Handler(level)
-    handler.emit = lambda record: said.append(record.getMessage())
-    logging.getLogger("plenocli").addHandler(handler)
-    try:
-        yield said
-    finally:
-        logging.getLogger("plenocli").removeHandler(handler)
 
 
 def test_bayer_frames_give_rgb_pages(tmp_path):
@@ -245,7 +231,7 @@ def test_a_galilean_frame_is_refocused_at_negative_g_and_refused_at_positive(tmp
 def test_a_sweep_of_vignetted_micro_images_is_said_to_lean_low(scene, tmp_path):
     """audit 9 W5: on unflattened micro-images (darker at their rims) the sweep's sharpest g
     leans low (3.7 for a plane at 4); such a sweep says so, one of flat micro-images does not."""
-    with _plenocli_messages(logging.WARNING) as said:
+    with plenocli_messages(logging.WARNING) as said:
         folder, _ = scene  # raytrix-scene: micro-images without vignetting
         assert invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
                       "--g", "3:5:1", "-o", tmp_path / "flat_sweep.tif").exit_code == 0
