@@ -73,7 +73,8 @@ class ImageCanvas:
         """What :func:`check_result` checks, learnt from a band as it passes."""
         if not self._finite[k]:
             self._finite[k] = bool(np.isfinite(page).any())
-        if np.isinf(page).any():
+        # fmax and fmin skip NaN and make no temporary: +-Inf shows in them, or nowhere
+        if np.fmax.reduce(page, axis=None) == np.inf or np.fmin.reduce(page, axis=None) == -np.inf:
             where = np.argwhere(np.isinf(page))
             self._infinite.setdefault(k, [0, first_row + int(where[0][0]), int(where[0][1])])
             self._infinite[k][0] += len(where)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from plenocli.stitch.kernels import edge_weight
 from plenocli.stitch.rig import (
     PrismRig,
     _view_maps,
@@ -133,19 +134,22 @@ def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.nda
     or to its nearest no-data pixel when it has some (``holes`` = (valid as float32, distance
     map)); 0 where the view does not fully cover the pixel."""
     rows, cols = shape
-    weight = np.minimum(mx + 1, cols - mx)
-    np.minimum(weight, np.minimum(my + 1, rows - my), out=weight)
-    # the distance to the edge is below 1 exactly where the source lies off the view
-    outside = weight < 1 - COVER_EPS_PX
+    weight = np.empty(np.shape(mx), np.float32)
+    # the distance to the edge is below 1 exactly where the source lies off the view; maps of
+    # any shape (a band, or points), as rows of the compiled pass
+    width = weight.shape[-1] if weight.ndim else 1
+    if weight.size:
+        edge_weight(np.asarray(mx, np.float32).reshape(-1, width),
+                    np.asarray(my, np.float32).reshape(-1, width), rows, cols,
+                    np.float32(1 - COVER_EPS_PX), weight.reshape(-1, width))
     if lost is not None:
-        outside |= lost
+        weight[lost] = 0
     if holes is not None:
         valid, distance = holes
         np.minimum(weight, cv2.remap(distance, mx, my, cv2.INTER_LINEAR,
                                      borderMode=cv2.BORDER_REPLICATE), out=weight)
-        outside |= cv2.remap(valid, mx, my, cv2.INTER_LINEAR,
-                             borderMode=cv2.BORDER_REPLICATE) <= 0.999
-    weight[outside] = 0
+        weight[cv2.remap(valid, mx, my, cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE) <= 0.999] = 0
     return weight
 
 
