@@ -129,21 +129,19 @@ class Stage:
                    for name in dict.fromkeys([folder, Path(os.path.realpath(folder))])}
         landing: list = []
 
-        unused = self.unused(params)
+        unused, recorded = self.unused(params), self.recorded(params)
 
         def record(landed):
             landing.extend(landed)
             states = records.with_digests(started, inputs)
-            records.write_records(self.name, self.recorded(params), inputs, outputs, states,
-                                  landed)
+            records.write_records(self.name, recorded, inputs, outputs, states, landed)
             # a folder written through a link gets its record under its own name too, where
             # a run given that name looks for the earlier run's
             real = {role: [Path(os.path.realpath(p)) for p in outputs[role]
                            if os.path.realpath(p) != os.path.abspath(p)]
                     for role in self.folder_outputs}
             if any(real.values()):
-                records.write_records(self.name, self.recorded(params), inputs, real, states,
-                                      landed)
+                records.write_records(self.name, recorded, inputs, real, states, landed)
 
         token, hidden = RESOLVED.set(dict(params)), UNUSED.set(unused)
         try:
