@@ -86,7 +86,9 @@ def test_non_finite_or_out_of_range_options_are_usage_errors(option, value):
                                         ("{radius: .nan, glass: N-BK7, thickness: 1}",
                                          "radius_mm is NaN"),
                                         ("{radius: 3.0, glass: N-BK7, thickness: .nan}",
-                                         "thickness_mm nan")])
+                                         "thickness_mm nan"),
+                                        ("{radius: 50, glass: N-BK7, thickness: 0.5, "
+                                         "diameter: 20}", "surfaces 1 and 2 cross 2.969 mm off")])
 def test_impossible_prescriptions_are_one_line(tmp_path, row, words):
     bad = tmp_path / "bad.yaml"
     bad.write_text(f"surfaces:\n  - {row}\n  - {{radius: -3.0, thickness: 5}}\n")
