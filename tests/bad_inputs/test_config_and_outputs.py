@@ -1,0 +1,362 @@
+"""The parameter path, configs, output names, and devices that fail while writing."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tifffile
+import yaml
+from click.testing import CliRunner
+
+from plenocli.cli.main import cli
+from plenocli.io import tiffio
+from plenocli.pipeline.config import load_config
+from tests.bad_inputs.files import (
+    assert_one_line,
+    run_bad,
+)
+
+# ------------------- the parameter path and the stage edge (more in tests/cli/test_edge.py)
+
+@pytest.mark.parametrize("step,words", [
+    ({"stage": "bias", "smooth": -3}, ("smooth",)),
+    ({"stage": "bias", "guard": -5}, ("guard",)),
+    ({"stage": "bias", "smooth": 1.5}, ("smooth",)),
+    ({"stage": "bias", "smooth": "abc"}, ("smooth",)),
+])
+def test_yaml_values_are_checked_like_flags(step, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"bias": {
+        **step, "input": str(inputs / "frames.tif"), "output": "{out}/b.tif"}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, words)
+
+
+def test_a_view_named_twice_in_yaml_is_refused_like_the_flag(inputs, tmp_path):
+    # audit 9 E3: --views is checked when read, as --frames is
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"stitch": {
+        "inputs": [str(inputs / "biased.tif")], "views": "A, A", "output": "{out}/p.tif"}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("--views", "'A' is named twice"))
+
+
+def test_simulate_params_from_yaml_are_checked_like_flags(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(yaml.safe_dump({"out": str(out), "steps": {"sim": {
+        "stage": "simulate", "kind": "dualpixel", "output": "{out}/s",
+        "param": ["noise=-5"]}}}))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("noise must be in [0, 65535]", "got -5"))
+
+
+@pytest.mark.parametrize("args,words", [
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{o}/x.tif"],
+     ("two outputs",)),
+    (["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "--save-gain", "{i}/biased.tif"],
+     ("also an input",)),
+])
+def test_outputs_that_collide_are_refused(args, words, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", [*args, "-o", "{o}/x.tif"])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("args", [
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x.jpg"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/x"],
+    ["decode", "{i}/dp.dng", "-o", "{o}/x.png"],
+    ["flat", "{i}/biased.tif", "--white", "{i}/biased.tif", "-o", "{o}/x.tif", "--save-gain",
+     "{o}/g.png"],
+    ["develop", "{i}/biased.tif", "--view", "S", "-o", "{o}/x.jpg", "--linear", "{o}/l.png"],
+    ["optics", "{i}/none.yaml", "--json", "{o}/x.yaml"],
+])
+def test_an_output_named_for_another_format_is_refused(args, inputs, tmp_path):
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, ("ending in",))
+
+
+@pytest.mark.parametrize("args,words", [
+    (["decode", "{i}/dp.dng", "-o", "{o}/.tif"], "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/x.tif", "--preview", "{o}/.PNG"],
+     "has no name before its suffix"),
+    (["decode", "{i}/dp.dng", "-o", "{o}/nl\nname.tif"], "holds a control character ('\\n')"),
+    (["simulate", "dualpixel", "-o", "{o}/a\tb"], "holds a control character ('\\t')"),
+])
+def test_an_output_name_that_is_only_a_suffix_or_holds_a_newline_is_refused(args, words, inputs,
+                                                                              tmp_path):
+    # audit 7 E14: '-o .tif' was told to end in .tif; a newline split the one-line messages
+    result = run_bad(inputs, tmp_path / "out", args)
+    assert_one_line(result, 2, (words,))
+
+
+def _config_text(inputs: Path, out: Path, extra_bias: str = "", extra_steps: str = "",
+                 top: str = "") -> str:
+    return (f"out: {out}\n{top}steps:\n"
+            f"  decode:\n    input: {inputs}/dp.dng\n    output: \"{{out}}/f.tif\"\n"
+            f"  bias:\n    input: \"{{out}}/f.tif\"\n    output: \"{{out}}/b.tif\"\n{extra_bias}"
+            f"{extra_steps}")
+
+
+@pytest.mark.parametrize("name,parts,words", [
+    ("duplicate-parameter", {"extra_bias": "    smooth: 1\n    smooth: 2\n"}, ("twice",)),
+    ("duplicate-step", {"extra_steps": "  decode:\n    input: x.dng\n    output: y.tif\n"},
+     ("twice",)),
+    ("step-scalar", {"extra_steps": "  sai: 5\n"}, ("mapping",)),
+    ("stage-list", {"extra_steps": "  x:\n    stage: [bias]\n"}, ("stage",)),
+    ("two-writers", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                     "    output: \"{out}/f.tif\"\n"}, ("both write",)),
+    ("own-input", {"extra_steps": "  bias2:\n    stage: bias\n    input: \"{out}/b2.tif\"\n"
+                                   "    output: \"{out}/b2.tif\"\n"}, ("also an input",)),
+    ("preview-not-png", {"extra_bias": "    preview: \"{out}/b.jpg\"\n"}, ("ending in .png",)),
+    # audit 8 W4: a YAML set was taken as its Python repr, in hash order ("{'A'", "'S'}")
+    ("frames-set", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                    "    output: \"{out}/g.tif\"\n    frames: !!set {S, A}\n"},
+     ("plain value",)),
+    ("frames-twice", {"extra_steps": "  decode2:\n    stage: decode\n    input: x.dng\n"
+                                      "    output: \"{out}/g.tif\"\n    frames: S,S\n"},
+     ("given twice",)),
+])
+def test_config_structure_is_checked_before_any_step_runs(name, parts, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out, **parts))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, words)
+
+
+@pytest.mark.parametrize("value, words", [
+    ("5", "'out:'"), ("[a, b]", "'out:'"), ("{a: 1}", "'out:'"),
+    # audit 7 E15: out: "{out}" wrote into a folder literally named {out}
+    ('"{out}"', "holds a placeholder"), ('"runs/{name}"', "holds a placeholder"),
+    ('"{foo}/x"', "holds a placeholder")])
+def test_config_out_must_be_one_folder_without_placeholders(value, words, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"out: {out}", f"out: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, (words,))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
+def test_a_short_write_on_a_full_device_says_no_space(tmp_path, monkeypatch):
+    import errno
+    from types import SimpleNamespace
+
+    from plenocli.io import atomic
+
+    monkeypatch.setattr(atomic.os, "statvfs", lambda p: SimpleNamespace(f_bavail=0,
+                                                                        f_frsize=4096))
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / "x.tif") as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError("6144 requested and 2992 written")  # numpy's short write: no errno
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / "x.tif")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ["x.json", ".x.tif.plenocli.json", "p.png"])
+def test_a_full_device_while_a_record_or_preview_is_written_names_it(tmp_path, name):
+    # audit 7 E16: a write without a file name (a record, a preview) said "no space left"
+    # without naming the file
+    import errno
+
+    from plenocli.errors import os_error_message
+    from plenocli.io import atomic
+
+    with pytest.raises(OSError) as info, atomic.atomic_path(tmp_path / name) as tmp:
+        tmp.write_bytes(b"half")
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert info.value.errno == errno.ENOSPC and info.value.filename == str(tmp_path / name)
+    assert os_error_message(info.value).startswith(f"{tmp_path / name}: no space left")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_codec_is_named_not_taken_for_damage(tmp_path):
+    err = KeyError("<COMPRESSION.LZW: 5> requires the 'imagecodecs' package")
+    message = str(tiffio.read_error(tmp_path / "x.tif", err, "fallback"))
+    assert "compressed with LZW" in message and "imagecodecs" in message
+    assert str(tiffio.read_error(tmp_path / "x.tif", ValueError("bad"), "fallback")) == "fallback"
+
+
+def test_a_bigtiff_sensor_image_decodes(tmp_path):
+    sensor = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96)
+    tifffile.imwrite(tmp_path / "big.tif", sensor, bigtiff=True)
+    result = CliRunner().invoke(cli, ["decode", str(tmp_path / "big.tif"), "-o",
+                                      str(tmp_path / "frames.tif")])
+    assert result.exit_code == 0, result.output
+    frames, _ = tiffio.read_image(tmp_path / "frames.tif")
+    assert np.array_equal(frames[0], sensor)
+
+
+def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    text = _config_text(inputs, out).replace("  bias:\n", "  bias.v2:\n    stage: bias\n")
+    config.write_text(text)
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", "bias.v2.smooth=-3"])
+    assert_one_line(result, 2, ("step 'bias.v2'", "--smooth"))  # the value alone: a usage error
+
+
+@pytest.mark.parametrize("word, code, words", [
+    # audit 9 E5: ' 2 : 8 ' read as the YAML mapping {2: 8}: "expected a value, got a mapping"
+    (" 2 : 4 ", 0, ()),
+    ("a: b", 2, ("--set 'depth.g=a: b': step 'depth'", "got 'a: b'")),
+    ("abc", 2, ("--set 'depth.g=abc': step 'depth'", "Invalid value for '--g'")),
+    ("[2", 2, ("--set 'depth.g=[2'", "not valid YAML")),
+])
+def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words, inputs,
+                                                                tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    output: {out}/d.tif\n")
+    result = run_bad(inputs, out, ["run", str(config), "--dry-run", "--set", f"depth.g={word}"])
+    if code == 0:
+        assert result.exit_code == 0, result.output
+        step = load_config(config, [f"depth.g={word}"])[0]
+        assert step.params["g"].replace(" ", "") == "2:4"
+    else:
+        assert_one_line(result, code, words)
+
+
+# ---- issue 21, class 8: unreadable inputs, lists for one path, empty values, cycles, long names
+
+def _deny_reading(monkeypatch, path: Path) -> None:
+    """Make ``path`` unreadable, even for root (who ignores permission bits): os.access says so
+    and opening it fails with EACCES, as for a file of another user."""
+    import builtins
+    import errno
+    import io
+    import os
+
+    target = os.path.realpath(path)
+    real_access, real_open = os.access, builtins.open
+
+    def access(p, mode, *args, **kwargs):
+        if os.path.realpath(p) == target and mode & os.R_OK:
+            return False
+        return real_access(p, mode, *args, **kwargs)
+
+    def opener(file, *args, **kwargs):
+        if isinstance(file, (str, bytes, os.PathLike)) and os.path.realpath(file) == target:
+            raise PermissionError(errno.EACCES, "Permission denied", str(file))
+        return real_open(file, *args, **kwargs)
+
+    monkeypatch.setattr(os, "access", access)
+    monkeypatch.setattr(builtins, "open", opener)
+    monkeypatch.setattr(io, "open", opener)
+
+
+@pytest.mark.parametrize("args", [
+    ["bias", "{f}", "-o", "{o}/b.tif"],
+    ["flat", "{i}/biased.tif", "--white", "{f}", "-o", "{o}/v.tif"],
+    ["info", "{f}"],
+    ["run", "{c}"],
+], ids=["argument", "option", "info", "run-config"])
+def test_an_unreadable_input_is_an_input_error_not_a_usage_error(args, inputs, tmp_path,
+                                                                 monkeypatch):
+    secret = tmp_path / "secret.tif"
+    secret.write_bytes((inputs / "biased.tif").read_bytes())
+    config = tmp_path / "secret.tif"  # run reads it as its config
+    out = tmp_path / "out"
+    out.mkdir()
+    _deny_reading(monkeypatch, secret)
+    argv = [a.format(i=inputs, o=out, f=secret, c=config) for a in args]
+    result = CliRunner().invoke(cli, argv)
+    assert_one_line(result, 1, ("secret.tif", "ermission denied"))
+    assert not list(out.iterdir())
+
+
+def test_every_input_path_is_left_to_its_reader_to_check(tmp_path, monkeypatch):
+    from plenocli.pipeline.registry import get_stages
+    from plenocli.pipeline.validators import InputFile
+
+    secret = tmp_path / "secret.tif"
+    secret.write_bytes(b"")
+    _deny_reading(monkeypatch, secret)
+    for stage in get_stages().values():
+        for param in stage.params:
+            if param.role == "input":
+                assert isinstance(param.type, InputFile), f"{stage.name} {param.name}"
+                assert param.type.convert(str(secret)) == str(secret)  # the reader says why
+
+
+@pytest.mark.parametrize("value", ["[a.tif, b.tif]", "[]"])
+def test_a_list_for_one_output_path_is_refused(value, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace('output: "{out}/b.tif"',
+                                                        f"output: {value}"))
+    result = run_bad(inputs, out, ["run", str(config)])
+    assert_one_line(result, 1, ("--output", "one file path"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "pipeline.yaml"]
+
+
+@pytest.mark.parametrize("how,words", [
+    (["--set", "bias.smooth="], ("--smooth", "''")),
+    (["--set", "bias.smooth=~"], ("smooth", "no value")),
+    (["--set", "bias.smooth=null"], ("smooth", "no value")),
+    (["--set", "bias.input="], ("INPUT", "empty")),
+    ("smooth: null", ("smooth", "no value")),
+    ("smooth:", ("smooth", "no value")),
+], ids=["set-empty", "set-tilde", "set-null", "set-empty-path", "yaml-null", "yaml-empty"])
+def test_an_empty_or_null_value_is_refused_not_taken_for_the_default(how, words, inputs,
+                                                                     tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    extra = f"    {how}\n" if isinstance(how, str) else "    smooth: 3\n"
+    config.write_text(_config_text(inputs, out, extra_bias=extra))
+    flags = how if isinstance(how, list) else []
+    for mode in (["--dry-run"], ["--print-make"], []):
+        result = run_bad(inputs, out, ["run", str(config), *flags, *mode])
+        assert_one_line(result, 2 if flags else 1, words)  # a --set value: a usage error
+
+
+@pytest.mark.parametrize("steps", [
+    "  a:\n    stage: bias\n    input: \"{out}/y.tif\"\n    output: \"{out}/x.tif\"\n"
+    "  b:\n    stage: bias\n    input: \"{out}/x.tif\"\n    output: \"{out}/y.tif\"\n",
+    "  a:\n    stage: bias\n    input: \"{out}/b.tif\"\n    output: \"{out}/x.tif\"\n",
+], ids=["cycle", "out-of-order"])
+def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    text = _config_text(inputs, out).replace("steps:\n", "steps:\n" + steps)
+    config.write_text(text)
+    for mode in ([], ["--print-make"], ["--dry-run"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, ("writes after it",))
+        assert not result.stdout
+
+
+def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out).replace(f"{inputs}/dp.dng", "nowhere.dng"))
+    for mode in ([], ["--print-make"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, ("nowhere.dng does not exist",))
+
+
+def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path):
+    from plenocli.pipeline.records import read_record, record_path
+    from plenocli.pipeline.runner import plan
+
+    name = "b" * 251 + ".tif"
+    result = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                      str(tmp_path / name), "-q"])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / name).is_file() and read_record(tmp_path / name) is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name,
+                                                                 record_path(name).name])
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  bias:\n    input: {inputs / 'frames.tif'}\n"
+                      f"    output: {name}\n")
+    assert [d.run for d in plan(load_config(config))] == [False]
+    too_long = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
+                                        str(tmp_path / ("c" * 252 + ".tif"))])
+    assert_one_line(too_long, 1, ("too long",))
