@@ -100,6 +100,31 @@ def test_an_empty_output_folder_is_a_usage_error(tmp_path, command, monkeypatch)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
 
 
+@pytest.mark.parametrize("command", ["run", "run-print-make", "batch"])
+def test_out_is_a_usage_error_when_no_step_uses_it(tmp_path, command, monkeypatch):
+    # own-2 (round 10): --out was ignored and the outputs went where the steps say
+    monkeypatch.chdir(tmp_path)
+    body = ('    input: "{capture}"\n    output: "o/{name}.tif"\n' if command == "batch"
+            else "    input: {W}\n    output: w.tif\n")
+    config = write(tmp_path, "steps:\n  decode:\n" + body)
+    args = {"run": ["run", config, "--out", "elsewhere"],
+            "run-print-make": ["run", config, "--print-make", "--out", "elsewhere"],
+            "batch": ["batch", config, "--inputs", CAPTURE, "--out", "elsewhere", "-j", "1"]}
+    result = invoke(*args[command])
+    assert result.exit_code == 2, result.output
+    assert "elsewhere: no step of" in result.output and "uses {out}" in result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+def test_an_out_key_no_step_uses_is_refused(tmp_path):
+    config = write(tmp_path, "out: elsewhere\nsteps:\n  decode:\n    input: {W}\n"
+                             "    output: w.tif\n")
+    with pytest.raises(ConfigError, match=r"'out: elsewhere' fills \{out\}, which no step uses"):
+        load_config(config)
+    result = invoke("run", config, "--dry-run")
+    one_line_error(result, "which no step uses")
+
+
 @pytest.mark.parametrize("validator,kind", [
     (validators.InputFile(), "file"), (validators.OutputFile(".tif"), "file"),
     (validators.OutputFolder(), "folder")])

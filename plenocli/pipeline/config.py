@@ -91,6 +91,10 @@ class Template:
     raw_steps: dict[str, dict]
     out: str | None  # the top-level 'out:' value (relative to the config's folder)
 
+    def uses_out(self) -> bool:
+        """Whether a step names ``{out}`` (else an output root has nothing to fill)."""
+        return any("out" in _placeholders(body) for body in self.raw_steps.values())
+
     def per_capture_steps(self) -> set[str]:
         """Names of the steps that use ``{capture}`` or ``{name}``."""
         return {name for name, body in self.raw_steps.items()
@@ -105,6 +109,10 @@ class Template:
         """
         if only not in ("all", "shared", "per-capture"):
             raise ValueError(f"only must be all, shared or per-capture, got {only!r}")
+        if out is not None and not self.uses_out():
+            raise OptionError(f"--out {out}: no step of {self.path} uses {{out}}, so it would "
+                              "change nothing (the outputs are the paths the steps name); "
+                              "leave --out out, or write the outputs as {out}/...")
         base = self.path.resolve().parent
         per_capture = self.per_capture_steps()
         values = self._values(capture, out)
@@ -248,6 +256,10 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     _apply_overrides(p, raw_steps, overrides)
     _check_placeholder_names(p, raw_steps)
     template = Template(p, raw_steps, out)
+    if out is not None and not template.uses_out():
+        raise ConfigError(f"{p}: 'out: {out}' fills {{out}}, which no step uses (the outputs "
+                          "are the paths the steps name); remove it, or write the outputs as "
+                          "{out}/...")
     _check_per_capture_outputs(template)
     return template
 
