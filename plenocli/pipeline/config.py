@@ -244,24 +244,31 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
         if not isinstance((body or {}).get("stage", ""), str):
             raise ConfigError(f"{p}: step {name!r}: stage must be one stage name, got "
                               f"{body['stage']!r}")
-    out = doc.get("out")
-    if out is not None and not isinstance(out, str):
-        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
-    if out is not None and _ANY_PLACEHOLDER.search(out):
-        # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
-        raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
-                          "(per-capture folders go in the steps, e.g. {out}/{name}/x.tif)")
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
     _check_placeholder_names(p, raw_steps)
-    template = Template(p, raw_steps, out)
-    if out is not None and not template.uses_out():
+    template = Template(p, raw_steps, doc.get("out"))
+    _check_out_key(template)
+    _check_per_capture_outputs(template)
+    return template
+
+
+def _check_out_key(template: Template) -> None:
+    """The top-level ``out:``: one plain folder path, filling a ``{out}`` some step uses."""
+    p, out = template.path, template.out
+    if out is None:
+        return
+    if not isinstance(out, str):
+        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
+    if _ANY_PLACEHOLDER.search(out):
+        # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
+        raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
+                          "(per-capture folders go in the steps, e.g. {out}/{name}/x.tif)")
+    if not template.uses_out():
         raise ConfigError(f"{p}: 'out: {out}' fills {{out}}, which no step uses (the outputs "
                           "are the paths the steps name); remove it, or write the outputs as "
                           "{out}/...")
-    _check_per_capture_outputs(template)
-    return template
 
 
 def _unflow(value):
