@@ -82,6 +82,24 @@ def test_a_nul_in_a_path_is_refused(tmp_path, key):
         load_config(write(tmp_path, text))
 
 
+@pytest.mark.parametrize("overrides, words", [
+    (["decode.ouput=x.tif"], "--set 'decode.ouput=x.tif': step 'decode': stage decode has no "
+                             "parameter 'ouput' (did you mean 'output'?)"),
+    (["decode.smooth=3"], "stage decode has no parameter 'smooth'"),
+    (["decod.output=x.tif"], "has no step 'decod' (did you mean 'decode'?)"),
+    (["decode.stage=bias"], "stage is not a parameter"),
+    (["decode.output=x.tif", "decode.output=y.tif"], "already set by --set"),
+])
+def test_a_fault_in_the_set_words_is_a_usage_error_naming_the_set(tmp_path, overrides, words):
+    # audit 10 E1: a misspelt --set key was blamed on the config ("c.yaml: step 'decode':
+    # unknown key") with exit 1, while a malformed --set was a usage error
+    config = write(tmp_path, "steps:\n  decode:\n    input: {W}\n    output: w.tif\n")
+    result = invoke("run", config, *[w for item in overrides for w in ("--set", item)],
+                    "--dry-run")
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "unknown key" not in result.output
+
+
 def test_set_cannot_change_a_steps_stage(tmp_path):
     config = write(tmp_path, "steps:\n  decode:\n    input: {W}\n    output: w.tif\n")
     with pytest.raises(ConfigError, match="stage is not a parameter"):

@@ -385,15 +385,16 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
         if not sep or not dot or not param:
             raise OptionError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
+        # Faults in the --set words themselves are the command line's: usage errors (exit 2).
         if step not in steps:
-            raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
+            raise OptionError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
         if param == "stage":
-            raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
+            raise OptionError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
         norm = param.replace("-", "_")
         if (step, norm) in given:
-            raise ConfigError(f"--set {item!r}: {step}.{param} is already set by --set "
+            raise OptionError(f"--set {item!r}: {step}.{param} is already set by --set "
                               f"{given[step, norm]!r}; keep one")
         given[step, norm] = item
         for key in [k for k in steps[step] if str(k).replace("-", "_") == norm]:
@@ -411,13 +412,20 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
 
 
 def _check_set_value(said: str, path: Path, stage_name: str, name: str, value: Any) -> None:
-    """A --set value gets its parameter's check now, as its flag would: a value wrong by itself
-    is a usage error (OptionError). Values with placeholders wait to be filled per capture; an
-    unknown key is the step's to refuse."""
+    """A --set key and value get their parameter's check now, as a flag would: a key the stage
+    does not take, or a value wrong by itself, is a usage error (OptionError). Values with
+    placeholders wait to be filled per capture; a step of an unknown stage is the config's to
+    refuse."""
     from plenocli.pipeline.params import convert
 
     stage = get_stages().get(stage_name)
-    param = {p.name: p for p in stage.params}.get(name) if stage is not None else None
+    if stage is None:
+        return
+    if name not in stage.parameters():
+        options = [k.replace("_", "-") for k in stage.parameters()]
+        raise OptionError(f"{said}: stage {stage_name} has no parameter "
+                          f"{name.replace('_', '-')!r}{closest(name.replace('_', '-'), options)}")
+    param = {p.name: p for p in stage.params}.get(name)
     if param is None or _placeholders(value):
         return
     if value is None:  # the shell has no word for "no value": null would mean the default
