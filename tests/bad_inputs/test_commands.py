@@ -338,6 +338,8 @@ CASES = [
      1, ("CFA cell",)),
     ("develop-wb-huge", ["develop", "{i}/biased.tif", "--view", "S", "--wb", "1e308,1,1", "-o",
                          "{o}/d.jpg"], 2, ("100 times",)),
+    ("develop-output-webp", ["develop", "{i}/biased.tif", "--view", "S", "-o", "{o}/d.webp"],
+     2, ("'-o' / '--output'", "an 8-bit JPEG or PNG", ".tiff, .jpg, .jpeg or .png")),
     ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
                                      "none", "--wb-from", "{i}/white_xy.tif", "-o",
                                      "{o}/d.jpg"], 1, ("no view S",)),
