@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError, not_a_file
+from plenocli.errors import InputError, OptionError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.io.plainimage import read_plain_image
 from plenocli.model.cfa import check_pattern, is_bayer
@@ -95,7 +95,13 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
             raise InputError(f"{path}: --camera raytrix needs the RayCalibData XML (--calib XML)")
         meta["raytrix_calib"] = raytrix.read_calib(calib)
     elif calib is not None:
-        raise InputError(f"--calib is for --camera raytrix, not {kind}")
+        raise OptionError(f"--calib goes with --camera raytrix and {path} is read as "
+                          f"{KIND_NAMES[kind]}: give --camera raytrix for a Raytrix sensor "
+                          "image, or leave --calib out")
+    if frame_names and _names_its_frames(kind, meta["views"]):
+        raise OptionError(f"--frames: {path} is {KIND_NAMES[kind]} that names its own frames "
+                          f"({','.join(meta['views'])}); other names would relabel which frame "
+                          "is which: leave --frames out")
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
                        white=white)
     _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype,
@@ -111,6 +117,13 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("colour") is not None:
         meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+def _names_its_frames(kind: str, names: list[str]) -> bool:
+    """A CR2's frames are S (A+B) and A by the format; a DNG's are named by its IFDs'
+    descriptions when they hold names (else frame0, frame1, ...: --frames may name them)."""
+    return kind == "canon-dp" or (
+        kind == "dng" and names != [f"frame{k}" for k in range(len(names))])
 
 
 KIND_NAMES = {"canon-dp": "a Canon CR2 raw", "dng": "a DNG", "raytrix": "a Raytrix sensor image",

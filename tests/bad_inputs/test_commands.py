@@ -166,10 +166,15 @@ CASES = [
                           ("huge.png", ("more than",))]],
     ("decode-frames-empty", ["decode", "{i}/dp.dng", "--frames=", "-o", "{o}/d.tif"], 2,
      ("'--frames'", "empty")),
-    ("decode-frames-count", ["decode", "{i}/dp.dng", "--frames", "S,A,B", "-o", "{o}/d.tif"],
+    ("decode-frames-count", ["decode", "{i}/zlib.tif", "--frames", "S,A,B", "-o", "{o}/d.tif"],
      1, ("3 frame names",)),
+    # own-5 (round 10): --frames A,S relabelled a DNG's S and A (bias then wrote the real S as
+    # A, exit 0); a raw that names its frames takes no --frames, as it takes no --black
+    ("decode-frames-of-a-raw", ["decode", "{i}/dp.dng", "--frames", "A,S", "-o", "{o}/d.tif"],
+     2, ("--frames", "names its own frames (S,A)", "leave --frames out")),
     ("decode-calib-without-raytrix", ["decode", "{i}/dp.dng", "--calib", "{i}/rt/calib.xml",
-                                      "-o", "{o}/d.tif"], 1, ("--calib",)),
+                                      "-o", "{o}/d.tif"], 2, ("--calib goes with --camera "
+                                                              "raytrix", "read as a DNG")),
     ("decode-raytrix-bad-calib", ["decode", "{i}/f512.tif", "--camera", "raytrix", "--calib",
                                   "{i}/calib_basis_zero.xml", "-o", "{o}/d.tif"], 1,
      ("lens_base",)),
