@@ -107,6 +107,7 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype,
                   given=tuple(name for name, value in (("--black", black), ("--white", white))
                               if value is not None))
+    _check_some_light(path, frames, meta, given=tuple(("--black",) if black is not None else ()))
     tiffio.check_no_infinity(path, frames, meta.get("views"))
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
@@ -197,6 +198,21 @@ def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = ())
         if not white > low.max():  # also refuses NaN
             raise InputError(f"{path}: white level {white:g} must be above the black level "
                              f"{low.max():g} DN{source}")
+
+
+def _check_some_light(path, frames: np.ndarray, meta: dict, *, given: tuple = ()) -> None:
+    """Some sample of each frame at or above its black level: light only adds to the black, and
+    even a dark frame's noise puts about half its pixels above it, so a level above every
+    sample is not this image's (every pixel would read as less than no light)."""
+    source = " (--black)" if given else " (the file's)"
+    for k, (frame, black) in enumerate(zip(frames, meta["black_level"], strict=True)):
+        top = np.fmax.reduce(frame, axis=None)  # NaN skipped; NaN only when every sample is
+        low = float(np.min(black))
+        if top == top and top < low:  # an all-NaN frame is decode's 'no valid pixel' error
+            name = (meta.get("views") or [f"frame{k}"] * len(frames))[k]
+            raise InputError(f"{path}: black level {low:g} DN{source} is above every sample of "
+                             f"frame {name} (the largest is {float(top):g}), so it would hold "
+                             "less than no light; give the black level the image has")
 
 
 def _check_cfa(cfa: str) -> str:

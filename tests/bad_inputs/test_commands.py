@@ -110,6 +110,10 @@ CASES = [
                                   "-o", "{o}/d.tif"], 1, ("white level",)),
     ("decode-black-negative", ["decode", "{i}/zlib.tif", "--black=-3", "-o", "{o}/d.tif"], 2,
      ("black",)),
+    # own-6 (round 10): a black level above every sample made a frame of less than no light
+    ("decode-black-above-every-sample", ["decode", "{i}/zlib.tif", "--black", "65000", "-o",
+                                         "{o}/d.tif"], 1,
+     ("black level 65000 DN (--black) is above every sample", "the largest is")),
     # a level the samples cannot reach: refused here, not written for bias to call damaged
     ("decode-white-beyond-samples", ["decode", "{i}/zlib.tif", "--white", "1e308", "-o",
                                      "{o}/d.tif"], 1, ("(--white)", "uint16", "65535")),
