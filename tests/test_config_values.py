@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # (a YAML list stands for the comma-separated word)
 WORDS = ["010", "+5", "-0", "1_0", "0x3", "0o7", "1e3", "3.0", "2:6", "1:30", "yes", "on",
          "1e30", ".5", "0.50", "2024-01-01", "00", "2:6:1",
-         ("[2, 1, 1.50]", "2,1,1.50"), ("[02, 1, 1]", "02,1,1")]  # (YAML, the shell's word)
+         ("[2, 1, 1.50]", "2,1,1.50"), ("[02, 1, 1]", "02,1,1"),  # (YAML, the shell's word)
+         ("!!float 9", "9.0"), ("!!float +3", "3.0"), ("!!int 010", "010"), ("!!str 9", "9")]
 OPTIONS = [("bias", "smooth"), ("flat", "floor"), ("develop", "quality"), ("stitch", "overlap"),
            ("refocus", "g"), ("develop", "view"), ("develop", "wb")]
 
@@ -66,6 +67,15 @@ def test_a_word_means_the_same_in_the_shell_yaml_and_set(tmp_path, stage, key):
 def test_yaml_scalars_are_the_shells_numbers():
     assert load_yaml("[010, 2:6, 1e30, 1:30, yes, 0x10, .inf, ~, true]") == [
         10, "2:6", 1e30, "1:30", "yes", "0x10", float("inf"), None, True]
+
+
+def test_a_tagged_scalar_is_the_value_its_tag_says():
+    # audit 10 E2: 'smooth: !!float 9' ran as --smooth 9 while 'smooth: 9.0' was refused; and
+    # '!!bool yes' made a flag true although the plain word yes is text
+    assert str(load_yaml("a: !!float 9", words=True)["a"]) == "9.0"
+    with pytest.raises(ValueError, match="'yes' is not a bool"):
+        load_yaml("a: !!bool yes")
+    assert load_yaml("[!!bool true, !!bool FALSE]") == [True, False]
 
 
 def test_a_base_60_g_refocuses_nowhere_it_was_not_asked(tmp_path):

@@ -53,7 +53,10 @@ def _rows_reversed(doc):
         before = rows[k - 1] if k > 0 else {"glass": "air", "thickness": 1.0}
         flipped.append({**rows[k], "radius": -rows[k]["radius"], "glass": before["glass"],
                         "thickness": before["thickness"]})
-    return {**doc, "surfaces": [doc["surfaces"][0], *flipped], "image_distance_mm": None}
+    # The stop 0.2 mm before the turned lens's first vertex: at that vertex's plane it would cut
+    # the glass, whose rim now curves towards the object.
+    stop = {**doc["surfaces"][0], "thickness": 0.2}
+    return {**doc, "surfaces": [stop, *flipped], "image_distance_mm": None}
 
 
 def test_other_readings_of_table2_do_not_fit():
@@ -81,8 +84,8 @@ def test_singlet_distortion_sign_follows_the_stop_position():
     # A positive singlet: barrel (negative) with the stop in front, pincushion (positive)
     # with the stop behind (the classic landscape-lens result); the latter needs ray aiming.
     front = Lens((Surface(math.inf, 5.0, "air", 2.0, stop=True),
-                  Surface(50.0, 4.0, "N-BK7", 30.0), Surface(-50.0, 47.0, "air", 30.0)))
-    behind = Lens((Surface(50.0, 4.0, "N-BK7", 30.0), Surface(-50.0, 5.0, "air", 30.0),
+                  Surface(50.0, 4.0, "N-BK7", 24.0), Surface(-50.0, 47.0, "air", 24.0)))
+    behind = Lens((Surface(50.0, 4.0, "N-BK7", 24.0), Surface(-50.0, 5.0, "air", 24.0),
                    Surface(math.inf, 42.0, "air", 2.0, stop=True)))
     fields = np.array([5.0, 10.0])
     assert np.all(distortion_percent(front, fields) < 0)
@@ -120,9 +123,9 @@ def test_a_stop_just_wider_than_the_first_element_is_refused(stop_mm):
 
 
 def test_an_f_number_below_one_half_is_refused():
-    # A thick biconvex singlet (n = 1.9, R = 10 mm, 2 mm thick) at full aperture (19 mm):
-    # lensmaker's f = 5.83 mm, f/0.31, a numerical aperture above 1.
-    n, r, t, d = 1.9, 10.0, 2.0, 19.0
+    # A thick biconvex singlet (n = 1.9, R = 10 mm, 14 mm thick: its rims 0.2 mm apart) at
+    # full aperture (19 mm): lensmaker's f = 8.31 mm, f/0.44, a numerical aperture above 1.
+    n, r, t, d = 1.9, 10.0, 14.0, 19.0
     f = 1 / ((n - 1) * (2 / r - (n - 1) * t / (n * r * r)))
     assert f / d < 0.5
     lens = Lens((Surface(math.inf, 0.0, "air", d, stop=True), Surface(r, t, n, d),

@@ -26,7 +26,7 @@ def axis_crossing(bundle):
 @pytest.mark.parametrize("r1, r2, thickness", [(100.0, -100.0, 0.5), (60.0, -200.0, 1.0),
                                                (80.0, math.inf, 0.8)])
 def test_thin_singlet_matches_lensmaker(r1, r2, thickness):
-    lens = Lens((Surface(r1, thickness, "N-BK7", 20.0), Surface(r2, 50.0, "air", 20.0)))
+    lens = Lens((Surface(r1, thickness, "N-BK7", 12.0), Surface(r2, 50.0, "air", 12.0)))
     n = N_BK7
     c1, c2 = 1 / r1, (0.0 if math.isinf(r2) else 1 / r2)
     power = (n - 1) * (c1 - c2 + (n - 1) * thickness * c1 * c2 / n)  # thick lensmaker
@@ -138,7 +138,7 @@ def test_conic_intersection_from_far_away_lands_on_the_vertex_sheet(conic):
 
 
 def test_image_distance_for_a_near_object_follows_the_thin_lens_equation():
-    lens = Lens((Surface(100.0, 0.01, "N-BK7", 20.0), Surface(-100.0, 0.0, "air", 20.0)))
+    lens = Lens((Surface(100.0, 0.01, "N-BK7", 1.0), Surface(-100.0, 0.0, "air", 1.0)))
     f = paraxial(lens)["efl_mm"]
     assert image_distance(lens, object_distance_mm=2000.0) == pytest.approx(
         1 / (1 / f - 1 / 2000.0), rel=1e-4)
@@ -147,6 +147,30 @@ def test_image_distance_for_a_near_object_follows_the_thin_lens_equation():
 def test_invalid_conic_for_the_diameter_is_refused():
     with pytest.raises(ValueError, match="does not reach"):
         Lens((Surface(-2.6425, 1.0, "air", 3.38069, conic=18.7316),))
+
+
+@pytest.mark.parametrize("thickness, crosses", [(1.0, True), (2.0, True), (2.05, False)])
+def test_surfaces_that_cross_inside_their_apertures_are_refused(thickness, crosses):
+    # A biconvex singlet R = +-50 mm, 20 mm across: each rim's sag is 50 - sqrt(50^2 - 10^2),
+    # so the glass is 2 * 1.0102 mm thinner at the rim than on the axis.
+    rim_sag = 50.0 - math.sqrt(50.0 ** 2 - 10.0 ** 2)
+    surfaces = (Surface(50.0, thickness, "N-BK7", 20.0), Surface(-50.0, 40.0, "air", 20.0))
+    if not crosses:
+        Lens(surfaces)
+        return
+    with pytest.raises(ValueError, match=rf"surfaces 1 and 2 cross 10 mm off axis \(the gap "
+                                         rf"between them is {thickness - 2 * rim_sag:.4g} mm"):
+        Lens(surfaces)
+
+
+def test_surfaces_touching_within_a_printed_prescriptions_rounding_are_taken():
+    # Table 2's surfaces 3 and 4 meet 0.67 um inside their 1.69 mm rims: less than the
+    # 1.8 um the rounding of its printed radius -2.6425 mm leaves at that rim.
+    s3 = Surface(-2.6425, 0.07071, "air", 3.38069, conic=-18.7316)
+    s4 = Surface(-2.1581, 0.43551, "F5", 3.38110, conic=-11.9393)
+    gap = 0.07071 + s4.sag(np.array([1.690345]))[0] - s3.sag(np.array([1.690345]))[0]
+    assert -1e-3 < gap < 0  # they do cross, by under a micrometre
+    Lens((s3, s4))
 
 
 def test_compiled_tracer_matches_the_numpy_tracer():

@@ -185,3 +185,12 @@ def test_a_yaml_flag_and_a_repeated_option_resolve_as_the_shell_gives_them(tmp_p
                       "    param: noise=0\n    no-prisms: false\n")
     step = load_config(config)[0]
     assert step.params["param"] == ("noise=0",) and step.params["no_prisms"] is False
+
+
+def test_develops_output_names_are_the_formats_it_writes():
+    # own-3 (round 10): develop -o x.webp was refused only when writing (exit 1), other
+    # outputs' wrong suffixes are usage errors
+    from plenocli.io.photo import FORMATS
+    from plenocli.pipeline.schema.develop import PHOTO_SUFFIXES
+
+    assert sorted(PHOTO_SUFFIXES) == sorted(FORMATS)

@@ -82,6 +82,24 @@ def test_a_nul_in_a_path_is_refused(tmp_path, key):
         load_config(write(tmp_path, text))
 
 
+@pytest.mark.parametrize("overrides, words", [
+    (["decode.ouput=x.tif"], "--set 'decode.ouput=x.tif': step 'decode': stage decode has no "
+                             "parameter 'ouput' (did you mean 'output'?)"),
+    (["decode.smooth=3"], "stage decode has no parameter 'smooth'"),
+    (["decod.output=x.tif"], "has no step 'decod' (did you mean 'decode'?)"),
+    (["decode.stage=bias"], "stage is not a parameter"),
+    (["decode.output=x.tif", "decode.output=y.tif"], "already set by --set"),
+])
+def test_a_fault_in_the_set_words_is_a_usage_error_naming_the_set(tmp_path, overrides, words):
+    # audit 10 E1: a misspelt --set key was blamed on the config ("c.yaml: step 'decode':
+    # unknown key") with exit 1, while a malformed --set was a usage error
+    config = write(tmp_path, "steps:\n  decode:\n    input: {W}\n    output: w.tif\n")
+    result = invoke("run", config, *[w for item in overrides for w in ("--set", item)],
+                    "--dry-run")
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "unknown key" not in result.output
+
+
 def test_set_cannot_change_a_steps_stage(tmp_path):
     config = write(tmp_path, "steps:\n  decode:\n    input: {W}\n    output: w.tif\n")
     with pytest.raises(ConfigError, match="stage is not a parameter"):
@@ -98,6 +116,31 @@ def test_an_empty_output_folder_is_a_usage_error(tmp_path, command, monkeypatch)
     result = invoke(*args)
     assert result.exit_code == 2 and "the folder name is empty" in result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+@pytest.mark.parametrize("command", ["run", "run-print-make", "batch"])
+def test_out_is_a_usage_error_when_no_step_uses_it(tmp_path, command, monkeypatch):
+    # own-2 (round 10): --out was ignored and the outputs went where the steps say
+    monkeypatch.chdir(tmp_path)
+    body = ('    input: "{capture}"\n    output: "o/{name}.tif"\n' if command == "batch"
+            else "    input: {W}\n    output: w.tif\n")
+    config = write(tmp_path, "steps:\n  decode:\n" + body)
+    args = {"run": ["run", config, "--out", "elsewhere"],
+            "run-print-make": ["run", config, "--print-make", "--out", "elsewhere"],
+            "batch": ["batch", config, "--inputs", CAPTURE, "--out", "elsewhere", "-j", "1"]}
+    result = invoke(*args[command])
+    assert result.exit_code == 2, result.output
+    assert "elsewhere: no step of" in result.output and "uses {out}" in result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml"]
+
+
+def test_an_out_key_no_step_uses_is_refused(tmp_path):
+    config = write(tmp_path, "out: elsewhere\nsteps:\n  decode:\n    input: {W}\n"
+                             "    output: w.tif\n")
+    with pytest.raises(ConfigError, match=r"'out: elsewhere' fills \{out\}, which no step uses"):
+        load_config(config)
+    result = invoke("run", config, "--dry-run")
+    one_line_error(result, "which no step uses")
 
 
 @pytest.mark.parametrize("validator,kind", [

@@ -147,6 +147,21 @@ def test_dng_active_area_beyond_the_image_is_refused(tmp_path):
         rawio.decode(tmp_path / "x.dng")
 
 
+def test_frames_names_a_dngs_unnamed_frames_only(tmp_path):
+    # own-5 (round 10): --frames A,S relabelled the S and A a DNG names (bias then wrote the
+    # real S as A); a DNG whose IFDs name no frame (frame0, frame1) still takes names
+    from plenocli.errors import OptionError
+
+    frames = np.arange(2 * 16 * 16, dtype=np.uint16).reshape(2, 16, 16)
+    options = dict(cfa="RGGB", black_levels=[0, 0], white_level=1000, active_area=[0, 0, 16, 16])
+    write_dng(tmp_path / "named.dng", frames, frame_names=["S", "A"], **options)
+    write_dng(tmp_path / "unnamed.dng", frames, **options)
+    with pytest.raises(OptionError, match=r"names its own frames \(S,A\)"):
+        rawio.decode(tmp_path / "named.dng", frame_names=["A", "S"])
+    got, meta = rawio.decode(tmp_path / "unnamed.dng", frame_names=["S", "A"])
+    assert meta["views"] == ["S", "A"] and np.array_equal(got, frames)
+
+
 @pytest.mark.parametrize("compression", [("jpeg", {"lossless": True}), ("lzw", None)])
 def test_compressed_dng_decodes_as_the_uncompressed_one(tmp_path, compression):
     """Cameras and Adobe's converter write DNGs in lossless-JPEG tiles: the same frames."""

@@ -38,11 +38,11 @@ def test_the_residual_of_a_transform_off_by_a_known_shift_is_that_shift(overlap)
         _, report = stitch(views, transform=t)
         if refused:
             with pytest.raises(ValueError, match="does not describe these views") as err:
-                verify.check_alignment(views, report, what="the transform")
+                verify.check_alignment(report, what="the transform")
             measured = float(re.search(r"are ([0-9.]+) px apart", str(err.value)).group(1))
             assert measured == pytest.approx(off, abs=0.1)
         else:
-            assert verify.check_alignment(views, report, what="t") == [pytest.approx(off, abs=0.1)]
+            assert verify.check_alignment(report, what="t") == [pytest.approx(off, abs=0.1)]
 
 
 def test_a_textureless_stretch_of_the_seam_measures_nothing_and_is_left_out():
@@ -60,9 +60,9 @@ def test_a_textureless_stretch_of_the_seam_measures_nothing_and_is_left_out():
         _, report = stitch(flat, transform=t)
         if refused:
             with pytest.raises(ValueError, match="does not describe these views"):
-                verify.check_alignment(flat, report, what="the transform")
+                verify.check_alignment(report, what="the transform")
         else:
-            assert verify.check_alignment(flat, report, what="t")[0] < 0.1
+            assert verify.check_alignment(report, what="t")[0] < 0.1
 
 
 def test_a_rig_with_the_wrong_focal_length_is_refused():
@@ -76,9 +76,9 @@ def test_a_rig_with_the_wrong_focal_length_is_refused():
         _, report = stitch(views, rig=rig)
         if refused:
             with pytest.raises(ValueError, match="rig does not describe these views"):
-                verify.check_alignment(views, report, what="the rig")
+                verify.check_alignment(report, what="the rig")
         else:  # blocks of ~50 px on the chart's mostly vertical texture: 0.2 px of noise
-            assert verify.check_alignment(views, report, what="the rig")[0] < 0.25
+            assert verify.check_alignment(report, what="the rig")[0] < 0.25
 
 
 def test_a_rig_that_warps_prism_free_views_is_refused(tmp_path):
@@ -128,7 +128,7 @@ def test_the_true_quad_pixel_rig_passes_at_every_seam():
                    tuple(ViewOptics(tuple(v["pupil_quarter_xy"]), tuple(v["prism_towards_xy"]))
                          for v in truth["views"]), cam["aperture_mm"], cam["object_distance_mm"])
     _, report = stitch(views, layout="2x2", rig=rig)
-    assert max(verify.check_alignment(views, report, what="the rig")) < 0.2
+    assert max(verify.check_alignment(report, what="the rig")) < 0.2
 
 
 def test_a_block_of_one_direction_s_texture_places_nothing_along_it():
@@ -164,4 +164,4 @@ def test_a_rig_refused_under_a_users_distortion_names_the_distortion():
     with pytest.raises(ValueError, match=r"the rig r.yaml on views with --distortion 0.05 "
                                          r"removed does not describe these views.*check "
                                          r"--distortion, or leave it out"):
-        verify.check_alignment(views, report, **_claim(None, "r.yaml", 0.05))
+        verify.check_alignment(report, **_claim(None, "r.yaml", 0.05))

@@ -9,7 +9,8 @@ from plenocli.pipeline.validators import FiniteFloat, InputFile, OutputFolder
 @click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
-              help="Worker processes on this machine [default: number of CPUs].")
+              help="Worker processes on this machine [default: number of CPUs]; not with "
+                   "--scheduler.")
 @click.option("--out", type=options.Declared(OutputFolder()), default=None,
               help="Output root: fills {out} in the config (overrides its 'out:' key).")
 @click.option("--force", is_flag=True, help="Rerun every step, even up-to-date ones.")
@@ -46,6 +47,9 @@ def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, tim
     from plenocli.pipeline.config import read_template
     from plenocli.progress import log
 
+    if scheduler and jobs is not None:  # a Dask cluster's own workers run the captures
+        raise click.UsageError("-j/--jobs sets worker processes on this machine; with "
+                               "--scheduler the cluster's workers run the captures: leave -j out")
     if jobs is None:
         jobs = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     # SIGTERM and Ctrl-C: the edge (options.stage_command) stops the workers and says so

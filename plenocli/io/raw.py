@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError, not_a_file
+from plenocli.errors import InputError, OptionError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.io.plainimage import read_plain_image
 from plenocli.model.cfa import check_pattern, is_bayer
@@ -95,12 +95,19 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
             raise InputError(f"{path}: --camera raytrix needs the RayCalibData XML (--calib XML)")
         meta["raytrix_calib"] = raytrix.read_calib(calib)
     elif calib is not None:
-        raise InputError(f"--calib is for --camera raytrix, not {kind}")
+        raise OptionError(f"--calib goes with --camera raytrix and {path} is read as "
+                          f"{KIND_NAMES[kind]}: give --camera raytrix for a Raytrix sensor "
+                          "image, or leave --calib out")
+    if frame_names and _names_its_frames(kind, meta["views"]):
+        raise OptionError(f"--frames: {path} is {KIND_NAMES[kind]} that names its own frames "
+                          f"({','.join(meta['views'])}); other names would relabel which frame "
+                          "is which: leave --frames out")
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
                        white=white)
     _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype,
                   given=tuple(name for name, value in (("--black", black), ("--white", white))
                               if value is not None))
+    _check_some_light(path, frames, meta, given=tuple(("--black",) if black is not None else ()))
     tiffio.check_no_infinity(path, frames, meta.get("views"))
     tiffio.check_geometry(path, {k: meta.get(k) for k in ("active_area", "masked_areas")},
                           frames.shape)
@@ -111,6 +118,13 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
     if meta.get("colour") is not None:
         meta["colour"] = rawmeta.clean_colour(meta["colour"], warn)
     return frames, meta
+
+
+def _names_its_frames(kind: str, names: list[str]) -> bool:
+    """A CR2's frames are S (A+B) and A by the format; a DNG's are named by its IFDs'
+    descriptions when they hold names (else frame0, frame1, ...: --frames may name them)."""
+    return kind == "canon-dp" or (
+        kind == "dng" and names != [f"frame{k}" for k in range(len(names))])
 
 
 KIND_NAMES = {"canon-dp": "a Canon CR2 raw", "dng": "a DNG", "raytrix": "a Raytrix sensor image",
@@ -184,6 +198,21 @@ def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = ())
         if not white > low.max():  # also refuses NaN
             raise InputError(f"{path}: white level {white:g} must be above the black level "
                              f"{low.max():g} DN{source}")
+
+
+def _check_some_light(path, frames: np.ndarray, meta: dict, *, given: tuple = ()) -> None:
+    """Some sample of each frame at or above its black level: light only adds to the black, and
+    even a dark frame's noise puts about half its pixels above it, so a level above every
+    sample is not this image's (every pixel would read as less than no light)."""
+    source = " (--black)" if given else " (the file's)"
+    for k, (frame, black) in enumerate(zip(frames, meta["black_level"], strict=True)):
+        top = np.fmax.reduce(frame, axis=None)  # NaN skipped; NaN only when every sample is
+        low = float(np.min(black))
+        if top == top and top < low:  # an all-NaN frame is decode's 'no valid pixel' error
+            name = (meta.get("views") or [f"frame{k}"] * len(frames))[k]
+            raise InputError(f"{path}: black level {low:g} DN{source} is above every sample of "
+                             f"frame {name} (the largest is {float(top):g}), so it would hold "
+                             "less than no light; give the black level the image has")
 
 
 def _check_cfa(cfa: str) -> str:

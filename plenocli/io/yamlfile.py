@@ -86,9 +86,22 @@ def _number(kind, word_kind=None):
         if word_kind is None:
             return value
         word = word_kind(value)
-        word.word = text if text[-1:].isdigit() or text[-1:] == "." else str(value)
+        # '!!float 9' is the number 9.0: its word must say so, or an integer option would take
+        # what the file calls a float (the plain word 9.0 is refused there)
+        as_written = (text[-1:].isdigit() or text[-1:] == ".") and not (
+            kind is float and _INT.match(text))
+        word.word = text if as_written else str(value)
         return word
     return construct
+
+
+def _core_bool(loader, node):
+    """true/false only, tagged or not: '!!bool yes' is refused as the plain word yes is text."""
+    text = loader.construct_scalar(node)
+    if text.lower() not in ("true", "false"):
+        raise yaml.constructor.ConstructorError(
+            None, None, f"{text!r} is not a bool (true or false)", node.start_mark)
+    return text.lower() == "true"
 
 
 def _unique_mapping(self, node, deep=False):
@@ -121,6 +134,7 @@ def _loader(base: type, *, words: bool = False) -> type:
         cls.add_implicit_resolver(f"tag:yaml.org,2002:{tag}", pattern, list(first))
     cls.add_constructor("tag:yaml.org,2002:int", _number(int, IntWord if words else None))
     cls.add_constructor("tag:yaml.org,2002:float", _number(float, FloatWord if words else None))
+    cls.add_constructor("tag:yaml.org,2002:bool", _core_bool)
     return cls
 
 

@@ -280,6 +280,15 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
                          f"focal length ({par['efl_mm']:.6g} mm): the sensor is nowhere near "
                          "focus and every figure (field, distortion, spots) would describe a "
                          "blur; check image_distance_mm")
+    # A point on the axis is spread over |offset| / N (the marginal rays' cone): once that is
+    # wider than the sensor, no point of the scene is imaged on it at all.
+    blur = abs(offset / par["f_number"])
+    if blur > sensor_mm:
+        raise ValueError(f"the image plane lies {offset:+.6g} mm from the focus: a point on the "
+                         f"axis is spread over {blur:.4g} mm there (|offset| / f-number "
+                         f"{abs(par['f_number']):.3g}), wider than the {sensor_mm:g} mm sensor, "
+                         "so every figure (field, distortion, spots) would describe a blur; "
+                         "check image_distance_mm and that every length is in mm")
     half = half_field_deg(lens, sensor_mm / 2, wavelength_um=wavelength_um)
     half_diag = half_field_deg(lens, sensor_mm / math.sqrt(2), wavelength_um=wavelength_um)
     fractions = np.array([0.25, 0.5, 0.7, 0.85, 1.0])

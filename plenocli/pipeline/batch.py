@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from multiprocessing import connection
 from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError, PlenocliError, raise_terminated
+from plenocli.errors import ConfigError, InputError, OptionError, PlenocliError, raise_terminated
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
@@ -138,7 +138,7 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     if timeout is not None and not (0 < timeout < 1e7):  # also refuses NaN
         raise ConfigError(f"--timeout {timeout}: give a positive number of seconds")
     if timeout is not None and scheduler:
-        raise ConfigError("--timeout limits local worker processes; with --scheduler set the "
+        raise OptionError("--timeout limits local worker processes; with --scheduler set the "
                           "Dask workers' own limits instead")
     if scheduler:
         check_scheduler(scheduler)

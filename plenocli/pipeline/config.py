@@ -91,6 +91,10 @@ class Template:
     raw_steps: dict[str, dict]
     out: str | None  # the top-level 'out:' value (relative to the config's folder)
 
+    def uses_out(self) -> bool:
+        """Whether a step names ``{out}`` (else an output root has nothing to fill)."""
+        return any("out" in _placeholders(body) for body in self.raw_steps.values())
+
     def per_capture_steps(self) -> set[str]:
         """Names of the steps that use ``{capture}`` or ``{name}``."""
         return {name for name, body in self.raw_steps.items()
@@ -105,6 +109,10 @@ class Template:
         """
         if only not in ("all", "shared", "per-capture"):
             raise ValueError(f"only must be all, shared or per-capture, got {only!r}")
+        if out is not None and not self.uses_out():
+            raise OptionError(f"--out {out}: no step of {self.path} uses {{out}}, so it would "
+                              "change nothing (the outputs are the paths the steps name); "
+                              "leave --out out, or write the outputs as {out}/...")
         base = self.path.resolve().parent
         per_capture = self.per_capture_steps()
         values = self._values(capture, out)
@@ -236,20 +244,31 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
         if not isinstance((body or {}).get("stage", ""), str):
             raise ConfigError(f"{p}: step {name!r}: stage must be one stage name, got "
                               f"{body['stage']!r}")
-    out = doc.get("out")
-    if out is not None and not isinstance(out, str):
-        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
-    if out is not None and _ANY_PLACEHOLDER.search(out):
-        # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
-        raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
-                          "(per-capture folders go in the steps, e.g. {out}/{name}/x.tif)")
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
     _check_placeholder_names(p, raw_steps)
-    template = Template(p, raw_steps, out)
+    template = Template(p, raw_steps, doc.get("out"))
+    _check_out_key(template)
     _check_per_capture_outputs(template)
     return template
+
+
+def _check_out_key(template: Template) -> None:
+    """The top-level ``out:``: one plain folder path, filling a ``{out}`` some step uses."""
+    p, out = template.path, template.out
+    if out is None:
+        return
+    if not isinstance(out, str):
+        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
+    if _ANY_PLACEHOLDER.search(out):
+        # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
+        raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
+                          "(per-capture folders go in the steps, e.g. {out}/{name}/x.tif)")
+    if not template.uses_out():
+        raise ConfigError(f"{p}: 'out: {out}' fills {{out}}, which no step uses (the outputs "
+                          "are the paths the steps name); remove it, or write the outputs as "
+                          "{out}/...")
 
 
 def _unflow(value):
@@ -366,15 +385,16 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         step, dot, param = target.rpartition(".")  # step names may hold dots; keys never
         if not sep or not dot or not param:
             raise OptionError(f"--set {item!r}: expected STEP.PARAM=VALUE, e.g. bias.smooth=9")
+        # Faults in the --set words themselves are the command line's: usage errors (exit 2).
         if step not in steps:
-            raise ConfigError(f"--set {item!r}: {path} has no step {step!r}"
+            raise OptionError(f"--set {item!r}: {path} has no step {step!r}"
                               f"{closest(step, steps)}")
         if param == "stage":
-            raise ConfigError(f"--set {item!r}: a step's stage is not a parameter; edit "
+            raise OptionError(f"--set {item!r}: a step's stage is not a parameter; edit "
                               f"{path} to change it")
         norm = param.replace("-", "_")
         if (step, norm) in given:
-            raise ConfigError(f"--set {item!r}: {step}.{param} is already set by --set "
+            raise OptionError(f"--set {item!r}: {step}.{param} is already set by --set "
                               f"{given[step, norm]!r}; keep one")
         given[step, norm] = item
         for key in [k for k in steps[step] if str(k).replace("-", "_") == norm]:
@@ -392,13 +412,20 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
 
 
 def _check_set_value(said: str, path: Path, stage_name: str, name: str, value: Any) -> None:
-    """A --set value gets its parameter's check now, as its flag would: a value wrong by itself
-    is a usage error (OptionError). Values with placeholders wait to be filled per capture; an
-    unknown key is the step's to refuse."""
+    """A --set key and value get their parameter's check now, as a flag would: a key the stage
+    does not take, or a value wrong by itself, is a usage error (OptionError). Values with
+    placeholders wait to be filled per capture; a step of an unknown stage is the config's to
+    refuse."""
     from plenocli.pipeline.params import convert
 
     stage = get_stages().get(stage_name)
-    param = {p.name: p for p in stage.params}.get(name) if stage is not None else None
+    if stage is None:
+        return
+    if name not in stage.parameters():
+        options = [k.replace("_", "-") for k in stage.parameters()]
+        raise OptionError(f"{said}: stage {stage_name} has no parameter "
+                          f"{name.replace('_', '-')!r}{closest(name.replace('_', '-'), options)}")
+    param = {p.name: p for p in stage.params}.get(name)
     if param is None or _placeholders(value):
         return
     if value is None:  # the shell has no word for "no value": null would mean the default

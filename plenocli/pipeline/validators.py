@@ -229,8 +229,10 @@ class OutputFile(Validator):
     name = "file"
     is_path = True
 
-    def __init__(self, *suffixes: str):
+    def __init__(self, *suffixes: str, formats: str | None = None):
         self.suffixes = suffixes
+        # what the file is written as, in words (the first suffix's format when not given)
+        self.formats = formats or (suffixes[0][1:].upper() if suffixes else "")
 
     def convert(self, value: Any) -> str:
         path = _output_word(value, folder=False)
@@ -239,8 +241,10 @@ class OutputFile(Validator):
             raise ValueError(f"{path!r} has no name before its suffix; give one, e.g. "
                              f"out{self.suffixes[0]}")
         if self.suffixes and os.path.splitext(path)[1].lower() not in self.suffixes:
-            raise ValueError(f"{path!r} is written as {self.suffixes[0][1:].upper()}; give a "
-                             f"name ending in {' or '.join(self.suffixes)}")
+            ending = (" or ".join(self.suffixes) if len(self.suffixes) < 3
+                      else ", ".join(self.suffixes[:-1]) + " or " + self.suffixes[-1])
+            raise ValueError(f"{path!r} is written as {self.formats}; give a name ending in "
+                             f"{ending}")
         return path
 
 

@@ -1,7 +1,7 @@
 """The overlaps of neighbour views, measured where both cover the panorama: the exposure gains
-(per view, per channel), the residual local shift left by the registration, and the overlap's
-area (from the maps alone; for a plain homography from its geometry). Each view is resampled
-here through the same one map per view as the blend (:mod:`plenocli.stitch.compose`).
+(per view, per channel) and the overlap's area (from the maps alone; for a plain homography from
+its geometry). Each view is resampled here through the same one map per view as the blend
+(:mod:`plenocli.stitch.compose`).
 """
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ import numpy as np
 
 from plenocli.progress import step
 from plenocli.stitch.compose import Box, coverage, intersect, region_shape, warp_region
-from plenocli.stitch.quality import bounding_box, overlap_residual
+from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import difference_row
 from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, apply_matrix, feather
 
-# An overlap is measured (exposure gains, residual shifts) on up to MEASURE_BLOCKS blocks spread
-# along the seam, together at most MEASURE_PIXELS: means and local shifts settle long before the
+# An overlap's exposure is measured on up to MEASURE_BLOCKS blocks spread
+# along the seam, together at most MEASURE_PIXELS: means settle long before the
 # whole overlap of a full-size view (10 Mpx at the 5D Mark IV's size) is resampled a second time
-# (gains within 4e-5 and residuals within their 0.05 px steps of the whole overlap's).
+# (gains within 4e-5 of the whole overlap's).
 MEASURE_PIXELS = 1 << 20
 MEASURE_BLOCKS = 4
 MIN_BLOCK_PX = 64
@@ -31,12 +31,12 @@ MEASURE_THREADS = 2  # neighbour pairs measured at once (the two cores the stitc
 
 @dataclass(frozen=True)
 class Overlap:
-    """A neighbour pair's overlap as measured: ``pieces`` (crop of view a (C, h, w), crop of
-    view b, pixels both cover (h, w)) of its blocks, in order along the seam, the seam's long
-    axis (0: rows) and ``area``, the pixels both views cover in the whole overlap."""
+    """A neighbour pair's overlap as measured: ``sums`` (2, C), the sums of view a's and view
+    b's channels over the ``count`` pixels of the blocks both views cover, and ``area``, the
+    pixels both cover in the whole overlap."""
 
-    pieces: list
-    long_axis: int
+    sums: np.ndarray
+    count: int
     area: int
 
 
@@ -51,17 +51,22 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
         if region is None:
             return None
         step(f"measuring the overlap of views {a} and {b}")
-        long_axis, pieces = _long_axis(region), []
-        for block in _measure_blocks(region, long_axis):
+        n_chan = len(views[a])
+        sums, count = np.zeros((2, n_chan)), 0
+        for block in _measure_blocks(region, _long_axis(region)):
             crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a])
             crop_b, weight_b = warp_region(views[b], maps[b], block, holes[b])
             both = (weight_a > 0) & (weight_b > 0)
             box = bounding_box(both)
-            if box is not None:
-                pieces.append((crop_a[(slice(None),) + box], crop_b[(slice(None),) + box],
-                               both[box]))
+            if box is None:
+                continue
+            inside = both[box]
+            count += int(inside.sum())
+            for k, crop in enumerate((crop_a, crop_b)):
+                for c in range(n_chan):
+                    sums[k, c] += float(crop[c][box][inside].sum())
         area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
-        return Overlap(pieces, long_axis, area) if pieces else None
+        return Overlap(sums, count, area) if count else None
 
     with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
         return list(pool.map(measure, pairs))
@@ -188,9 +193,7 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
         for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
             if overlap is None:
                 continue
-            count = sum(int(both.sum()) for _, _, both in overlap.pieces)
-            mean_a, mean_b = (sum(float(piece[k][c][piece[2]].sum()) for piece in overlap.pieces)
-                              / count for k in (0, 1))
+            mean_a, mean_b = overlap.sums[:, c] / overlap.count
             if mean_a <= 0 or mean_b <= 0:
                 continue  # signed data: leave this pair out
             rows.append(difference_row(a, b, n_views))
@@ -199,19 +202,3 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
             sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
             gains[1:, c] = np.exp(sol)
     return gains
-
-
-def residuals(overlaps: list, pairs: list[tuple[int, int, str]], gains: np.ndarray) -> list:
-    """Per pair: (RMS local shift left in the overlap px or None, overlap area px); the pairs
-    in MEASURE_THREADS threads (the FFTs and blurs release the GIL)."""
-    def measure(item):
-        (a, b, _), overlap = item
-        if overlap is None:
-            return None, 0
-        lumas = [tuple((x * gains[k].astype(np.float32)[:, None, None]).mean(axis=0)
-                       for x, k in ((crop_a, a), (crop_b, b))) + (both,)
-                 for crop_a, crop_b, both in overlap.pieces]
-        return overlap_residual(lumas, overlap.long_axis), overlap.area
-
-    with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
-        return list(pool.map(measure, zip(pairs, overlaps, strict=True)))

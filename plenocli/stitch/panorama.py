@@ -19,7 +19,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from plenocli.progress import step
-from plenocli.stitch import compose
+from plenocli.stitch import compose, verify
 from plenocli.stitch import overlaps as overlap_measure
 from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
@@ -32,9 +32,7 @@ from plenocli.stitch.views import (
     LAYOUTS,
     MODELS,
     as_view_stack,
-    erode,
     fill_nan_channels,
-    highpass,
     luminance,
     neighbour_pairs,
     translation_matrix,
@@ -139,10 +137,10 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
-    panorama, covered, offset, gains, residuals = _composite(
+    panorama, covered, offset, gains, fits, areas = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, check_correlation=min_correlation if source == "given" else None, out=out)
-    pair_info, measured = _pair_report(pair_info, pairs, residuals)
+        rig=rig, out=out)
+    pair_info, measured = _pair_report(pair_info, pairs, fits, areas)
     axis_px, field_deg = (None, None) if rig is None else rig_axis_and_field(
         rig, (rows, cols), origins, offset, covered)
     rig_dict = rig.to_dict() if rig is not None else None
@@ -164,15 +162,19 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     return (panorama if colour or panorama is None else panorama[0]), report
 
 
-def _pair_report(pair_info: list[dict] | None, pairs, residuals) -> tuple[list[dict], list]:
-    """Each pair's registration figures with its residual (a given transform's pairs only
-    named), and the residuals measured."""
-    measured = [res for res, _ in residuals if res is not None]
+def _pair_report(pair_info: list[dict] | None, pairs, fits: list, areas: list
+                 ) -> tuple[list[dict], list[float]]:
+    """Each pair's registration figures (a given transform's pairs: only named) with how well
+    its seam lines up (:class:`plenocli.stitch.verify.SeamFit`: ``residual_px``,
+    ``seam_correlation``; None where too narrow to measure) and its overlap area; and the
+    residuals measured."""
     if pair_info is None:
-        return [{"views": [a, b], "direction": d} for a, b, d in pairs], measured
-    for info, (res, area) in zip(pair_info, residuals, strict=True):
-        info.update(residual_px=res, overlap_px_area=area)
-    return pair_info, measured
+        pair_info = [{"views": [a, b], "direction": d} for a, b, d in pairs]
+    for info, fit, area in zip(pair_info, fits, areas, strict=True):
+        info.update(residual_px=None if fit is None else fit.residual_px,
+                    seam_correlation=None if fit is None else fit.correlation,
+                    overlap_px_area=area)
+    return pair_info, [fit.residual_px for fit in fits if fit is not None]
 
 
 def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
@@ -332,23 +334,21 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
-               match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
-               check_correlation: float | None, out):
+               match_gain: bool, blend: str, k1: float, rig: PrismRig | None, out):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
-    cover, the reference -> panorama translation, the per-view, per-channel gains and per pair
-    (residual px, overlap area). ``check_correlation``: refuse a (given) transform under which
-    the views correlate less than this over an overlap."""
+    cover, the reference -> panorama translation, the per-view, per-channel gains, and per pair
+    how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area."""
     maps, boxes, offset, shape = compose.place(frame_to_ref, stack.shape[-2:], k1=k1, rig=rig)
+    step("checking the seams")
+    fits = verify.seam_fits(stack, maps, boxes, pairs)
     holes = [holes_of(view) for view in stack]
     filled = [view if h is None else fill_nan_channels(view) for view, h in
               zip(stack, holes, strict=True)]
     overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
-    if check_correlation is not None:
-        _check_fit(overlaps, pairs, check_correlation)
     gains = np.ones(stack.shape[:2])
     if match_gain:
         gains = overlap_measure.match_gains(overlaps, pairs, *stack.shape[:2])
-    residuals = overlap_measure.residuals(overlaps, pairs, gains)
+    areas = [0 if overlap is None else overlap.area for overlap in overlaps]
     del overlaps
     box = compose.covered_box(maps, boxes, holes)
     if box is None:
@@ -365,32 +365,11 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     else:
         covered = compose.blend(filled, *compose.crop(maps, boxes, box), holes, gains, pano_shape,
                                 write_rows)
-    return panorama, covered, offset, gains, residuals
+    return panorama, covered, offset, gains, fits, areas
 
 
 def _write_rows(panorama: np.ndarray, rows: slice, pixels: np.ndarray) -> None:
     panorama[:, rows] = pixels
-
-
-def _check_fit(overlaps: list, pairs: list, min_correlation: float) -> None:
-    """Refuse a given transform under which a pair's overlap does not correlate: it was made
-    for another rig or capture, or it lies."""
-    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
-        if overlap is None:
-            raise StitchError(f"the transform places views {a} and {b} without an overlap; it "
-                             "does not describe these views: register them again (without "
-                             "--transform-in)")
-        values: list = [[], []]
-        for *crops, both in overlap.pieces:
-            inner = erode(both, 2)
-            for k, crop in enumerate(crops):
-                values[k].append(highpass(np.where(both, crop.mean(axis=0), np.nan))[inner])
-        ha, hb = (np.concatenate(v) for v in values)
-        corr = ncc(ha, hb) if ha.size >= 64 else float("nan")
-        if not corr >= min_correlation:
-            raise StitchError(f"the transform does not fit these views: views {a} and {b} "
-                             f"correlate {corr:.2f} over the overlap it gives (at least "
-                             f"{min_correlation}); register them again (without --transform-in)")
 
 
 def _check_options(n_views: int, *, layout: str, model: str, blend: str,

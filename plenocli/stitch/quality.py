@@ -1,5 +1,5 @@
-"""Measures of how well two registered views agree: the correlation over their overlap, and the
-local shifts left between them once warped onto the panorama."""
+"""Measures of two registered views: their correlation over the overlap, and the box of a mask
+(the local shifts left between them once placed are measured by :mod:`plenocli.stitch.verify`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 
 from plenocli.stitch.ncc import ncc
-from plenocli.stitch.views import erode, highpass
+from plenocli.stitch.views import erode
 
 
 def aligned_correlation(ha: np.ndarray, hb: np.ndarray, h_ab: np.ndarray,
@@ -35,45 +35,3 @@ def bounding_box(mask: np.ndarray) -> tuple[slice, slice] | None:
         return None
     cols = np.flatnonzero(mask.any(axis=0))
     return slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)
-
-
-def _longest_run(flags: np.ndarray) -> tuple[int, int] | None:
-    """[start, stop) of the longest run of True in a 1-D boolean array, or None."""
-    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    if edges.size == 0:
-        return None
-    starts, stops = edges[::2], edges[1::2]
-    k = int(np.argmax(stops - starts))
-    return int(starts[k]), int(stops[k])
-
-
-def overlap_residual(pieces: list, long_axis: int) -> float | None:
-    """RMS (px) of the local shifts left between two warped views over the blocks of their
-    overlap: ``pieces`` (view a, view b, pixels both cover), same-size crops of the canvas, one
-    channel, in order along a seam whose long axis is ``long_axis``; None when too little of it
-    is covered to measure."""
-    from skimage.registration import phase_cross_correlation
-
-    if sum(int(both.sum()) for _, _, both in pieces) < 1024:
-        return None
-    shifts = []
-    for pano_a, pano_b, both in pieces:
-        if min(both.shape) < 32:
-            continue
-        # an overlap that is not a rectangle (homography, undistorted views): keep the longest
-        # run of lines across the block that lie wholly inside it
-        run = _longest_run(both.all(axis=long_axis))
-        if run is None or run[1] - run[0] < 16:
-            continue
-        across = [slice(None), slice(None)]
-        across[1 - long_axis] = slice(*run)
-        # both views cover every pixel of the run: high-passed alike, with no no-data to mask
-        ha, hb = (highpass(x[tuple(across)]) for x in (pano_a, pano_b))
-        if ha.std() == 0:
-            continue
-        shift, _, _ = phase_cross_correlation(ha, hb, upsample_factor=20)
-        shifts.append(shift)
-    if not shifts:
-        return None
-    return float(np.sqrt(np.mean(np.sum(np.square(shifts), axis=1))))

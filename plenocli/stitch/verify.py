@@ -1,34 +1,31 @@
-"""Side files checked against the views: a saved transform or a rig may make a panorama
-refused, never wrong.
+"""How well the placed views line up, measured where it can be seen; a side file (a saved
+transform, a rig) or a registration that does not line them up makes the panorama refused,
+never wrong.
 
-A transform (``--transform-in``) or a rig (``--rig``) claims where each view lies. The claim is
-checked where it can be seen: in every neighbour pair's overlap, the two views warped by the
-applied transform must line up. Up to eight blocks of at most ``BLOCK_PX`` square, tiling each
+In every neighbour pair's overlap, up to eight blocks of at most ``BLOCK_PX`` square, tiling the
 overlap from one end of the seam to the other, are warped at full resolution; in each block the
 shift that best aligns the two warped views is found by normalised cross-correlation over whole-
 pixel shifts within ``SEARCH_PX`` and a parabola through the peak, on the high-passed luminance
-(exposure and vignetting do not move the peak). The RMS of the block shifts is the residual;
-beyond ``TOLERANCE_PX`` the side file does not describe these views. Short blocks along the
-whole seam (not one shift for the whole strip) also catch a rig whose distortion model is wrong:
-its misfit changes along the seam and is largest at its ends. A block of nearly no texture
-(under ``FLAT_FRACTION`` of the seam's most textured block) that does not correlate is left out:
-it measures nothing. This works on overlaps down to ~20 px wide, where the report's residual is
-not measured, and costs a few warps of small blocks whatever the view size."""
+(exposure and vignetting do not move the peak). The RMS of the block shifts is the pair's
+residual (the report's ``residual_px``); beyond ``TOLERANCE_PX`` the transform does not describe
+these views. Short blocks along the whole seam (not one shift for the whole strip) also catch a
+rig whose distortion model is wrong: its misfit changes along the seam and is largest at its
+ends. A block of nearly no texture (under ``FLAT_FRACTION`` of the seam's most textured block)
+that does not correlate is left out: it measures nothing. This works on overlaps down to ~20 px
+wide and costs a few warps of small blocks whatever the view size."""
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import cv2
 import numpy as np
 from scipy import ndimage
 
 from plenocli.io.transformfile import views_remedy
 from plenocli.stitch import compose
-from plenocli.stitch.rig import PrismRig
-from plenocli.stitch.views import (
-    as_view_stack,
-    highpass,
-    neighbour_pairs,
-    translation_matrix,
-)
+from plenocli.stitch.views import highpass
 
 # A seam error under half a pixel is invisible after blending; a transform 1 px off shows.
 TOLERANCE_PX = 0.5
@@ -61,33 +58,53 @@ def check_transform_names(transform: dict, names: list[str], layout: str, *,
                          f"{transform.get('layout')}; drop --layout (the transform sets it)")
 
 
-def check_alignment(stack: np.ndarray, report, *, what: str,
-                    remedy: str = "register the views without it") -> list[float]:
-    """Refuse a panorama whose applied transform (``report.transform``, with its rig canvases)
-    does not line the views of ``stack`` (V, C, rows, cols) or (V, rows, cols) up within
-    ``TOLERANCE_PX`` in every overlap. ``what`` names the side file (or the registration) in
-    the message, ``remedy`` what to do. Returns each pair's residual (px)."""
-    stack = as_view_stack(stack)[0]
-    rig = PrismRig.from_dict(report.rig) if report.rig else None
-    transforms = [np.asarray(m, dtype=np.float64) for m in report.transform["view_to_reference"]]
-    if rig is not None:
-        transforms = [m @ translation_matrix(-o[0], -o[1])
-                      for m, o in zip(transforms, report.canvas_origins_px, strict=True)]
-    maps, boxes, _, _ = compose.place(transforms, stack.shape[-2:], k1=report.distortion_k1,
-                                      rig=rig)
-    out = []
-    for a, b, _ in neighbour_pairs(report.layout):
+@dataclass(frozen=True)
+class SeamFit:
+    """How well a neighbour pair lines up on the panorama: the RMS (px) of the local shifts left
+    along its seam (per axis, over the blocks that place it) and the blocks' lowest peak
+    correlation."""
+
+    residual_px: float
+    correlation: float
+
+
+def seam_fits(stack: np.ndarray, maps: list, boxes: list, pairs: list) -> list[SeamFit | None]:
+    """Per neighbour pair (a, b, direction) of the views ``stack`` (V, C, rows, cols) placed by
+    ``maps`` into ``boxes`` (:func:`plenocli.stitch.compose.place`): its :class:`SeamFit`, or
+    None where no block holds enough of both views (a seam under about 20 x 20 px). The pairs
+    are measured two at a time, in threads (OpenCV's warps and matches release the GIL)."""
+    def fit(pair):
+        a, b, _ = pair
         shifts, corrs = _seam_shifts(stack, maps, (a, b), compose.intersect(boxes[a], boxes[b]))
         if not shifts:
-            raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
-                             f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
+            return None
         # per axis over the blocks that constrain it (NaN: the block's texture runs along it)
         squares = np.square(np.array(shifts))
         residual = float(np.sqrt(sum(np.nanmean(c) for c in squares.T if np.isfinite(c).any())))
-        if not min(corrs) >= MIN_CORRELATION or residual > TOLERANCE_PX:
+        return SeamFit(residual, min(corrs))
+
+    with ThreadPoolExecutor(min(2, len(pairs))) as pool:
+        return list(pool.map(fit, pairs))
+
+
+def check_alignment(report, *, what: str, remedy: str = "register the views without it"
+                    ) -> list[float]:
+    """Refuse a panorama whose applied transform (``report``: a
+    :class:`plenocli.stitch.StitchReport`, its pairs' ``residual_px`` and ``seam_correlation``
+    measured by :func:`seam_fits`) does not line the views up within ``TOLERANCE_PX`` in every
+    overlap. ``what`` names the side file (or the registration) in the message, ``remedy`` what
+    to do. Returns each pair's residual (px)."""
+    out = []
+    for pair in report.pairs:
+        (a, b), residual = pair["views"], pair.get("residual_px")
+        if residual is None:
+            raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
+                             f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
+        corr = pair["seam_correlation"]
+        if not corr >= MIN_CORRELATION or residual > TOLERANCE_PX:
             shown = f"> {SEARCH_PX}" if residual > SEARCH_PX else f"{residual:.2f}"
             raise ValueError(f"{what} does not describe these views: views {a} and {b} are "
-                             f"{shown} px apart in its overlap (correlation {min(corrs):.2f}; at "
+                             f"{shown} px apart in its overlap (correlation {corr:.2f}; at "
                              f"most {TOLERANCE_PX} px): {remedy}")
         out.append(residual)
     return out
@@ -160,7 +177,30 @@ def _block_shift(a: np.ndarray, b: np.ndarray, ok: np.ndarray
     valid = ok[core] & ok[:rows - 2 * s, :cols - 2 * s] & ok[2 * s:, 2 * s:]
     if valid.sum() < 256:
         return None
-    x = a[core][valid]
+    scores = _scores(a, b, valid)
+    iy, ix = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    shift = np.array([_vertex(scores[:, ix], iy), _vertex(scores[iy, :], ix)]) - s
+    # the aperture problem: texture of one direction (edges along x, say) correlates alike at
+    # every shift along it, so the peak's place along that axis is noise, not a misfit
+    drops = np.array([_drop(scores[:, ix], iy), _drop(scores[iy, :], ix)])
+    shift[drops < APERTURE_FRACTION * drops.max()] = np.nan
+    return shift, float(scores[iy, ix])
+
+
+def _scores(a: np.ndarray, b: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """(2 s + 1, 2 s + 1) normalised cross-correlations of ``a``'s core (SEARCH_PX in from each
+    side) with ``b`` shifted by (dy, dx), over the core's ``valid`` pixels (0 where ``b`` is flat
+    there). A core valid throughout is OpenCV's mean-subtracted normalised template match, the
+    same sums in float32 (scores within 1e-6); else the sums are taken shift by shift."""
+    s = SEARCH_PX
+    rows, cols = a.shape
+    if valid.all():
+        found = cv2.matchTemplate(np.ascontiguousarray(b, np.float32),
+                                  np.ascontiguousarray(a[s:rows - s, s:cols - s], np.float32),
+                                  cv2.TM_CCOEFF_NORMED)
+        # OpenCV's score where b's window is flat is not 0 by contract: set it as the loop does
+        return np.where(np.isfinite(found), found, 0.0).astype(np.float64)
+    x = a[s:rows - s, s:cols - s][valid]
     x = x - x.mean()
     nx = np.sqrt((x * x).sum())
     scores = np.full((2 * s + 1, 2 * s + 1), -1.0)
@@ -170,13 +210,7 @@ def _block_shift(a: np.ndarray, b: np.ndarray, ok: np.ndarray
             y = y - y.mean()
             den = nx * np.sqrt((y * y).sum())
             scores[dy + s, dx + s] = (x * y).sum() / den if den > 0 else 0.0
-    iy, ix = np.unravel_index(int(np.argmax(scores)), scores.shape)
-    shift = np.array([_vertex(scores[:, ix], iy), _vertex(scores[iy, :], ix)]) - s
-    # the aperture problem: texture of one direction (edges along x, say) correlates alike at
-    # every shift along it, so the peak's place along that axis is noise, not a misfit
-    drops = np.array([_drop(scores[:, ix], iy), _drop(scores[iy, :], ix)])
-    shift[drops < APERTURE_FRACTION * drops.max()] = np.nan
-    return shift, float(scores[iy, ix])
+    return scores
 
 
 def _drop(values: np.ndarray, k: int) -> float:

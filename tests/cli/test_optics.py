@@ -86,7 +86,9 @@ def test_non_finite_or_out_of_range_options_are_usage_errors(option, value):
                                         ("{radius: .nan, glass: N-BK7, thickness: 1}",
                                          "radius_mm is NaN"),
                                         ("{radius: 3.0, glass: N-BK7, thickness: .nan}",
-                                         "thickness_mm nan")])
+                                         "thickness_mm nan"),
+                                        ("{radius: 50, glass: N-BK7, thickness: 0.5, "
+                                         "diameter: 20}", "surfaces 1 and 2 cross 2.969 mm off")])
 def test_impossible_prescriptions_are_one_line(tmp_path, row, words):
     bad = tmp_path / "bad.yaml"
     bad.write_text(f"surfaces:\n  - {row}\n  - {{radius: -3.0, thickness: 5}}\n")
@@ -138,3 +140,38 @@ def test_a_sensor_nowhere_near_focus_is_refused(distance, tmp_path):
     res = CliRunner().invoke(cli, ["optics", str(lens), "--json", str(out)])
     assert res.exit_code == 1 and "nowhere near focus" in res.output, res.output
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def _scaled(doc, factor):
+    """The prescription with every length but image_distance_mm times ``factor``."""
+    rows = [{k: (v * factor if k in ("thickness", "radius", "diameter") else v)
+             for k, v in row.items()} for row in doc["surfaces"]]
+    return {**doc, "surfaces": rows}
+
+
+@pytest.mark.parametrize("blur_mm, refused", [(1.5, False), (2.5, True)])
+def test_a_sensor_whose_axial_blur_is_wider_than_it_is_refused(blur_mm, refused, tmp_path):
+    """audit 10 W1: Table 2 in micrometres (every length x 1000 but image_distance_mm) put the
+    sensor 956 mm before a 6165 mm focus, within the focal length, and printed spots of 18 cm
+    on a 3.6 mm sensor with exit 0. A point on the axis spreads over |offset| / N: an image
+    plane where that is wider than the sensor is refused (here a 2 mm sensor behind Table 2,
+    f/1.995, focus 0.9573 mm behind the last vertex)."""
+    import yaml
+
+    doc = yaml.safe_load(Path(TABLE2).read_text())
+    f_number = 6.16541 / 3.09
+    doc["image_distance_mm"] = 0.95731 + blur_mm * f_number
+    lens = tmp_path / "defocused.yaml"
+    lens.write_text(yaml.safe_dump(doc))
+    res = CliRunner().invoke(cli, ["optics", str(lens), "--sensor-mm", "2"])
+    if not refused:
+        assert res.exit_code == 0, res.output
+        return
+    assert res.exit_code == 1 and f"spread over {blur_mm:.4g} mm" in res.output, res.output
+    assert "wider than the 2 mm sensor" in res.output
+    assert len(res.output.strip().splitlines()) == 1
+    micrometres = tmp_path / "um.yaml"
+    micrometres.write_text(yaml.safe_dump(_scaled(yaml.safe_load(Path(TABLE2).read_text()),
+                                                  1000.0)))
+    res = CliRunner().invoke(cli, ["optics", str(micrometres)])
+    assert res.exit_code == 1 and "-956.2" in res.output and "in mm" in res.output, res.output

@@ -198,10 +198,12 @@ def _lies(data):
                                       np.where(np.eye(3) > 0, np.nan, m).tolist()]}, "finite"
     off = m.copy()
     off[:2, 2] += [9.0, 23.0]  # 23 px off along, 9 across: overlap still there, views disagree
-    yield {**t, "view_to_reference": [t["view_to_reference"][0], off.tolist()]}, "does not fit"
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], off.tolist()]}, \
+        "does not describe these views"
     far = m.copy()
     far[0, 2] += 400  # past the view: no overlap
-    yield {**t, "view_to_reference": [t["view_to_reference"][0], far.tolist()]}, "does not fit"
+    yield {**t, "view_to_reference": [t["view_to_reference"][0], far.tolist()]}, \
+        "does not fit"
     yield {**t, "views": t["views"][::-1]}, "--views"
     yield {**t, "views": [1, 2]}, "distinct names"
     yield {**t, "layout": "2x2"}, "layout"

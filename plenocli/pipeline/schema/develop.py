@@ -4,7 +4,7 @@ import os
 from collections.abc import Collection
 
 from plenocli.model.colour import DEFAULT_METHOD, MAX_GAIN_RATIO, METHODS, OUTPUT_SPACES
-from plenocli.pipeline.params import PREVIEW, Param, input_arg, output_param, refuse_unused
+from plenocli.pipeline.params import PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import (
     TIFF,
     Choice,
@@ -39,9 +39,14 @@ class WhiteBalance(Text):
         return ",".join(repr(g) for g in gains)
 
 
+# the photograph's formats by name (io/photo.FORMATS, which writes them)
+PHOTO_SUFFIXES = (".tif", ".tiff", ".jpg", ".jpeg", ".png")
+
 PARAMS = (
     input_arg(),
-    output_param(),
+    Param("output", OutputFile(*PHOTO_SUFFIXES, formats="a 16-bit TIFF, an 8-bit JPEG or PNG"),
+          "The photograph (written atomically): a 16-bit TIFF, an 8-bit JPEG or PNG, by the "
+          "name's suffix.", role="output", flags=("-o", "--output"), required=True),
     Param("view", Text(), "Which view to develop (e.g. S); needed when the file holds several."),
     Param("method", Choice(METHODS), "Demosaicing method (docs/colour.md compares them).",
           default=DEFAULT_METHOD),

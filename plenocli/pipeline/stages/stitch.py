@@ -151,8 +151,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate)
         # a side file may make the panorama refused, never wrong; a registration is checked
         # the same way (a weak false match, correlation just over the floor, lines up nowhere)
-        _verified(verify.check_alignment, stack, result,
-                  **_claim(transform_in, rig, distortion))
+        _verified(verify.check_alignment, result, **_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                       overlap_tolerance=overlap_tolerance)
@@ -176,9 +175,9 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                                       allow_nan=False), protect=protect)
     if transform_out:
         write_transform(transform_out, rep["transform"], names, record, protect=protect)
-    log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, %s)",
+    log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %.3f px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
-             ",".join(names), width, height, _alignment(rep))
+             ",".join(names), width, height, rep["residual_px"])
 
 
 # views named as a layout's places say where they lie (plenocli.stitch.VIEW_NAMES; left.tif and
@@ -240,12 +239,3 @@ def _verified(call, *args, **kwargs):
         raise InputError(str(err)) from err
 
 
-def _alignment(rep: dict) -> str:
-    """How well the views line up, as the log says it: the overlap residual, else the loop
-    closure of the pairwise shifts (a 2 x 2 layout), else why neither was measured."""
-    if rep["residual_px"] is not None:
-        return f"residual {rep['residual_px']:.3f} px"
-    if rep.get("closure_px") is not None:
-        return (f"loop closure {rep['closure_px']:.3f} px (overlaps too narrow for a "
-                "residual)")
-    return "overlaps too narrow to measure a residual"
