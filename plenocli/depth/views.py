@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from plenocli.depth import MAX_DISPARITY
+
 FLAT_SIGMA = 24.0
 FLAT_SHRINK = 8
 PRE_BLUR = 1.0
@@ -92,8 +94,8 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
     if min(a.shape) < 2 * WINDOW:
         raise ValueError(f"views of {a.shape[1]} x {a.shape[0]} px are too small for "
                          f"{WINDOW} px windows")
-    if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= 64):
-        raise ValueError(f"max_disparity must be 0.5 to 64 px, got {max_disparity}")
+    if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= MAX_DISPARITY):
+        raise ValueError(f"max_disparity must be 0.5 to {MAX_DISPARITY:g} px, got {max_disparity}")
     missing = ~(np.isfinite(a) & np.isfinite(b))
     pa, pb = _prepare(a), _prepare(b)
     d = np.empty(a.shape, np.float32)

@@ -34,11 +34,12 @@ def warn_unchecked(grid_path: str) -> None:
                 "frames or on the camera's white image)", grid_path)
 
 
-def centred_on(frame: np.ndarray, grid, grid_path: str):
+def centred_on(frame: np.ndarray, grid, grid_path: str, *, refit: bool = False):
     """(grid moved onto the frame's lens centres, the move (dx, dy) px or None where the frame
-    does not show them); InputError for a grid more than a quarter pitch off (depth)."""
+    does not show them); InputError for a grid more than a quarter pitch off (depth).
+    ``refit``: a lattice-only grid's pitch and angle are refitted on the frame too (depth)."""
     try:
-        return centred(frame, grid)
+        return centred(frame, grid, refit=refit)
     except ValueError as err:
         raise InputError(f"{grid_path} does not fit the frames: {err}; make the grid with "
                          f"`plenocli calibrate --start {grid_path}` on these frames") from err

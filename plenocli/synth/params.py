@@ -13,6 +13,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from plenocli.depth import MAX_DISPARITY
+
 MAX_PIXELS = 2 ** 27  # a 134 Mpx sensor: beyond every camera simulated here
 MAX_RAYS = 2 ** 31    # rays traced in all: hours of work, gigabytes of arrays
 INF = math.inf
@@ -78,7 +80,7 @@ PARAMS: dict[str, Param] = {
     "scene": Param("scene", text=True),
     "g": Param("refocus parameter g of the scene (negative: Galilean)", -100, 100),
     "distance_m": Param("distance of the plane, metres (0: placed by g)", 0),
-    "disparities": Param("disparity of each band, pixels", -32, 32),
+    "disparities": Param("disparity of each band, pixels", -MAX_DISPARITY, MAX_DISPARITY),
     "quad": Param("2 x 2 sub-aperture views instead of A, B"),
 }
 

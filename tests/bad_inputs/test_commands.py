@@ -154,6 +154,13 @@ CASES = [
     ("crosstalk-raw", ["crosstalk", "{i}/dp.dng", "-o", "{o}/x.json"], 1,
      ("raw capture (DNG)",)),
     ("depth-raw", ["depth", "{i}/dp.dng", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
+    # audit 9 W9: past 12 px a half-pixel view's blur leaves side lobes matched at wrong
+    # shifts with clear confidence (bands of 16-31 px read 7-15 px, signs flipped)
+    ("depth-max-disparity-past-measured", ["depth", "{i}/biased.tif", "--max-disparity", "24",
+                                           "-o", "{o}/x.tif"], 2, ("--max-disparity", "12")),
+    ("simulate-disparity-past-measured", ["simulate", "dualpixel-depth", "-o", "{o}/s",
+                                          "--param", "disparities=[-20,-2,-1,0,1,2,3,20]"], 2,
+     ("disparities", "12")),
     ("sai-raw", ["sai", "{i}/dp.dng", "-n", "2", "-o", "{o}/x.tif"], 1, ("raw capture (DNG)",)),
     ("calibrate-raw", ["calibrate", "{i}/dp.dng", "-o", "{o}/g.yaml"], 1,
      ("raw capture (DNG)",)),

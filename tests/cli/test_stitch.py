@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
@@ -275,19 +276,25 @@ def test_a_saved_transform_that_contradicts_itself_or_the_file_is_named(tmp_path
         assert not (tmp_path / "q.tif").exists()
 
 
-def test_a_weak_false_registration_is_refused_not_written(tmp_path):
+@pytest.mark.parametrize("params", [{}, {"seed": 1, "overlap": 0.3, "ghost_r": 0.3,
+                                          "noise": 0.01}])
+def test_views_named_out_of_their_places_are_refused_not_matched(tmp_path, params):
     """audit 7 W1: the stereo rig's views given right to left (--views R,L) matched one above
-    the other at correlation 0.42 (floor 0.4) and were written (exit 0, residual 0.43 px); a
-    registration is now checked in its overlap like a saved transform or a rig."""
-    simulate("stereo-rig", tmp_path / "rig")
+    the other at correlation 0.42 (floor 0.4) and were written (exit 0, residual 0.43 px); the
+    registration check caught most such rigs, but one (seed 1, overlap 0.3, ghost 0.3) lined up
+    its false match to 0.25 px at correlation 0.45 (the true pair: 0.90). Views named as a
+    layout's places (L, R) are now placed by their names."""
+    simulate("stereo-rig", tmp_path / "rig", **params)
     out = tmp_path / "out"
     out.mkdir()
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "--views",
                                    "R,L", "-o", str(out / "pano.tif")])
     assert res.exit_code == 1, res.output
-    assert "the registration does not describe these views" in res.stderr
-    assert "--rig" in res.stderr and "Traceback" not in res.output
+    assert "--views L,R" in res.stderr and "Traceback" not in res.output
     assert not list(out.iterdir())
+    res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "--layout",
+                                   "2x1", "-o", str(out / "pano.tif")])
+    assert res.exit_code == 1 and "contradicts the views' names" in res.stderr, res.output
     res = CliRunner().invoke(cli, ["stitch", str(tmp_path / "rig" / "views.tif"), "--views",
                                    "L,R", "-o", str(out / "pano.tif")])
     assert res.exit_code == 0, res.output

@@ -2,6 +2,7 @@
 
 from collections.abc import Collection
 
+from plenocli.depth import MAX_DISPARITY
 from plenocli.model.focus import MAX_S
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
@@ -31,7 +32,7 @@ PARAMS = (
           default="2:8"),
     Param("min_confidence", FiniteFloat(0, 1),
           "Lenses below this confidence leave g unknown (NaN).", default=0.1),
-    Param("max_disparity", FiniteFloat(0.5, 64),
+    Param("max_disparity", FiniteFloat(0.5, MAX_DISPARITY),
           "Largest |disparity| searched (px, dual/quad-pixel).", default=4.0),
     Param("camera", InputFile(), "Camera YAML (focal_length_mm, focus_distance_m, mla_sensor_mm):"
           " adds a depth_m page (lenslet).", role="input"),

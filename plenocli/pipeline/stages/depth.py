@@ -126,7 +126,7 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
         checked = check_fits(grey, framing.grid, grid_path, frames_path=input, for_depth=True)
-        lens_grid, moved = centred_on(grey, framing.grid, grid_path)
+        lens_grid, moved = centred_on(grey, framing.grid, grid_path, refit=True)
         ranges = _type_ranges(grid_path, framing.grid)
         result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,
                                    min_confidence=min_confidence, type_ranges=ranges)
@@ -147,6 +147,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
             "s": s, "g_range": list(g_range), "min_confidence": min_confidence,
             "crop_sensor_origin": list(framing.sensor_origin),
             "grid_moved_px": None if moved is None else list(moved), "grid_checked": checked,
+            "grid_refitted": None if lens_grid.pitch_px == framing.grid.pitch_px else
+            {"pitch_px": lens_grid.pitch_px, "angle_deg": float(np.degrees(lens_grid.angle_rad))},
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
             "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
             "type_ranges": None if ranges is None else ranges.tolist(),
