@@ -154,9 +154,10 @@ def _stage_edge(name: str, params: dict):
     if stage is None:
         return contextlib.nullcontext()
     ctx = click.get_current_context()
-    stage.check(params, {key for key in params
-                         if ctx.get_parameter_source(key) not in (None, ParameterSource.DEFAULT)})
-    return stage.guard(params)
+    given = {key for key in params
+             if ctx.get_parameter_source(key) not in (None, ParameterSource.DEFAULT)}
+    stage.check(params, given)
+    return stage.guard(params, given)
 
 
 @contextlib.contextmanager
