@@ -154,10 +154,9 @@ def _stage_edge(name: str, params: dict):
     if stage is None:
         return contextlib.nullcontext()
     ctx = click.get_current_context()
-    given = {key for key in params
-             if ctx.get_parameter_source(key) not in (None, ParameterSource.DEFAULT)}
-    stage.check(params, given)
-    return stage.guard(params, given)
+    stage.check(params, {key for key in params
+                         if ctx.get_parameter_source(key) not in (None, ParameterSource.DEFAULT)})
+    return stage.guard(params)
 
 
 @contextlib.contextmanager

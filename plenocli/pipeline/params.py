@@ -204,19 +204,6 @@ def refuse_unused(params: Sequence[Param], given: Collection[str], names: Sequen
 
 _NOTED: contextvars.ContextVar[set | None] = contextvars.ContextVar("plenocli_noted",
                                                                    default=None)
-# the parameters the user gave to the stage running now (Stage.guard sets them; None: unknown,
-# as for a library call)
-GIVEN: contextvars.ContextVar[frozenset | None] = contextvars.ContextVar("plenocli_given",
-                                                                         default=None)
-
-
-def refuse_given(params: Sequence[Param], names: Sequence[str], reason: str) -> None:
-    """:func:`refuse_unused` for what only the stage can tell, from its input (an option for
-    a Bayer view given for RGB pages): OptionError for the first of ``names`` the user gave to
-    the running stage."""
-    given = GIVEN.get()
-    if given is not None:
-        refuse_unused(params, given, names, reason)
 
 
 def unused_in(check, values: Mapping[str, Any]) -> frozenset:

@@ -30,7 +30,7 @@ from plenocli.io.folderlock import folders_locked
 from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
-from plenocli.pipeline.params import GIVEN, Param, names_by_role, resolve, unused_in
+from plenocli.pipeline.params import Param, names_by_role, resolve, unused_in
 from plenocli.progress import log
 
 # every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
@@ -97,23 +97,13 @@ class Stage:
         return out
 
     @contextlib.contextmanager
-    def guard(self, params: dict[str, Any], given: Collection[str] | None = None
-              ) -> Iterator[None]:
+    def guard(self, params: dict[str, Any]) -> Iterator[None]:
         """The edge of one stage run: outputs checked before any work, and landed together.
 
         Outputs must be distinct from each other and from the inputs, in writable folders;
         every file the stage writes inside the block is renamed into place only when the whole
         stage succeeded (nothing is left behind otherwise), each output with its record.
-        ``given``: the parameters the user gave, for the stage's own refusals of options its
-        input leaves without effect (``params.refuse_given``).
         """
-        token = GIVEN.set(None if given is None else frozenset(given))
-        try:
-            yield from self._guarded(params)
-        finally:
-            GIVEN.reset(token)
-
-    def _guarded(self, params: dict[str, Any]) -> Iterator[None]:
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
         shared = getattr(self.schema, "shared_inputs", None)
         _check_inputs_apart(params, self.params, shared(params) if shared else ())

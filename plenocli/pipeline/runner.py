@@ -78,7 +78,7 @@ def run_pipeline(steps: list[Step], *, force: bool = False,
         log.info("run      %-16s (%s: %s)", d.step.name, d.step.stage.name, d.reason)
         start = time.monotonic()
         try:
-            with d.step.stage.guard(d.step.params, d.step.given):
+            with d.step.stage.guard(d.step.params):
                 d.step.stage.run(**d.step.params)
         except PlenocliError as err:
             raise type(err)(f"step {d.step.name!r}: {err}") from err

@@ -276,23 +276,3 @@ def test_an_unwritable_output_folder_is_named_not_a_file_x_in_it(inputs, tmp_pat
                                       "--pixels", "64"])
     assert result.exit_code == 1
     assert "cannot write into" in result.output and "/x" not in result.output
-
-
-@pytest.mark.parametrize("method", ["bilinear", "rcd"])
-def test_develop_method_for_rgb_pages_is_refused(tmp_path, method, monkeypatch):
-    # audit 10 E4: develop --method bilinear of a panorama's R, G, B pages (nothing to
-    # demosaic) gave the default's photograph and recorded method bilinear
-    monkeypatch.chdir(tmp_path)
-    rgb = np.random.default_rng(3).random((3, 24, 32), np.float32)
-    plenocli_tiff(tmp_path / "rgb.tif", rgb, views=["R", "G", "B"], black_level=[[0.0] * 4] * 3,
-                  white_level=[1.0] * 3)
-    words = ["develop", "rgb.tif", "--wb", "1,1,1", "--matrix", "none", "-o", "p.jpg"]
-    result = CliRunner().invoke(cli, [*words, "--method", method])
-    assert result.exit_code == 2, result.output
-    assert "--method applies to a Bayer view" in result.output and not Path("p.jpg").exists()
-    Path("c.yaml").write_text("steps:\n  develop:\n    input: rgb.tif\n    wb: 1,1,1\n"
-                              f"    matrix: none\n    method: {method}\n    output: p.jpg\n")
-    result = CliRunner().invoke(cli, ["run", "c.yaml"])   # as depth's --g past the grid
-    assert result.exit_code == 2 and "step 'develop': --method applies to a Bayer view" in \
-        result.output
-    assert CliRunner().invoke(cli, words).exit_code == 0   # without it: developed

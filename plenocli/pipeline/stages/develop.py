@@ -19,8 +19,6 @@ from plenocli.io.framing import active_area
 from plenocli.model import colour as colour_matrix
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import ViewNames
-from plenocli.pipeline.params import refuse_given
-from plenocli.pipeline.schema import develop as schema
 from plenocli.progress import log, shown
 
 PREVIEW_SIDE = 1024
@@ -49,9 +47,6 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
                 "decode` it first, which names an RGB image's pages R, G, B")
         raise InputError(f"{input}: {err}{hint}") from err
     chosen = _choose(views, view, input)
-    if not chosen.cfa:  # nothing to demosaic
-        refuse_given(schema.PARAMS, ["method"], f"applies to a Bayer view (it chooses the "
-                     f"demosaic); view {chosen.name} of {input} holds R, G, B pages")
     rebuilt = None
     if recover_highlights:
         data, rebuilt = _recover(data, names, cfa, recover_highlights, input, meta)
