@@ -42,9 +42,6 @@ NULL_RATIO = 3.0       # the winner's contrast over its own detuned copies
 MIN_CONTRAST = 0.15    # lattice points above holes by this share of the spread of A
 MIN_LAGS = 12          # fewer lattice lags in the annulus: no contrast
 HOLE_REACH = 1.2       # the farthest hole from its lattice point (2 |b1 + b2| / 3 = 1.155 pitches)
-# No lens lattice is finer than the pixels can sample (two per lens); a finer relative of a
-# winner is not looked at (its lags grow as 1 / pitch^2: 0.04 px took 23 GB)
-MIN_LENS_PITCH_PX = 2.0
 
 
 class Autocorrelation:
@@ -439,7 +436,7 @@ def judge(scored: list[tuple[Lattice, float]], acf_for,
         others = [*best.relatives()[:4], *(lat for lat, _ in ranked[1:])]
         for lat in others:
             pair = None if lat.same_as(best) else nested(best, lat)
-            if pair is None or pair[1].pitch_px < MIN_LENS_PITCH_PX:
+            if pair is None:
                 continue
             other = pair[0] if pair[1] is best else pair[1]
             if any(other.same_as(u) for u, _ in undecided):
