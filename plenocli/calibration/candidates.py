@@ -22,6 +22,10 @@ from scipy.optimize import minimize
 from plenocli.model.lensgrid import LATTICES
 
 PEAK_Z = 4.0          # a spectral peak stands this many robust sigma above its ring
+# no micro-lens lattice is finer: a micro-image under 3 px across holds no image (--pitch takes
+# 4 px at the least, and a hint's search reaches 15 % below it); the halves, thirds and quarters
+# of a lattice's relatives below it are the pixel grid's aliases, not lens lattices
+MIN_LENS_PITCH_PX = 3.0
 PEAKS_PER_SPECTRUM = 8
 RING_SAMPLES = 512    # a ring's statistics come from 512-1023 of its bins (all if fewer)
 
@@ -57,11 +61,14 @@ class Lattice:
     def relatives(self) -> list[Lattice]:
         """The lattices a spectral peak of this one could really belong to: twice and half the
         pitch, the index-3 (hex: sqrt(3), turned 30 deg) or index-2 (square: sqrt(2), turned
-        45 deg) super- and sub-lattices, and the other kind at the same pitch."""
+        45 deg) super- and sub-lattices, and the other kind at the same pitch (those of at
+        least MIN_LENS_PITCH_PX)."""
         turn, root = (np.pi / 6, np.sqrt(3)) if self.kind == "hex" else (np.pi / 4, np.sqrt(2))
         other = "square" if self.kind == "hex" else "hex"
-        return [self.scaled(2), self.scaled(0.5), self.scaled(root, turn),
-                self.scaled(1 / root, turn), Lattice(other, self.pitch_px, self.angle_rad)]
+        return [lat for lat in (self.scaled(2), self.scaled(0.5), self.scaled(root, turn),
+                                self.scaled(1 / root, turn),
+                                Lattice(other, self.pitch_px, self.angle_rad))
+                if lat.pitch_px >= MIN_LENS_PITCH_PX]
 
     def describe(self) -> str:
         return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(self.angle_rad):.2f} deg"

@@ -35,7 +35,7 @@ import numba
 import numpy as np
 import scipy.fft
 
-from plenocli.calibration.candidates import Lattice, _parabola
+from plenocli.calibration.candidates import MIN_LENS_PITCH_PX, Lattice, _parabola
 
 WIN_RATIO = 2.0        # the winner's contrast over any unrelated hypothesis
 NULL_RATIO = 3.0       # the winner's contrast over its own detuned copies
@@ -433,10 +433,11 @@ def judge(scored: list[tuple[Lattice, float]], acf_for,
     undecided: list[tuple[Lattice, float]] = []
     for _ in range(4):
         moved, undecided = False, []
-        others = [*best.relatives()[:4], *(lat for lat, _ in ranked[1:])]
+        others = [*(lat for lat in best.relatives() if lat.kind == best.kind),
+                  *(lat for lat, _ in ranked[1:])]
         for lat in others:
             pair = None if lat.same_as(best) else nested(best, lat)
-            if pair is None:
+            if pair is None or min(pair[1].pitch_px, lat.pitch_px) < MIN_LENS_PITCH_PX:
                 continue
             other = pair[0] if pair[1] is best else pair[1]
             if any(other.same_as(u) for u, _ in undecided):

@@ -22,6 +22,9 @@ from plenocli.stitch.kernels import channel_mean
 
 LAYOUTS = {"1x2": (1, 2), "2x1": (2, 1), "2x2": (2, 2)}
 VIEW_NAMES = {"1x2": ("L", "R"), "2x1": ("T", "B"), "2x2": ("S00", "S01", "S10", "S11")}
+# views named as a layout's places say where they lie (left.tif and right.tif, refocus's
+# views, are named after their files)
+_NAMED_PLACES = {**VIEW_NAMES, "left,right": ("left", "right"), "top,bottom": ("top", "bottom")}
 MODELS = ("translation", "homography")
 BLENDS = ("feather", "multiband")
 HIGHPASS_SIGMA_PX = 8.0
@@ -191,3 +194,24 @@ def corners_xy(shape: tuple[int, int]) -> np.ndarray:
     rows, cols = shape
     return np.float64([[0, 0], [cols - 1, 0], [cols - 1, rows - 1], [0, rows - 1]]).reshape(
         -1, 1, 2)
+
+
+def layout_of_names(names: list[str], layout: str) -> str:
+    """The layout the views' names give (``layout`` when they name none). Views named a
+    layout's places in another order, or a ``layout`` other than "auto" that contradicts
+    them, are refused (StitchError): registered as given, the stereo rig's R, L (or a left.tif
+    given after right.tif) was matched one above the other on chance or ghost texture and
+    written (correlation 0.45, residual 0.25 px)."""
+    for key, places in _NAMED_PLACES.items():
+        if sorted(names) != sorted(places):
+            continue
+        named = "1x2" if key in ("left,right", "1x2") else "2x1" if key == "top,bottom" else key
+        if list(names) != list(places):
+            raise StitchError(f"the views are named {','.join(names)}: their names place them "
+                              f"as {','.join(places)} (layout {named}); list them in that order "
+                              f"(--views {','.join(places)}, or the files in that order)")
+        if layout not in ("auto", named):
+            raise StitchError(f"--layout {layout} contradicts the views' names "
+                              f"{','.join(names)} (layout {named}); drop --layout")
+        return named
+    return layout

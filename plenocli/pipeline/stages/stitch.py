@@ -35,6 +35,7 @@ from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import CHANNELS, ViewNames, view_of
 from plenocli.progress import log, shown
 from plenocli.stitch import verify
+from plenocli.stitch.views import layout_of_names
 
 
 def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
@@ -135,7 +136,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
-    placed = layout if transform_in or rig else _named_layout(names, layout)
+    placed = layout if transform_in or rig else _verified(layout_of_names, names, layout)
     held = _held_views(inputs) if transform_in else []
     transform = read_transform(transform_in, names, held=held) if transform_in else None
     named_after_files = names == [Path(p).stem for p in inputs]
@@ -178,32 +179,6 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %.3f px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), width, height, rep["residual_px"])
-
-
-# views named as a layout's places say where they lie (plenocli.stitch.VIEW_NAMES; left.tif and
-# right.tif, refocus's views, are named after their files)
-_NAMED = {**{layout: tuple(n) for layout, n in stitch_lib.VIEW_NAMES.items()},
-          "left,right": ("left", "right"), "top,bottom": ("top", "bottom")}
-
-
-def _named_layout(names: list[str], layout: str) -> str:
-    """The layout the views' names give (``layout`` when they name none). Views named a
-    layout's places in another order are refused: registered as given, the stereo rig's R, L
-    (or a left.tif given after right.tif) was matched one above the other on chance or ghost
-    texture and written (correlation 0.45, residual 0.25 px, audit 7)."""
-    for key, places in _NAMED.items():
-        if sorted(names) != sorted(places):
-            continue
-        named = "1x2" if key in ("left,right", "1x2") else "2x1" if key == "top,bottom" else key
-        if list(names) != list(places):
-            raise InputError(f"the views are named {','.join(names)}: their names place them "
-                             f"as {','.join(places)} (layout {named}); list them in that order "
-                             f"(--views {','.join(places)}, or the files in that order)")
-        if layout not in ("auto", named):
-            raise InputError(f"--layout {layout} contradicts the views' names "
-                             f"{','.join(names)} (layout {named}); drop --layout")
-        return named
-    return layout
 
 
 def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0) -> dict:
