@@ -90,3 +90,49 @@ def test_missing_input_that_no_step_makes(tmp_path):
     path.write_text("steps:\n  bias:\n    input: nowhere.tif\n    output: b.tif\n")
     with pytest.raises(ConfigError, match="nowhere.tif does not exist"):
         plan(load_config(path))
+
+
+def _plenocli(*args, cwd):
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-c", "from plenocli.cli.main import cli; cli()",
+                             *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def test_a_run_waits_for_another_run_writing_into_its_folders(tmp_path):
+    """audit 10 P2: two `run --force` of one config each read a file the other then replaced,
+    and left outputs whose records named inputs no longer on disk (3 runs in 6), both exit 0.
+    A run holds the lock of the folders it writes into (as simulate does for a folder)."""
+    import fcntl
+
+    (tmp_path / "c.yaml").write_text(
+        f"steps:\n  decode:\n    input: {ROOT / 'fixtures' / 'dualpixel' / 'white.dng'}\n"
+        "    output: out/frames.tif\n  bias:\n    input: out/frames.tif\n"
+        "    output: out/views.tif\n")
+    (tmp_path / "out").mkdir()
+    fd = os.open(tmp_path / "out", os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)   # another run, writing into out/
+    try:
+        run = _plenocli("run", "c.yaml", cwd=tmp_path)
+        time.sleep(4)   # it has started (its message says it waits), and made nothing
+        assert run.poll() is None and not (tmp_path / "out" / "frames.tif").exists()
+    finally:
+        os.close(fd)   # the other run ends
+    _, err = run.communicate(timeout=120)
+    assert run.returncode == 0, err
+    assert "waiting for another run writing into out" in err
+    assert (tmp_path / "out" / "views.tif").exists()
+
+
+def test_a_run_takes_its_own_lock_again_for_a_folder_step(tmp_path):
+    """simulate locks its folder's parent too: inside the run's lock of that parent it must not
+    wait for itself."""
+    (tmp_path / "c.yaml").write_text(
+        "steps:\n  simulate:\n    kind: dualpixel\n    pixels: 32x48\n    output: out/sim\n"
+        "  decode:\n    input: out/sim/capture.dng\n    output: out/frames.tif\n")
+    run = _plenocli("run", "c.yaml", cwd=tmp_path)
+    _, err = run.communicate(timeout=120)
+    assert run.returncode == 0, err
+    assert (tmp_path / "out" / "frames.tif").exists() and "waiting" not in err

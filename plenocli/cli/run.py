@@ -67,4 +67,4 @@ def run(config, force, dry_run, overrides, out, print_make, patterns):
         steps = load_config(config, overrides)
     else:
         steps = read_template(config, overrides).steps(out=out)
-    run_pipeline(steps, force=force, dry_run=dry_run)
+    run_pipeline(steps, force=force, dry_run=dry_run, locked=True)

@@ -236,11 +236,27 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
         if folder.exists() and not folder.is_dir():
             raise InputError(f"output folder {folder} is a file; give a folder")
         _check_folder(folder / "x", shown=f"into {folder}")  # any name in it
+    for path in [*outputs, *folders]:
+        _check_not_a_loop(Path(path))
     check_distinct(outputs, inputs)
     for out in outputs:
         if out.is_dir():
             raise InputError(f"output {out} is a folder; give a file name")
         _check_folder(written_path(out))
+
+
+def _check_not_a_loop(out: Path) -> None:
+    """A symbolic link whose chain comes back to itself names no file to write through to (the
+    shell's '>' says 'Too many levels of symbolic links')."""
+    if not out.is_symlink():
+        return
+    try:
+        os.stat(out)
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise InputError(f"cannot write {out}: it is a symbolic link loop ({out} -> "
+                             f"{os.readlink(out)} -> ...); remove the link or choose another "
+                             "name") from err
 
 
 def check_distinct(outputs: Iterable[Path], inputs: Iterable[Path] = ()) -> None:

@@ -296,7 +296,13 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
     dist = distortion_percent(lens, fields, wavelength_um=wavelength_um)
     spots = [spot_rms_um(lens, float(f), rays_across=spot_rays_across,
                          wavelength_um=wavelength_um) for f in [0.0, *fields]]
+    dark = [float(f) for f, s in zip([0.0, *fields], spots, strict=True) if not s == s]
+    if dark:  # the chief ray alone is no image: the figures there would describe no light
+        raise ValueError(f"no ray of the pupil but the chief ray reaches the image {dark[0]:.1f} "
+                         f"deg off axis (the sensor's corner is at {half_diag:.1f} deg): the lens "
+                         "vignettes it completely; give a smaller sensor (--sensor-mm)")
     ideal_half = math.degrees(math.atan(sensor_mm / 2 / par["efl_mm"]))
+    apex = ideal_half / (prism_n - 1.0)
     return {
         "lens": lens.name,
         "wavelength_um": wavelength_um,
@@ -313,5 +319,6 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
                         for f, s in zip([0.0, *fields], spots, strict=True)],
         "prism": {"n": prism_n, "apex_deg": prism_apex_deg,
                   **prism_deviation_deg(prism_n, prism_apex_deg),
-                  "apex_for_half_field_deg": ideal_half / (prism_n - 1.0)},
+                  # no prism's apex reaches 90 deg: n too close to 1 for this field
+                  "apex_for_half_field_deg": apex if apex < 90 else None},
     }

@@ -148,6 +148,11 @@ def crosstalk_report(lens: Lens, *, cross_width_fraction: float = 1 / 15, quarte
     out = {"quarter": quarter, "intended_sai": list(intended)}
     for label, width in (("no_mask", 0.0), ("cross_mask", cross_width_fraction * stop_d)):
         res = sai_flux(lens, quarter=quarter, cross_width_mm=width, **options)
+        if not res["flux"].sum() > 0:
+            raise ValueError(f"cross_width_fraction {cross_width_fraction:g}: a cross that wide "
+                             f"leaves no traced ray through the {quarter} quarter of the pupil "
+                             "(its open corner vanishes at 1/sqrt(2) = 0.707 of the stop); "
+                             "give a narrower cross")
         per_field = [crosstalk_ratio(f, intended) for f in res["flux_by_field"] if f.sum() > 0]
         out[label] = {"cross_width_mm": width, "ratio": crosstalk_ratio(res["flux"], intended),
                       "worst_field_ratio": float(np.max(per_field)),

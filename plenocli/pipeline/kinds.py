@@ -55,6 +55,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             made = made_by(path)
+            if not made:
+                _check_not_a_document(path, stage, role)
             if not made and stage != "decode":
                 _check_not_raw(path, stage, role)
             if not made or made[-1] is None:
@@ -87,6 +89,36 @@ def _check_not_raw(path: Path, stage: str, role: str) -> None:
         raise InputError(f"{path} is a raw capture ({name}), not the decoded frames or views "
                          f"{stage} takes as {role.replace('_', '-')}: decode it first "
                          f"(plenocli decode{'' if stage == 'bias' else ', then plenocli bias'})")
+
+
+# text documents plenocli reads or writes beside its images, told by their first bytes
+DOCUMENT_SUFFIXES = (".yaml", ".yml", ".json", ".xml")
+DOCUMENTS = ((b"<RayCalibData", "a Raytrix RayCalibData XML (a camera calibration: it goes "
+                                "with --grid, calibrate's --start or decode's --calib)"),
+             (b"lens_grid:", "a plenocli lens grid (it goes with --grid, or calibrate's --start)"),
+             (b"steps:", "a pipeline config (plenocli run CONFIG runs it)"),
+             (b"surfaces:", "a lens prescription (plenocli optics LENS reads it)"))
+
+
+def _check_not_a_document(path: Path, stage: str, role: str) -> None:
+    """A grid, config, report or calibration given where an image goes is named, not called a
+    damaged image."""
+    suffix = Path(path).suffix.lower()
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except OSError:
+        return  # the stage's reader says what is wrong with it
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if b"\0" in head or not (suffix in DOCUMENT_SUFFIXES or text[:1] in (b"{", b"<")):
+        return
+    what = next((name for mark, name in DOCUMENTS if mark in head), None)
+    if what is None:
+        what = ("a JSON document (a report, transform or record)" if text[:1] in (b"{", b"[")
+                else "an XML document" if text[:1] == b"<" else "a text document")
+    raise InputError(f"{path} is {what}, not an image {stage} can take as "
+                     f"{role.replace('_', '-')}" if stage != "decode" else
+                     f"{path} is {what}, not a raw capture or sensor image")
 
 
 def made_by(path: Path) -> list:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
+from plenocli.io.folderlock import folders_locked
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
 
@@ -63,9 +64,14 @@ def _within(path: Path, made: set[Path]) -> bool:
     return resolved in made or any(parent in made for parent in resolved.parents)
 
 
-def run_pipeline(steps: list[Step], *, force: bool = False,
-                 dry_run: bool = False) -> list[Decision]:
-    """Run what :func:`plan` says must run; return the decisions."""
+def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = False,
+                 locked: bool = False) -> list[Decision]:
+    """Run what :func:`plan` says must run; return the decisions. ``locked``: plan and run
+    holding the lock of every folder the steps write into (another run writing there waits,
+    then finds what this one made up to date)."""
+    if locked and not dry_run:
+        with folders_locked([p for step in steps for p in step.output_paths()]):
+            return run_pipeline(steps, force=force)
     decisions = plan(steps, force=force)
     for d in decisions:
         if dry_run:

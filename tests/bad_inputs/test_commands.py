@@ -356,6 +356,10 @@ CASES = [
                          "{o}/d.jpg"], 2, ("100 times",)),
     ("develop-output-webp", ["develop", "{i}/biased.tif", "--view", "S", "-o", "{o}/d.webp"],
      2, ("'-o' / '--output'", "an 8-bit JPEG or PNG", ".tiff, .jpg, .jpeg or .png")),
+    # audit 10 E5: a clash of two options known before reading, as --quality with a .tif is
+    ("develop-rec2020-linear-jpeg", ["develop", "{i}/biased.tif", "--view", "S", "--space",
+                                     "rec2020-linear", "-o", "{o}/d.jpg"], 2,
+     ("--space rec2020-linear needs 16 bits", "-o NAME.tif")),
     ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
                                      "none", "--wb-from", "{i}/white_xy.tif", "-o",
                                      "{o}/d.jpg"], 1, ("no view S",)),

@@ -265,3 +265,20 @@ def test_no_output_may_take_a_records_name(inputs, tmp_path):
                       f"output: {tmp_path / 'o' / '.b.tif.plenocli.json'}}}\n")
     with pytest.raises(ConfigError, match="is named as a plenocli record"):
         load_config(config)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["calibrate", "{i}/rt/grid.yaml", "-o", "{o}/g.yaml"], ("is a plenocli lens grid",
+                                                             "calibrate's --start")),
+    (["calibrate", "{i}/rt/calib.xml", "-o", "{o}/g.yaml"], ("is a Raytrix RayCalibData XML",)),
+    (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], ("is a JSON document",
+                                                        "not an image bias can take as input")),
+    (["unmix", "{i}/biased.tif", "--mixing", "{i}/rt/grid.yaml", "-o", "{o}/u.tif"],
+     ("not an image unmix can take as mixing",)),
+    (["decode", "{i}/rt/calib.xml", "-o", "{o}/d.tif"], ("RayCalibData XML",
+                                                         "not a raw capture or sensor image")),
+])
+def test_a_document_given_as_an_image_is_named(inputs, tmp_path, args, words):
+    # audit 10 E3: calibrate called a sound grid YAML (a JSON report, an XML) "unreadable
+    # image; the file may be truncated, damaged or of another type"
+    assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)

@@ -259,6 +259,25 @@ def test_an_output_that_is_a_symbolic_link_is_written_through(tmp_path, frames):
     assert [d.reason for d in plan(load_config(config))] == ["up to date"]  # its record matches
 
 
+@pytest.mark.parametrize("role", ["-o", "--preview"])
+def test_an_output_that_is_a_symbolic_link_loop_is_refused_before_any_work(tmp_path, frames,
+                                                                          role):
+    # audit 10 I1: decode/calibrate -o LOOP was an internal error (after the work), a looping
+    # --preview or --json was replaced by a regular file with exit 0
+    (tmp_path / "a.png").symlink_to("b.png")
+    (tmp_path / "b.png").symlink_to("a.png")
+    (tmp_path / "l.tif").symlink_to("l.tif")
+    out = {"-o": tmp_path / "l.tif", "--preview": tmp_path / "a.png"}
+    words = ["-o", tmp_path / "v.tif", "--preview", tmp_path / "p.png"]
+    words[words.index(role) + 1] = out[role]
+    result = invoke("bias", frames, *words)
+    assert result.exit_code == 1
+    assert f"cannot write {out[role]}: it is a symbolic link loop" in one_line(result)
+    assert not (tmp_path / "v.tif").exists() and not (tmp_path / "p.png").exists()
+    assert [os.readlink(tmp_path / n) for n in ("a.png", "b.png", "l.tif")] == [
+        "b.png", "a.png", "l.tif"]
+
+
 def test_an_output_folder_that_is_a_dangling_link_is_named_so(tmp_path, frames):
     (tmp_path / "out").symlink_to("nowhere")
     result = invoke("bias", frames, "-o", tmp_path / "out" / "b.tif")

@@ -118,8 +118,8 @@ def test_object_distances_the_trace_cannot_vouch_for(tmp_path):
     distance, not the lens); beyond 1e9 mm the board is at infinity and the rays lose their
     precision (1e15 mm moved r by half a point): a usage error."""
     near = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm", "7"])
-    assert near.exit_code == 1 and "object_distance_mm 7: the lens forms no real image" in \
-        near.output and len(near.output.strip().splitlines()) == 1
+    assert near.exit_code == 1 and "Error: --object-distance-mm 7: the lens forms no real " \
+        "image" in near.output and len(near.output.strip().splitlines()) == 1
     far = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--object-distance-mm",
                                    "1e15"])
     assert far.exit_code == 2 and "'--object-distance-mm'" in far.output
@@ -175,3 +175,32 @@ def test_a_sensor_whose_axial_blur_is_wider_than_it_is_refused(blur_mm, refused,
                                                   1000.0)))
     res = CliRunner().invoke(cli, ["optics", str(micrometres)])
     assert res.exit_code == 1 and "-956.2" in res.output and "in mm" in res.output, res.output
+
+
+def test_prism_figures_that_do_not_exist_are_said_so():
+    """audit 10 W3: --prism-n 1.0001 printed 'A for alpha = half field: 162752.59 deg' and an
+    apex of 60 deg 'nan deg at normal incidence', with exit 0."""
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--prism-n", "1.0001"])
+    assert res.exit_code == 0 and "none (n too close to 1" in res.output, res.output
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--prism-apex-deg", "60"])
+    assert res.exit_code == 0 and "none at normal incidence (totally reflected" in res.output
+    assert "nan" not in res.output
+
+
+def test_a_sensor_corner_the_lens_vignettes_completely_is_refused(tmp_path):
+    """audit 10 W3: --sensor-mm 5 printed field and distortion at the 28.8 deg corner and an
+    RMS spot of 'nan um' there: only the chief ray reaches it."""
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--sensor-mm", "5", "--json",
+                                   str(tmp_path / "t.json")])
+    assert res.exit_code == 1 and "vignettes it completely" in res.output, res.output
+    assert "28.8 deg off axis" in res.output and not (tmp_path / "t.json").exists()
+
+
+@pytest.mark.parametrize("width, code, words", [
+    ("0.7", 1, "Error: --mask-width 0.7: a cross that wide leaves no traced ray"),
+    ("0.7071", 2, "'--mask-width'")])
+def test_a_cross_that_covers_a_quarter_is_refused_naming_the_option(width, code, words):
+    """audit 10 E7: --mask-width 0.7 failed with numpy's 'zero-size array to reduction
+    operation maximum', blamed on the lens file."""
+    res = CliRunner().invoke(cli, ["optics", TABLE2, "--crosstalk", "--mask-width", width])
+    assert res.exit_code == code and words in res.output, res.output

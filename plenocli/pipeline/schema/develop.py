@@ -3,6 +3,7 @@
 import os
 from collections.abc import Collection
 
+from plenocli.errors import OptionError
 from plenocli.model.colour import DEFAULT_METHOD, MAX_GAIN_RATIO, METHODS, OUTPUT_SPACES
 from plenocli.pipeline.params import PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import (
@@ -76,11 +77,17 @@ def shared_inputs(params) -> tuple[tuple[str, str], ...]:
 
 
 def check(params: dict, given: Collection[str]) -> None:
-    """A measured white balance replaces --wb, and only a JPEG has a quality."""
+    """A measured white balance replaces --wb, only a JPEG has a quality, linear Rec.2020
+    needs a 16-bit TIFF, and only mosaiced views have a demosaicing method."""
     if params.get("wb_from"):
         refuse_unused(PARAMS, given, ["wb"], "and --wb-from both set the white balance; give one")
-    if os.path.splitext(str(params.get("output", "")))[1].lower() not in (".jpg", ".jpeg"):
+    suffix = os.path.splitext(str(params.get("output", "")))[1].lower()
+    if suffix not in (".jpg", ".jpeg"):
         refuse_unused(PARAMS, given, ["quality"], "applies to a JPEG output (-o NAME.jpg) only")
+    if params.get("space") == "rec2020-linear" and suffix not in TIFF:
+        # an 8-bit JPEG or PNG bands a linear encoding: a clash of two options, as --quality's
+        raise OptionError(f"--space rec2020-linear needs 16 bits: write -o NAME.tif, or choose "
+                          f"--space srgb or display-p3 for {suffix[1:].upper() or 'this'} output")
     meta = _views_meta(params.get("input"))
     if meta is not None and not _mosaiced(meta):
         refuse_unused(PARAMS, given, ["method"], "applies to mosaiced (Bayer) views only: "

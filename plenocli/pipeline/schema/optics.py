@@ -12,8 +12,10 @@ PARAMS = (
     Param("json", OutputFile(".json"), "Also write the figures as JSON here.", role="output"),
     Param("crosstalk", Flag(), "Also trace a quad-pixel micro-lens array behind the lens and "
           "report the sub-aperture cross-talk ratio, without and with a cross mask at the stop."),
-    Param("mask_width", FiniteFloat(min=0, max=1, max_open=True),
-          "Cross mask width as a fraction of the stop diameter.", default=1 / 15),
+    # a cross of 1/sqrt(2) of the stop or wider covers a whole quarter of the pupil
+    Param("mask_width", FiniteFloat(min=0, max=0.7071, max_open=True),
+          "Cross mask width as a fraction of the stop diameter (below 0.7071: a wider cross "
+          "covers each quarter of the pupil).", default=1 / 15),
     Param("pixel_um", FiniteFloat(min=0.1, max=100), "Pixel size (um) for --crosstalk.",
           default=1.2),
     # beyond 1000 km the board is at infinity to a nanometre of focus, and the rays from it

@@ -30,7 +30,7 @@ def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,
                 lens, cross_width_fraction=mask_width, sensor_mm=sensor_mm, pixel_um=pixel_um,
                 object_distance_mm=object_distance_mm)
     except ValueError as err:
-        raise ConfigError(f"{input}: {err}") from err
+        raise ConfigError(_blamed(input, err)) from err
     if json:
         params = dict(sensor_mm=sensor_mm, crosstalk=crosstalk, mask_width=mask_width,
                       pixel_um=pixel_um, object_distance_mm=object_distance_mm,
@@ -39,6 +39,16 @@ def run(input: str, *, sensor_mm: float = 3.6, json: str | None = None,
         write_text(json, _json.dumps(json_safe(doc), indent=1, allow_nan=False) + "\n",
                    protect=(input,))
     return report
+
+
+# the library's names of values an option gives: its message is the option's, not the lens's
+OPTION_OF = {"cross_width_fraction": "--mask-width", "object_distance_mm": "--object-distance-mm"}
+
+
+def _blamed(input: str, err: ValueError) -> str:
+    """The library's message, led by the option whose value it names, else by the lens file."""
+    name, _, rest = str(err).partition(" ")
+    return f"{OPTION_OF[name]} {rest}" if name in OPTION_OF else f"{input}: {err}"
 
 
 def format_report(report: dict) -> str:
@@ -64,11 +74,15 @@ def format_report(report: dict) -> str:
             f"{s['rms_um']:.2f} um @ {s['field_deg']:.1f} deg" for s in report["spot_rms_um"]),
     ]
     p = report["prism"]
+    normal = p["normal_incidence_deg"]
+    apex = p["apex_for_half_field_deg"]
     lines.append(f"prism n {p['n']}, A {p['apex_deg']} deg  deviation {p['thin_deg']:.3f} deg "
                  f"(n-1)A, {p['minimum_deg']:.3f} deg exact minimum, "
-                 f"{p['normal_incidence_deg']:.3f} deg at normal incidence; "
-                 "A for alpha = half field: "
-                 f"{p['apex_for_half_field_deg']:.2f} deg")
+                 + (f"{normal:.3f} deg at normal incidence" if normal == normal else
+                    "none at normal incidence (totally reflected: n sin A > 1)")
+                 + "; A for alpha = half field: "
+                 + (f"{apex:.2f} deg" if apex is not None else
+                    "none (n too close to 1: (n-1)A stays below half the field up to 90 deg)"))
     ct = report.get("crosstalk")
     if ct:
         def pct(v):
