@@ -87,7 +87,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
            tolerance_px: float | None = None, out: Callable[..., Callable] | None = None,
-           ) -> tuple[np.ndarray, StitchReport]:
+           claim: tuple[str, str] | None = None) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -112,6 +112,11 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         along the stitching direction) and the tolerance on it (same unit).
     out : given the shape (C, rows', cols'), the function ``write_rows(rows, pixels)`` taking
         each band of the panorama once final (e.g. into a file; the panorama is then None).
+    claim : (what placed the views, what to do) as the refusal of views that do not line up
+        says them (default :func:`plenocli.stitch.verify.default_claim`: the transform, the
+        rig or the registration). Every pair's seam is measured once the views are placed
+        (:func:`plenocli.stitch.verify.seam_fits`) and the panorama refused, before it is
+        blended, where they do not line up within half a pixel.
 
     Returns
     -------
@@ -137,9 +142,10 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
+    claim = claim or verify.default_claim(transform=transform is not None, rig=rig is not None)
     panorama, covered, offset, gains, fits, areas = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, out=out)
+        rig=rig, claim=claim, out=out)
     pair_info, measured = _pair_report(pair_info, pairs, fits, areas)
     axis_px, field_deg = (None, None) if rig is None else rig_axis_and_field(
         rig, (rows, cols), origins, offset, covered)
@@ -334,13 +340,16 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
-               match_gain: bool, blend: str, k1: float, rig: PrismRig | None, out):
+               match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
+               claim: tuple[str, str], out):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
     cover, the reference -> panorama translation, the per-view, per-channel gains, and per pair
-    how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area."""
+    how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area;
+    refused before the blend where the seams do not line up (``claim``: see :func:`stitch`)."""
     maps, boxes, offset, shape = compose.place(frame_to_ref, stack.shape[-2:], k1=k1, rig=rig)
     step("checking the seams")
     fits = verify.seam_fits(stack, maps, boxes, pairs)
+    verify.check_fits(fits, pairs, what=claim[0], remedy=claim[1])
     holes = [holes_of(view) for view in stack]
     filled = [view if h is None else fill_nan_channels(view) for view, h in
               zip(stack, holes, strict=True)]

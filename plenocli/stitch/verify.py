@@ -25,6 +25,7 @@ from scipy import ndimage
 
 from plenocli.io.transformfile import views_remedy
 from plenocli.stitch import compose
+from plenocli.stitch.errors import StitchError
 from plenocli.stitch.views import highpass
 
 # A seam error under half a pixel is invisible after blending; a transform 1 px off shows.
@@ -87,27 +88,36 @@ def seam_fits(stack: np.ndarray, maps: list, boxes: list, pairs: list) -> list[S
         return list(pool.map(fit, pairs))
 
 
-def check_alignment(report, *, what: str, remedy: str = "register the views without it"
-                    ) -> list[float]:
-    """Refuse a panorama whose applied transform (``report``: a
-    :class:`plenocli.stitch.StitchReport`, its pairs' ``residual_px`` and ``seam_correlation``
-    measured by :func:`seam_fits`) does not line the views up within ``TOLERANCE_PX`` in every
-    overlap. ``what`` names the side file (or the registration) in the message, ``remedy`` what
-    to do. Returns each pair's residual (px)."""
-    out = []
-    for pair in report.pairs:
-        (a, b), residual = pair["views"], pair.get("residual_px")
-        if residual is None:
-            raise ValueError(f"{what} leaves views {a} and {b} no overlap large enough to check "
-                             f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
-        corr = pair["seam_correlation"]
-        if not corr >= MIN_CORRELATION or residual > TOLERANCE_PX:
-            shown = f"> {SEARCH_PX}" if residual > SEARCH_PX else f"{residual:.2f}"
-            raise ValueError(f"{what} does not describe these views: views {a} and {b} are "
-                             f"{shown} px apart in its overlap (correlation {corr:.2f}; at "
-                             f"most {TOLERANCE_PX} px): {remedy}")
-        out.append(residual)
-    return out
+# what to do when the views do not line up, by what placed them
+_REGISTRATION_REMEDY = ("a false match, or views that no shift lines up: give the rig (--rig), "
+                        "the expected overlap (--overlap) or the lens distortion "
+                        "(--distortion), try --model homography, check the views' order "
+                        "(--views)")
+_SIDE_FILE_REMEDY = "register the views without it"
+
+
+def default_claim(*, transform: bool, rig: bool) -> tuple[str, str]:
+    """(what placed the views, what to do if they do not line up), as a refusal says them."""
+    if transform:
+        return "the transform", _SIDE_FILE_REMEDY
+    if rig:
+        return "the rig", _SIDE_FILE_REMEDY
+    return "the registration", _REGISTRATION_REMEDY
+
+
+def check_fits(fits: list, pairs: list, *, what: str, remedy: str) -> None:
+    """Refuse (StitchError) views whose placement (``what`` names it in the message, ``remedy``
+    says what to do) does not line them up within ``TOLERANCE_PX`` in every overlap, or leaves
+    a pair no overlap large enough to check: ``fits`` from :func:`seam_fits`, one per pair."""
+    for (a, b, _), fit in zip(pairs, fits, strict=True):
+        if fit is None:
+            raise StitchError(f"{what} leaves views {a} and {b} no overlap large enough to check "
+                              f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
+        if not fit.correlation >= MIN_CORRELATION or fit.residual_px > TOLERANCE_PX:
+            shown = f"> {SEARCH_PX}" if fit.residual_px > SEARCH_PX else f"{fit.residual_px:.2f}"
+            raise StitchError(f"{what} does not describe these views: views {a} and {b} are "
+                              f"{shown} px apart in its overlap (correlation "
+                              f"{fit.correlation:.2f}; at most {TOLERANCE_PX} px): {remedy}")
 
 
 def _seam_shifts(stack: np.ndarray, maps: list, pair: tuple[int, int], region
@@ -191,7 +201,8 @@ def _scores(a: np.ndarray, b: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(2 s + 1, 2 s + 1) normalised cross-correlations of ``a``'s core (SEARCH_PX in from each
     side) with ``b`` shifted by (dy, dx), each mean-subtracted over the core's ``valid`` pixels
     (0 where either is flat there): OpenCV's template match, masked where not all is valid
-    (float32 sums: within 1e-7 of numpy's float64 ones)."""
+    (float32 sums: within 1e-7 of float64 ones on the high-passed, zero-mean blocks it is
+    given; an offset far above the texture would cost float32 its digits)."""
     s = SEARCH_PX
     rows, cols = a.shape
     template = a[s:rows - s, s:cols - s]

@@ -149,10 +149,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         _, result = _verified(stitch_lib.stitch, stack, layout=placed, model=model,
                               distortion_k1=distortion, transform=transform, blend=blend,
                               rig=prism_rig, overlap=overlap,
-                              overlap_tolerance=overlap_tolerance, out=canvas.allocate)
-        # a side file may make the panorama refused, never wrong; a registration is checked
-        # the same way (a weak false match, correlation just over the floor, lines up nowhere)
-        _verified(verify.check_alignment, result, **_claim(transform_in, rig, distortion))
+                              overlap_tolerance=overlap_tolerance, out=canvas.allocate,
+                              claim=_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                       overlap_tolerance=overlap_tolerance)
@@ -181,18 +179,20 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
              ",".join(names), width, height, rep["residual_px"])
 
 
-def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0) -> dict:
-    """What placed the views, as verify.check_alignment names it, and what to do if it fails."""
+def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
+           ) -> tuple[str, str]:
+    """What placed the views, as the seam check's refusal names it (the side file by its
+    name), and what to do if they do not line up. A side file may make the panorama refused,
+    never wrong; a registration is checked the same way (a weak false match lines up
+    nowhere)."""
     if rig and distortion:  # the user's K1 moves the views the rig places
-        return {"what": f"the rig {rig} on views with --distortion {distortion:g} removed",
-                "remedy": "check --distortion, or leave it out (the rig places the views as "
-                          "the camera recorded them); else register the views without the rig"}
+        return (f"the rig {rig} on views with --distortion {distortion:g} removed",
+                "check --distortion, or leave it out (the rig places the views as the camera "
+                "recorded them); else register the views without the rig")
+    what, remedy = verify.default_claim(transform=bool(transform_in), rig=bool(rig))
     if transform_in or rig:
-        return {"what": f"the transform {transform_in}" if transform_in else f"the rig {rig}"}
-    return {"what": "the registration", "remedy": "a false match, or views that no shift "
-            "lines up: give the rig (--rig), the expected overlap (--overlap) or the lens "
-            "distortion (--distortion), try --model homography, check the views' order "
-            "(--views)"}
+        what = f"the transform {transform_in}" if transform_in else f"the rig {rig}"
+    return what, remedy
 
 
 def _levels(meta: dict, pages: int) -> dict:
