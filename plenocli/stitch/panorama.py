@@ -105,18 +105,15 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     match_gain : match per-view, per-channel exposure from the overlaps (view 0 is the reference).
     max_overlap, min_overlap_px, min_correlation : registration search limits, see
         :func:`plenocli.stitch.translation.estimate_translation`.
-    rig : the prism rig (one entry per view): every view is first resampled into the common
-        undistorted frame (the prisms' constant distortion cancelled), and each pair is searched
-        only within ``tolerance_px`` (default 5 % of the view, >= 8 px) of the rig's prediction.
+    rig : the prism rig (one entry per view): views are placed through its undistorted common
+        frame, each pair searched within ``tolerance_px`` (default 5 % of the view, >= 8 px).
     overlap, overlap_tolerance : without a rig, the expected overlap (fraction of the view
         along the stitching direction) and the tolerance on it (same unit).
     out : given the shape (C, rows', cols'), the function ``write_rows(rows, pixels)`` taking
         each band of the panorama once final (e.g. into a file; the panorama is then None).
-    claim : (what placed the views, what to do) as the refusal of views that do not line up
-        says them (default :func:`plenocli.stitch.verify.default_claim`: the transform, the
-        rig or the registration). Every pair's seam is measured once the views are placed
-        (:func:`plenocli.stitch.verify.seam_fits`) and the panorama refused, before it is
-        blended, where they do not line up within half a pixel.
+    claim : (what placed the views, what to do) as the refusal says them when the views do not
+        line up at a seam (:mod:`plenocli.stitch.verify`, before the blend); by default the
+        transform, the rig or the registration (:func:`plenocli.stitch.verify.default_claim`).
 
     Returns
     -------
@@ -128,10 +125,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     n_views, n_chan, rows, cols = stack.shape
     _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
                    overlap_tolerance=overlap_tolerance, k1=distortion_k1)
-    rig = _rig_of(rig, transform, n_views)
-    origins, frame_shape = None, (rows, cols)
-    if rig is not None:
-        origins, frame_shape, layout = _rig_canvases(rig, (rows, cols), layout, n_views)
+    rig, origins, frame_shape, layout = _rig_frames(_rig_of(rig, transform, n_views),
+                                                    (rows, cols), layout, n_views)
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
@@ -142,15 +137,15 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
-    claim = claim or verify.default_claim(transform=transform is not None, rig=rig is not None)
     panorama, covered, offset, gains, fits, areas = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, claim=claim, out=out)
+        rig=rig, out=out, claim=claim or verify.default_claim(transform=transform is not None,
+                                                              rig=rig is not None))
     pair_info, measured = _pair_report(pair_info, pairs, fits, areas)
     axis_px, field_deg = (None, None) if rig is None else rig_axis_and_field(
         rig, (rows, cols), origins, offset, covered)
-    rig_dict = rig.to_dict() if rig is not None else None
-    report = StitchReport(
+    rig_dict = None if rig is None else rig.to_dict()
+    return (panorama if colour or panorama is None else panorama[0]), StitchReport(
         model=model, layout=layout, n_views=n_views, channels=n_chan if colour else 1,
         view_shape=[rows, cols], distortion_k1=distortion_k1, blend=blend, rig=rig_dict,
         canvas_shape=list(frame_shape) if rig is not None else None,
@@ -165,7 +160,6 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         closure_px=closure, panorama_shape=list(covered.shape),
         origin_px=[float(offset[1, 2]), float(offset[0, 2])],
         coverage_fraction=np.count_nonzero(covered) / covered.size)
-    return (panorama if colour or panorama is None else panorama[0]), report
 
 
 def _pair_report(pair_info: list[dict] | None, pairs, fits: list, areas: list
@@ -412,6 +406,14 @@ def _rig_of(rig: PrismRig | None, transform: dict | None, n_views: int) -> Prism
         raise StitchError(f"the rig describes {len(rig.views)} views but {n_views} are "
                          "given; list one rig view per input view, in order")
     return rig
+
+
+def _rig_frames(rig: PrismRig | None, shape: tuple[int, int], layout: str, n_views: int):
+    """(rig, its canvases' origins, the frame the views are registered in, layout): the
+    views' own frame and no origins without a rig."""
+    if rig is None:
+        return None, None, shape, layout
+    return (rig, *_rig_canvases(rig, shape, layout, n_views))
 
 
 def _rig_canvases(rig: PrismRig, shape: tuple[int, int], layout: str, n_views: int):
