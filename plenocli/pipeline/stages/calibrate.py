@@ -95,6 +95,10 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
                          "use --lattice hex or auto")
     image, cfa, black, origin, meta = load_image(input)
+    try:
+        calibration.check_size(image.shape)
+    except CalibrationError as err:
+        raise CalibrationError(f"{input}: {err}") from err
     _refuse_unknown_pixels(input, image)
     if cfa is None:
         _refuse_hidden_mosaic(input, image)
