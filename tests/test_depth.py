@@ -225,9 +225,14 @@ def test_disparity_a_pixel_inside_the_search_bound_reads_right_or_unknown(quad, 
         for k, d in enumerate(disparities):
             cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
             known = np.isfinite(cut)
-            assert known.mean() > 0.8, (names, d, known.mean())  # measured >= 0.85
+            # measured >= 0.85; quad >= 0.62 (its pixels whose x and y disagree are unknown)
+            assert known.mean() > (0.55 if quad else 0.8), (names, d, known.mean())
             # measured <= 0.144 (quad y, averaged pairs); it read 0.5 out before
             assert abs(np.median(cut[known]) - d) <= 0.15, (names, d, np.median(cut[known]))
+            if quad:  # at 5-5.5 px 5-17 % of the known pixels were > 1 px off before x and y
+                # had to agree (dual-pixel at -5 px: 10 %, docs/depth.md)
+                off = float(np.mean(np.abs(cut[known] - d) > 1))
+                assert off <= 0.02, (names, d, off)
 
 
 @pytest.mark.parametrize(("g", "g_range"), [(1.3, (1.1, 8)), (1.7, (1.1, 8)),

@@ -203,3 +203,21 @@ def test_kinds_are_registered_and_loaded_one_module_at_a_time():
                          check=True).stdout
     assert eval(out) == ["plenocli.synth.capture", "plenocli.synth.chart",
                          "plenocli.synth.prismcam", "plenocli.synth.prismsets"]
+
+
+@pytest.mark.parametrize("kind, apex", [("quadpixel-pyramid", 24.0), ("quadpixel-pyramid", 50.0),
+                                        ("dualpixel-prism", 40.0)])
+def test_a_prism_that_reflects_a_view_edges_light_is_refused(kind, apex, tmp_path):
+    """Audit 10 W4: a capture whose prisms reflect every ray was written black (apex 50: every
+    pixel 0, the truth's fields null), exit 0. A view whose corners, edge midpoints or centre
+    receive no light is refused, as `optics` refuses the prism."""
+    from plenocli.errors import OptionError
+
+    with pytest.raises(OptionError, match="reflects totally"):
+        simulate(kind, tmp_path / "s", prism_apex_deg=apex)
+    assert not (tmp_path / "s").exists()
+
+
+def test_the_largest_apex_that_images_every_view_is_taken(tmp_path):
+    truth = simulate("quadpixel-pyramid", tmp_path / "s", prism_apex_deg=20.0)
+    assert all(np.isfinite(v["field_x_deg"]).all() for v in truth["views"])

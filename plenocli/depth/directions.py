@@ -37,22 +37,26 @@ def direction_medians(flat, cx, cy, neighbours_along, directions, profile, half,
         found.append(kn.refine_q(flat, cx, cy, nb, profile, half, start.copy(), q_lo, q_hi,
                                  steps, stride))
     q_dir = np.stack(found)[:, sure]
-    keep = np.all(np.isfinite(q_dir) & (q_dir != 0), axis=0)
+    # a direction's optimum pinned at a bound of the search is no measurement
+    inside = (q_dir > q_lo + 1e-3 * (q_hi - q_lo)) & (q_dir < q_hi - 1e-3 * (q_hi - q_lo))
+    keep = np.all(np.isfinite(q_dir) & (q_dir != 0) & inside, axis=0)
     if keep.sum() < MIN_LENSES:
         return None
     return np.median(1.0 / q_dir[:, keep], axis=1)
 
 
-def check_directions(medians: np.ndarray | None) -> None:
-    """ValueError when the direction medians part by more than MAX_SPREAD."""
+def check_directions(medians) -> None:
+    """ValueError when the direction medians (or None: not compared) part by more than
+    MAX_SPREAD."""
     if medians is None:
         return
+    medians = np.asarray(medians, float)
     spread = float((medians.max() - medians.min()) / abs(np.median(medians)))
     if spread > MAX_SPREAD:
         shown = " / ".join(f"{g:.2f}" for g in medians)
         raise ValueError(
             f"the micro-images do not agree on one depth by direction: matched along each "
             f"lattice direction alone their lenses give g {shown} by median "
-            f"({100 * spread:.0f} % apart; a scene gives <= {100 * MAX_SPREAD:g} %): parts of "
-            "each micro-image look in different directions (a prism over part of the main "
-            "lens?): no depth is vouched for; refocus each part (--view left, right) instead")
+            f"({100 * spread:.0f} % apart; a scene gives <= {100 * MAX_SPREAD:g} %): they do "
+            "not show one scene shifted by one g (parts looking in different directions behind "
+            "a prism, or micro-images too small to match); nothing was written")

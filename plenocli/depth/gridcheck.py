@@ -151,7 +151,7 @@ def refitted(flat: np.ndarray, grid: LensGrid) -> LensGrid:
     in a lattice vector moves the lenses at the corners by e times the half-diagonal, which
     the fold check (MAX_DEPTH_ERROR, from the middle region) cannot tell on a large frame:
     pitch 0.05-0.15 % off (0.2-0.6 px at the corners of 480 x 640, 1.2 px at those of 8 Mpx)
-    read a plane at g = 4 with median errors 0.04-0.28 (8 Mpx: 1.8). The regions' lattice
+    read a plane at g = 4 with median errors 0.04-0.33 (8 Mpx: 1.8). The regions' lattice
     places the corner lenses to 0.003-0.03 px (simulator, 480 x 640 to 1200 x 1600). A grid
     that lists its centres (calibrate's, measured lens by lens) is used as it lists them."""
     from dataclasses import replace

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from plenocli.depth import kernels as kn
-from plenocli.depth.directions import check_directions, direction_medians
+from plenocli.depth.directions import direction_medians
 from plenocli.depth.nearlimit import drop_alone, measurable_q
 from plenocli.model.lensgrid import LensGrid
 
@@ -63,6 +63,7 @@ class LensDepth:
     confidence: np.ndarray
     radius_px: float
     ranges_used: bool | None = None  # lens-type ranges given: whether the frame bore them out
+    g_by_direction: np.ndarray | None = None  # median g along each lattice direction alone
 
 
 @dataclass(frozen=True)
@@ -229,9 +230,9 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     # an optimum pinned at a bound of the search is no minimum: the lens's g lies outside
     at_bound = (q <= q_lo + 1e-3 * (q_hi - q_lo)) | (q >= q_hi - 1e-3 * (q_hi - q_lo))
     at_bound |= np.abs(q) > q_trusted
-    check_directions(direction_medians(
+    by_direction = direction_medians(
         flat, cx, cy, lambda offsets: neighbours(indices, offsets), coarse, profile, half,
-        np.where(at_bound, np.nan, q), confidence, q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE))
+        np.where(at_bound, np.nan, q), confidence, q_lo, q_hi, REFINE_STEPS, REFINE_STRIDE)
     with np.errstate(divide="ignore", invalid="ignore"):
         g = np.where(np.isfinite(q) & ~at_bound, 1.0 / q, np.nan)
     prefer, used = None, None
@@ -241,7 +242,8 @@ def lens_depth(frame: np.ndarray, grid: LensGrid, *, g_range: tuple[float, float
     if math.isfinite(q_trusted):
         g = drop_alone(g, neighbours(indices, ring1))
     g = lens_median(g, confidence, neighbours(indices, ring1), prefer=prefer)
-    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used)
+    return LensDepth(centres, g, np.where(np.isfinite(g), confidence, 0.0), r_use, used,
+                     by_direction)
 
 
 def _in_focus(flat, indices, centres, r_use, g, confidence, types, type_ranges

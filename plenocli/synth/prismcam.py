@@ -205,6 +205,12 @@ def view_footprint(cam: Camera, *, rows: int, cols: int, cell_mm: float,
                     [-w, 0.0], [w, 0.0], [0.0, -h], [0.0, h], [0.0, 0.0]])
     pupil = np.tile(optics_prism.pupil_centroid_mm(cam.aperture_mm, region), (len(pts), 1))
     hits = _chart_hits(cam, pts, pupil, prism)
+    if not np.isfinite(hits).all():
+        # the same prism model as `plenocli optics` (optics.prism.deviate): NaN = reflected
+        raise ValueError(f"the prism of index {cam.prism_n:g} and apex {cam.prism_apex_deg:g} "
+                         f"deg reflects totally the light of pupil part {list(region)} that "
+                         "reaches the view's edges: no image forms there; use a smaller "
+                         "prism_apex_deg")
     ang = np.degrees(np.arctan(hits / cam.object_distance_mm))
 
     def span(values):

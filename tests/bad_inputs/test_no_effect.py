@@ -3,6 +3,7 @@ wrong."""
 
 from __future__ import annotations
 
+import json
 import os
 import struct
 import zlib
@@ -276,3 +277,26 @@ def test_an_unwritable_output_folder_is_named_not_a_file_x_in_it(inputs, tmp_pat
                                       "--pixels", "64"])
     assert result.exit_code == 1
     assert "cannot write into" in result.output and "/x" not in result.output
+
+
+def test_develop_method_on_colour_pages_is_refused_and_left_out_of_the_record(tmp_path):
+    """audit 10 E4, P1: --method on a panorama's R, G, B pages (nothing to demosaic) was taken
+    and recorded, and the record said view null where the photograph's provenance said RGB.
+    From the shell and from a YAML step alike."""
+    rgb = tmp_path / "rgb.tif"
+    rng = np.random.default_rng(0)
+    plenocli_tiff(rgb, 0.2 + 0.5 * rng.random((3, 24, 32), np.float32), views=["R", "G", "B"])
+    out = tmp_path / "out"
+    args = ["develop", str(rgb), "--wb", "1,1,1", "--matrix", "none", "-o", str(out / "p.jpg")]
+    result = run_bad(tmp_path, out, [*args, "--method", "bilinear"])
+    assert_one_line(result, 2, ("--method", "demosaiced already"))
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump({"steps": {"develop": {
+        "input": str(rgb), "wb": "1,1,1", "matrix": "none", "method": "rcd",
+        "output": str(out / "q.jpg")}}}))
+    with pytest.raises(ConfigError, match="--method"):
+        load_config(config)
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    record = json.loads((out / ".p.jpg.plenocli.json").read_text())["parameters"]
+    assert record["view"] == "RGB" and "method" not in record

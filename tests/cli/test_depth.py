@@ -488,3 +488,13 @@ def test_a_prism_capture_has_no_one_depth_and_is_refused(tmp_path):
     assert result.exit_code == 0, result.output
     data, _ = tiffio.read_image(tmp_path / "dn.tif")
     assert abs(np.nanmedian(data[0]) - 4.0) < 0.05   # measured 3.99
+
+
+def test_micro_images_too_small_to_match_are_refused_by_direction(tmp_path):
+    """Micro-images of a 10 px pitch: the steps scene was written 58 % known with a median
+    error of 1.6 in g; matched along each lattice direction alone its lenses part by 11 %."""
+    simulate("lenslet-depth", tmp_path / "s", pitch_px=10.0)
+    result = invoke("depth", tmp_path / "s" / "frames.tif", "--grid", tmp_path / "s" / "grid.yaml",
+                    "-o", tmp_path / "d.tif")
+    assert result.exit_code == 1 and "by direction" in result.output, result.output
+    assert not (tmp_path / "d.tif").exists()

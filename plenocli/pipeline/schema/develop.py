@@ -77,8 +77,8 @@ def shared_inputs(params) -> tuple[tuple[str, str], ...]:
 
 
 def check(params: dict, given: Collection[str]) -> None:
-    """A measured white balance replaces --wb, only a JPEG has a quality, and linear Rec.2020
-    needs a 16-bit TIFF."""
+    """A measured white balance replaces --wb, only a JPEG has a quality, linear Rec.2020
+    needs a 16-bit TIFF, and only mosaiced views have a demosaicing method."""
     if params.get("wb_from"):
         refuse_unused(PARAMS, given, ["wb"], "and --wb-from both set the white balance; give one")
     suffix = os.path.splitext(str(params.get("output", "")))[1].lower()
@@ -88,3 +88,43 @@ def check(params: dict, given: Collection[str]) -> None:
         # an 8-bit JPEG or PNG bands a linear encoding: a clash of two options, as --quality's
         raise OptionError(f"--space rec2020-linear needs 16 bits: write -o NAME.tif, or choose "
                           f"--space srgb or display-p3 for {suffix[1:].upper() or 'this'} output")
+    meta = _views_meta(params.get("input"))
+    if meta is not None and not _mosaiced(meta):
+        refuse_unused(PARAMS, given, ["method"], "applies to mosaiced (Bayer) views only: "
+                      "INPUT's views are colour pages, demosaiced already")
+
+
+def recorded(params: dict) -> dict:
+    """The view developed, where INPUT holds one colour view and none was named (a panorama's
+    R, G, B pages are view RGB): the record says which, as the photograph's provenance does."""
+    from plenocli.colour.develop import colour_views
+
+    meta = _views_meta(params.get("input"))
+    if params.get("view") is not None or meta is None:
+        return {}
+    try:
+        views = colour_views(list(meta["views"]), cfa=meta.get("cfa"),
+                             view_colours=meta.get("view_colours"))
+    except ValueError:
+        return {}
+    return {"view": views[0].name} if len(views) == 1 else {}
+
+
+def _views_meta(path) -> dict | None:
+    """INPUT's plenocli metadata when it names its views; None when the file is not there yet
+    (a step of a run that makes it) or says nothing (the stage then refuses it itself)."""
+    from plenocli.errors import PlenocliError
+    from plenocli.io.tiffio import read_meta
+
+    if not path or not os.path.isfile(path):
+        return None
+    try:
+        meta = read_meta(path)
+    except (PlenocliError, OSError, ValueError):
+        return None
+    return meta if meta.get("views") else None
+
+
+def _mosaiced(meta: dict) -> bool:
+    """Whether the views are mosaics develop demosaics (a CFA for the file or per view)."""
+    return bool(meta.get("cfa")) or any(c is not None for c in meta.get("view_colours") or [])

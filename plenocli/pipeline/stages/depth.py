@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.depth import lenslet, metric, views
+from plenocli.depth.directions import check_directions
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -59,6 +60,11 @@ def run(input: str, output: str, *, grid: str | None = None, s: float = 0.2,
         pages, names, info = _views(input, data, meta, max_disparity)
     _check_known(pages[0], f"g in --g {g}" if grid else
                  f"disparity within --max-disparity {max_disparity:g}")
+    if grid:
+        try:
+            check_directions(info["g_by_direction"])
+        except ValueError as err:
+            raise InputError(f"depth: {err}") from err
     record = stage_record("depth", params, {"input": input, "grid": grid, "camera": camera})
     stack = np.stack(pages).astype(np.float32)
     out_meta = tiffio.derived_meta(
@@ -152,6 +158,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
             "usable_radius_px": lens.radius_px, "lenses": int(len(lens.g)),
             "lenses_confident": int(np.sum(lens.confidence >= min_confidence)),
             "type_ranges": None if ranges is None else ranges.tolist(),
+            "g_by_direction": None if lens.g_by_direction is None else
+            lens.g_by_direction.tolist(),
             "type_ranges_used": lens.ranges_used}
     return [result.g, result.confidence], ["g", "confidence"], info
 
