@@ -208,6 +208,8 @@ def test_dry_run_writes_nothing(tmp_path):
     assert [r.status for r in report.results] == ["would run", "would run"]
     assert not (tmp_path / "out").exists()
     assert "2 would run" in format_summary(report)
+    one = run_batch(config, captures[:1], out=tmp_path / "out", dry_run=True, jobs=1)
+    assert format_summary(one).splitlines()[-1].startswith("1 capture: 0 done")  # not captures
 
 
 def test_one_job_and_two_jobs_agree(tmp_path):

@@ -438,7 +438,8 @@ def format_summary(report: BatchReport, *, width: int = 100) -> str:
         lines.append(f"{r.name:<{name_w}}  {r.status:<9}  {r.seconds:>5.1f} s  {detail}")
     counts = {s: sum(r.status == s for r in results)
               for s in ("done", "would run", "skipped", "failed")}
-    tail = (f"{len(results)} captures: {counts['done']} done, {counts['skipped']} skipped "
+    tail = (f"{len(results)} capture{'' if len(results) == 1 else 's'}: {counts['done']} done, "
+            f"{counts['skipped']} skipped "
             f"(up to date), {counts['failed']} failed")
     if counts["would run"]:
         tail += f", {counts['would run']} would run"
