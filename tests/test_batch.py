@@ -549,3 +549,17 @@ def test_one_terminated_and_one_sigterm_handler_for_every_command():
                         "pipeline/batch.py:_on_alarm",      # a worker's time limit
                         "pipeline/batch.py:_on_sigterm"]    # a worker's SIGTERM
     assert issubclass(Terminated, KeyboardInterrupt)  # every Ctrl-C clean-up applies
+
+
+@pytest.mark.parametrize("pattern", ["", "{d}", "{d}/", "@{d}/list.txt"])
+def test_inputs_that_name_a_folder_or_nothing_are_usage_errors(tmp_path, pattern):
+    # own-8 (round 10): --inputs FOLDER (or '') reached the config's decode step, which blamed
+    # the config: "batch.yaml: step 'decode': Invalid value for 'INPUT': ... is a directory"
+    from plenocli.errors import OptionError
+
+    shoot = tmp_path / "shoot"
+    shoot.mkdir()
+    (shoot / "list.txt").write_text(f"{shoot}\n")
+    with pytest.raises(OptionError, match="the pattern is empty" if not pattern else
+                       f"{shoot} is a folder, not a capture"):
+        expand_inputs([pattern.format(d=shoot)])
