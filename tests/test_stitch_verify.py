@@ -165,3 +165,34 @@ def test_a_rig_refused_under_a_users_distortion_names_the_distortion():
                                          r"removed does not describe these views.*check "
                                          r"--distortion, or leave it out"):
         verify.check_alignment(report, **_claim(None, "r.yaml", 0.05))
+
+
+def _masked_ncc(a, b, valid):
+    """The seam check's correlations by their definition, in float64 (0 where a side is flat)."""
+    s = verify.SEARCH_PX
+    rows, cols = a.shape
+    x = a[s:rows - s, s:cols - s][valid].astype(np.float64)
+    x -= x.mean()
+    out = np.zeros((2 * s + 1, 2 * s + 1))
+    for dy in range(-s, s + 1):
+        for dx in range(-s, s + 1):
+            y = b[s + dy:rows - s + dy, s + dx:cols - s + dx][valid].astype(np.float64)
+            y -= y.mean()
+            den = np.sqrt((x * x).sum() * (y * y).sum())
+            out[dy + s, dx + s] = (x * y).sum() / den if den > 0 else 0.0
+    return out
+
+
+@pytest.mark.parametrize("case", ["all valid", "masked", "flat template", "flat view"])
+def test_the_seam_correlations_are_the_masked_ncc(case):
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(64, 72)).astype(np.float32)
+    b = np.roll(a, (1, -2), (0, 1)) + rng.normal(0, 0.1, a.shape).astype(np.float32)
+    valid = np.ones((64 - 8, 72 - 8), bool)
+    if case != "all valid":
+        valid[:20, :15] = False
+    if case == "flat template":
+        a[:] = 0.5
+    if case == "flat view":
+        b[:] = 0.25
+    np.testing.assert_allclose(verify._scores(a, b, valid), _masked_ncc(a, b, valid), atol=1e-5)

@@ -3,11 +3,11 @@ against? (docs/depth.md, "Directions")
 
 A scene point's virtual depth g is the point's, not the baseline's: matched only against the
 neighbours along one lattice direction, the lenses give the same g, by median over the frame,
-along every direction (simulated scenes within 1.7 %, real Raytrix captures within 3.5 %).
+along every direction (simulated scenes within 1.7 %, real Raytrix captures within 4.0 %).
 Behind a prism over part of the main lens, the parts of each micro-image look in different
 directions: a neighbour along the line across the prism's edge shows another part of the scene
 where a single g expects the same one, and that direction's median parts from the others by
-8-10 % (raytrix-prism, three seeds), while the match over all neighbours together still looks
+7-10 % (raytrix-prism, three seeds), while the match over all neighbours together still looks
 confident (96 % known, a third of it more than 0.5 off the true g = 4).
 """
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from plenocli.depth import kernels as kn
 
-MAX_SPREAD = 0.05   # (max - min) / |median| of the direction medians: 3.5 % real, 8 % prism
+MAX_SPREAD = 0.05   # (max - min) / |median| of the direction medians: 4.0 % real, 7-10 % prism
 MIN_LENSES = 50     # confident lenses below which the medians are not compared
 CONFIDENT = 0.5
 

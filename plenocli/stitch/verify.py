@@ -189,28 +189,20 @@ def _block_shift(a: np.ndarray, b: np.ndarray, ok: np.ndarray
 
 def _scores(a: np.ndarray, b: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """(2 s + 1, 2 s + 1) normalised cross-correlations of ``a``'s core (SEARCH_PX in from each
-    side) with ``b`` shifted by (dy, dx), over the core's ``valid`` pixels (0 where ``b`` is flat
-    there). A core valid throughout is OpenCV's mean-subtracted normalised template match, the
-    same sums in float32 (scores within 1e-6); else the sums are taken shift by shift."""
+    side) with ``b`` shifted by (dy, dx), each mean-subtracted over the core's ``valid`` pixels
+    (0 where either is flat there): OpenCV's template match, masked where not all is valid
+    (float32 sums: within 1e-7 of numpy's float64 ones)."""
     s = SEARCH_PX
     rows, cols = a.shape
-    if valid.all():
-        found = cv2.matchTemplate(np.ascontiguousarray(b, np.float32),
-                                  np.ascontiguousarray(a[s:rows - s, s:cols - s], np.float32),
-                                  cv2.TM_CCOEFF_NORMED)
-        # OpenCV's score where b's window is flat is not 0 by contract: set it as the loop does
-        return np.where(np.isfinite(found), found, 0.0).astype(np.float64)
-    x = a[s:rows - s, s:cols - s][valid]
-    x = x - x.mean()
-    nx = np.sqrt((x * x).sum())
-    scores = np.full((2 * s + 1, 2 * s + 1), -1.0)
-    for dy in range(-s, s + 1):
-        for dx in range(-s, s + 1):
-            y = b[s + dy:rows - s + dy, s + dx:cols - s + dx][valid]
-            y = y - y.mean()
-            den = nx * np.sqrt((y * y).sum())
-            scores[dy + s, dx + s] = (x * y).sum() / den if den > 0 else 0.0
-    return scores
+    template = a[s:rows - s, s:cols - s]
+    if not np.ptp(template[valid]) > 0:
+        return np.zeros((2 * s + 1, 2 * s + 1))  # OpenCV scores a flat template 1 or NaN
+    mask = None if valid.all() else valid.astype(np.float32)
+    found = cv2.matchTemplate(np.ascontiguousarray(b, np.float32),
+                              np.ascontiguousarray(template, np.float32),
+                              cv2.TM_CCOEFF_NORMED, mask=mask)
+    # a flat window has no correlation; OpenCV leaves it undefined (NaN or inf)
+    return np.where(np.isfinite(found), found, 0.0).astype(np.float64)
 
 
 def _drop(values: np.ndarray, k: int) -> float:
