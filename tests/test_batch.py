@@ -563,3 +563,29 @@ def test_inputs_that_name_a_folder_or_nothing_are_usage_errors(tmp_path, pattern
     with pytest.raises(OptionError, match="the pattern is empty" if not pattern else
                        f"{shoot} is a folder, not a capture"):
         expand_inputs([pattern.format(d=shoot)])
+
+
+def test_a_batch_waits_for_another_writing_its_shared_steps(tmp_path):
+    # audit 10 P2, for batch: two batches of one shoot ran the shared steps at once, each
+    # reading a white file the other then replaced; the shared steps hold the run's lock
+    import fcntl
+    import subprocess
+    import sys
+    import time
+
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    (tmp_path / "out").mkdir()
+    fd = os.open(tmp_path / "out", os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)   # another batch, running the shared steps
+    try:
+        batch = subprocess.Popen(
+            [sys.executable, "-c", "from plenocli.cli.main import cli; cli()", "batch",
+             str(config), "--inputs", str(captures[0]), "-j", "1"], cwd=tmp_path,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4)
+        assert batch.poll() is None and not (tmp_path / "out" / "white_frames.tif").exists()
+    finally:
+        os.close(fd)
+    _, err = batch.communicate(timeout=120)
+    assert batch.returncode == 0, err
+    assert "waiting for another run writing into" in err

@@ -189,8 +189,8 @@ def _run_shared(template: Template, *, out, force: bool, dry_run: bool) -> list[
             log.info("%-9s %-16s (shared) %s", "would run" if d.run else "skip", d.step.name,
                      d.reason)
         return decisions
-    try:
-        return run_pipeline(steps, force=force)
+    try:  # two batches of one shoot: the second waits for the first's shared steps
+        return run_pipeline(steps, force=force, locked=True)
     except PlenocliError as err:
         raise type(err)(f"shared {err} (no capture was processed)") from err
 
