@@ -20,16 +20,23 @@ from plenocli.depth import kernels as kn
 MAX_SPREAD = 0.05   # (max - min) / |median| of the direction medians: 4.0 % real, 7-10 % prism
 MIN_LENSES = 50     # confident lenses below which the medians are not compared
 CONFIDENT = 0.5
+# the medians are taken over at most this many confident lenses, every k-th in the grid's
+# (row by row) order, so spread over the frame; the same lenses along every direction, so the
+# comparison is paired (the 8 Mpx bench frame's 14 000 lenses cost 0.35 s, 70 % of its depth)
+SAMPLED_LENSES = 2000
 
 
 def direction_medians(flat, cx, cy, neighbours_along, directions, profile, half, q,
                       confidence, q_lo, q_hi, steps, stride) -> np.ndarray | None:
-    """Median g (one per lattice direction) of the lenses with a confident, finite ``q``,
-    each refined against its two neighbours along that direction only (from ``q``); None when
-    fewer than MIN_LENSES lenses are confident."""
+    """Median g (one per lattice direction) of the lenses with a confident, finite ``q`` (at
+    most about SAMPLED_LENSES of them), each refined against its two neighbours along that
+    direction only (from ``q``); None when fewer than MIN_LENSES lenses are confident."""
     sure = np.isfinite(q) & (confidence >= CONFIDENT)
     if sure.sum() < MIN_LENSES:
         return None
+    chosen = np.flatnonzero(sure)
+    sure = np.zeros_like(sure)
+    sure[chosen[::max(1, len(chosen) // SAMPLED_LENSES)]] = True
     start = np.where(sure, q, np.nan)
     found = []
     for di, dj in directions:

@@ -88,6 +88,12 @@ def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = Fals
         log.info("run      %-16s (%s: %s)", d.step.name, d.step.stage.name, d.reason)
         start = time.monotonic()
         try:
+            # checks that read an input an earlier step made could not see it when the config
+            # was loaded: they hold now, as when the next run loads the config (ConfigError)
+            try:
+                d.step.stage.check(d.step.params, d.step.given)
+            except PlenocliError as err:
+                raise ConfigError(str(err)) from err
             with d.step.stage.guard(d.step.params):
                 d.step.stage.run(**d.step.params)
         except PlenocliError as err:

@@ -360,3 +360,24 @@ def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path
     too_long = CliRunner().invoke(cli, ["bias", str(inputs / "frames.tif"), "-o",
                                         str(tmp_path / ("c" * 252 + ".tif"))])
     assert_one_line(too_long, 1, ("too long",))
+
+
+def test_a_check_that_reads_an_input_an_earlier_step_makes_holds_on_the_first_run(tmp_path):
+    """develop --method on colour pages is refused from what INPUT holds. Loaded before the
+    run, the check could not see a file that an earlier step makes: the first run developed
+    with a method that did nothing (exit 0), the next run of the same config refused it. Each
+    step's checks are made again just before it runs."""
+    import cv2
+
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(tmp_path / "rgb.png"), rng.integers(0, 255, (24, 32, 3), np.uint8))
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump({"steps": {
+        "decode": {"input": str(tmp_path / "rgb.png"), "output": str(out / "f.tif")},
+        "develop": {"input": str(out / "f.tif"), "wb": "1,1,1", "matrix": "none",
+                    "method": "bilinear", "output": str(out / "p.jpg")}}}))
+    for _ in range(2):
+        result = CliRunner().invoke(cli, ["run", str(config)])
+        assert result.exit_code == 1 and "--method" in result.output, result.output
+        assert not (out / "p.jpg").exists()

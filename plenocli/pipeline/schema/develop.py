@@ -91,7 +91,8 @@ def check(params: dict, given: Collection[str]) -> None:
     meta = _views_meta(params.get("input"))
     if meta is not None and not _mosaiced(meta):
         refuse_unused(PARAMS, given, ["method"], "applies to mosaiced (Bayer) views only: "
-                      "INPUT's views are colour pages, demosaiced already")
+                      "INPUT's views carry no colour filter pattern (colour pages, demosaiced "
+                      "already, or grey)")
 
 
 def recorded(params: dict) -> dict:
