@@ -88,4 +88,13 @@ def not_a_file(path: "str | os.PathLike") -> InputError:
         return InputError(f"{path}: is a folder; pass a file")
     if os.path.exists(path):
         return InputError(f"{path}: not a regular file (a device, pipe or socket); pass a file")
+    if os.path.islink(path):  # a link to nothing: say where it leads
+        try:
+            os.stat(path)
+        except OSError as err:
+            if err.errno == errno.ELOOP:
+                return InputError(f"{path}: a symbolic link loop ({path} -> "
+                                  f"{os.readlink(path)} -> ...); pass the file itself")
+        return InputError(f"{path}: a symbolic link to {os.readlink(path)}, which does not "
+                          "exist; pass the file itself")
     return InputError(f"{path}: no such file")

@@ -208,6 +208,8 @@ def test_dry_run_writes_nothing(tmp_path):
     assert [r.status for r in report.results] == ["would run", "would run"]
     assert not (tmp_path / "out").exists()
     assert "2 would run" in format_summary(report)
+    one = run_batch(config, captures[:1], out=tmp_path / "out", dry_run=True, jobs=1)
+    assert format_summary(one).splitlines()[-1].startswith("1 capture: 0 done")  # not captures
 
 
 def test_one_job_and_two_jobs_agree(tmp_path):
@@ -547,3 +549,43 @@ def test_one_terminated_and_one_sigterm_handler_for_every_command():
                         "pipeline/batch.py:_on_alarm",      # a worker's time limit
                         "pipeline/batch.py:_on_sigterm"]    # a worker's SIGTERM
     assert issubclass(Terminated, KeyboardInterrupt)  # every Ctrl-C clean-up applies
+
+
+@pytest.mark.parametrize("pattern", ["", "{d}", "{d}/", "@{d}/list.txt"])
+def test_inputs_that_name_a_folder_or_nothing_are_usage_errors(tmp_path, pattern):
+    # own-8 (round 10): --inputs FOLDER (or '') reached the config's decode step, which blamed
+    # the config: "batch.yaml: step 'decode': Invalid value for 'INPUT': ... is a directory"
+    from plenocli.errors import OptionError
+
+    shoot = tmp_path / "shoot"
+    shoot.mkdir()
+    (shoot / "list.txt").write_text(f"{shoot}\n")
+    with pytest.raises(OptionError, match="the pattern is empty" if not pattern else
+                       f"{shoot} is a folder, not a capture"):
+        expand_inputs([pattern.format(d=shoot)])
+
+
+def test_a_batch_waits_for_another_writing_its_shared_steps(tmp_path):
+    # audit 10 P2, for batch: two batches of one shoot ran the shared steps at once, each
+    # reading a white file the other then replaced; the shared steps hold the run's lock
+    import fcntl
+    import subprocess
+    import sys
+    import time
+
+    config, captures = make_shoot(tmp_path, 1, corrupt=None)
+    (tmp_path / "out").mkdir()
+    fd = os.open(tmp_path / "out", os.O_RDONLY)
+    fcntl.flock(fd, fcntl.LOCK_EX)   # another batch, running the shared steps
+    try:
+        batch = subprocess.Popen(
+            [sys.executable, "-c", "from plenocli.cli.main import cli; cli()", "batch",
+             str(config), "--inputs", str(captures[0]), "-j", "1"], cwd=tmp_path,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4)
+        assert batch.poll() is None and not (tmp_path / "out" / "white_frames.tif").exists()
+    finally:
+        os.close(fd)
+    _, err = batch.communicate(timeout=120)
+    assert batch.returncode == 0, err
+    assert "waiting for another run writing into" in err

@@ -136,3 +136,20 @@ def test_a_run_takes_its_own_lock_again_for_a_folder_step(tmp_path):
     _, err = run.communicate(timeout=120)
     assert run.returncode == 0, err
     assert (tmp_path / "out" / "frames.tif").exists() and "waiting" not in err
+
+
+def test_a_run_says_an_output_under_a_file_cannot_be_written(tmp_path, monkeypatch):
+    """The run's lock makes the folders its outputs go into: an output under a file is said
+    as the step's own check says it, not as the folder's making fails ('it exists already')."""
+    from click.testing import CliRunner
+
+    from plenocli.cli.main import cli
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("a file")
+    (tmp_path / "c.yaml").write_text(
+        f"steps:\n  decode:\n    input: {ROOT / 'fixtures' / 'dualpixel' / 'white.dng'}\n"
+        "    output: notes.txt/frames.tif\n")
+    result = CliRunner().invoke(cli, ["run", "c.yaml"])
+    assert result.exit_code == 1
+    assert "notes.txt is a file, not a folder" in result.output, result.output

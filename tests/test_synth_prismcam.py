@@ -221,3 +221,19 @@ def test_a_prism_that_reflects_a_view_edges_light_is_refused(kind, apex, tmp_pat
 def test_the_largest_apex_that_images_every_view_is_taken(tmp_path):
     truth = simulate("quadpixel-pyramid", tmp_path / "s", prism_apex_deg=20.0)
     assert all(np.isfinite(v["field_x_deg"]).all() for v in truth["views"])
+
+
+def test_memory_does_not_grow_with_the_rays_per_pixel():
+    # own-10 (round 10): every view block held all its pupil samples at once, (rays, rows,
+    # cols, 2) float64: 1.66 GB at --pixels 64 --rays 100000, growing with --rays
+    import tracemalloc
+
+    def peak(rays):
+        tracemalloc.start()
+        render_quadpixel(pixels=32, rays=rays, prisms=False, seed=3)
+        top = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return top
+
+    few, many = peak(2), peak(1500)   # all 1500 samples of a view: 1500 x 16 x 16 x 16 B = 6 MB
+    assert many < few + 2_000_000, (few, many)

@@ -303,6 +303,16 @@ def _corner_error(border, shape: tuple[int, int]) -> float:
     return half_diagonal * (border.pitch_err_px / border.lattice.pitch_px + border.angle_err_rad)
 
 
+def check_size(shape: tuple[int, int]) -> None:
+    """CalibrationError for an image (rows, cols) too small to hold a lattice worth fitting:
+    said first, before what its pixels hold."""
+    rows, cols = shape
+    if min(rows, cols) < MIN_SIDE_PX:
+        raise CalibrationError(f"image of {cols} x {rows} px (columns x rows) is too small to "
+                               f"calibrate a lens grid; it needs at least {MIN_SIDE_PX} px on "
+                               "each side")
+
+
 def _checked(image: np.ndarray, lattice: str, black_level: float,
              pitch_hint: float | None) -> np.ndarray:
     if lattice not in ("auto", *LATTICES):
@@ -312,10 +322,7 @@ def _checked(image: np.ndarray, lattice: str, black_level: float,
     image = np.asarray(image)
     if image.ndim != 2:
         raise ValueError(f"image must be 2-D (rows, cols), got shape {image.shape}")
-    rows, cols = image.shape
-    if min(rows, cols) < MIN_SIDE_PX:
-        raise CalibrationError(f"image of {cols} x {rows} px is too small to calibrate a lens "
-                               f"grid; it needs at least {MIN_SIDE_PX} px on each side")
+    check_size(image.shape)
     image = image.astype(np.float32, copy=False)
     if black_level:
         image = image - np.float32(black_level)

@@ -23,4 +23,20 @@ def info(file, as_json):
     from plenocli.pipeline.records import read_record
 
     described = describe(file, record=read_record(file))
+    if described["kind"] == "pipeline-config":
+        described["refused"] = _config_refused(file)
     click.echo(json.dumps(described, indent=2, default=str) if as_json else format_info(described))
+
+
+def _config_refused(path: str) -> str | None:
+    """Why ``plenocli run`` (or batch) would refuse the config before any step, or None."""
+    from plenocli.errors import PlenocliError
+    from plenocli.pipeline.config import read_template
+
+    try:
+        template = read_template(path)
+        if not template.per_capture_steps() and (template.out or not template.uses_out()):
+            template.steps()   # every step's stage, keys and values, as run checks them
+    except PlenocliError as err:
+        return " ".join(str(err).split())
+    return None

@@ -94,8 +94,8 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
     if a.shape != b.shape or a.ndim != 2:
         raise ValueError(f"views must be two 2-D images of one shape, got {a.shape}, {b.shape}")
     if min(a.shape) < 2 * WINDOW:
-        raise ValueError(f"views of {a.shape[1]} x {a.shape[0]} px are too small for "
-                         f"{WINDOW} px windows")
+        raise ValueError(f"views of {a.shape[1]} x {a.shape[0]} px (columns x rows) are too "
+                         f"small for {WINDOW} px windows")
     if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= MAX_DISPARITY):
         raise ValueError(f"max_disparity must be 0.5 to {MAX_DISPARITY:g} px, got {max_disparity}")
     missing = ~(np.isfinite(a) & np.isfinite(b))

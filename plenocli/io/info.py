@@ -229,7 +229,8 @@ def format_info(info: dict) -> str:
     fields += [(f"history {k}", f"{past.get('stage')} {_short(past.get('parameters'))} "
                                 f"on {past.get('created')}")
                for k, past in enumerate(info.get("history") or [], 1)]
-    return "\n".join(lines + _field_lines(fields))
+    refused = [f"  run refuses it: {info['refused']}"] if info.get("refused") else []
+    return "\n".join(lines + _field_lines(fields) + refused)
 
 
 def _field_lines(fields: list[tuple[str, object]]) -> list[str]:

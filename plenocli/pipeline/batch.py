@@ -189,8 +189,8 @@ def _run_shared(template: Template, *, out, force: bool, dry_run: bool) -> list[
             log.info("%-9s %-16s (shared) %s", "would run" if d.run else "skip", d.step.name,
                      d.reason)
         return decisions
-    try:
-        return run_pipeline(steps, force=force)
+    try:  # two batches of one shoot: the second waits for the first's shared steps
+        return run_pipeline(steps, force=force, locked=True)
     except PlenocliError as err:
         raise type(err)(f"shared {err} (no capture was processed)") from err
 
@@ -438,7 +438,8 @@ def format_summary(report: BatchReport, *, width: int = 100) -> str:
         lines.append(f"{r.name:<{name_w}}  {r.status:<9}  {r.seconds:>5.1f} s  {detail}")
     counts = {s: sum(r.status == s for r in results)
               for s in ("done", "would run", "skipped", "failed")}
-    tail = (f"{len(results)} captures: {counts['done']} done, {counts['skipped']} skipped "
+    tail = (f"{len(results)} capture{'' if len(results) == 1 else 's'}: {counts['done']} done, "
+            f"{counts['skipped']} skipped "
             f"(up to date), {counts['failed']} failed")
     if counts["would run"]:
         tail += f", {counts['would run']} would run"

@@ -12,7 +12,7 @@ import glob
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, OptionError
 from plenocli.pipeline.config import Template
 from plenocli.progress import log, shown
 
@@ -45,6 +45,9 @@ def expand_inputs(patterns: Sequence[str], *,
     """
     found: list[tuple[str, list[Path], bool]] = []  # pattern, its files, whether a glob
     for pattern in patterns:
+        if not pattern.strip():
+            raise OptionError("--inputs '': the pattern is empty; give a quoted glob, a capture "
+                              "file or @LIST, e.g. --inputs 'shoot/*.CR2'")
         if pattern.startswith("@"):
             listing = Path(pattern[1:])
             files = [listing.parent / ln.strip() for ln in _list_lines(pattern, listing)
@@ -59,6 +62,10 @@ def expand_inputs(patterns: Sequence[str], *,
         if not files:
             raise InputError(f"--inputs {pattern!r} matches no file; quote globs so that "
                              "plenocli expands them, e.g. --inputs 'shoot/*.CR2'")
+        folder = next((p for p in files if p.is_dir()), None)
+        if folder is not None:  # a capture is a file: the folder's captures are a glob
+            raise OptionError(f"--inputs {pattern!r}: {folder} is a folder, not a capture; give "
+                              f"its captures as a quoted glob, e.g. --inputs '{folder}/*.CR2'")
         found.append((pattern, files, glob.has_magic(pattern) and not pattern.startswith("@")))
     if template is not None and any(is_glob for _, _, is_glob in found):
         found = _without_outputs(found, template if isinstance(template, Template)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
+from plenocli.io.atomic import check_outputs
 from plenocli.io.folderlock import folders_locked
 from plenocli.pipeline.config import Step
 from plenocli.progress import log
@@ -70,6 +71,9 @@ def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = Fals
     holding the lock of every folder the steps write into (another run writing there waits,
     then finds what this one made up to date)."""
     if locked and not dry_run:
+        for step in steps:  # what cannot be written is said as each step's guard says it
+            folders = step.stage.paths(step.params, step.stage.folder_outputs)
+            check_outputs([p for p in step.output_paths() if p not in folders], folders=folders)
         with folders_locked([p for step in steps for p in step.output_paths()]):
             return run_pipeline(steps, force=force)
     decisions = plan(steps, force=force)

@@ -73,8 +73,8 @@ def as_view_stack(views: np.ndarray | Sequence[np.ndarray]) -> tuple[np.ndarray,
         for k, a in enumerate(arrays):
             stack[k] = a
     if min(stack.shape[-2:]) < 32:
-        raise StitchError(f"views of {stack.shape[-2]} x {stack.shape[-1]} px are too small to "
-                         "register; need at least 32 x 32")
+        raise StitchError(f"views of {stack.shape[-1]} x {stack.shape[-2]} px (columns x rows) "
+                         "are too small to register; need at least 32 x 32")
     return stack, colour
 
 

@@ -101,12 +101,18 @@ def _pupil_samples(rng, shape, region: tuple[int, int], radius: float, rays: int
         return np.broadcast_to(centroid, (1, *shape, 2)).copy()
     out = np.empty((rays, *shape, 2))
     for k in range(rays):
-        r = radius * np.sqrt(rng.random(shape))
-        phi = 2 * math.pi * rng.random(shape)
-        x, y = np.abs(r * np.cos(phi)), np.abs(r * np.sin(phi))
-        out[k, ..., 0] = sx * x if sx else r * np.cos(phi)
-        out[k, ..., 1] = sy * y if sy else r * np.sin(phi)
+        out[k] = _pupil_draw(rng, shape, region, radius)
     return out
+
+
+def _pupil_draw(rng, shape, region: tuple[int, int], radius: float) -> np.ndarray:
+    """One pupil point (*shape, 2) per pixel, uniform over the pupil part ``region``."""
+    sx, sy = region
+    r = radius * np.sqrt(rng.random(shape))
+    phi = 2 * math.pi * rng.random(shape)
+    x, y = np.abs(r * np.cos(phi)), np.abs(r * np.sin(phi))
+    return np.stack([sx * x if sx else r * np.cos(phi), sy * y if sy else r * np.sin(phi)],
+                    axis=-1)
 
 
 @dataclass(frozen=True)
@@ -178,15 +184,16 @@ def render_view(cam: Camera, chart: Chart, *, rows: int, cols: int, cell_mm: flo
         yb = ys[r0:r0 + block_rows]
         gx, gy = np.meshgrid(xs, yb)
         acc = np.zeros((len(yb), cols, 3), np.float32)
-        pupils = _pupil_samples(rng, gx.shape, region, radius, rays)
-        for k in range(rays):
+        centroid = _pupil_samples(rng, gx.shape, region, radius, 1)[0] if rays == 1 else None
+        for _ in range(rays):  # one ray a pixel at a time: memory does not grow with --rays
             if rays > 1:
+                pupil = _pupil_draw(rng, gx.shape, region, radius)
                 jx = (rng.random(gx.shape) - 0.5) * cell_mm
                 jy = (rng.random(gx.shape) - 0.5) * cell_mm
             else:
-                jx = jy = 0.0
+                pupil, jx, jy = centroid, 0.0, 0.0
             s = np.stack([gx + jx, gy + jy], axis=-1)
-            acc += _sample_chart(chart, _chart_hits(cam, s, pupils[k], prism))
+            acc += _sample_chart(chart, _chart_hits(cam, s, pupil, prism))
         out[r0:r0 + len(yb)] = acc / rays
     return out
 

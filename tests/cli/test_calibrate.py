@@ -223,3 +223,18 @@ def test_a_dual_pixel_white_is_refused_in_bounded_memory(tmp_path):
     assert done.returncode == 1, done.stderr
     assert "no micro-lens lattice found" in done.stderr and done.stderr.count("\n") == 1
     assert not (tmp_path / "g.yaml").exists()
+
+
+@pytest.mark.parametrize("shape", [(2000, 3), (3, 2000), (31, 47)])
+def test_a_frame_too_small_is_said_so_first_in_columns_x_rows(tmp_path, shape):
+    # audit 10 E6: a 3-column frame was told to give --cfa (its pixel phases differ like a
+    # mosaic's) where a 3-row one was "too small"; sizes are columns x rows everywhere
+    from plenocli.cli.main import cli
+
+    rows, cols = shape
+    mosaic = np.tile(np.array([[1.0, 2.0], [2.0, 3.0]], np.float32), (rows, cols))[:rows, :cols]
+    tifffile.imwrite(tmp_path / "f.tif", mosaic)
+    result = CliRunner().invoke(cli, ["calibrate", str(tmp_path / "f.tif"), "-o",
+                                      str(tmp_path / "g.yaml")])
+    assert result.exit_code == 1
+    assert f"image of {cols} x {rows} px (columns x rows) is too small" in result.output

@@ -297,3 +297,14 @@ def test_an_output_name_that_is_not_utf8_is_written_with_its_record(tmp_path, fr
     assert {b"lat\xe9.tif", b".lat\xe9.tif.plenocli.json", b"p\xe9.png"} <= made
     result = invoke("bias", tmp_path / name, "-o", tmp_path / "again.tif", "-q")
     assert result.exit_code == 1 and "is a `plenocli bias` output" in result.output  # read back
+
+
+def test_an_input_that_is_a_loop_or_a_dangling_link_says_so(tmp_path):
+    # audit 10 I1's neighbours: a looping or dangling input link was "no such file"
+    (tmp_path / "l.tif").symlink_to("l.tif")
+    (tmp_path / "d.tif").symlink_to("nowhere.tif")
+    loop = invoke("bias", tmp_path / "l.tif", "-o", tmp_path / "v.tif")
+    assert loop.exit_code == 1 and "a symbolic link loop" in one_line(loop)
+    dangling = invoke("info", tmp_path / "d.tif")
+    assert dangling.exit_code == 1
+    assert "a symbolic link to nowhere.tif, which does not exist" in one_line(dangling)

@@ -176,3 +176,21 @@ def test_a_float_image_without_white_level_records_null_not_infinity(tmp_path):
         result = _info(tmp_path / name, "--json")
         assert result.exit_code == 0, result.output
         assert _strict_json(result.stdout)["white_level"] == [None]
+
+
+@pytest.mark.parametrize("body, refused", [
+    ("steps:\n  decode: {input: c.dng, output: f.tif}\n", None),
+    ("base: 1\nsteps:\n  decode: {input: c.dng, output: f.tif}\n", "unknown top-level key 'base'"),
+    ("steps:\n  bias: {input: f.tif, output: v.tif, smoth: 3}\n",
+     "unknown key 'smoth' for stage bias"),
+    ("steps:\n  decode: {input: \"{capture}\", output: \"{out}/{name}.tif\"}\n", None)])
+def test_a_config_says_whether_run_refuses_it(tmp_path, body, refused):
+    # own-9 (round 10): info described configs that run refuses as plain pipeline configs
+    (tmp_path / "c.yaml").write_text(body)
+    text = CliRunner().invoke(cli, ["info", str(tmp_path / "c.yaml")])
+    doc = json.loads(CliRunner().invoke(cli, ["info", str(tmp_path / "c.yaml"), "--json"]).output)
+    assert text.exit_code == 0 and doc["kind"] == "pipeline-config"
+    if refused is None:
+        assert doc["refused"] is None and "run refuses it" not in text.output
+    else:
+        assert refused in doc["refused"] and "run refuses it: " in text.output

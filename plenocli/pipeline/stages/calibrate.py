@@ -69,6 +69,18 @@ def _refuse_hidden_mosaic(path: str, image: np.ndarray) -> None:
                          "calibrate the decoded frames")
 
 
+def _refuse_unusable(path: str, image: np.ndarray, cfa: str | None) -> None:
+    """An image too small to hold a lattice (said first), with unknown pixels, or a mosaic
+    that names no CFA pattern."""
+    try:
+        calibration.check_size(image.shape)
+    except CalibrationError as err:
+        raise CalibrationError(f"{path}: {err}") from err
+    _refuse_unknown_pixels(path, image)
+    if cfa is None:
+        _refuse_hidden_mosaic(path, image)
+
+
 def _refuse_unknown_pixels(path: str, image: np.ndarray) -> None:
     """The lattice search reads every pixel (a spectrum, the micro-images' borders): NaN pixels
     (clipped by bias, below flat's --floor) cannot be measured around, so they are refused with
@@ -95,9 +107,7 @@ def run(input: str, output: str, *, lattice: str = "auto", pitch: float | None =
         raise InputError("--xml writes a Raytrix (hexagonal) calibration; "
                          "use --lattice hex or auto")
     image, cfa, black, origin, meta = load_image(input)
-    _refuse_unknown_pixels(input, image)
-    if cfa is None:
-        _refuse_hidden_mosaic(input, image)
+    _refuse_unusable(input, image, cfa)
     other = gridfile.read_grid(compare, image_shape=image.shape) if compare else None
     first = gridfile.read_grid(start, image_shape=image.shape) if start else None
     try:
