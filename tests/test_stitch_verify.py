@@ -195,3 +195,20 @@ def test_the_seam_correlations_are_the_masked_ncc(case):
     if case == "flat view":
         b[:] = 0.25
     np.testing.assert_allclose(verify._scores(a, b, valid), _masked_ncc(a, b, valid), atol=1e-5)
+
+
+def test_a_seam_without_texture_cannot_vouch_for_a_transform():
+    """Round 11 W1: an overlap made constant (a noise-free sky) correlated the float32 rounding
+    of its resampling at 0.51 and passed a transform 8 px off, residual 0.05 px. A constant
+    block measures nothing; a seam of nothing else leaves the transform unvouched: refused,
+    the true one too (nothing there can tell it from a wrong one)."""
+    views, _, truth = make_rig(view_shape=(160, 240), overlap=0.3, vignetting=0.0, noise=0.0,
+                               seed=4)
+    flat = views.copy()
+    flat[0, :, 150:] = 0.5
+    flat[1, :, :90] = 0.5
+    for off in (0.0, 8.0):
+        t = _true_transform(truth)
+        t["view_to_reference"][1][0][2] += off
+        with pytest.raises(ValueError, match="no overlap large enough, and textured, to check"):
+            stitch(flat, transform=t)

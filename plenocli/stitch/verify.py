@@ -43,6 +43,9 @@ MAX_BLOCKS = 8
 # noise (sky, a wall): with no correlation there it measures nothing, and a seam there is
 # invisible, so it is left out rather than counted as misaligned.
 FLAT_FRACTION = 0.1
+# texture below this fraction of the block's level is no texture: a constant region resampled
+# varies by float32 rounding (1e-7), a camera's darkest sky by its noise (1e-3 and more)
+MIN_TEXTURE = 1e-5
 
 
 def check_transform_names(transform: dict, names: list[str], layout: str, *,
@@ -111,8 +114,9 @@ def check_fits(fits: list, pairs: list, *, what: str, remedy: str) -> None:
     a pair no overlap large enough to check: ``fits`` from :func:`seam_fits`, one per pair."""
     for (a, b, _), fit in zip(pairs, fits, strict=True):
         if fit is None:
-            raise StitchError(f"{what} leaves views {a} and {b} no overlap large enough to check "
-                              f"(about 20 x 20 px); it cannot be vouched for: {remedy}")
+            raise StitchError(f"{what} leaves views {a} and {b} no overlap large enough, and "
+                              f"textured, to check (about 20 x 20 px); it cannot be vouched "
+                              f"for: {remedy}")
         if not fit.correlation >= MIN_CORRELATION or fit.residual_px > TOLERANCE_PX:
             shown = f"> {SEARCH_PX}" if fit.residual_px > SEARCH_PX else f"{fit.residual_px:.2f}"
             raise StitchError(f"{what} does not describe these views: views {a} and {b} are "
@@ -136,6 +140,9 @@ def _seam_shifts(stack: np.ndarray, maps: list, pair: tuple[int, int], region
             if ok.mean() < MIN_COVERED:
                 continue
             texture = [highpass(v) for v in luma]
+            level = max(float(np.nanmean(np.abs(v))) for v in luma)
+            if not min(float(np.std(t[ok])) for t in texture) > MIN_TEXTURE * level:
+                continue   # a constant (the arithmetic's rounding correlates, not the scene)
             found = _block_shift(*texture, ok)
             if found is not None:
                 found_blocks.append((*found, min(float(np.std(t[ok])) for t in texture)))
