@@ -160,27 +160,3 @@ def approximate_sai(frame: np.ndarray, grid: LensGrid, n: int) -> tuple[np.ndarr
             ok[ok] = (x[ok] >= 0) & (x[ok] < cols) & (y[ok] >= 0) & (y[ok] < rows)
             views[i * n + j][ok] = frame[y[ok].astype(np.int64), x[ok].astype(np.int64)]
     return views, table
-
-
-def block_misfit(frame: np.ndarray, n: int, *, cfa: str | None = None) -> str | None:
-    """None unless ``frame`` (2-D) shows micro-images on a lattice other than n x n pixel
-    blocks; then which lattice. A lenslet frame (micro-images of 20 px on a hex lattice, say)
-    demultiplexed by pixel phases gives views that are the frame subsampled, not pupil parts.
-    Calibrate's own judges (micro-image borders repeating on one lattice over the frame) tell;
-    they vouch for no lattice finer than 3 px, so a 2 x 2 sensor given a wrong N is not told.
-    """
-    from plenocli.calibration import MIN_SIDE_PX
-    from plenocli.calibration.judges import decide
-    from plenocli.calibration.search import views
-    from plenocli.errors import CalibrationError
-
-    if min(np.shape(frame)) < MIN_SIDE_PX:   # too small to hold a lattice worth judging
-        return None
-    image = np.nan_to_num(np.asarray(frame, np.float64))
-    try:
-        found = decide(image, views(image, cfa)).lattice
-    except CalibrationError:   # no lattice shows: nothing contradicts N
-        return None
-    if found.kind == "square" and abs(found.pitch_px - n) <= 0.1 * n:
-        return None
-    return found.describe()

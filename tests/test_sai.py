@@ -121,21 +121,3 @@ def test_approximate_sai_refuses_a_hex_grid():
     grid = LensGrid(pitch_px=20.0, angle_rad=0.0, offset_xy=(0, 0), image_shape=(50, 50))
     with pytest.raises(ValueError, match="square"):
         approximate_sai(np.zeros((50, 50)), grid, 2)
-
-
-def test_a_lenslet_frame_is_not_demultiplexed_into_pixel_blocks(tmp_path):
-    """audit 10 W2: a Raytrix-like frame (hex micro-images of 20.2 px) was split by pixel
-    phases into 4 'views' with -n 2 (exit 0); the frame shows its own lattice."""
-    from click.testing import CliRunner
-
-    from plenocli.cli.main import cli
-    from plenocli.pipeline.stages.simulate import simulate
-
-    simulate("raytrix-white", tmp_path / "w", pixels=404)
-    runner = CliRunner()
-    assert runner.invoke(cli, ["decode", str(tmp_path / "w" / "capture.tif"), "-o",
-                               str(tmp_path / "f.tif")]).exit_code == 0
-    result = runner.invoke(cli, ["sai", str(tmp_path / "f.tif"), "-n", "2", "-o",
-                                 str(tmp_path / "v.tif")])
-    assert result.exit_code == 1 and "hex 20.2" in result.output, result.output
-    assert not (tmp_path / "v.tif").exists()

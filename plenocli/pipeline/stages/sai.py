@@ -36,13 +36,6 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
                else active_area(meta, data.shape[1:]))
     cfa = framing.cfa
-    if framing.grid is None:
-        shows = sai_mod.block_misfit(framing.crop(data[0]), n, cfa=cfa)
-        if shows is not None:
-            raise InputError(f"{input}: its micro-images lie on a {shows} lattice, not on "
-                             f"{n} x {n} pixel blocks: Eq. 1 gives no sub-aperture images of "
-                             "them; render views with plenocli refocus (--view), or "
-                             "approximate SAIs with sai --grid GRID")
     per_page = []
     for page in data:
         crop = framing.crop(page)
