@@ -150,7 +150,9 @@ def test_dual_and_quad_pixel_disparity_within_a_tenth(quad):
     for result in results:
         for k, d in enumerate(disparities):
             cut = result.disparity[16:-16, k * band + 12:(k + 1) * band - 12]
-            assert abs(np.median(cut) - d) <= 0.07, (names, d, np.median(cut))  # measured <= 0.052
+            # the frame's 15 px border is unknown (windows reaching past it): a band's cut there
+            assert np.isfinite(cut).mean() > 0.8   # measured 0.86 at the left edge
+            assert abs(np.nanmedian(cut) - d) <= 0.07, (names, d, np.nanmedian(cut))  # <= 0.052
 
 
 def test_depth_picture_has_alpha_and_scale_bar():

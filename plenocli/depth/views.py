@@ -114,6 +114,16 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0) -> 
     # a best shift pinned at the search bound is no minimum, and a cost that does not vary
     # with the shift (confidence 0: no texture) measures nothing
     lost |= (np.abs(d) >= reach - 1e-3) | ~(conf > 0)
+    # a window reaching past the frame's edge, in a or at the found shift in b, matched the
+    # padding there: a patch at a simulated frame's corner read +7 px as -9.3, confidently.
+    # The coarse search's windows, on the views shrunk by two, reach a whole WINDOW
+    half = WINDOW
+    rows, cols = a.shape
+    with np.errstate(invalid="ignore"):
+        x = np.arange(cols, dtype=np.float32)[None, :]
+        y = np.arange(rows)[:, None]
+        lost |= (x + np.minimum(d, 0) < half) | (x + np.maximum(d, 0) > cols - 1 - half)
+        lost |= (y < half) | (y > rows - 1 - half)
     d[lost] = np.nan
     conf[lost] = 0.0
     return Disparity(d, conf)
