@@ -140,12 +140,13 @@ def _seam_shifts(stack: np.ndarray, maps: list, pair: tuple[int, int], region
             if ok.mean() < MIN_COVERED:
                 continue
             texture = [highpass(v) for v in luma]
+            strength = min(float(np.std(t[ok])) for t in texture)
             level = max(float(np.nanmean(np.abs(v))) for v in luma)
-            if not min(float(np.std(t[ok])) for t in texture) > MIN_TEXTURE * level:
+            if not strength > MIN_TEXTURE * level:
                 continue   # a constant (the arithmetic's rounding correlates, not the scene)
             found = _block_shift(*texture, ok)
             if found is not None:
-                found_blocks.append((*found, min(float(np.std(t[ok])) for t in texture)))
+                found_blocks.append((*found, strength))
         if found_blocks:
             strongest = max(t for _, _, t in found_blocks)
             kept = [(s, c) for s, c, t in found_blocks
