@@ -108,3 +108,12 @@ def test_a_nominal_start_converges_and_says_what_moved():
     other = LensGrid(pitch * 1.5, angle + 0.3, tuple(off), image_shape=(640, 640))
     with pytest.raises(CalibrationError, match="start grid .* does not fit this image"):
         calibration.calibrate(image, start=other)   # another camera's calibration
+
+
+def test_a_white_of_the_finest_lattice_takes_a_pitch_hint():
+    """audit 11 E5: a white of 3.2 px pitch was refused with the advice "pass --pitch PX",
+    which refused any pitch under 4 px; a hint takes every pitch the search looks at (3 px on)."""
+    shape, pitch, angle, off = (384, 384), 3.2, 0.05, (192.3, 192.6)
+    image, _ = white_image(shape, pitch_px=pitch, angle_rad=angle, offset_xy=off, seed=2)
+    grid, _ = calibration.calibrate(image, pitch_hint=pitch)
+    assert _is_right(grid, LensGrid(pitch, angle, off, image_shape=shape))

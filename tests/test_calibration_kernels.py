@@ -83,3 +83,11 @@ def test_grid_refuses_a_lens_listed_twice_however_its_indices_are_stored():
     with pytest.raises(ValueError, match="compact block"):
         LensGrid(20.0, 0.1, (100.0, 100.0), centres_xy=np.zeros((2, 2)),
                  indices=np.array([[0, 0], [10 ** 5, 3]]))
+
+
+def test_a_lattice_is_described_by_its_smallest_turn():
+    """audit 11 E4: a refused hex lattice was shown "at 60.00 deg" beside a grid at 0 deg, the
+    same lattice; its angle is shown as its smallest turn from the x axis."""
+    assert Lattice("hex", 20.2, np.radians(59.99)).describe() == "hex 20.20 px at -0.01 deg"
+    assert Lattice("hex", 20.2, np.radians(29.0)).describe() == "hex 20.20 px at 29.00 deg"
+    assert Lattice("square", 20.2, np.radians(89.0)).describe() == "square 20.20 px at -1.00 deg"

@@ -387,3 +387,15 @@ def test_a_pair_not_found_within_the_users_overlap_is_told_the_overlap_found_wit
                                           rf"searched without it they overlap by {found} side by "
                                           rf"side: give --overlap {found}, or leave it out"):
         stitch(views, overlap=0.7, overlap_tolerance=0.1)
+
+
+def test_an_ambiguous_match_within_the_given_overlap_does_not_ask_for_an_overlap():
+    """audit 11 E1: a periodic scene searched within --overlap was told to "give the expected
+    overlap (--overlap)"; it was given: the advice is to narrow its tolerance."""
+    tile = ndimage.gaussian_filter(np.random.default_rng(7).random((300, 24)), 1.5)
+    scene = np.tile(tile, (1, 30))  # repeats every 24 px across
+    views = np.stack([scene[:, :400], scene[:, 280:680]]).astype(np.float32)
+    with pytest.raises(StitchError, match="ambiguous") as refused:
+        stitch(views, layout="1x2", overlap=0.3, overlap_tolerance=0.1)
+    assert "give the expected overlap" not in str(refused.value)
+    assert "narrow --overlap-tolerance" in str(refused.value)

@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from plenocli.calibration.candidates import Lattice
+from plenocli.calibration.candidates import MIN_LENS_PITCH_PX, Lattice
 from plenocli.calibration.centres import (
     LensCentre,
     lens_centre,
@@ -169,7 +169,7 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
                          if sure else None)
     if not fit.centres_refined and not sure:
         raise CalibrationError(
-            f"{found.describe()} lattice found, but on this scene neither the micro-image "
+            f"{found.describe()} lattice found, but on this image neither the micro-image "
             f"centres nor the border repetition pin its pitch down (+-{border.pitch_err_px:.3f} "
             f"px); {_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
     grid, type_info = _with_lens_types(flat, grid)
@@ -317,8 +317,8 @@ def _checked(image: np.ndarray, lattice: str, black_level: float,
              pitch_hint: float | None) -> np.ndarray:
     if lattice not in ("auto", *LATTICES):
         raise ValueError(f"lattice must be 'auto' or one of {sorted(LATTICES)}, got {lattice!r}")
-    if pitch_hint is not None and not 4.0 <= pitch_hint <= 200.0:
-        raise ValueError(f"pitch_hint must be 4-200 px, got {pitch_hint}")
+    if pitch_hint is not None and not MIN_LENS_PITCH_PX <= pitch_hint <= 200.0:
+        raise ValueError(f"pitch_hint must be {MIN_LENS_PITCH_PX:g}-200 px, got {pitch_hint}")
     image = np.asarray(image)
     if image.ndim != 2:
         raise ValueError(f"image must be 2-D (rows, cols), got shape {image.shape}")

@@ -22,9 +22,9 @@ from scipy.optimize import minimize
 from plenocli.model.lensgrid import LATTICES
 
 PEAK_Z = 4.0          # a spectral peak stands this many robust sigma above its ring
-# no micro-lens lattice is finer: a micro-image under 3 px across holds no image (--pitch takes
-# 4 px at the least, and a hint's search reaches 15 % below it); the halves, thirds and quarters
-# of a lattice's relatives below it are the pixel grid's aliases, not lens lattices
+# no micro-lens lattice is finer: a micro-image under 3 px across holds no image (the least
+# --pitch takes, so every lattice found without a hint can be given as one); the halves, thirds
+# and quarters of a lattice's relatives below it are the pixel grid's aliases, not lens lattices
 MIN_LENS_PITCH_PX = 3.0
 PEAKS_PER_SPECTRUM = 8
 RING_SAMPLES = 512    # a ring's statistics come from 512-1023 of its bins (all if fewer)
@@ -71,7 +71,11 @@ class Lattice:
                 if lat.pitch_px >= MIN_LENS_PITCH_PX]
 
     def describe(self) -> str:
-        return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(self.angle_rad):.2f} deg"
+        """Pitch and angle, the angle the lattice's smallest turn from the x axis (a hex lattice
+        at 59.99 deg is the one at -0.01 deg: shown so, as the grid file gives it)."""
+        step = LATTICES[self.kind]
+        turn = (self.angle_rad + step / 2) % step - step / 2
+        return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(turn):.2f} deg"
 
     def climbed(self, score, *, step: float, evaluations: int, xatol: float,
                 fatol: float) -> Lattice:

@@ -12,7 +12,7 @@ def calibrate(**params):
 
     INPUT is a white image or a scene through the lens array (frames TIFF from decode, or a
     plain TIFF/PNG/BMP; views are summed, a Bayer mosaic is handled from the metadata). No hint
-    is needed (hex or square, pitch 6-100 px, any rotation; --pitch takes 4-200 px). When the
+    is needed (hex or square, pitch 6-100 px, any rotation; --pitch takes 3-200 px). When the
     lattice is not certain (a rival lattice fits almost as well) the command stops and names
     the rivals: pass --pitch, a white image, or --start. The YAML holds the lattice, every
     lens (i, j, x, y), the lens types of a multi-focus array, the residuals and the confidence.

@@ -87,9 +87,13 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                          f"correlation {best:.2f} < {min_correlation}); the views may not "
                          "overlap, or the overlap has no texture")
     if second >= max_ambiguity * best:
+        # with an expected shift already given, asking for one again does not help
+        advice = ("the scene repeats within the tolerance around the expected shift: with "
+                  "--overlap, narrow --overlap-tolerance; with --rig, give a transform solved "
+                  "on another capture of the rig (--transform-in)") if prior is not None \
+            else "give the expected overlap (--overlap) or the rig (--rig)"
         raise StitchError(f"ambiguous overlap: shifts correlating {best:.2f} and {second:.2f} "
-                         "(a periodic scene?); give the expected overlap (--overlap) or the "
-                         "rig (--rig)")
+                          f"(a periodic scene?); {advice}")
     ty, tx, method = _ecc_subpixel(a, b, dy0, dx0)
     dy, dx, method = _photometric_polish(a, b, dy0 - ty, dx0 - tx, method)
     correlation = aligned_correlation(ha, hb, translation_matrix(dy, dx), a, b)

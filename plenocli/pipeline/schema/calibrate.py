@@ -8,7 +8,7 @@ PARAMS = (
     output_param(".yaml", ".yml"),
     Param("lattice", Choice(["auto", "hex", "square"]), "Micro-lens lattice; auto finds the "
           "kind (a kind that does not fit the image is refused).", default="auto"),
-    Param("pitch", FiniteFloat(min=4.0, max=200.0), "Approximate lens pitch in px (e.g. from "
+    Param("pitch", FiniteFloat(min=3.0, max=200.0), "Approximate lens pitch in px (e.g. from "
           "the datasheet): lattices within 15 % are looked at too; the image decides, and an "
           "answer outside 15 % of the hint is refused."),
     Param("start", InputFile(), "A camera calibration to refine (plenocli YAML or Raytrix XML): "
