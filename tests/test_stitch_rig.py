@@ -141,6 +141,23 @@ def test_transform_with_rig_is_reapplied():
     assert np.allclose(np.nan_to_num(again), np.nan_to_num(pano) * 0.5, atol=1e-5)
 
 
+def test_a_second_capture_of_one_transform_traces_no_ray_again(monkeypatch):
+    """A batch stitched by one transform maps the same canvases of the same rig: the second
+    capture's maps come from the traced node grids of the first (bounded), bit for bit."""
+    from plenocli.stitch import rig as rig_module
+
+    views, _, rig = dual(384)
+    _, rep = stitch(views, layout="1x2", rig=rig)
+    first, _ = stitch(views, transform=rep.transform)
+    traced = []
+    real = rig_module._traced
+    monkeypatch.setattr(rig_module, "_traced", lambda *a: traced.append(a) or real(*a))
+    again, _ = stitch(views, transform=rep.transform)
+    assert not traced and np.array_equal(again, first, equal_nan=True)
+    held = sum(a.nbytes for g in rig_module._NODE_CACHE.values() for a in (*g[0], *g[1:]))
+    assert 0 < held <= rig_module.NODE_CACHE_BYTES
+
+
 @pytest.mark.parametrize("blend", ["feather", "multiband"])
 def test_interleaved_colour_views_give_the_planar_panorama_bit_for_bit(blend):
     """Views whose channels are interleaved in memory (as the stage demosaics them) are

@@ -27,6 +27,8 @@ inverse traces the ray back through the prism (exact, no iteration).
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 
 import cv2
 import numpy as np
@@ -41,6 +43,9 @@ MAP_BAND_PIXELS = 1 << 20  # canvas pixels mapped at a time (OpenCV's remap slow
 TRACE_BAND_PIXELS = 1 << 18  # rays traced at a time (float64 temporaries of a few tens of MB)
 MAP_NODES_PER_VIEW = 256  # rays traced exactly across a view's width for the remap maps
 MAP_TOLERANCE_PX = 1e-6  # interpolated maps further than this from a traced ray: traced
+NODE_CACHE_BYTES = 128 << 20  # node grids kept for the next capture of a batch (_node_grid)
+_NODE_CACHE: OrderedDict = OrderedDict()
+_NODE_LOCK = threading.Lock()
 
 
 def _check_view(rig: PrismRig, view: int) -> ViewOptics:
@@ -241,6 +246,39 @@ def _rough_cells(rig: PrismRig, view: int, nodes: list[np.ndarray], node_x: np.n
     return ndimage.binary_dilation(rough, structure=np.ones((3, 3), bool))
 
 
+def _node_grid(rig: PrismRig, view: int, origin_xy, canvas: tuple[int, int],
+               shape: tuple[int, int]) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """The traced nodes of a canvas's maps interpolated along its rows (one array per
+    coordinate), the cells traced per pixel, and each column's first stencil node (see
+    :func:`_view_maps`). Kept for the canvases mapped last (NODE_CACHE_BYTES): the captures of a
+    batch stitched by one transform map the same canvases of the same rig, and tracing is most
+    of what their maps cost. Callers only read them."""
+    key = (rig, view, float(origin_xy[0]), float(origin_xy[1]), tuple(canvas), tuple(shape))
+    with _NODE_LOCK:
+        if key in _NODE_CACHE:
+            _NODE_CACHE.move_to_end(key)
+            return _NODE_CACHE[key]
+    rows, cols = canvas
+    pitch = map_pitch(shape)
+    node_y = (np.arange((rows - 1) // pitch + 4) - 1.0) * pitch + origin_xy[1]
+    node_x = (np.arange((cols - 1) // pitch + 4) - 1.0) * pitch + origin_xy[0]
+    nodes = _traced(rig, view, *np.meshgrid(node_x, node_y), shape)
+    lost = ndimage.binary_dilation(~(np.isfinite(nodes[0]) & np.isfinite(nodes[1])),
+                                   structure=np.ones((3, 3), bool))
+    nodes = [np.where(lost, np.nan, node) for node in nodes]
+    rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
+    first_x, weights_x = _cubic_weights(cols, pitch)
+    along_x = [np.ascontiguousarray(sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)))
+               for node in nodes]
+    grid = (along_x, rough, first_x)
+    with _NODE_LOCK:
+        _NODE_CACHE[key] = grid
+        while sum(a.nbytes for g in _NODE_CACHE.values() for a in (*g[0], *g[1:])) \
+                > NODE_CACHE_BYTES and len(_NODE_CACHE) > 1:
+            _NODE_CACHE.popitem(last=False)
+    return grid
+
+
 def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[int, int],
                shape: tuple[int, int]):
     """cv2.remap maps of a canvas (rows, cols) whose pixel (0, 0) is common pixel
@@ -257,17 +295,7 @@ def _view_maps(rig: PrismRig, view: int, origin_xy: np.ndarray, canvas: tuple[in
     ray (total reflection), are traced exactly."""
     rows, cols = canvas
     pitch = map_pitch(shape)
-    node_y = (np.arange((rows - 1) // pitch + 4) - 1.0) * pitch + origin_xy[1]
-    node_x = (np.arange((cols - 1) // pitch + 4) - 1.0) * pitch + origin_xy[0]
-    nodes = _traced(rig, view, *np.meshgrid(node_x, node_y), shape)
-    lost = ndimage.binary_dilation(~(np.isfinite(nodes[0]) & np.isfinite(nodes[1])),
-                                   structure=np.ones((3, 3), bool))
-    nodes = [np.where(lost, np.nan, node) for node in nodes]
-    rough = _rough_cells(rig, view, nodes, node_x, node_y, pitch, shape)
-    first_x, weights_x = _cubic_weights(cols, pitch)
-    along_x = [np.ascontiguousarray(sum(node[:, first_x + j] * weights_x[:, j] for j in range(4)))
-               for node in nodes]
-    del nodes
+    along_x, rough, first_x = _node_grid(rig, view, origin_xy, canvas, shape)
     gx = np.arange(cols, dtype=np.float64) + origin_xy[0]
     step = max(1, MAP_BAND_PIXELS // cols)
     for r0 in range(0, rows, step):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from plenocli.stitch.kernels import edge_weight
+from plenocli.stitch.kernels import edge_weight, matrix_maps
 from plenocli.stitch.rig import (
     PrismRig,
     _view_maps,
@@ -61,6 +61,13 @@ class ViewMap:
         step = max(1, BAND_PIXELS // max(1, cols))
         for r0 in range(0, rows, step):
             band = slice(r0, min(r0 + step, rows))
+            if self.rig is None and not self.k1:
+                fx = np.empty((band.stop - band.start, cols), np.float32)
+                fy = np.empty_like(fx)
+                matrix_maps(np.ascontiguousarray(m, np.float64), float(region[1].start),
+                            float(region[0].start + band.start), fx, fy)
+                yield band, fx, fy, None
+                continue
             ys = np.arange(region[0].start + band.start, region[0].start + band.stop,
                            dtype=np.float64)
             fx, fy = apply_matrix(m, xs[None, :], ys[:, None])
