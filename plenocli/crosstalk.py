@@ -121,6 +121,16 @@ def crosstalk_ratio(views: np.ndarray, *, intended: int | None = None, tile_px: 
         rest = np.array([clean[k][sel].sum() for k in others])
         per_colour[colour] = {"r": float(rest.max() / main) if main > 0 else float("nan"),
                               "map": tile_map(sel, mask)}
+    # a ratio of a few scattered pixels is not the capture's: r is measured where some tile
+    # is known well enough to map it, in every colour
+    for name, tiles in [("", r_map)] + [(f" of colour {c}", v["map"])
+                                        for c, v in per_colour.items()]:
+        if not np.isfinite(tiles).any():
+            raise ValueError(
+                f"too few pixels{name} are known in every view to measure r: "
+                f"{int(valid.sum())} of {valid.size} ({100 * valid.mean():.2g} %), and no "
+                f"{tile_px} px tile has {100 * min_valid_fraction:.0f} % of its pixels{name} "
+                "known; measure on a white whose pixels are known (not clipped or masked)")
     finite = r_map[np.isfinite(r_map)]
     return {
         "r": max(r_per_view.values()),
@@ -248,6 +258,12 @@ def measure_mixing(captures: Sequence[np.ndarray], *, intended: Sequence[int],
             good = enough & (main > 0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 nodes[c, :, j] = np.where(good, flux / main, np.nan)
+            if not enough.any():
+                raise ValueError(f"masked white of view {views[j]}: no {tile_px} px tile has "
+                                 f"{100 * min_valid_fraction:.0f} % of its colour {colours[c]} "
+                                 f"pixels known in every view ({100 * valid.mean():.2g} % of "
+                                 "all pixels are); use a white whose pixels are known (not "
+                                 "clipped or masked)")
             if not good.any():
                 raise ValueError(f"masked white of view {views[j]}: no tile of colour "
                                  f"{colours[c]} has light in view {views[j]}; is it the capture "

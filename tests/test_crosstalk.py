@@ -151,3 +151,22 @@ def test_a_tile_larger_than_the_image_is_refused_before_allocating():
     views = np.ones((2, 40, 60), np.float32)
     with pytest.raises(ValueError, match="larger than the 60 x 40 image"):
         crosstalk_ratio(views, tile_px=100_000)
+
+
+def test_a_white_of_scattered_known_pixels_is_refused_not_measured():
+    """audit 12 W7: a white 99 % unknown gave r from 6 pixels and a map of no tile (exit 0);
+    r needs a tile known well enough to map it, in every colour; the mixing says the pixels
+    are unknown (not "no tile has light")."""
+    from plenocli.crosstalk import measure_mixing
+
+    views, _ = make_masked_white(r=0.13, cfa="RGGB", n_views=2, intended=0, seed=5)
+    sparse = views.copy()
+    sparse[:, np.random.default_rng(1).random(views.shape[1:]) < 0.99] = np.nan
+    with pytest.raises(ValueError, match=r"too few pixels are known in every view"):
+        crosstalk_ratio(sparse, cfa="RGGB", tile_px=16)
+    no_red = views.copy()
+    no_red[:, ::2, ::2] = np.nan
+    with pytest.raises(ValueError, match=r"too few pixels of colour R are known"):
+        crosstalk_ratio(no_red, cfa="RGGB", tile_px=16)
+    with pytest.raises(ValueError, match=r"no 16 px tile has 25 % of its colour L pixels known"):
+        measure_mixing([sparse, sparse[::-1]], intended=[0, 1], views=["A", "B"], tile_px=16)

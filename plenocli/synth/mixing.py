@@ -292,6 +292,7 @@ def render_raytrix_ghost(*, pixels: int = 404, seed: int = 0, pitch_px: float = 
     from scipy.spatial import cKDTree
     from scipy.special import erfc
 
+    prismcam._check(pixels, 1)  # the sizes render_raytrix takes: its lattice is this one's
     camera = camera or prismcam.Camera()
     rng = np.random.default_rng(seed)
     rows = pixels * 2 // 3

@@ -244,3 +244,15 @@ def test_a_folder_filled_by_its_name_and_through_a_link_holds_one_set(tmp_path, 
         assert result.exit_code == 0, result.output
     assert sorted(p.name for p in real.iterdir()) == ["grid_true.xml", "truth.json",
                                                        "white.tif"]
+
+
+@pytest.mark.parametrize("kind", KIND_NAMES)
+def test_no_kind_renders_a_capture_of_a_few_pixels(kind, tmp_path):
+    """audit 12 I1: raytrix-ghost rendered --pixels 2 as a 1 x 2 capture of zeros (exit 0) and
+    failed on 1 as an internal error; every kind refuses sizes it cannot render (or --pixels
+    itself), a usage error."""
+    for pixels in ("1", "2"):
+        res = CliRunner().invoke(cli, ["simulate", kind, "-o", str(tmp_path / pixels),
+                                       "--pixels", pixels])
+        assert res.exit_code == 2, (kind, pixels, res.output)
+        assert not (tmp_path / pixels).exists()
