@@ -118,3 +118,17 @@ def test_out_receives_the_same_pixels_in_place(method):
     assert np.array_equal(stack[1], fresh, equal_nan=True) and not stack[0].any()
     with pytest.raises(ValueError, match="out must be"):
         dm.demosaic(frame, "GRBG", out=np.zeros((64, 96, 3), np.float64))
+
+
+@pytest.mark.parametrize("method", dm.METHODS)
+@pytest.mark.parametrize("site", [(0, 0), (0, 1), (1, 0), (1, 1)])
+def test_a_site_with_no_known_pixel_is_refused(method, site):
+    # audit 12: an all-NaN red plane was filled with the frame's median (no red left to grow
+    # from) and demosaiced as if known
+    rng = np.random.default_rng(12)
+    frame = (0.2 + 0.5 * rng.random((40, 40))).astype(np.float32)
+    frame[site[0]::2, site[1]::2] = np.nan
+    with pytest.raises(ValueError, match="cannot be rebuilt from the others"):
+        dm.demosaic(frame, "RGGB", method=method)
+    frame[site[0], site[1]] = 0.5  # one known pixel of that colour: grown from, not refused
+    assert dm.demosaic(frame, "RGGB", method=method).shape == (40, 40, 3)

@@ -399,3 +399,18 @@ def test_an_ambiguous_match_within_the_given_overlap_does_not_ask_for_an_overlap
         stitch(views, layout="1x2", overlap=0.3, overlap_tolerance=0.1)
     assert "give the expected overlap" not in str(refused.value)
     assert "narrow --overlap-tolerance" in str(refused.value)
+
+
+@pytest.mark.parametrize("offset", [0.8, 1.0, 1.1, 4.0])  # times the views' median
+def test_gains_are_not_measured_on_overlaps_near_or_below_zero(offset):
+    # audit 12 W4: views with an offset left in gave gains 4.57 / 0.063 from overlap means near
+    # 0, or 1 where a mean was below 0, exit 0
+    views, _, _ = make_rig(layout="2x2", view_shape=(200, 260), overlap=0.3, seed=12)
+    _, plain = stitch(views, layout="2x2")
+    assert plain.gains[1][0] == pytest.approx(1 / 0.85, rel=0.02)
+    shifted = views - np.float32(offset * float(np.median(views)))
+    with pytest.raises(StitchError, match="no exposure gain can be measured.*--gains none"):
+        stitch(shifted, layout="2x2")
+    _, kept = stitch(shifted, layout="2x2", match_gain=False)
+    assert kept.gains == [[1.0]] * 4
+    assert np.allclose(kept.shifts_px, plain.shifts_px, atol=0.01)

@@ -67,3 +67,26 @@ def test_a_refusal_is_that_of_the_first_pair_in_order(monkeypatch):
     with pytest.raises(StitchError, match="views 0 and 1"):
         registration.register(lambda a, b, _: (luma[a], luma[b], (0, 0), (0, 0)), 4, (60, 80),
                               "2x2", "translation", {}, expected)
+
+
+@pytest.mark.parametrize("model", ["translation", "homography"])
+@pytest.mark.parametrize("scale,which", [(1e-9, "all"), (1e-12, "all"), (1e12, "all"),
+                                         (2.0, "one"), (1e-6, "one"), (1e-12, "one")])
+def test_the_views_unit_and_exposure_do_not_move_the_match(model, scale, which):
+    # audit 12: views x 1e-9 were registered 0.37 px off (exit 0), x 1e12 and 1e-12 refused
+    # ("no reliable overlap"), one view x 1e-6 refused ("has no texture"), one view x 2 moved
+    # 0.04 px: the floors of the fits and of the texture checks were absolute
+    views, _, _ = make_rig(layout="2x2", model=model, view_shape=(200, 260), overlap=0.3,
+                           perspective_px=3.0, noise=0.003, seed=12)
+    _, plain = stitch(views, layout="2x2", model=model)
+    scaled = views.astype(np.float64)
+    scaled[slice(None) if which == "all" else 1] *= scale
+    _, report = stitch(scaled.astype(np.float32), layout="2x2", model=model)
+    for before, after in zip(plain.transform["view_to_reference"],
+                             report.transform["view_to_reference"], strict=True):
+        corners = np.float64([[0, 0, 1], [259, 0, 1], [0, 199, 1], [259, 199, 1]]).T
+        moved = [np.asarray(m) @ corners for m in (before, after)]
+        moved = [p[:2] / p[2] for p in moved]
+        assert np.abs(moved[0] - moved[1]).max() < 0.005
+    assert report.gains[1][0] == pytest.approx(plain.gains[1][0] / (scale if which == "one"
+                                                                    else 1.0), rel=1e-3)

@@ -125,8 +125,7 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
     has_unknown = not np.isfinite(np.sum(data))
     unknown = ~np.isfinite(data) if has_unknown else None
     if has_unknown:
-        if unknown.all():
-            raise ValueError("frame has no finite pixel to demosaic")
+        _check_every_site(unknown, pattern)
         data = fill_unknown(data, unknown)
     gains = grey_edge_gains(data, pattern) if gains is None else normalised_gains(gains)
     tile = np.array([gains["RGB".index(c)] for c in pattern], np.float32).reshape(2, 2)
@@ -169,6 +168,23 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
         reach = cv2.dilate(unknown.view(np.uint8), kernel).view(bool)
         rgb[reach] = np.nan
     return rgb
+
+
+def _check_every_site(unknown: np.ndarray, pattern: str) -> None:
+    """Refuse a mosaic in which one site of the 2 x 2 pattern (a whole colour plane, or one of
+    the two greens) holds no known pixel: no neighbour of that colour is left to interpolate
+    from, and rebuilt from the other colours it came out as the frame's median, then as the
+    clipped-highlight estimate (a red plane all NaN developed with R 54 % off, exit 0)."""
+    if unknown.all():
+        raise ValueError("frame has no finite pixel to demosaic")
+    for k, colour in enumerate(pattern):
+        if unknown[k // 2::2, k % 2::2].all():
+            site = f"{colour} ({'first' if pattern.index(colour) == k else 'second'} green) " \
+                if colour == "G" else f"{colour} "
+            raise ValueError(f"no {site}pixel of the {pattern} mosaic is known (all NaN: "
+                             "clipped or masked), so its colour cannot be rebuilt from the "
+                             "others; demosaic a frame that recorded it (check the flat-field "
+                             "or the masking that emptied it)")
 
 
 def grey_edge_gains(frame: np.ndarray, cfa: str) -> np.ndarray:
@@ -215,9 +231,8 @@ def fill_unknown(frame: np.ndarray, unknown: np.ndarray) -> np.ndarray:
             missing = unknown[r::2, c::2].copy()
             if not missing.any():
                 continue
-            if missing.all():
-                plane[...] = float(np.nanmedian(frame[np.isfinite(frame)]))
-                continue
+            if missing.all():  # nothing of this colour to grow from (demosaic refuses it)
+                raise ValueError("a site of the mosaic has no known pixel to fill from")
             value = np.where(missing, 0.0, plane).astype(np.float32)
             weight = (~missing).astype(np.float32)
             while missing.any():

@@ -13,6 +13,7 @@ from plenocli.stitch.photometric import refine_homography
 from plenocli.stitch.quality import aligned_correlation
 from plenocli.stitch.views import (
     HIGHPASS_SIGMA_PX,
+    at_own_level,
     corners_xy,
     fill_nan,
     highpass,
@@ -151,6 +152,7 @@ def _refined(a: np.ndarray, b: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, s
     """The photometric refinement of ``h`` unless it lowers the overlap correlation by more than
     0.01 (then ``h``): the homography, its method, its correlation and the refinement's figures.
     """
+    a, b = at_own_level(a, b)
     overlap_correlation = OverlapCorrelation(a, b)
     try:
         candidate, photometric = refine_homography(a, b, h, tol_px=REFINE_TOL_PX)

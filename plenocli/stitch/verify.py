@@ -139,10 +139,16 @@ def _seam_shifts(stack: np.ndarray, maps: list, pair: tuple[int, int], region
             ok = ndimage.binary_erosion(np.isfinite(luma[0] + luma[1]), iterations=2)
             if ok.mean() < MIN_COVERED:
                 continue
-            texture = [highpass(v) for v in luma]
-            strength = min(float(np.std(t[ok])) for t in texture)
-            level = max(float(np.nanmean(np.abs(v))) for v in luma)
-            if not strength > MIN_TEXTURE * level:
+            # each view's texture against its own level, on that level: a view a million
+            # times darker than its neighbour (another exposure, another unit) lines up the
+            # same, and no unit is too small or too large for the float32 correlation
+            levels = [float(np.nanmean(np.abs(v[ok]), dtype=np.float64)) for v in luma]
+            if not min(levels) > 0:
+                continue
+            texture = [highpass(v / np.float32(level)) for v, level in zip(luma, levels,
+                                                                             strict=True)]
+            strength = min(float(np.std(t[ok], dtype=np.float64)) for t in texture)
+            if not strength > MIN_TEXTURE:
                 continue   # a constant (the arithmetic's rounding correlates, not the scene)
             found = _block_shift(*texture, ok)
             if found is not None:

@@ -14,6 +14,7 @@ from plenocli.io import tiffio
 from plenocli.io.dng import write_dng
 from tests.bad_inputs.files import (
     assert_one_line,
+    plenocli_tiff,
     run_bad,
 )
 
@@ -92,3 +93,24 @@ def test_a_dng_with_a_zero_as_shot_neutral_decodes_without_a_white_balance(tmp_p
                                       str(tmp_path / "f.tif")])
     assert result.exit_code == 0 and "as-shot white balance" in result.stderr + caplog.text
     assert tiffio.read_meta(tmp_path / "f.tif")["colour"]["as_shot_wb"] is None
+
+
+@pytest.mark.parametrize("site,words", [((0, 0), ("no R pixel",)), ((1, 1), ("no B pixel",)),
+                                        ((0, 1), ("no G (first green) pixel",))])
+@pytest.mark.parametrize("command", [
+    ["develop", "{i}/emptied.tif", "--view", "A", "--wb", "1,1,1", "--matrix", "none", "-o",
+     "{o}/x.tif"],
+    ["stitch", "{i}/emptied.tif", "--views", "A,B", "-o", "{o}/x.tif"],
+], ids=["develop", "stitch"])
+def test_a_cfa_site_without_a_known_pixel_is_refused_not_rebuilt(command, site, words,
+                                                                 tmp_path):
+    # audit 12: a red plane all NaN (a flat-field that emptied it) was filled with the frame's
+    # median, then rebuilt as a clipped highlight from green and blue: R 54 % off, exit 0
+    rng = np.random.default_rng(12)
+    views = (0.2 + 0.6 * rng.random((2, 64, 96))).astype(np.float32)
+    views[:, site[0]::2, site[1]::2] = np.nan
+    folder = tmp_path / "in"
+    folder.mkdir()
+    plenocli_tiff(folder / "emptied.tif", views, cfa="RGGB", views=["A", "B"])
+    result = run_bad(folder, tmp_path / "out", command)
+    assert_one_line(result, 1, ("emptied.tif: view A", *words, "cannot be rebuilt"))

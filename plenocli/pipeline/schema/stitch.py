@@ -37,6 +37,8 @@ PARAMS = (
           "Save the transform (JSON) to reapply to later captures of the same rig.",
           role="output"),
     Param("blend", Choice(["feather", "multiband"]), "Seam blending.", default="feather"),
+    Param("gains", Choice(["match", "none"]), "Exposure: match each view's gains to view 0 from "
+          "the overlaps (views above black), or keep the views as recorded.", default="match"),
     Param("report", OutputFile(".json"),
           "Write a JSON report (model, parameters, overlap, inliers, residual px).",
           role="output"),

@@ -131,7 +131,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         model: str = "translation", distortion: float = 0.0, transform_in: str | None = None,
         transform_out: str | None = None, blend: str = "feather", report: str | None = None,
         preview: str | None = None, rig: str | None = None, overlap: float | None = None,
-        overlap_tolerance: float = 0.1) -> None:
+        overlap_tolerance: float = 0.1, gains: str = "match") -> None:
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
@@ -150,10 +150,11 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               distortion_k1=distortion, transform=transform, blend=blend,
                               rig=prism_rig, overlap=overlap,
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate,
+                              match_gain=gains == "match",
                               claim=_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
-                      overlap_tolerance=overlap_tolerance)
+                      overlap_tolerance=overlap_tolerance, gains=gains)
         record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                                  "rig": rig})
         rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
