@@ -363,6 +363,9 @@ CASES = [
     ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
                                      "none", "--wb-from", "{i}/white_xy.tif", "-o",
                                      "{o}/d.jpg"], 1, ("no view S",)),
+    # audit 12 W: develop's linear TIFF is white-balanced already
+    ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
+                                "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ("'--timeout'", "x>0")),
