@@ -69,10 +69,37 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
                 raise InputError(f"{path} is a `plenocli {made[-1]}` output{what}; {stage} "
                                  f"takes as {role.replace('_', '-')} the output of "
                                  f"{', '.join(accepted)}{foreign}")
+            if made[-1] == "develop" and _photograph(path):
+                raise InputError(_photograph_refused(path, stage, role))
             if stage in ONCE and role in ("input", "inputs") and stage in made:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+
+
+def _photograph(path: Path) -> bool:
+    """develop's photograph (JPEG, PNG, 16-bit TIFF), not its --linear TIFF: the photograph's
+    levels are display-encoded (a tone curve, clipped to white), its linear TIFF's are light."""
+    from plenocli.io import tiffio
+
+    if Path(path).suffix.lower() in PHOTOS:
+        return True
+    try:
+        return not tiffio.read_meta(path)  # the linear TIFF carries plenocli metadata
+    except InputError:
+        return True
+
+
+def _photograph_refused(path: Path, stage: str, role: str) -> str:
+    from plenocli.io.photo import photo_record
+
+    record = (photo_record(path) or {}).get("plenocli") or {}
+    source = next((i.get("path") for i in record.get("inputs") or []
+                   if isinstance(i, dict) and i.get("role") == "input"), None)
+    came = f" ({source})" if source else ""
+    return (f"{path} is a `plenocli develop` photograph (display-encoded levels, not light); "
+            f"{stage} takes as {role.replace('_', '-')} the views it was developed from{came}, "
+            "or the scene-referred TIFF `develop --linear` writes")
 
 
 def _check_not_raw(path: Path, stage: str, role: str) -> None:

@@ -363,6 +363,11 @@ CASES = [
     ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
                                      "none", "--wb-from", "{i}/white_xy.tif", "-o",
                                      "{o}/d.jpg"], 1, ("no view S",)),
+    # audit 12 E: develop's photograph was "a plain (not plenocli) TIFF: decode it first"
+    # (decode refuses it), its JPEG "not a readable TIFF"
+    *[(f"develop-own-photograph-{ext}", ["develop", f"{{i}}/photo.{ext}", "-o", "{o}/d.jpg"], 1,
+       ("`plenocli develop` photograph", "biased.tif), or", "develop --linear"))
+      for ext in ("tif", "jpg")],
     # audit 12 W: develop's linear TIFF is white-balanced already
     ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
                                 "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
