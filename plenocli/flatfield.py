@@ -55,10 +55,15 @@ def white_gain(white: np.ndarray, *, cfa: str | None = None, median_px: int = 5,
     if white.ndim != 2:
         raise ValueError(f"white must be 2-D (rows, cols), got shape {white.shape}")
     plane_side = min(white.shape) // step
+    if plane_side == 0:  # no median window fits, not even 1 px: say what the image lacks
+        raise ValueError(f"a {white.shape[0]} x {white.shape[1]} px image is narrower than "
+                         f"one 2 x 2 cell of its {cfa} pattern: some colour has no pixel to "
+                         "flat-field; give a frame of at least 2 x 2 px")
     if median_px > plane_side:  # before any filter allocates its windows
         largest = max(plane_side - 1 + plane_side % 2, 1)
+        pixels = f"{plane_side} pixel{'s' * (plane_side > 1)}"
         raise ValueError(f"the median window of {median_px} px is larger than the image "
-                         f"({plane_side} pixels of one colour across); use at most {largest}")
+                         f"({pixels} of one colour across); use at most {largest}")
     gain = np.full(white.shape, np.nan, np.float32)
     for r, c in positions(cfa):
         plane = np.asarray(white[r::step, c::step], np.float32)

@@ -155,6 +155,17 @@ def test_dual_and_quad_pixel_disparity_within_a_tenth(quad):
             assert abs(np.nanmedian(cut) - d) <= 0.07, (names, d, np.nanmedian(cut))  # <= 0.052
 
 
+@pytest.mark.parametrize("seed", [0, 3])
+def test_dual_pixel_views_whose_parallax_runs_along_columns_are_refused(seed):
+    """audit 12: transposed views (a portrait capture) were searched along rows only and read
+    with clear confidence (2 px as 0.89, 67-88 % known, exit 0). A vertical shift fits 29-97 %
+    of their clear matches clearly better than any horizontal one; side by side, < 3 %."""
+    views, _, _ = disparity_views((192, 448), [-2.0, -1.0, 0.6, 1.3, 2.0], seed=seed)
+    disparity_x(views[0], views[1])  # side by side: measured
+    with pytest.raises(ValueError, match="parallax runs along columns, not rows"):
+        disparity_x(views[0].T, views[1].T)
+
+
 def test_depth_picture_has_alpha_and_scale_bar():
     g = np.linspace(2, 6, 40 * 60).reshape(40, 60)
     conf = np.ones_like(g)

@@ -55,6 +55,15 @@ def test_floor_masks_dark_pixels_instead_of_amplifying_noise():
     np.testing.assert_allclose(gain[:, 4:], 1.0)
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (1, 50), (50, 1), (2, 1)])
+def test_a_bayer_image_narrower_than_its_cell_is_named_not_given_a_window(shape):
+    """audit 12: a 1-px-wide Bayer view was told "the median window of 1 px is larger than the
+    image (0 pixels of one colour across); use at most 1"."""
+    with pytest.raises(ValueError, match="narrower than one 2 x 2 cell of its RGGB") as err:
+        white_gain(np.full(shape, 1000.0), cfa="RGGB", median_px=1)
+    assert "at most" not in str(err.value)
+
+
 def test_percentile_reference_ignores_a_hot_cluster():
     white = np.full((64, 64), 1000.0)
     white[10:20, 10:20] = 5000.0  # larger than the median window: survives filtering

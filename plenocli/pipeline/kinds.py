@@ -12,6 +12,7 @@ foreign files (no plenocli record) are accepted as they are: their reader checks
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import InputError
@@ -49,15 +50,35 @@ RECORD_NEEDED = ("bias",)
 ONCE = ("bias", "flat", "unmix")
 
 
-def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
+@dataclass(frozen=True)
+class Planned:
+    """What an earlier step of a run will have written at a path, known before it runs: the
+    stages that made it (oldest first), or what else it is."""
+
+    made: tuple[str, ...] = ()
+    photograph: str | None = None   # develop's photograph: the views it was developed from
+    document: str | None = None     # not an image: what it is
+    raw: bool = False               # a raw capture (simulate writes one)
+
+
+def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
+                planned: Mapping[Path, Planned | None] | None = None) -> None:
     """InputError for the first input whose recorded producer ``stage`` does not take in its
-    role, or that already went through ``stage`` (one of ONCE)."""
+    role, or that already went through ``stage`` (one of ONCE). ``planned``: the files earlier
+    steps of a run will write (absolute paths; None: not known), taken as what they will be."""
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
-            made = made_by(path)
-            if not made:
+            plan = _planned(path, planned or {})
+            if plan is None and Path(path).absolute() in (planned or {}):
+                continue  # another run makes it: its stage checks it then
+            if plan is not None and (plan.document or (plan.raw and stage != "decode")):
+                raise InputError(_planned_not_an_image(path, plan, stage, role))
+            if plan is not None and plan.raw:
+                continue  # decode takes it
+            made = list(plan.made) if plan is not None else made_by(path)
+            if not made and plan is None:
                 _check_not_a_document(path, stage, role)
-            if not made and stage != "decode":
+            if not made and plan is None and stage != "decode":
                 _check_not_raw(path, stage, role)
             if not made or made[-1] is None:
                 continue
@@ -69,10 +90,40 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]]) -> None:
                 raise InputError(f"{path} is a `plenocli {made[-1]}` output{what}; {stage} "
                                  f"takes as {role.replace('_', '-')} the output of "
                                  f"{', '.join(accepted)}{foreign}")
+            if made[-1] == "develop" and (plan.photograph if plan is not None
+                                          else _photograph(path)):
+                raise InputError(_photograph_refused(path, stage, role,
+                                                     plan.photograph if plan else None))
             if stage in ONCE and role in ("input", "inputs") and stage in made:
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+
+
+def _photograph(path: Path) -> bool:
+    """develop's photograph (JPEG, PNG, 16-bit TIFF), not its --linear TIFF: the photograph's
+    levels are display-encoded (a tone curve, clipped to white), its linear TIFF's are light."""
+    from plenocli.io import tiffio
+
+    if Path(path).suffix.lower() in PHOTOS:
+        return True
+    try:
+        return not tiffio.read_meta(path)  # the linear TIFF carries plenocli metadata
+    except InputError:
+        return True
+
+
+def _photograph_refused(path: Path, stage: str, role: str, source: str | None = None) -> str:
+    from plenocli.io.photo import photo_record
+
+    if source is None:
+        record = (photo_record(path) or {}).get("plenocli") or {}
+        source = next((i.get("path") for i in record.get("inputs") or []
+                       if isinstance(i, dict) and i.get("role") == "input"), None)
+    came = f" ({source})" if source else ""
+    return (f"{path} is a `plenocli develop` photograph (display-encoded levels, not light); "
+            f"{stage} takes as {role.replace('_', '-')} the views it was developed from{came}, "
+            "or the scene-referred TIFF `develop --linear` writes")
 
 
 def _check_not_raw(path: Path, stage: str, role: str) -> None:
@@ -194,3 +245,70 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
                 takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
                 break
     return takers + [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+
+
+# outputs recorded under another stage name than their step's, and the input role whose
+# history they carry (the others carry the history of the step's main input)
+SIDE_OUTPUTS = {("flat", "save_gain"): ("flat-gain", "white"),
+                ("unmix", "noise_map"): ("unmix-noise-gain", "inputs")}
+RAW_SUFFIXES = (".dng", ".cr2")
+
+
+def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
+                    inputs: Mapping[str, Sequence[Path]],
+                    planned: Mapping[Path, Planned | None]) -> dict[Path, Planned | None]:
+    """What a step of ``stage`` will write, by absolute path, for the steps after it
+    (:func:`check_kinds`); a folder output (simulate's) maps to Planned(made=(stage,))."""
+    def history(role: str) -> tuple[str, ...] | None:
+        paths = inputs.get(role) or inputs.get("inputs") or ()
+        if not paths:
+            return ()
+        plan = _planned(paths[0], planned)
+        if plan is None and Path(paths[0]).absolute() in planned:
+            return None
+        return plan.made if plan is not None else tuple(made_by(paths[0]))
+
+    out: dict[Path, Planned | None] = {}
+    for role, paths in outputs.items():
+        name, source = SIDE_OUTPUTS.get((stage, role), (stage, "input"))
+        before = history(source)
+        for path in paths:
+            key, suffix = Path(path).absolute(), Path(path).suffix.lower()
+            if suffix in DOCUMENT_SUFFIXES:
+                out[key] = Planned(document=f"a {suffix[1:].upper()} document step {stage} "
+                                            "writes")
+            elif suffix in PHOTOS and role == "preview":
+                out[key] = Planned(made=("preview",))
+            elif before is None:
+                out[key] = None
+            elif stage == "develop" and role == "output":
+                source_path = (inputs.get("input") or [None])[0]
+                out[key] = Planned(made=(*before, name), photograph=str(source_path))
+            else:
+                out[key] = Planned(made=(*before, name))
+    return out
+
+
+def _planned(path: Path, planned: Mapping[Path, Planned | None]) -> Planned | None:
+    """The plan for ``path``: its own, or a file inside a planned folder (simulate's)."""
+    key = Path(path).absolute()
+    if key in planned:
+        return planned[key]
+    folder = next((planned[p] for p in key.parents if p in planned), None)
+    if folder is None:
+        return None
+    suffix = key.suffix.lower()
+    if suffix in RAW_SUFFIXES:
+        return Planned(raw=True)
+    if suffix in DOCUMENT_SUFFIXES:
+        return Planned(document=f"a {suffix[1:].upper()} document (not an image)")
+    return folder
+
+
+def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> str:
+    if plan.raw:
+        return (f"{path} is a raw capture, not the decoded frames or views {stage} takes as "
+                f"{role.replace('_', '-')}: decode it first")
+    return (f"{path} is {plan.document}, not an image {stage} can take as "
+            f"{role.replace('_', '-')}" if stage != "decode" else
+            f"{path} is {plan.document}, not a raw capture or sensor image")

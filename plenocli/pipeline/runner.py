@@ -19,6 +19,7 @@ from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_mes
 from plenocli.io.atomic import check_outputs
 from plenocli.io.folderlock import folders_locked
 from plenocli.pipeline.config import Step
+from plenocli.pipeline.kinds import Planned, check_kinds, planned_outputs
 from plenocli.progress import log
 
 
@@ -48,15 +49,24 @@ def plan(steps: list[Step], *, force: bool = False,
 
 
 def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
-    """Every input of every step exists or is made by an earlier step (or is in ``upstream``):
-    what ``run`` and ``--print-make`` both check before any work (ConfigError)."""
+    """Every input of every step exists or is made by an earlier step (or is in ``upstream``),
+    and is of a kind its stage takes (an earlier step's output as that step will make it):
+    what ``run``, ``--dry-run`` and ``--print-make`` check before any work (ConfigError)."""
     made: set[Path] = {Path(p).resolve() for p in upstream}
+    planned: dict[Path, Planned | None] = {Path(p).absolute(): None for p in upstream}
     for step in steps:
         for p in step.input_paths():
             if not p.exists() and not _within(p, made):
                 raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
                                   "step makes it")
+        inputs = step.stage.by_role(step.params, step.stage.inputs)
+        try:
+            check_kinds(step.stage.name, inputs, planned)
+        except InputError as err:
+            raise ConfigError(f"step {step.name!r}: {err}") from err
         made.update(p.resolve() for p in step.output_paths())
+        planned.update(planned_outputs(step.stage.name, step.stage.by_role(
+            step.params, step.stage.outputs), inputs, planned))
 
 
 def _within(path: Path, made: set[Path]) -> bool:

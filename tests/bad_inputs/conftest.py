@@ -41,7 +41,11 @@ def inputs(tmp_path_factory) -> Path:
     raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
     write_dng(d / "dp.dng", raw, **dng_options(truth))
     for args in (["decode", d / "dp.dng", "-o", d / "frames.tif"],
-                 ["bias", d / "frames.tif", "-o", d / "biased.tif"]):
+                 ["bias", d / "frames.tif", "-o", d / "biased.tif"],
+                 ["develop", d / "biased.tif", "--view", "S", "--wb", "2,1,1.5", "--matrix",
+                  "none", "-o", d / "photo.tif", "--linear", d / "linear.tif"],
+                 ["develop", d / "biased.tif", "--view", "S", "--wb", "2,1,1.5", "--matrix",
+                  "none", "-o", d / "photo.jpg"]):
         result = runner.invoke(cli, [str(a) for a in args])
         assert result.exit_code == 0, result.output
     white = truth["params"]["white_level"]

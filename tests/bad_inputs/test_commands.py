@@ -15,12 +15,14 @@ from tests.bad_inputs.files import (
 # a value the option's own type refuses is a usage error (exit 2), like any bad flag
 CASES = [
     # refocus: g, s and grids
-    # depth: a g bound past the shift the grid can measure (pitch / 0.25 px) is a usage error
+    # depth: a g bound past the shift the grid can measure (pitch / 0.5 px) is refused; it
+    # depends on the grid file, so it is an input error (audit 12 E5: it was exit 2)
     ("depth-g-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml",
-                                 "--g", "2:1e308", "-o", "{o}/d.tif"], 2, ("--g", "1 < g <=")),
+                                 "--g", "2:1e308", "-o", "{o}/d.tif"], 1,
+     ("--g with", "grid.yaml", "1 < g <=")),
     ("depth-g-galilean-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid",
                                           "{i}/rt/grid.yaml", "--g", "-1e6:-2", "-o",
-                                          "{o}/d.tif"], 2, ("--g", "<= g < -1")),
+                                          "{o}/d.tif"], 1, ("--g", "<= g < -1")),
     ("refocus-g0", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "0",
                     "-o", "{o}/r.tif"], 2, ("non-zero",)),
     ("refocus-g-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g=-1",
@@ -363,6 +365,14 @@ CASES = [
     ("develop-wb-from-other-views", ["develop", "{i}/biased.tif", "--view", "S", "--matrix",
                                      "none", "--wb-from", "{i}/white_xy.tif", "-o",
                                      "{o}/d.jpg"], 1, ("no view S",)),
+    # audit 12 E: develop's photograph was "a plain (not plenocli) TIFF: decode it first"
+    # (decode refuses it), its JPEG "not a readable TIFF"
+    *[(f"develop-own-photograph-{ext}", ["develop", f"{{i}}/photo.{ext}", "-o", "{o}/d.jpg"], 1,
+       ("`plenocli develop` photograph", "biased.tif), or", "develop --linear"))
+      for ext in ("tif", "jpg")],
+    # audit 12 W: develop's linear TIFF is white-balanced already
+    ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
+                                "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ("'--timeout'", "x>0")),

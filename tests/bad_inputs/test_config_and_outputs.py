@@ -333,6 +333,41 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
         assert not result.stdout
 
 
+@pytest.mark.parametrize("steps, words", [
+    ("  depth:\n    input: \"{out}/b.tif\"\n    output: \"{out}/d.tif\"\n"
+     "  develop:\n    input: \"{out}/d.tif\"\n    wb: 1,1,1\n    matrix: none\n"
+     "    output: \"{out}/p.jpg\"\n", ("step 'develop'", "`plenocli depth` output")),
+    ("  bias2:\n    stage: bias\n    input: \"{out}/b.tif\"\n    output: \"{out}/b2.tif\"\n",
+     ("step 'bias2'", "`plenocli bias` output; bias takes as input the output of decode")),
+    ("  flat:\n    input: \"{out}/b.tif\"\n    white: {i}/biased.tif\n"
+     "    save-gain: \"{out}/g.tif\"\n    output: \"{out}/fl.tif\"\n"
+     "  stitch:\n    inputs: \"{out}/g.tif\"\n    output: \"{out}/p.tif\"\n",
+     ("step 'stitch'", "`plenocli flat-gain` output (a gain map")),
+    ("  develop:\n    input: \"{out}/b.tif\"\n    view: S\n    wb: 1,1,1\n    matrix: none\n"
+     "    output: \"{out}/p.tif\"\n  develop2:\n    stage: develop\n"
+     "    input: \"{out}/p.tif\"\n    output: \"{out}/p2.jpg\"\n",
+     ("step 'develop2'", "`plenocli develop` photograph", "/b.tif)")),
+    ("  simulate:\n    kind: dualpixel\n    output: \"{out}/sim\"\n"
+     "  decode2:\n    stage: decode\n    input: \"{out}/sim/truth.json\"\n"
+     "    output: \"{out}/t.tif\"\n", ("step 'decode2'", "JSON document", "not a raw")),
+    ("  simulate:\n    kind: dualpixel\n    output: \"{out}/sim\"\n"
+     "  bias2:\n    stage: bias\n    input: \"{out}/sim/capture.dng\"\n"
+     "    output: \"{out}/b2.tif\"\n", ("step 'bias2'", "raw capture", "decode it first")),
+], ids=["develop-of-depth", "bias-twice", "gain-as-views", "photograph-to-develop",
+        "decode-of-truth-json", "bias-of-simulated-raw"])
+def test_a_step_fed_an_output_its_stage_refuses_is_refused_before_any_step_runs(
+        steps, words, inputs, tmp_path):
+    """audit 12 E4: the producing step's stage is known before anything runs, yet --dry-run
+    said "would run" and run ran every earlier step before the stage refused the file."""
+    out = tmp_path / "out"
+    config = tmp_path / "pipeline.yaml"
+    config.write_text(_config_text(inputs, out, extra_steps=steps.replace("{i}", str(inputs))))
+    for mode in ([], ["--print-make"], ["--dry-run"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, words)
+        assert not result.stdout
+
+
 def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
     out = tmp_path / "out"
     config = tmp_path / "pipeline.yaml"

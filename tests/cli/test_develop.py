@@ -73,6 +73,29 @@ def test_raw_colour_metadata_gives_the_chart_colours(tmp_path):
     assert Image.open(tmp_path / "p.png").info.get("icc_profile")
 
 
+def test_developing_the_linear_tiff_again_applies_nothing_twice(tmp_path):
+    """audit 12: the linear TIFF carried the raw's as-shot gains and matrix, and develop applied
+    them again (R x3.25, G x0.33, B x1.85, exit 0); as shot it is as developed, and a correction
+    on top is only --wb."""
+    _chart_dng(tmp_path / "chart.dng")
+    invoke("decode", tmp_path / "chart.dng", "-o", tmp_path / "f.tif")
+    assert invoke("develop", tmp_path / "f.tif", "-o", tmp_path / "a.tif", "--linear",
+                  tmp_path / "a_lin.tif").exit_code == 0
+    result = invoke("develop", tmp_path / "a_lin.tif", "-o", tmp_path / "b.tif", "--linear",
+                    tmp_path / "b_lin.tif")
+    assert result.exit_code == 0, result.output
+    first, meta = read_image(tmp_path / "a_lin.tif")
+    again, _ = read_image(tmp_path / "b_lin.tif")
+    assert not (meta.get("colour") or {}).get("as_shot_wb")  # it is balanced already
+    np.testing.assert_array_equal(again, first)
+    np.testing.assert_array_equal(tifffile.imread(tmp_path / "b.tif"),
+                                  tifffile.imread(tmp_path / "a.tif"))
+    invoke("develop", tmp_path / "a_lin.tif", "--wb", "2,1,1", "-o", tmp_path / "c.jpg",
+           "--linear", tmp_path / "c_lin.tif")
+    warmer, _ = read_image(tmp_path / "c_lin.tif")
+    np.testing.assert_allclose(warmer, first * np.array([2, 1, 1])[:, None, None], rtol=1e-6)
+
+
 def test_sixteen_bit_tiff_in_display_p3(tmp_path):
     _chart_dng(tmp_path / "chart.dng")
     invoke("decode", tmp_path / "chart.dng", "-o", tmp_path / "f.tif")

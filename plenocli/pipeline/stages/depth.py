@@ -7,7 +7,7 @@ import numpy as np
 
 from plenocli.depth import lenslet, metric, views
 from plenocli.depth.directions import check_directions
-from plenocli.errors import ConfigError, InputError, OptionError
+from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
@@ -126,8 +126,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     framing = frame_grid(grid_path, meta, data.shape[1:], frames_path=input)
     try:
         lenslet.check_measurable(g_range, framing.grid.pitch_px)
-    except ValueError as err:
-        raise OptionError(f"--g: {err}") from err
+    except ValueError as err:  # the grid's to say, not the flag's alone: an input error
+        raise ConfigError(f"--g with {grid_path}: {err}") from err
     try:
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))

@@ -51,7 +51,7 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
     if recover_highlights:
         data, rebuilt = _recover(data, names, cfa, recover_highlights, input, meta)
     gains, gains_from = _gains(wb, wb_from, meta, chosen, input)
-    to_srgb = _camera_matrix(matrix, meta, input)
+    to_srgb = None if _developed(meta) else _camera_matrix(matrix, meta, input)
     try:
         camera = dev.camera_rgb(data, chosen, method=method, gains=gains)
         del data
@@ -109,6 +109,13 @@ def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
     return out
 
 
+def _developed(meta: dict) -> bool:
+    """Whether the views are develop's own --linear TIFF: white-balanced and in linear sRGB
+    already (an older one still carries the camera's as-shot gains and matrix)."""
+    records = [*meta.get("history", []), meta.get("provenance") or {}]
+    return any(r.get("stage") == "develop" for r in records if isinstance(r, dict))
+
+
 def _stages(meta: dict) -> list[str]:
     records = [*meta.get("history", []), meta.get("provenance") or {}]
     return [r.get("stage") for r in records if r.get("stage") in ("bias", "flat")]
@@ -157,7 +164,12 @@ def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.Col
 
 def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, path: str
            ) -> tuple[np.ndarray, str]:
-    """White-balance gains from --wb-from, --wb R,G,B or the raw's as-shot metadata."""
+    """White-balance gains from --wb-from, --wb R,G,B or the raw's as-shot metadata; for
+    develop's linear TIFF, as shot is as developed (1, 1, 1), and --wb a correction on top."""
+    if wb_from is not None and _developed(meta):
+        raise InputError(f"--wb-from {wb_from}: {path} is develop's linear TIFF, white-balanced "
+                         "already, and a white image measures the camera's gains: give --wb "
+                         "R,G,B for a correction on top, or develop the views it came from")
     if wb_from is not None:
         if wb != "as-shot":
             raise ConfigError("give --wb or --wb-from, not both")
@@ -169,6 +181,8 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
             raise ConfigError(f"--wb {wb}: give three positive gains R,G,B (e.g. 2.1,1,1.6) "
                               "or as-shot") from err
     as_shot = (meta.get("colour") or {}).get("as_shot_wb")
+    if _developed(meta):
+        return np.ones(3), "as developed"
     if as_shot is None:
         raise InputError(f"{path}: no as-shot white balance in the metadata; give --wb R,G,B "
                          "or --wb-from WHITE.tif")
@@ -230,7 +244,7 @@ def _write_together(output, body, linear, scene, meta, record, preview, preview_
         if linear:
             linear_meta = tiffio.derived_meta(
                 meta, record, views=["R", "G", "B", "rebuilt"][:scene.shape[-1]], cfa=None,
-                view_colours=None, black_level=None, white_level=None,
+                view_colours=None, black_level=None, white_level=None, colour=None,
                 active_area=[0, 0, *scene.shape[:2]], masked_areas=[], origin=None,
                 colour_space="linear sRGB (D65), scene-referred, camera units")
             tiffio.write_image(linear, np.moveaxis(scene, -1, 0), linear_meta, protect=protect)
