@@ -41,9 +41,12 @@ def inputs(tmp_path_factory) -> Path:
     raw, truth = dualpixel_capture(seed=3, rows=48, cols=64, top=8, left=16)
     write_dng(d / "dp.dng", raw, **dng_options(truth))
     for args in (["decode", d / "dp.dng", "-o", d / "frames.tif"],
-                 ["bias", d / "frames.tif", "-o", d / "biased.tif"]):
+                 ["bias", d / "frames.tif", "-o", d / "biased.tif"],
+                 ["bias", d / "frames.tif", "--crop", "24x32", "-o", d / "biased_crop.tif"]):
         result = runner.invoke(cli, [str(a) for a in args])
         assert result.exit_code == 0, result.output
+    rigs = Path(__file__).resolve().parents[2] / "configs" / "rigs"
+    (d / "dualpixel_prism.yaml").write_text((rigs / "dualpixel_prism.yaml").read_text())
     white = truth["params"]["white_level"]
     write_dng(d / "clipped.dng", np.full_like(raw, white), **dng_options(truth))
     # a focused (Raytrix-like) capture and its grid

@@ -144,6 +144,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         _verified(verify.check_transform_names, transform, names, layout,
                   named_after_files=named_after_files, held=held)
     prism_rig = read_rig(rig) if rig else None
+    if rig or (transform or {}).get("rig"):
+        _check_uncropped(inputs, rig or transform_in)
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     with image_canvas(output, protect=protect) as canvas:  # blended straight into the file
         _, result = _verified(stitch_lib.stitch, stack, layout=placed, model=model,
@@ -178,6 +180,33 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %.3f px)",
              " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
              ",".join(names), width, height, rep["residual_px"])
+
+
+def _bias_crop(meta: dict) -> str | None:
+    """The ``bias --crop`` (ROWSxCOLS) that cut a file's views out of the sensor's active area,
+    from its record (its own or its history's), or None."""
+    for record in (*(meta.get("history") or []), meta.get("provenance")):
+        if isinstance(record, dict) and record.get("stage") == "bias":
+            crop = (record.get("parameters") or {}).get("crop")
+            if crop:
+                return str(crop)
+    return None
+
+
+def _check_uncropped(inputs: list[str], side_file: str) -> None:
+    """Refuse views cut out of the sensor by ``bias --crop`` when a rig places them: a rig
+    describes the whole active area (optical axis at its centre, ``sensor_mm`` across its
+    width), and a crop's file records its sensor origin but not the active area it was cut
+    from, so the rig cannot be put on it. Before, the rig's check refused them saying to
+    register without it, and the registration said to give the rig."""
+    for path in inputs:
+        meta = tiffio.read_meta(path)
+        crop = _bias_crop(meta)
+        if crop:
+            raise InputError(f"{path}: its views are a `bias --crop {crop}` crop (sensor origin "
+                             f"{meta.get('origin')}), and the rig of {side_file} describes the "
+                             "sensor's whole active area: stitch the views of `bias` without "
+                             "--crop with it")
 
 
 def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
