@@ -318,3 +318,34 @@ def test_an_option_taken_as_the_value_of_the_one_before_is_said_so(tmp_path):
     assert res.exit_code == 2
     assert ("Invalid value for '--report': got the option '-o' as its value; give --report its "
             "own value (--report FILE)") in res.output
+
+
+def test_a_saved_transform_sets_the_model_as_it_sets_the_layout(tmp_path):
+    """Audit 12 E5: a homography transform reapplied without --model was refused ("the
+    transform is a homography model but --model is translation; pass --model homography"): the
+    default was taken for a choice. The model now comes from the transform; a --model it
+    contradicts, or a model no stitch makes, is refused in one line."""
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(160, 200), seed=1)
+    views, saved = tmp_path / "rig" / "views.tif", tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "p.tif"),
+                                   "--model", "homography", "--transform-out", str(saved)])
+    assert res.exit_code == 0, res.output
+    again = tmp_path / "again.tif"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(again), "--transform-in",
+                                   str(saved), "--report", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "r.json").read_text())["model"] == "homography"
+    np.testing.assert_array_equal(tiffio.read_image(again)[0],
+                                  tiffio.read_image(tmp_path / "p.tif")[0])
+    doc = json.loads(saved.read_text())
+    doc["transform"]["model"] = "affine"
+    (tmp_path / "affine.json").write_text(json.dumps(doc))
+    for side, extra, words in ((saved, ["--model", "translation"],
+                                "--model translation contradicts the transform's model "
+                                "homography; drop --model"),
+                               (tmp_path / "affine.json", [], "model 'affine' is not one of")):
+        out = tmp_path / "q.tif"
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(out), "--transform-in",
+                                       str(side), *extra])
+        assert res.exit_code == 1 and words in res.output, res.output
+        assert len(res.output.strip().splitlines()) == 1 and not out.exists()

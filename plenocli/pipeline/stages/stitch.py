@@ -128,7 +128,7 @@ def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: l
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
-        model: str = "translation", distortion: float = 0.0, transform_in: str | None = None,
+        model: str = "auto", distortion: float = 0.0, transform_in: str | None = None,
         transform_out: str | None = None, blend: str = "feather", report: str | None = None,
         preview: str | None = None, rig: str | None = None, overlap: float | None = None,
         overlap_tolerance: float = 0.1, gains: str = "match") -> None:
@@ -178,7 +178,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     if transform_out:
         write_transform(transform_out, rep["transform"], names, record, protect=protect)
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %.3f px)",
-             " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
+             " + ".join(shown(p) for p in inputs), shown(output), rep["model"], rep["layout"],
              ",".join(names), width, height, rep["residual_px"])
 
 
