@@ -349,3 +349,24 @@ def test_a_saved_transform_sets_the_model_as_it_sets_the_layout(tmp_path):
                                        str(side), *extra])
         assert res.exit_code == 1 and words in res.output, res.output
         assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_panorama_carries_the_camera_not_its_inputs_pixel_records(tmp_path):
+    """Audit 12 P1: a panorama of SAIs carried their `sai` block (micro-lens layout, crop
+    sensor origin), one of bias output its row levels and clipped-pixel count: records of the
+    input's pixels, not the panorama's. It keeps the camera's (colour, camera, exif)."""
+    views, _, _ = make_rig(layout="1x2", view_shape=(120, 160), overlap=0.3, jitter_px=0,
+                           seed=3)
+    path = tmp_path / "sai.tif"
+    colour = {"as_shot_wb": [2.0, 1.0, 1.5], "xyz_to_camera": None}
+    tiffio.write_image(path, np.stack(views), {
+        "views": ["L", "R"], "colour": colour, "camera": "dng", "exif": {"Model": "x"},
+        "sai": {"n": 2, "crop_sensor_origin": [0, 16]}, "clipped_pixels": 3,
+        "bias_levels": [{"frame": "S", "mode": "left"}], "gain_masked": 5})
+    out = tmp_path / "pano.tif"
+    res = CliRunner().invoke(cli, ["stitch", str(path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    meta = tiffio.read_meta(out)
+    assert not {"sai", "clipped_pixels", "bias_levels", "gain_masked"} & set(meta), meta.keys()
+    assert meta["colour"] == colour and meta["camera"] == "dng" and meta["exif"] == {"Model": "x"}
+    assert meta["stitch"]["layout"] == "1x2"

@@ -8,7 +8,7 @@ file (``left.tif`` -> ``left``). A single-page Bayer view is made camera RGB as 
 (``plenocli.colour.develop.camera_rgb``: the default demosaic, pixels clipped in some channels
 rebuilt) and stitched at full resolution; pixels clipped in every channel stay NaN. The panorama
 keeps the capture's colour metadata, so ``develop`` gives it the camera's white balance and colour
-matrix.
+matrix, and none of the records of the input's pixels.
 """
 
 from __future__ import annotations
@@ -164,8 +164,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         page_names = (list(CHANNELS) if n_pages == 3 else ["panorama"]
                       if n_pages == 1 else [f"C{c}" for c in range(n_pages)])
         canvas.finish(tiffio.derived_meta(
-            meta, record, views=page_names, cfa=None, view_colours=None, active_area=None,
-            masked_areas=None, origin=None, **_levels(meta, len(page_names)),
+            _of_the_camera(meta), record, views=page_names, cfa=None, view_colours=None,
+            active_area=None, masked_areas=None, origin=None, **_levels(meta, len(page_names)),
             stitch={k: rep[k] for k in ("model", "layout", "shifts_px", "residual_px",
                                         "origin_px")}))
         if preview:  # from the file's pages: the panorama was never held whole
@@ -223,6 +223,17 @@ def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
     if transform_in or rig:
         what = f"the transform {transform_in}" if transform_in else f"the rig {rig}"
     return what, remedy
+
+
+# what a panorama keeps of its first input's metadata: what describes the camera, not the
+# input's pixels (an `sai` block's micro-lens layout and crop origin, bias's row levels, the
+# input's clipped-pixel count, a flat's masked gain: none of them is the panorama's)
+_CAMERA_KEYS = ("plenocli_format", "colour", "color", "camera", "exif", "provenance", "history")
+
+
+def _of_the_camera(meta: dict) -> dict:
+    """The part of the input's metadata that a panorama made from it carries on."""
+    return {k: v for k, v in meta.items() if k in _CAMERA_KEYS}
 
 
 def _levels(meta: dict, pages: int) -> dict:
