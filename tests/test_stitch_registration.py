@@ -90,3 +90,18 @@ def test_the_views_unit_and_exposure_do_not_move_the_match(model, scale, which):
         assert np.abs(moved[0] - moved[1]).max() < 0.005
     assert report.gains[1][0] == pytest.approx(plain.gains[1][0] / (scale if which == "one"
                                                                     else 1.0), rel=1e-3)
+
+
+def test_an_overlap_with_nothing_known_is_not_reported_as_a_correlation_of_minus_one():
+    """Audit 12 E1: views whose overlap is all NaN were refused with "best normalised
+    correlation -1.00 < 0.4": -1 is the search's mark for a shift with nothing to correlate,
+    and read as perfectly anti-correlated views."""
+    from plenocli.stitch.translation import estimate_translation
+
+    views, _, _ = make_rig(layout="1x2", view_shape=(120, 160), overlap=0.3, jitter_px=0,
+                           seed=4)
+    a, b = views[0].copy(), views[1].copy()
+    a[:, 30:] = np.nan  # every shift within max_overlap sees only NaN of view a
+    with pytest.raises(StitchError, match="nothing to correlate") as err:
+        estimate_translation(a, b, direction="h")
+    assert "-1.00" not in str(err.value) and "NaN" in str(err.value)

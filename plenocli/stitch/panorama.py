@@ -81,7 +81,7 @@ class StitchReport:
 # machine (the bench's 2 x 2 homography: a third less CPU and wall time)
 @threadpool_limits.wrap(limits=1, user_api="blas")
 def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
-           model: str = "translation", distortion_k1: float = 0.0,
+           model: str = "auto", distortion_k1: float = 0.0,
            transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
            max_overlap: float = 0.7, min_overlap_px: int = 16,
            min_correlation: float = 0.4, rig: PrismRig | None = None,
@@ -96,7 +96,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         V = 2 (side by side or one above the other) or 4 (2 x 2, row-major). NaN = no data.
     layout : "1x2", "2x1", "2x2" or "auto" (4 views -> 2x2; 2 views -> the direction whose
         overlap correlates best, or the rig's).
-    model : "translation" or "homography".
+    model : "translation", "homography" or "auto" (a saved transform's own, else translation).
     distortion_k1 : known constant radial distortion removed from every view first (see
         :func:`plenocli.stitch.views.undistort`); 0 = none.
     transform : a previous report's ``transform`` to reapply to views of the same rig instead
@@ -123,8 +123,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     """
     stack, colour = as_view_stack(views)
     n_views, n_chan, rows, cols = stack.shape
-    _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
-                   overlap_tolerance=overlap_tolerance, k1=distortion_k1)
+    model = _check_options(n_views, layout=layout, model=model, blend=blend, overlap=overlap,
+                           tolerance=overlap_tolerance, k1=distortion_k1, transform=transform)
     rig, origins, frame_shape, layout = _rig_frames(_rig_of(rig, transform, n_views),
                                                     (rows, cols), layout, n_views)
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
@@ -375,12 +375,13 @@ def _write_rows(panorama: np.ndarray, rows: slice, pixels: np.ndarray) -> None:
     panorama[:, rows] = pixels
 
 
-def _check_options(n_views: int, *, layout: str, model: str, blend: str,
-                   overlap: float | None, overlap_tolerance: float, k1: float) -> None:
+def _check_options(n_views: int, *, layout: str, model: str, blend: str, overlap: float | None,
+                   tolerance: float, k1: float, transform: dict | None) -> str:
+    """Refuse options out of their ranges; the model to place the views with."""
     if not (np.isfinite(k1) and -1 < k1 <= 1):
         raise ValueError(f"distortion k1 must be a finite number in (-1, 1], got {k1}")
-    if model not in MODELS:
-        raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+    if model != "auto" and model not in MODELS:
+        raise ValueError(f"model must be 'auto' or one of {MODELS}, got {model!r}")
     if blend not in BLENDS:
         raise ValueError(f"blend must be one of {BLENDS}, got {blend!r}")
     if layout != "auto" and layout not in LAYOUTS:
@@ -390,8 +391,25 @@ def _check_options(n_views: int, *, layout: str, model: str, blend: str,
                          f"got {n_views}")
     if overlap is not None and not 0 < overlap < 1:
         raise ValueError(f"overlap must be in (0, 1), got {overlap}")
-    if not 0 < overlap_tolerance < 1:
-        raise ValueError(f"overlap_tolerance must be in (0, 1), got {overlap_tolerance}")
+    if not 0 < tolerance < 1:
+        raise ValueError(f"overlap_tolerance must be in (0, 1), got {tolerance}")
+    return _model_of(model, transform)
+
+
+def _model_of(model: str, transform: dict | None) -> str:
+    """The model to place the views with: a saved transform's (its matrices are of that model,
+    as its layout is its own), refused when ``model`` contradicts it; translation by default.
+    Before, a homography transform was refused unless --model homography was passed too."""
+    if transform is None:
+        return "translation" if model == "auto" else model
+    saved = transform.get("model") if isinstance(transform, dict) else None
+    if saved not in MODELS:
+        raise StitchError(f"the transform's model {saved!r} is not one of {', '.join(MODELS)}; "
+                          "save a transform with --transform-out")
+    if model not in ("auto", saved):
+        raise StitchError(f"--model {model} contradicts the transform's model {saved}; drop "
+                          "--model (the transform sets it)")
+    return saved
 
 
 def _rig_of(rig: PrismRig | None, transform: dict | None, n_views: int) -> PrismRig | None:

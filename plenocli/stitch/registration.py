@@ -243,9 +243,8 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
     if view_shape != tuple(shape):
         raise StitchError(f"the transform was made for views of {view_shape[-1]} x "
                          f"{view_shape[0]} px, these are {shape[1]} x {shape[0]}; {again}")
-    if transform.get("model", model) != model:
-        raise StitchError(f"the transform is a {transform.get('model')} model but --model is "
-                         f"{model}; pass --model {transform.get('model')}")
+    if transform.get("model") != model:  # the caller takes the model from the transform
+        raise StitchError(f"the transform's model {transform.get('model')!r} is not {model}")
     if saved_k1 != k1:
         raise StitchError(f"the transform was made with --distortion {saved_k1:g}, not {k1:g}; "
                          f"pass --distortion {saved_k1:g} or {again}")

@@ -83,6 +83,10 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
                                                dy_range=dy_range, dx_range=dx_range,
                                                min_pixels=min_pixels,
                                                exclusion_px=RUNNER_UP_EXCLUSION_PX)
+    if best <= -1.0:  # the search's mark for a shift with nothing to correlate
+        raise StitchError(f"nothing to correlate: no shift searched leaves {min_pixels} pixels "
+                          "known (not NaN) in both views and textured; the views may not "
+                          "overlap, or their overlap is unknown (NaN) or flat")
     if best < min_correlation:
         raise StitchError(f"no reliable overlap found between the views (best normalised "
                          f"correlation {best:.2f} < {min_correlation}); the views may not "

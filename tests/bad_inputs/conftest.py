@@ -45,9 +45,12 @@ def inputs(tmp_path_factory) -> Path:
                  ["develop", d / "biased.tif", "--view", "S", "--wb", "2,1,1.5", "--matrix",
                   "none", "-o", d / "photo.tif", "--linear", d / "linear.tif"],
                  ["develop", d / "biased.tif", "--view", "S", "--wb", "2,1,1.5", "--matrix",
-                  "none", "-o", d / "photo.jpg"]):
+                  "none", "-o", d / "photo.jpg"],
+                 ["bias", d / "frames.tif", "--crop", "24x32", "-o", d / "biased_crop.tif"]):
         result = runner.invoke(cli, [str(a) for a in args])
         assert result.exit_code == 0, result.output
+    rigs = Path(__file__).resolve().parents[2] / "configs" / "rigs"
+    (d / "dualpixel_prism.yaml").write_text((rigs / "dualpixel_prism.yaml").read_text())
     white = truth["params"]["white_level"]
     write_dng(d / "clipped.dng", np.full_like(raw, white), **dng_options(truth))
     # a focused (Raytrix-like) capture and its grid

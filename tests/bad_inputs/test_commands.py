@@ -169,6 +169,11 @@ CASES = [
     # audit 9 E3: a view named twice in --views was exit 1, --frames S,S a usage error
     ("stitch-views-twice", ["stitch", "{i}/biased.tif", "--views", "A,A", "-o", "{o}/p.tif"], 2,
      ("'A' is named twice",)),
+    # audit 12 E5: a rig on `bias --crop` views was refused saying to register without it,
+    # and the registration said to give the rig; the rig describes the whole active area
+    ("stitch-rig-on-cropped-views", ["stitch", "{i}/biased_crop.tif", "--views", "A,B", "--rig",
+                                     "{i}/dualpixel_prism.yaml", "-o", "{o}/p.tif"], 1,
+     ("bias --crop 24x32", "whole active area", "without --crop")),
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
     ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1,
      ("empty.tif", "not a raw capture")),

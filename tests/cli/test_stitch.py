@@ -318,3 +318,55 @@ def test_an_option_taken_as_the_value_of_the_one_before_is_said_so(tmp_path):
     assert res.exit_code == 2
     assert ("Invalid value for '--report': got the option '-o' as its value; give --report its "
             "own value (--report FILE)") in res.output
+
+
+def test_a_saved_transform_sets_the_model_as_it_sets_the_layout(tmp_path):
+    """Audit 12 E5: a homography transform reapplied without --model was refused ("the
+    transform is a homography model but --model is translation; pass --model homography"): the
+    default was taken for a choice. The model now comes from the transform; a --model it
+    contradicts, or a model no stitch makes, is refused in one line."""
+    simulate("stereo-rig", tmp_path / "rig", view_shape=(160, 200), seed=1)
+    views, saved = tmp_path / "rig" / "views.tif", tmp_path / "t.json"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(tmp_path / "p.tif"),
+                                   "--model", "homography", "--transform-out", str(saved)])
+    assert res.exit_code == 0, res.output
+    again = tmp_path / "again.tif"
+    res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(again), "--transform-in",
+                                   str(saved), "--report", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "r.json").read_text())["model"] == "homography"
+    np.testing.assert_array_equal(tiffio.read_image(again)[0],
+                                  tiffio.read_image(tmp_path / "p.tif")[0])
+    doc = json.loads(saved.read_text())
+    doc["transform"]["model"] = "affine"
+    (tmp_path / "affine.json").write_text(json.dumps(doc))
+    for side, extra, words in ((saved, ["--model", "translation"],
+                                "--model translation contradicts the transform's model "
+                                "homography; drop --model"),
+                               (tmp_path / "affine.json", [], "model 'affine' is not one of")):
+        out = tmp_path / "q.tif"
+        res = CliRunner().invoke(cli, ["stitch", str(views), "-o", str(out), "--transform-in",
+                                       str(side), *extra])
+        assert res.exit_code == 1 and words in res.output, res.output
+        assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_panorama_carries_the_camera_not_its_inputs_pixel_records(tmp_path):
+    """Audit 12 P1: a panorama of SAIs carried their `sai` block (micro-lens layout, crop
+    sensor origin), one of bias output its row levels and clipped-pixel count: records of the
+    input's pixels, not the panorama's. It keeps the camera's (colour, camera, exif)."""
+    views, _, _ = make_rig(layout="1x2", view_shape=(120, 160), overlap=0.3, jitter_px=0,
+                           seed=3)
+    path = tmp_path / "sai.tif"
+    colour = {"as_shot_wb": [2.0, 1.0, 1.5], "xyz_to_camera": None}
+    tiffio.write_image(path, np.stack(views), {
+        "views": ["L", "R"], "colour": colour, "camera": "dng", "exif": {"Model": "x"},
+        "sai": {"n": 2, "crop_sensor_origin": [0, 16]}, "clipped_pixels": 3,
+        "bias_levels": [{"frame": "S", "mode": "left"}], "gain_masked": 5})
+    out = tmp_path / "pano.tif"
+    res = CliRunner().invoke(cli, ["stitch", str(path), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    meta = tiffio.read_meta(out)
+    assert not {"sai", "clipped_pixels", "bias_levels", "gain_masked"} & set(meta), meta.keys()
+    assert meta["colour"] == colour and meta["camera"] == "dng" and meta["exif"] == {"Model": "x"}
+    assert meta["stitch"]["layout"] == "1x2"

@@ -20,8 +20,8 @@ PARAMS = (
           "(e.g. A,B)."),
     Param("layout", Choice(["auto", "1x2", "2x1", "2x2"]),
           "Arrangement, views row-major (2x2: S00,S01,S10,S11).", default="auto"),
-    Param("model", Choice(["translation", "homography"]), "Geometric model between views.",
-          default="translation"),
+    Param("model", Choice(["auto", "translation", "homography"]), "Geometric model between "
+          "views (auto: a --transform-in's own, else translation).", default="auto"),
     Param("distortion", FiniteFloat(min=-1, max=1, min_open=True), "Known radial distortion K1 "
           "removed first (r_d = r_u (1 + K1 r_u^2), r in half-diagonals).", default=0.0),
     Param("rig", InputFile(), "Prism rig YAML (focal_mm, sensor_mm, prism_n, prism_apex_deg, "

@@ -8,7 +8,7 @@ file (``left.tif`` -> ``left``). A single-page Bayer view is made camera RGB as 
 (``plenocli.colour.develop.camera_rgb``: the default demosaic, pixels clipped in some channels
 rebuilt) and stitched at full resolution; pixels clipped in every channel stay NaN. The panorama
 keeps the capture's colour metadata, so ``develop`` gives it the camera's white balance and colour
-matrix.
+matrix, and none of the records of the input's pixels.
 """
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: l
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
-        model: str = "translation", distortion: float = 0.0, transform_in: str | None = None,
+        model: str = "auto", distortion: float = 0.0, transform_in: str | None = None,
         transform_out: str | None = None, blend: str = "feather", report: str | None = None,
         preview: str | None = None, rig: str | None = None, overlap: float | None = None,
         overlap_tolerance: float = 0.1, gains: str = "match") -> None:
@@ -144,6 +144,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         _verified(verify.check_transform_names, transform, names, layout,
                   named_after_files=named_after_files, held=held)
     prism_rig = read_rig(rig) if rig else None
+    if rig or (transform or {}).get("rig"):
+        _check_uncropped(inputs, rig or transform_in)
     protect = tuple(p for p in (*inputs, transform_in, rig) if p)
     with image_canvas(output, protect=protect) as canvas:  # blended straight into the file
         _, result = _verified(stitch_lib.stitch, stack, layout=placed, model=model,
@@ -162,8 +164,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
         page_names = (list(CHANNELS) if n_pages == 3 else ["panorama"]
                       if n_pages == 1 else [f"C{c}" for c in range(n_pages)])
         canvas.finish(tiffio.derived_meta(
-            meta, record, views=page_names, cfa=None, view_colours=None, active_area=None,
-            masked_areas=None, origin=None, **_levels(meta, len(page_names)),
+            _of_the_camera(meta), record, views=page_names, cfa=None, view_colours=None,
+            active_area=None, masked_areas=None, origin=None, **_levels(meta, len(page_names)),
             stitch={k: rep[k] for k in ("model", "layout", "shifts_px", "residual_px",
                                         "origin_px")}))
         if preview:  # from the file's pages: the panorama was never held whole
@@ -176,8 +178,35 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     if transform_out:
         write_transform(transform_out, rep["transform"], names, record, protect=protect)
     log.info("stitch: %s -> %s (%s, layout %s, views %s, %d x %d px, residual %.3f px)",
-             " + ".join(shown(p) for p in inputs), shown(output), model, rep["layout"],
+             " + ".join(shown(p) for p in inputs), shown(output), rep["model"], rep["layout"],
              ",".join(names), width, height, rep["residual_px"])
+
+
+def _bias_crop(meta: dict) -> str | None:
+    """The ``bias --crop`` (ROWSxCOLS) that cut a file's views out of the sensor's active area,
+    from its record (its own or its history's), or None."""
+    for record in (*(meta.get("history") or []), meta.get("provenance")):
+        if isinstance(record, dict) and record.get("stage") == "bias":
+            crop = (record.get("parameters") or {}).get("crop")
+            if crop:
+                return str(crop)
+    return None
+
+
+def _check_uncropped(inputs: list[str], side_file: str) -> None:
+    """Refuse views cut out of the sensor by ``bias --crop`` when a rig places them: a rig
+    describes the whole active area (optical axis at its centre, ``sensor_mm`` across its
+    width), and a crop's file records its sensor origin but not the active area it was cut
+    from, so the rig cannot be put on it. Before, the rig's check refused them saying to
+    register without it, and the registration said to give the rig."""
+    for path in inputs:
+        meta = tiffio.read_meta(path)
+        crop = _bias_crop(meta)
+        if crop:
+            raise InputError(f"{path}: its views are a `bias --crop {crop}` crop (sensor origin "
+                             f"{meta.get('origin')}), and the rig of {side_file} describes the "
+                             "sensor's whole active area: stitch the views of `bias` without "
+                             "--crop with it")
 
 
 def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
@@ -194,6 +223,17 @@ def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
     if transform_in or rig:
         what = f"the transform {transform_in}" if transform_in else f"the rig {rig}"
     return what, remedy
+
+
+# what a panorama keeps of its first input's metadata: what describes the camera, not the
+# input's pixels (an `sai` block's micro-lens layout and crop origin, bias's row levels, the
+# input's clipped-pixel count, a flat's masked gain: none of them is the panorama's)
+_CAMERA_KEYS = ("plenocli_format", "colour", "color", "camera", "exif", "provenance", "history")
+
+
+def _of_the_camera(meta: dict) -> dict:
+    """The part of the input's metadata that a panorama made from it carries on."""
+    return {k: v for k, v in meta.items() if k in _CAMERA_KEYS}
 
 
 def _levels(meta: dict, pages: int) -> dict:
