@@ -68,10 +68,13 @@ def test_an_option_with_no_effect_is_refused_at_its_default_value_too(stage, ste
     (tmp_path / "c.yaml").write_text(yaml.safe_dump({"steps": {"s": {"stage": stage, **step}}}))
     with pytest.raises(ConfigError, match=param.label):
         load_config(tmp_path / "c.yaml")
+
+
 @pytest.mark.parametrize("how", ["yaml", "set"])
 def test_a_g_bound_past_what_the_grid_measures_is_refused_from_a_config(how, inputs, tmp_path):
     """`depth --g 2:1e308` searched shifts of 1e-307 px and wrote a map with exit 0: refused
-    as from the shell (exit 2, naming the range the grid measures), from YAML and --set."""
+    as from the shell (exit 1: the bound is the grid file's; naming the range it measures), from
+    YAML and --set."""
     out = tmp_path / "out"
     config = tmp_path / "c.yaml"
     g = "2:1e308" if how == "yaml" else "2:8"
@@ -80,7 +83,7 @@ def test_a_g_bound_past_what_the_grid_measures_is_refused_from_a_config(how, inp
                       f"    output: {out}/d.tif\n")
     extra = ["--set", "depth.g=2:1e308"] if how == "set" else []
     result = run_bad(inputs, out, ["run", str(config), *extra])
-    assert_one_line(result, 2, ("step 'depth'", "--g", "1 < g <="))
+    assert_one_line(result, 1, ("step 'depth'", "--g", "1 < g <="))
 
 
 def _damaged_pngs(folder: Path) -> dict[str, Path]:
