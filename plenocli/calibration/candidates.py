@@ -72,7 +72,8 @@ class Lattice:
 
     def describe(self) -> str:
         """Pitch and angle, the angle the lattice's smallest turn from the x axis (a hex lattice
-        at 59.99 deg is the one at -0.01 deg: shown so, as the grid file gives it)."""
+        at 59.99 deg is the one at -0.01 deg: two candidates shown side by side compare at a
+        glance; a grid file keeps the angle its fit ended at)."""
         step = LATTICES[self.kind]
         turn = (self.angle_rad + step / 2) % step - step / 2
         return f"{self.kind} {self.pitch_px:.2f} px at {np.degrees(turn):.2f} deg"
