@@ -15,7 +15,7 @@ steps:
   simulate: {kind: dualpixel, output: sim, pixels: 32x48, seed: 3, param: ['noise=0']}
   decode: {input: sim/capture.dng, output: frames.tif}
   bias: {input: frames.tif, output: biased.tif, smooth: 3}
-  flat: {input: biased.tif, white: sim/white.dng, output: flat.tif}
+  flat: {input: biased.tif, white: frames.tif, output: flat.tif}
   calibrate: {input: frames.tif, output: grid2.yaml, pitch: 10}
   refocus: {input: frames.tif, grid: grid.yaml, output: refocused.tif, g: [2, 3]}
   depth: {input: frames.tif, grid: grid.yaml, output: depth.tif, g: "2:8"}
