@@ -33,12 +33,10 @@ MEASURE_THREADS = 2  # neighbour pairs measured at once (the two cores the stitc
 @dataclass(frozen=True)
 class Overlap:
     """A neighbour pair's overlap as measured: ``sums`` (2, C), the sums of view a's and view
-    b's channels over the ``count`` pixels of the blocks both views cover, ``below_noise``
-    (2, C) how many of them lie further below zero than the noise reaches
-    (:func:`_below_noise`), and ``area``, the pixels both cover in the whole overlap."""
+    b's channels over the ``count`` pixels of the blocks both views cover, and ``area``, the
+    pixels both cover in the whole overlap."""
 
     sums: np.ndarray
-    below_noise: np.ndarray
     count: int
     area: int
 
@@ -55,7 +53,7 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
             return None
         step(f"measuring the overlap of views {a} and {b}")
         n_chan = len(views[a])
-        sums, below, count = np.zeros((2, n_chan)), np.zeros((2, n_chan)), 0
+        sums, count = np.zeros((2, n_chan)), 0
         for block in _measure_blocks(region, _long_axis(region)):
             crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a])
             crop_b, weight_b = warp_region(views[b], maps[b], block, holes[b])
@@ -68,9 +66,8 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
             for k, crop in enumerate((crop_a, crop_b)):
                 for c in range(n_chan):
                     sums[k, c] += float(crop[c][box][inside].sum(dtype=np.float64))
-                    below[k, c] += _below_noise(crop[c][box], inside)
         area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
-        return Overlap(sums, below, count, area) if count else None
+        return Overlap(sums, count, area) if count else None
 
     with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
         return list(pool.map(measure, pairs))
@@ -188,31 +185,40 @@ def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
     return out
 
 
-def _below_noise(block: np.ndarray, inside: np.ndarray) -> int:
-    """How many ``inside`` pixels of a block lie further below 0 than its noise reaches:
-    BELOW_NOISE_SIGMAS x the noise, from the median absolute difference of row neighbours
-    (every fourth row: a scale needs no more)."""
-    known = inside[::4, 1:] & inside[::4, :-1]
-    steps = (block[::4, 1:] - block[::4, :-1])[known]
-    if steps.size < 16:
-        return 0
-    sigma = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) / np.sqrt(2.0)
-    return int(np.count_nonzero(block[inside] < -BELOW_NOISE_SIGMAS * sigma))
-
-
 # An exposure gain is a ratio of light, measured where zero is black. Noise about a black of
-# 0 (a dark, bias-subtracted scene) goes below zero by a few sigma, never 5: a view whose
-# overlap has more than MAX_BELOW_NOISE of its pixels past -5 sigma holds an offset (zero is
-# not black), and the ratio of its means is not its exposure. The simulated rigs, dark and
-# noisy or not, have none; views offset by 0.4-0.5 of their level 1.4-48 %.
+# 0 (a dark, bias-subtracted scene) goes below zero by a few sigma, never 5: a view with more
+# than MAX_BELOW_NOISE of its pixels past -5 sigma holds an offset (zero is not black), and the
+# ratio of its means is not its exposure. Measured on the views as recorded: resampling rings
+# below zero at every edge of a black area.
 BELOW_NOISE_SIGMAS = 5.0
 MAX_BELOW_NOISE = 0.005
+NOISE_SAMPLE_PX = 1 << 18
+
+
+def below_noise(view: np.ndarray) -> np.ndarray:
+    """Per channel of a view (C, rows, cols), the share of its known pixels further below zero
+    than BELOW_NOISE_SIGMAS x its noise (from the median absolute difference of row
+    neighbours), on rows spread over the view (about NOISE_SAMPLE_PX pixels: a share needs no
+    more)."""
+    shares = np.zeros(len(view))
+    every = max(1, view[0].size // NOISE_SAMPLE_PX)
+    for c, channel in enumerate(view):
+        rows = channel[::every]
+        steps = (rows[:, 1:] - rows[:, :-1]).ravel()
+        steps = steps[np.isfinite(steps)]
+        known = rows[np.isfinite(rows)]
+        if steps.size < 16 or known.size == 0:
+            continue
+        sigma = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) / np.sqrt(2.0)
+        shares[c] = np.count_nonzero(known < -BELOW_NOISE_SIGMAS * sigma) / known.size
+    return shares
 
 
 def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
-                n_chan: int) -> np.ndarray:
+                n_chan: int, below: list[np.ndarray]) -> np.ndarray:
     """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed);
-    refused (StitchError) where an overlap holds no light or an offset (:func:`_check_light`)."""
+    refused (StitchError) where an overlap holds no light or a view an offset (``below``: each
+    view's :func:`below_noise`)."""
     gains = np.ones((n_views, n_chan))
     for c in range(n_chan):
         rows, rhs = [], []
@@ -220,7 +226,7 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
             if overlap is None:
                 continue
             mean_a, mean_b = overlap.sums[:, c] / overlap.count
-            _check_light(overlap, (a, b), c, n_chan)
+            _check_light((mean_a, mean_b), (below[a][c], below[b][c]), (a, b), c, n_chan)
             rows.append(difference_row(a, b, n_views))
             rhs.append(np.log(mean_a / mean_b))
         if rows:
@@ -229,19 +235,18 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
     return gains
 
 
-def _check_light(overlap: Overlap, pair: tuple[int, int], channel: int, n_chan: int) -> None:
-    """Refuse an overlap that, in either view, holds no light or an offset (see
-    MAX_BELOW_NOISE)."""
+def _check_light(means, below, pair: tuple[int, int], channel: int, n_chan: int) -> None:
+    """Refuse a pair whose overlap holds no light in either view, or a view with an offset
+    (MAX_BELOW_NOISE)."""
     for k, view in enumerate(pair):
-        mean = float(overlap.sums[k, channel]) / overlap.count
-        below = float(overlap.below_noise[k, channel]) / overlap.count
-        if mean > 0 and below <= MAX_BELOW_NOISE:
+        if means[k] > 0 and below[k] <= MAX_BELOW_NOISE:
             continue
         where = f" (channel {channel})" if n_chan > 1 else ""
-        found = (f"averages {mean:.4g}{where}" if not mean > 0 else
-                 f"has {100 * below:.2g} % of its pixels{where} further below zero than its "
-                 "noise reaches")
+        found = (f"'s overlap with view {pair[1 - k]} averages {means[k]:.4g}{where}"
+                 if not means[k] > 0 else
+                 f" has {100 * below[k]:.2g} % of its pixels{where} further below zero than "
+                 "its noise reaches")
         raise StitchError(
-            f"view {view}'s overlap with view {pair[1 - k]} {found}: zero is not black there "
-            "(an offset left in), so no exposure gain can be measured: subtract the black "
-            "level (plenocli bias), or stitch without exposure matching (--gains none)")
+            f"view {view}{found}: zero is not black there (an offset left in), so no exposure "
+            "gain can be measured: subtract the black level (plenocli bias), or stitch "
+            "without exposure matching (--gains none)")
