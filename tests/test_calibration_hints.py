@@ -117,3 +117,24 @@ def test_a_white_of_the_finest_lattice_takes_a_pitch_hint():
     image, _ = white_image(shape, pitch_px=pitch, angle_rad=angle, offset_xy=off, seed=2)
     grid, _ = calibration.calibrate(image, pitch_hint=pitch)
     assert _is_right(grid, LensGrid(pitch, angle, off, image_shape=shape))
+
+
+def test_a_lattice_refused_later_is_not_called_what_the_image_shows():
+    """Audit 12 E3: a Raytrix scene (hex 20.2 px, seed 1) whose texture passes the border judge
+    as hex 16.05 px; its lens centres cannot be told from the holes, so it is not what the
+    image shows: the true --pitch 20.2 and the true start were called contradicted by it
+    ("pass --pitch 16.1", refused in turn). Now each is refused as unconfirmed, the advice
+    naming only hints not given."""
+    from plenocli.synth.focused import raytrix_scene
+
+    image, truth, _, _ = raytrix_scene(seed=1)
+    for hints, unconfirmed in (({"pitch_hint": 20.2}, "nor is any lattice near --pitch 20.2"),
+                               ({"start": truth}, "nor is the start grid (hex 20.20 px"),
+                               ({"pitch_hint": 16.1}, "")):
+        with pytest.raises(CalibrationError) as err:
+            calibration.calibrate(image, **hints)
+        message = str(err.value)
+        assert "no lattice can be vouched for" in message and unconfirmed in message, message
+        assert "contradicts" not in message and "does not fit" not in message, message
+        assert "pass --pitch" not in message and "image shows" not in message, message
+        assert ("--start" in message) == ("start" not in hints), message

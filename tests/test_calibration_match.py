@@ -46,3 +46,21 @@ def test_a_start_off_in_pitch_is_refused(processed):
     frame, truth = processed
     with pytest.raises(CalibrationError, match="best at a pitch -0.[2-5]"):
         calibration.calibrate(frame, start=replace(truth, pitch_px=23.2 * 1.005))
+
+
+@pytest.mark.slow
+def test_a_pitch_hint_on_a_borderless_scene_is_measured_where_the_match_falls():
+    """Audit 12 W6: the Raytrix scene simulator at hex 14.5 px (no micro-image borders: only
+    the match judge sees the lattice). --pitch 14.5 was written as 14.5379 px (+0.26 %, the
+    corner lenses 1.09 px off, exit 0): the top of the match curve leans towards larger
+    pitches, and a parabola through it followed the lean. The midpoint of its falls is the
+    lattice: 14.5016 px, every lens within 0.10 px. A start at the former answer is refused."""
+    from plenocli.synth.focused import raytrix_scene
+
+    image, truth, _, _ = raytrix_scene(seed=0, pitch_px=14.5)
+    grid, report = calibration.calibrate(image, pitch_hint=14.5)
+    assert report.decision.judge == "match"
+    assert abs(grid.pitch_px / 14.5 - 1) <= 0.001, grid.pitch_px   # measured +0.011 %
+    assert calibration.compare_grids(grid, truth, SHAPE)["max_px"] <= 0.05 * 14.5
+    with pytest.raises(CalibrationError, match="best at a pitch -0.[1-4]"):
+        calibration.calibrate(image, start=replace(truth, pitch_px=14.5379))

@@ -44,7 +44,13 @@ from plenocli.calibration.fit import (
     reindexed,
 )
 from plenocli.calibration.flatten import flatten
-from plenocli.calibration.judges import Decision, decide
+from plenocli.calibration.judges import (
+    Decision,
+    check_hints,
+    decide,
+    fits_start,
+    within_hint,
+)
 from plenocli.calibration.lenstypes import classify
 from plenocli.calibration.search import BorderLattice, border_lattice, views
 from plenocli.calibration.verify import Verdict
@@ -116,7 +122,15 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     all_views = views(image, cfa)
     try:
         decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
-        grid, report = _grid(image, cfa, decision, all_views, lattice, pitch_hint)
+        grid, report = _grid(image, cfa, decision, all_views, pitch_hint, start)
+        # what the image shows is named only once its lens centres are found too
+        if lattice != "auto" and decision.lattice.kind != lattice:
+            raise CalibrationError(
+                f"--lattice {lattice} does not fit this image: it shows a "
+                f"{decision.lattice.describe()} lattice; use --lattice "
+                f"{decision.lattice.kind} or auto")
+        check_hints(decision, pitch_hint, None if start is None else
+                    Lattice(start.lattice, start.pitch_px, start.angle_rad))
     except CalibrationError as err:
         raise _refusal(err, image.shape, pitch_hint, start) from err
     if start is None:
@@ -130,20 +144,18 @@ def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationErro
     if any(s in str(err) for s in ("contradicts", "does not fit", "pass ")):
         return err
     if start is not None:
+        # without the start the judges would see the same: the advice left is a white image
         return CalibrationError(f"the image does not confirm the start grid ({start.lattice} "
-                                f"{start.pitch_px:.2f} px): {err}; check the --start file or "
-                                "calibrate without it")
+                                f"{start.pitch_px:.2f} px): {err}; check the --start "
+                                "file or pass a white image")
     return CalibrationError(f"{err}; {_what_to_do(shape, pitch_hint)}")
 
 
-def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
+def _grid(image, cfa, decision: Decision, all_views, pitch_hint, start
           ) -> tuple[LensGrid, CalibrationReport]:
     """Centres, lattice and lens types on the lattice a judge decided (steps 4 and 5)."""
     verdict = decision.border
     found = decision.lattice
-    if lattice != "auto" and found.kind != lattice:
-        raise CalibrationError(f"--lattice {lattice} does not fit this image: it shows a "
-                               f"{found.describe()} lattice; use --lattice {found.kind} or auto")
     if decision.judge == "match":
         return _matched_grid(image, cfa, decision)
     border = border_lattice(found, all_views)
@@ -154,11 +166,10 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
     centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind))
     if not centre.sure:
-        raise CalibrationError(
-            f"{found.describe()} lattice found, but its lens centres cannot be told from the "
-            f"holes between them (the mean micro-image is as round about a hole: asymmetry "
-            f"{centre.asymmetry:.2f} against {centre.rival_asymmetry:.2f}); "
-            f"{_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
+        raise _unvouched(
+            found, "its lens centres cannot be told from the holes between them (the mean "
+            f"micro-image is as round about a hole: asymmetry {centre.asymmetry:.2f} against "
+            f"{centre.rival_asymmetry:.2f})", image.shape, pitch_hint, start)
     if not sure:   # the regions' mean micro-images may pin it down where the borders do not
         found, border, sure = _regional(flat, found, centre, border, image.shape)
         pinned = "the regions' mean micro-images" if sure else ""
@@ -168,14 +179,29 @@ def _grid(image, cfa, decision: Decision, all_views, lattice: str, pitch_hint
                                               border.pitch_err_px, border.angle_err_rad)
                          if sure else None)
     if not fit.centres_refined and not sure:
-        raise CalibrationError(
-            f"{found.describe()} lattice found, but on this image neither the micro-image "
-            f"centres nor the border repetition pin its pitch down (+-{border.pitch_err_px:.3f} "
-            f"px); {_what_to_do(image.shape, pitch_hint, found.pitch_px)}")
+        raise _unvouched(
+            found, "neither the micro-image centres nor the border repetition pin its pitch "
+            f"down on this image (+-{border.pitch_err_px:.3f} px)", image.shape, pitch_hint,
+            start)
     grid, type_info = _with_lens_types(flat, grid)
     pinned = "the micro-images' symmetry centres" if fit.centres_refined else pinned
     return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
                                    lens_centre=centre, decision=decision, lattice_from=pinned)
+
+
+def _unvouched(found: Lattice, why: str, shape, pitch_hint, start: LensGrid | None
+               ) -> CalibrationError:
+    """The refusal of the judges' lattice that its lens centres or pitch do not bear out: it
+    is not what the image shows, so a hint it misses is unconfirmed, not contradicted."""
+    missed = "" if within_hint(found, pitch_hint) else (
+        f"; nor is any lattice near --pitch {pitch_hint:g} confirmed")
+    if start is not None:
+        own = Lattice(start.lattice, start.pitch_px, start.angle_rad)
+        if not fits_start(found, own):
+            missed += f"; nor is the start grid ({own.describe()}) confirmed"
+    return CalibrationError(f"no lattice can be vouched for: the judges' best, "
+                            f"{found.describe()}, fails: {why}{missed}; "
+                            f"{_what_to_do(shape, pitch_hint, found.pitch_px, start)}")
 
 
 def _matched_grid(image, cfa, decision: Decision) -> tuple[LensGrid, CalibrationReport]:
@@ -269,12 +295,12 @@ def start_types(grid: LensGrid, start: LensGrid, report: CalibrationReport
 
 
 def _what_to_do(shape: tuple[int, int], pitch_hint: float | None,
-                pitch_seen: float | None = None) -> str:
+                pitch_seen: float | None = None, start: LensGrid | None = None) -> str:
     """What could make the image calibrate: the hints not given yet, a larger image when it
     holds few lenses across."""
-    hints = ([] if pitch_hint else ["--pitch PX (approximate)"]) + [
-        "a white image", "--start GRID.yaml|calib.xml"]
-    advice = f"pass {', '.join(hints[:-1])} or {hints[-1]}"
+    hints = ([] if pitch_hint or start is not None else ["--pitch PX (approximate)"]) + [
+        "a white image"] + ([] if start is not None else ["--start GRID.yaml|calib.xml"])
+    advice = "pass " + (f"{', '.join(hints[:-1])} or " if len(hints) > 1 else "") + hints[-1]
     pitch = pitch_hint or pitch_seen
     across = min(shape) / pitch if pitch else None
     if across is not None and across < FEW_LENSES_ACROSS:

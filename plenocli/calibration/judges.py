@@ -77,8 +77,11 @@ class Decision:
 
 def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = None,
            start: LensGrid | None = None) -> Decision:
-    """The lattice of ``image`` (its views built by ``search.views``), or CalibrationError
-    saying why none can be vouched for, or how the image contradicts a hint."""
+    """The lattice the judges choose on ``image`` (its views built by ``search.views``), or
+    CalibrationError saying why none can be vouched for. Whether it contradicts a hint is
+    :func:`check_hints`'s to say, once its lens centres are found too: a lattice refused
+    there is not what the image shows (a scene's strong period passed the border judge as
+    hex 16.05 px on a 20.2 px array, and the true --pitch was called a contradiction)."""
     free = find_lattice(all_views, hypotheses(all_views, pitch_hint=None))
     own = None if start is None else Lattice(start.lattice, start.pitch_px, start.angle_rad)
     extra: list[tuple[Lattice, float]] = []
@@ -98,7 +101,6 @@ def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = Non
             decision = _match_decision(image, verdict, own, pitch_hint, str(err))
     else:   # the fold judge checks the border judge's choice among nested relatives
         decision = cross_checked(image, decision, all_views) or decision
-    _check_hints(decision, pitch_hint, own)
     return decision
 
 
@@ -186,18 +188,28 @@ def _related(lattice: Lattice, other: Lattice, all_views) -> bool:
     return False
 
 
-def _check_hints(decision: Decision, pitch_hint: float | None, own: Lattice | None) -> None:
-    """Refuse an answer that a hint contradicts, saying what the image shows."""
-    found = decision.lattice
-    shows = f"the image shows a {found.describe()} lattice ({decision.describe()})"
-    if pitch_hint is not None and not 1 / HINT_RANGE <= found.pitch_px / pitch_hint <= HINT_RANGE:
-        raise CalibrationError(f"--pitch {pitch_hint:g} contradicts the image: {shows}; pass "
-                               f"--pitch {found.pitch_px:.1f} or drop --pitch")
-    if own is None:
-        return
+def within_hint(found: Lattice, pitch_hint: float | None) -> bool:
+    """Whether ``found`` lies within HINT_RANGE of a pitch hint (or there is none)."""
+    return pitch_hint is None or 1 / HINT_RANGE <= found.pitch_px / pitch_hint <= HINT_RANGE
+
+
+def fits_start(found: Lattice, own: Lattice) -> bool:
+    """Whether ``found`` has a start lattice's kind, its pitch within HINT_RANGE and its
+    rotation within START_ANGLE_RAD."""
     step = np.pi / 3 if found.kind == "hex" else np.pi / 2
     turn = abs((found.angle_rad - own.angle_rad + step / 2) % step - step / 2)
-    if (found.kind != own.kind or not 1 / HINT_RANGE <= found.pitch_px / own.pitch_px
-            <= HINT_RANGE or turn > START_ANGLE_RAD):
+    return (found.kind == own.kind and 1 / HINT_RANGE <= found.pitch_px / own.pitch_px
+            <= HINT_RANGE and turn <= START_ANGLE_RAD)
+
+
+def check_hints(decision: Decision, pitch_hint: float | None, own: Lattice | None) -> None:
+    """Refuse an answer that a hint contradicts, saying what the image shows: called only on
+    a lattice vouched for (its lens centres found too)."""
+    found = decision.lattice
+    shows = f"the image shows a {found.describe()} lattice ({decision.describe()})"
+    if not within_hint(found, pitch_hint):
+        raise CalibrationError(f"--pitch {pitch_hint:g} contradicts the image: {shows}; pass "
+                               f"--pitch {found.pitch_px:.1f} or drop --pitch")
+    if own is not None and not fits_start(found, own):
         raise CalibrationError(f"the start grid ({own.describe()}) does not fit this image: "
                                f"{shows}; check the --start file or calibrate without it")

@@ -43,7 +43,9 @@ RESIDUAL_RATIO = 2.0   # a rival's residual (1 - confidence) over the winner's, 
 MIN_CONFIDENCE = 0.5   # the winner's median lens confidence, at least
 CORNER_SHARE = 0.05    # the kept pitch and angle place the image's corner lenses this close
 #                        (share of a pitch) to where the match peaks
-PEAK_REACH = 0.25      # the peak is placed from steps moving the corners by up to this share
+PEAK_REACH = 0.5       # the peak is placed from steps moving the corners by up to this share
+#                        of a pitch (the detuned rivals' distance: the match has fallen there)
+PEAK_SAMPLES = 4       # steps either side
 G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
 
 
@@ -190,19 +192,47 @@ def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
 
 def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
               ) -> tuple[float, float, float]:
-    """Where the match peaks around ``lattice``: the vertices (relative pitch change, angle
-    change in rad; inf where the curve does not bend down) of parabolas (least squares)
-    through the confidence at steps that move the image's corners by up to PEAK_REACH of a
-    pitch either side (the top of the curve is flat over about a third of a pitch at the
-    corners: only its sides place it), and the step that moves them by CORNER_SHARE."""
+    """Where the match peaks around ``lattice``: per axis (relative pitch change, angle change
+    in rad) the midpoint of the two points where the confidence falls through half its drop
+    (peak to the higher of the two ends), from steps that move the image's corners by up to
+    PEAK_REACH of a pitch either side; inf where it does not fall clearly on both sides (a
+    lattice far off the peak, or a flat match). The top of the curve is flat over about
+    two thirds of a pitch at the corners and may lean: a parabola through it placed the Raytrix
+    scene simulator's 14.5 px at +0.26 % (its top rises towards larger pitches); the falls are
+    steep and symmetric about the lattice. Also the step that moves the corners by
+    CORNER_SHARE of a pitch."""
     step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
-    at = np.linspace(-1.0, 1.0, 5) * PEAK_REACH / CORNER_SHARE * step
+    at = np.linspace(-1.0, 1.0, 2 * PEAK_SAMPLES + 1) * PEAK_REACH / CORNER_SHARE * step
     out = []
     for move in (lambda d: lattice.scaled(1 + d), lambda d: lattice.scaled(1.0, d)):
-        values = [confidence if d == 0 else matcher.confidence(move(d), offset) for d in at]
-        curve, slope, _ = np.polyfit(at, values, 2)
-        out.append(-slope / (2 * curve) if curve < 0 else np.inf)
+        def along(d, move=move):
+            return confidence if d == 0 else matcher.confidence(move(d), offset)
+        out.append(_half_drop_midpoint(along, at, [along(d) for d in at]))
     return out[0], out[1], step
+
+
+def _half_drop_midpoint(confidence, at: np.ndarray, values: list[float]) -> float:
+    """The midpoint of the half-drop crossings of a sampled peak (each placed between its two
+    samples by one more sample and a straight line); inf unless both ends lie below the peak by
+    RESIDUAL_RATIO in residual (1 - confidence), as the detuned rivals must (then +-inf: the
+    sign of the end where it stays high)."""
+    values = list(values)
+    top = int(np.argmax(values))
+    peak, end = values[top], max(values[0], values[-1])
+    if end >= peak or not 1 - end >= RESIDUAL_RATIO * (1 - peak):   # signed: where it stays high
+        return float(np.copysign(np.inf, values[-1] - values[0]))
+    level = (peak + end) / 2
+    sides = []
+    for way in (-1, 1):
+        i = top
+        while values[i + way] >= level:
+            i += way
+        near, far = (at[i], values[i]), (at[i + way], values[i + way])
+        mid = (near[0] + far[0]) / 2
+        value = confidence(mid)
+        near, far = ((mid, value), far) if value >= level else (near, (mid, value))
+        sides.append(near[0] + (far[0] - near[0]) * (near[1] - level) / (near[1] - far[1]))
+    return float(np.mean(sides))
 
 
 def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
@@ -222,9 +252,10 @@ def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> 
 def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lattice]
                   ) -> MatchVerdict:
     """The match judge where only a pitch is hinted: each candidate lattice (near the hint)
-    is moved to where the match peaks (twice: pitch and angle to the parabolas' vertices,
-    each move at most PEAK_REACH of a pitch at the corners), then judged as a start would be
-    (:func:`match_judge`); the first confirmed, else the first candidate's refusal."""
+    is moved to where the match peaks (pitch and angle to :func:`_vertices`; where the peak
+    lies beyond their reach, half of it towards the higher end, and once again), then judged
+    as a start would be (:func:`match_judge`); the first confirmed, else the first
+    candidate's refusal."""
     matcher = Matcher(image)
     first = None
     for lattice in candidates[:3]:
@@ -233,11 +264,12 @@ def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lat
             offset, confidence, _ = _centred(matcher, lattice)
             matcher.settle_sign(lattice, offset)
             pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
-            reach = PEAK_REACH / CORNER_SHARE * step
-            if not (np.isfinite(pitch) and np.isfinite(angle)):
+            half = PEAK_REACH / CORNER_SHARE * step / 2   # towards a peak beyond the reach
+            pitch_move, angle_move = (float(np.clip(v, -half, half)) if np.isinf(v) else v
+                                      for v in (pitch, angle))
+            lattice = lattice.scaled(1 + pitch_move, angle_move)
+            if np.isfinite(pitch) and np.isfinite(angle):
                 break
-            lattice = lattice.scaled(1 + float(np.clip(pitch, -reach, reach)),
-                                     float(np.clip(angle, -reach, reach)))
         found = match_judge(image, lattice, others, matcher=matcher)
         if found.lattice is not None:
             return replace(found, measured=True)
