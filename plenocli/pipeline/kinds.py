@@ -7,6 +7,8 @@ flat of a flat-fielded one): both would give a wrong result with exit 0. decode 
 plenocli file at all (frames, views, photographs and previews are not raws: decoding one again
 drops its history and its levels), and only decode takes a raw capture (DNG, CR2). Other
 foreign files (no plenocli record) are accepted as they are: their reader checks what it can.
+The other roles (a grid, a saved gain or transform, a rig) take what one stage's option writes
+(SIDE_INPUTS): a plenocli output of another role is refused, named as what it is.
 """
 
 from __future__ import annotations
@@ -41,8 +43,26 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
 # the maps stages write beside their result (their own stage names): never light levels
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
-# side files a stage reads besides ACCEPTS: (stage, option, producing stage)
-SIDE_FILES = (("flat", "gain", "flat-gain"),)
+# the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
+# output role); what it is, in words). A plenocli output of another role is refused here,
+# before any step runs; a foreign file is its reader's to check.
+GRIDS = (("calibrate", "output"), ("calibrate", "xml"))
+GRID = "a lens grid (the YAML or --xml of calibrate, or a Raytrix RayCalibData XML)"
+SIDE_INPUTS: dict[str, dict[str, tuple[tuple[tuple[str, str], ...], str]]] = {
+    "decode": {"calib": ((("calibrate", "xml"),), "a Raytrix RayCalibData XML (or the one "
+                                                 "calibrate --xml writes)")},
+    "flat": {"gain": ((("flat", "save_gain"),), "the gain map flat --save-gain writes")},
+    "calibrate": {"start": (GRIDS, GRID), "compare": (GRIDS, GRID)},
+    "refocus": {"grid": (GRIDS, GRID)},
+    "depth": {"grid": (GRIDS, GRID), "camera": ((), "a camera YAML (focal_length_mm, "
+                                                    "focus_distance_m, mla_sensor_mm)")},
+    "sai": {"grid": (GRIDS, GRID)},
+    "crosstalk": {"grid": (GRIDS, GRID)},
+    "stitch": {"rig": ((), "a prism rig YAML (configs/rigs/)"),
+               "transform_in": ((("stitch", "transform_out"),),
+                                "the JSON transform stitch --transform-out writes")},
+    "optics": {"input": ((), "a lens prescription YAML")},
+}
 PHOTOS = (".png", ".jpg", ".jpeg")
 # stages that read what only their producer records (bias: decode's areas and levels)
 RECORD_NEEDED = ("bias",)
@@ -98,6 +118,50 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+    _check_side_inputs(stage, inputs, planned or {})
+
+
+def _check_side_inputs(stage: str, inputs: Mapping[str, Sequence[Path]],
+                       planned: Mapping[Path, Planned | None]) -> None:
+    """The roles beyond ACCEPTS (grids, gains, transforms, rigs): a plenocli output of a role
+    other than one that makes such a file is refused."""
+    for role, (makers, takes) in SIDE_INPUTS.get(stage, {}).items():
+        for path in inputs.get(role, ()):
+            wrote = _wrote(path, planned)
+            if wrote is not None and wrote not in makers:
+                raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
+                                 f"{_label(role)} {takes}")
+
+
+def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str] | None:
+    """(stage, output role) of the plenocli output at ``path``; None when not known (a
+    foreign file, one an earlier step of a run writes)."""
+    if _planned(path, planned) is not None or Path(path).absolute() in planned:
+        return None
+    made = made_by(path)
+    if not made or made[-1] is None:
+        return None
+    if made[-1] == "preview":
+        return ("", "preview")
+    if made[-1] == "develop":
+        return ("develop", "output" if _photograph(path) else "linear")
+    return RECORDED_AS.get(made[-1], (made[-1], "output"))
+
+
+def _output_name(wrote: tuple[str, str]) -> str:
+    """How a message names what a stage wrote in one of its output roles."""
+    stage, role = wrote
+    if role == "preview":
+        return "a plenocli preview (display-stretched 8-bit levels)"
+    if wrote == ("develop", "output"):
+        return "a `plenocli develop` photograph (display-encoded levels, not light)"
+    option = "" if role == "output" else f" --{_label(role)}"
+    what = MAPS.get(SIDE_OUTPUTS.get(wrote, ("",))[0])
+    return f"a `plenocli {stage}{option}` output{f' ({what})' if what else ''}"
+
+
+def _label(role: str) -> str:
+    return role.replace("_", "-")
 
 
 def _photograph(path: Path) -> bool:
@@ -244,13 +308,16 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
             if stage in accepted:
                 takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
                 break
-    return takers + [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+    kind = RECORDED_AS.get(stage, (stage, "output"))
+    return takers + [f"{name} --{_label(role)}" for name, roles in SIDE_INPUTS.items()
+                     for role, (makers, _) in roles.items() if kind in makers]
 
 
 # outputs recorded under another stage name than their step's, and the input role whose
 # history they carry (the others carry the history of the step's main input)
 SIDE_OUTPUTS = {("flat", "save_gain"): ("flat-gain", "white"),
                 ("unmix", "noise_map"): ("unmix-noise-gain", "inputs")}
+RECORDED_AS = {name: wrote for wrote, (name, _) in SIDE_OUTPUTS.items()}
 RAW_SUFFIXES = (".dng", ".cr2")
 
 

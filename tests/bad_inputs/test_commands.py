@@ -241,7 +241,14 @@ CASES = [
     ("flat-white-not-bias-corrected", ["flat", "{i}/biased.tif", "--white", "{i}/frames.tif",
                                        "-o", "{o}/f.tif"], 1, ("run plenocli bias first",)),
     ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased_copy.tif", "-o",
-                            "{o}/f.tif"], 1, ("not a gain",)),
+                            "{o}/f.tif"], 1, ("`plenocli bias` output", "flat takes as gain")),
+    # audit 13 E3: a photograph as --gain was "no CFA in its plenocli metadata ... use the output
+    # of plenocli bias": it is named, as every other input names it
+    *[(f"flat-gain-{name}", ["flat", "{i}/biased.tif", "--gain", f"{{i}}/{name}", "-o",
+                             "{o}/f.tif"], 1, (what, "flat takes as gain the gain map"))
+      for name, what in (("photo.tif", "`plenocli develop` photograph"),
+                         ("photo.jpg", "`plenocli develop` photograph"),
+                         ("linear.tif", "`plenocli develop --linear` output"))],
     ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
                                "{o}/f.tif"], 1, ("white image",)),
     # refocus and sai: other options
