@@ -14,7 +14,7 @@ The other roles (a grid, a saved gain or transform, a rig) take what one stage's
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from plenocli.errors import InputError
@@ -63,6 +63,15 @@ SIDE_INPUTS: dict[str, dict[str, tuple[tuple[tuple[str, str], ...], str]]] = {
                                 "the JSON transform stitch --transform-out writes")},
     "optics": {"input": ((), "a lens prescription YAML")},
 }
+# side roles that a main input of one kind leaves without meaning:
+# (stage, what made its input) -> role -> why, after "INPUT"
+EXCLUDED = {("develop", ("develop", "linear")): {
+    "wb_from": "is develop's linear TIFF, white-balanced already, and a white image measures "
+               "the camera's gains: give --wb R,G,B for a correction on top, or develop the "
+               "views it came from",
+    "recover_highlights": "is develop's linear TIFF (R, G, B pages): it holds no dual-pixel "
+                          "A, B, S views; give --recover-highlights when developing the views "
+                          "it came from"}}
 PHOTOS = (".png", ".jpg", ".jpeg")
 # stages that read what only their producer records (bias: decode's areas and levels)
 RECORD_NEEDED = ("bias",)
@@ -79,6 +88,7 @@ class Planned:
     photograph: str | None = None   # develop's photograph: the views it was developed from
     document: str | None = None     # not an image: what it is
     raw: bool = False               # a raw capture (simulate writes one)
+    wrote: tuple[str, str] | None = None  # (stage, output role) writing it; None: not known
 
 
 def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
@@ -123,21 +133,28 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
 
 def _check_side_inputs(stage: str, inputs: Mapping[str, Sequence[Path]],
                        planned: Mapping[Path, Planned | None]) -> None:
-    """The roles beyond ACCEPTS (grids, gains, transforms, rigs): a plenocli output of a role
-    other than one that makes such a file is refused."""
+    """The roles beyond ACCEPTS (grids, gains, transforms, rigs): a plenocli output (or what
+    an earlier step will write) of a role other than one that makes such a file is refused;
+    so is a side file that the main input leaves without meaning (EXCLUDED)."""
     for role, (makers, takes) in SIDE_INPUTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             wrote = _wrote(path, planned)
             if wrote is not None and wrote not in makers:
                 raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
                                  f"{_label(role)} {takes}")
+    main = (inputs.get("input") or [None])[0]
+    excluded = EXCLUDED.get((stage, _wrote(main, planned))) if main is not None else None
+    for role, why in (excluded or {}).items():
+        for side in inputs.get(role, ()):
+            raise InputError(f"--{_label(role)} {side}: {main} {why}")
 
 
 def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str] | None:
-    """(stage, output role) of the plenocli output at ``path``; None when not known (a
-    foreign file, one an earlier step of a run writes)."""
-    if _planned(path, planned) is not None or Path(path).absolute() in planned:
-        return None
+    """(stage, output role) of the plenocli output at ``path``, or of what an earlier step
+    will write there; None when not known (a foreign file, a file inside a folder output)."""
+    plan = _planned(path, planned)
+    if plan is not None or Path(path).absolute() in planned:
+        return plan.wrote if plan is not None else None
     made = made_by(path)
     if not made or made[-1] is None:
         return None
@@ -341,18 +358,20 @@ def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
         before = history(source)
         for path in paths:
             key, suffix = Path(path).absolute(), Path(path).suffix.lower()
+            wrote = (stage, role)
             if suffix in DOCUMENT_SUFFIXES:
                 out[key] = Planned(document=f"a {suffix[1:].upper()} document step {stage} "
-                                            "writes")
+                                            "writes", wrote=wrote)
             elif suffix in PHOTOS and role == "preview":
-                out[key] = Planned(made=("preview",))
+                out[key] = Planned(made=("preview",), wrote=wrote)
             elif before is None:
                 out[key] = None
             elif stage == "develop" and role == "output":
                 source_path = (inputs.get("input") or [None])[0]
-                out[key] = Planned(made=(*before, name), photograph=str(source_path))
+                out[key] = Planned(made=(*before, name), photograph=str(source_path),
+                                   wrote=wrote)
             else:
-                out[key] = Planned(made=(*before, name))
+                out[key] = Planned(made=(*before, name), wrote=wrote)
     return out
 
 
@@ -369,7 +388,7 @@ def _planned(path: Path, planned: Mapping[Path, Planned | None]) -> Planned | No
         return Planned(raw=True)
     if suffix in DOCUMENT_SUFFIXES:
         return Planned(document=f"a {suffix[1:].upper()} document (not an image)")
-    return folder
+    return replace(folder, wrote=None)  # which of the folder's files: not known
 
 
 def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> str:

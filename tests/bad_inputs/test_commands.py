@@ -385,6 +385,9 @@ CASES = [
     # audit 12 W: develop's linear TIFF is white-balanced already
     ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
                                 "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
+    ("develop-linear-recover", ["develop", "{i}/linear.tif", "--recover-highlights",
+                                "{i}/biased.tif", "-o", "{o}/d.jpg"], 1,
+     ("linear TIFF (R, G, B pages)", "when developing the views it came from")),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ("'--timeout'", "x>0")),
