@@ -14,7 +14,7 @@ The other roles (a grid, a saved gain or transform, a rig) take what one stage's
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import InputError
@@ -99,8 +99,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             plan = _planned(path, planned or {})
-            if plan is None and Path(path).absolute() in (planned or {}):
-                continue  # another run makes it: its stage checks it then
+            if plan is None and _not_known(path, planned or {}):
+                continue  # another run or step makes it, as what: its stage checks it then
             if plan is not None and (plan.document or (plan.raw and stage != "decode")):
                 raise InputError(_planned_not_an_image(path, plan, stage, role))
             if plan is not None and plan.raw:
@@ -153,7 +153,7 @@ def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str
     """(stage, output role) of the plenocli output at ``path``, or of what an earlier step
     will write there; None when not known (a foreign file, a file inside a folder output)."""
     plan = _planned(path, planned)
-    if plan is not None or Path(path).absolute() in planned:
+    if plan is not None or _not_known(path, planned):
         return plan.wrote if plan is not None else None
     made = made_by(path)
     if not made or made[-1] is None:
@@ -345,10 +345,10 @@ def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
     (:func:`check_kinds`); a folder output (simulate's) maps to Planned(made=(stage,))."""
     def history(role: str) -> tuple[str, ...] | None:
         paths = inputs.get(role) or inputs.get("inputs") or ()
-        if not paths:
-            return ()
+        if not paths or stage == "decode":
+            return ()  # decode takes no plenocli file: its frames start a history
         plan = _planned(paths[0], planned)
-        if plan is None and Path(paths[0]).absolute() in planned:
+        if plan is None and _not_known(paths[0], planned):
             return None
         return plan.made if plan is not None else tuple(made_by(paths[0]))
 
@@ -388,7 +388,17 @@ def _planned(path: Path, planned: Mapping[Path, Planned | None]) -> Planned | No
         return Planned(raw=True)
     if suffix in DOCUMENT_SUFFIXES:
         return Planned(document=f"a {suffix[1:].upper()} document (not an image)")
-    return replace(folder, wrote=None)  # which of the folder's files: not known
+    # simulate writes plenocli TIFFs and plain sensor TIFFs (decode's), told apart only by
+    # what each kind makes when it runs
+    return None
+
+
+def _not_known(path: Path, planned: Mapping[Path, Planned | None]) -> bool:
+    """Whether a step writes ``path`` without its kind being known before it runs (an output
+    of another run; an image inside a folder a step fills): its stage checks it then."""
+    key = Path(path).absolute()
+    return key in planned or (_planned(path, planned) is None
+                              and any(p in planned for p in key.parents))
 
 
 def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> str:

@@ -418,6 +418,30 @@ def test_side_files_wired_to_the_step_that_makes_them_would_run(inputs, tmp_path
     assert not out.exists()
 
 
+def test_a_plain_sensor_tiff_a_simulate_step_writes_is_decoded(tmp_path):
+    """review 12 item 1: every TIFF in a simulate step's folder was planned as a plenocli
+    output, so decode of raytrix-ghost's plain white.tif (decode's from the shell) was refused
+    by --dry-run and run (configs/raytrix_r5.yaml with its fixtures step in front). Which kind
+    of TIFF a kind writes is known when it runs: its stage checks it then; decode's frames start
+    a history known before (bias of bias output is still refused before any step runs)."""
+    config = tmp_path / "c.yaml"
+    steps = {"sim": {"stage": "simulate", "kind": "raytrix-ghost", "pixels": 96,
+                     "output": "sd/rg"},
+             "decode": {"input": "sd/rg/white.tif", "output": "sd/wf.tif"},
+             "bias": {"input": "sd/wf.tif", "output": "sd/wb.tif"}}
+    config.write_text(yaml.safe_dump({"steps": steps}, sort_keys=False))
+    for mode in (["--dry-run"], []):
+        result = CliRunner().invoke(cli, ["run", str(config), *mode])
+        assert result.exit_code == 0, result.output
+    assert (tmp_path / "sd" / "wb.tif").is_file()
+    steps["bias2"] = {"stage": "bias", "input": "sd/wb.tif", "output": "sd/wb2.tif"}
+    steps["sim"]["output"], steps["decode"]["input"] = "s2/rg", "s2/rg/white.tif"
+    config.write_text(yaml.safe_dump({"steps": steps}, sort_keys=False))
+    result = CliRunner().invoke(cli, ["run", str(config)])
+    assert_one_line(result, 1, ("step 'bias2'", "`plenocli bias` output"))
+    assert not (tmp_path / "s2").exists()
+
+
 def test_print_make_refuses_an_input_that_nothing_makes(inputs, tmp_path):
     out = tmp_path / "out"
     config = tmp_path / "pipeline.yaml"
