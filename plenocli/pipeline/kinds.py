@@ -7,6 +7,8 @@ flat of a flat-fielded one): both would give a wrong result with exit 0. decode 
 plenocli file at all (frames, views, photographs and previews are not raws: decoding one again
 drops its history and its levels), and only decode takes a raw capture (DNG, CR2). Other
 foreign files (no plenocli record) are accepted as they are: their reader checks what it can.
+The other roles (a grid, a saved gain or transform, a rig) take what one stage's option writes
+(SIDE_INPUTS): a plenocli output of another role is refused, named as what it is.
 """
 
 from __future__ import annotations
@@ -41,8 +43,35 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
 # the maps stages write beside their result (their own stage names): never light levels
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
-# side files a stage reads besides ACCEPTS: (stage, option, producing stage)
-SIDE_FILES = (("flat", "gain", "flat-gain"),)
+# the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
+# output role); what it is, in words). A plenocli output of another role is refused here,
+# before any step runs; a foreign file is its reader's to check.
+GRIDS = (("calibrate", "output"), ("calibrate", "xml"))
+GRID = "a lens grid (the YAML or --xml of calibrate, or a Raytrix RayCalibData XML)"
+SIDE_INPUTS: dict[str, dict[str, tuple[tuple[tuple[str, str], ...], str]]] = {
+    "decode": {"calib": ((("calibrate", "xml"),), "a Raytrix RayCalibData XML (or the one "
+                                                 "calibrate --xml writes)")},
+    "flat": {"gain": ((("flat", "save_gain"),), "the gain map flat --save-gain writes")},
+    "calibrate": {"start": (GRIDS, GRID), "compare": (GRIDS, GRID)},
+    "refocus": {"grid": (GRIDS, GRID)},
+    "depth": {"grid": (GRIDS, GRID), "camera": ((), "a camera YAML (focal_length_mm, "
+                                                    "focus_distance_m, mla_sensor_mm)")},
+    "sai": {"grid": (GRIDS, GRID)},
+    "crosstalk": {"grid": (GRIDS, GRID)},
+    "stitch": {"rig": ((), "a prism rig YAML (configs/rigs/)"),
+               "transform_in": ((("stitch", "transform_out"),),
+                                "the JSON transform stitch --transform-out writes")},
+    "optics": {"input": ((), "a lens prescription YAML")},
+}
+# side roles that a main input of one kind leaves without meaning:
+# (stage, what made its input) -> role -> why, after "INPUT"
+EXCLUDED = {("develop", ("develop", "linear")): {
+    "wb_from": "is develop's linear TIFF, white-balanced already, and a white image measures "
+               "the camera's gains: give --wb R,G,B for a correction on top, or develop the "
+               "views it came from",
+    "recover_highlights": "is develop's linear TIFF (R, G, B pages): it holds no dual-pixel "
+                          "A, B, S views; give --recover-highlights when developing the views "
+                          "it came from"}}
 PHOTOS = (".png", ".jpg", ".jpeg")
 # stages that read what only their producer records (bias: decode's areas and levels)
 RECORD_NEEDED = ("bias",)
@@ -59,6 +88,7 @@ class Planned:
     photograph: str | None = None   # develop's photograph: the views it was developed from
     document: str | None = None     # not an image: what it is
     raw: bool = False               # a raw capture (simulate writes one)
+    wrote: tuple[str, str] | None = None  # (stage, output role) writing it; None: not known
 
 
 def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
@@ -69,8 +99,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
     for role, accepted in ACCEPTS.get(stage, {}).items():
         for path in inputs.get(role, ()):
             plan = _planned(path, planned or {})
-            if plan is None and Path(path).absolute() in (planned or {}):
-                continue  # another run makes it: its stage checks it then
+            if plan is None and _not_known(path, planned or {}):
+                continue  # another run or step makes it, as what: its stage checks it then
             if plan is not None and (plan.document or (plan.raw and stage != "decode")):
                 raise InputError(_planned_not_an_image(path, plan, stage, role))
             if plan is not None and plan.raw:
@@ -98,6 +128,57 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
                 raise InputError(f"{path} already went through `plenocli {stage}`; applying "
                                  "it twice corrects what is already corrected: give the file "
                                  "from before it")
+    _check_side_inputs(stage, inputs, planned or {})
+
+
+def _check_side_inputs(stage: str, inputs: Mapping[str, Sequence[Path]],
+                       planned: Mapping[Path, Planned | None]) -> None:
+    """The roles beyond ACCEPTS (grids, gains, transforms, rigs): a plenocli output (or what
+    an earlier step will write) of a role other than one that makes such a file is refused;
+    so is a side file that the main input leaves without meaning (EXCLUDED)."""
+    for role, (makers, takes) in SIDE_INPUTS.get(stage, {}).items():
+        for path in inputs.get(role, ()):
+            wrote = _wrote(path, planned)
+            if wrote is not None and wrote not in makers:
+                raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
+                                 f"{_label(role)} {takes}")
+    main = (inputs.get("input") or [None])[0]
+    excluded = EXCLUDED.get((stage, _wrote(main, planned))) if main is not None else None
+    for role, why in (excluded or {}).items():
+        for side in inputs.get(role, ()):
+            raise InputError(f"--{_label(role)} {side}: {main} {why}")
+
+
+def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str] | None:
+    """(stage, output role) of the plenocli output at ``path``, or of what an earlier step
+    will write there; None when not known (a foreign file, a file inside a folder output)."""
+    plan = _planned(path, planned)
+    if plan is not None or _not_known(path, planned):
+        return plan.wrote if plan is not None else None
+    made = made_by(path)
+    if not made or made[-1] is None:
+        return None
+    if made[-1] == "preview":
+        return ("", "preview")
+    if made[-1] == "develop":
+        return ("develop", "output" if _photograph(path) else "linear")
+    return RECORDED_AS.get(made[-1], (made[-1], "output"))
+
+
+def _output_name(wrote: tuple[str, str]) -> str:
+    """How a message names what a stage wrote in one of its output roles."""
+    stage, role = wrote
+    if role == "preview":
+        return "a plenocli preview (display-stretched 8-bit levels)"
+    if wrote == ("develop", "output"):
+        return "a `plenocli develop` photograph (display-encoded levels, not light)"
+    option = "" if role == "output" else f" --{_label(role)}"
+    what = MAPS.get(SIDE_OUTPUTS.get(wrote, ("",))[0])
+    return f"a `plenocli {stage}{option}` output{f' ({what})' if what else ''}"
+
+
+def _label(role: str) -> str:
+    return role.replace("_", "-")
 
 
 def _photograph(path: Path) -> bool:
@@ -244,13 +325,16 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
             if stage in accepted:
                 takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
                 break
-    return takers + [f"{name} --{role}" for name, role, kind in SIDE_FILES if kind == stage]
+    kind = RECORDED_AS.get(stage, (stage, "output"))
+    return takers + [f"{name} --{_label(role)}" for name, roles in SIDE_INPUTS.items()
+                     for role, (makers, _) in roles.items() if kind in makers]
 
 
 # outputs recorded under another stage name than their step's, and the input role whose
 # history they carry (the others carry the history of the step's main input)
 SIDE_OUTPUTS = {("flat", "save_gain"): ("flat-gain", "white"),
                 ("unmix", "noise_map"): ("unmix-noise-gain", "inputs")}
+RECORDED_AS = {name: wrote for wrote, (name, _) in SIDE_OUTPUTS.items()}
 RAW_SUFFIXES = (".dng", ".cr2")
 
 
@@ -261,10 +345,10 @@ def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
     (:func:`check_kinds`); a folder output (simulate's) maps to Planned(made=(stage,))."""
     def history(role: str) -> tuple[str, ...] | None:
         paths = inputs.get(role) or inputs.get("inputs") or ()
-        if not paths:
-            return ()
+        if not paths or stage == "decode":
+            return ()  # decode takes no plenocli file: its frames start a history
         plan = _planned(paths[0], planned)
-        if plan is None and Path(paths[0]).absolute() in planned:
+        if plan is None and _not_known(paths[0], planned):
             return None
         return plan.made if plan is not None else tuple(made_by(paths[0]))
 
@@ -274,18 +358,20 @@ def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
         before = history(source)
         for path in paths:
             key, suffix = Path(path).absolute(), Path(path).suffix.lower()
+            wrote = (stage, role)
             if suffix in DOCUMENT_SUFFIXES:
                 out[key] = Planned(document=f"a {suffix[1:].upper()} document step {stage} "
-                                            "writes")
+                                            "writes", wrote=wrote)
             elif suffix in PHOTOS and role == "preview":
-                out[key] = Planned(made=("preview",))
+                out[key] = Planned(made=("preview",), wrote=wrote)
             elif before is None:
                 out[key] = None
             elif stage == "develop" and role == "output":
                 source_path = (inputs.get("input") or [None])[0]
-                out[key] = Planned(made=(*before, name), photograph=str(source_path))
+                out[key] = Planned(made=(*before, name), photograph=str(source_path),
+                                   wrote=wrote)
             else:
-                out[key] = Planned(made=(*before, name))
+                out[key] = Planned(made=(*before, name), wrote=wrote)
     return out
 
 
@@ -302,7 +388,17 @@ def _planned(path: Path, planned: Mapping[Path, Planned | None]) -> Planned | No
         return Planned(raw=True)
     if suffix in DOCUMENT_SUFFIXES:
         return Planned(document=f"a {suffix[1:].upper()} document (not an image)")
-    return folder
+    # simulate writes plenocli TIFFs and plain sensor TIFFs (decode's), told apart only by
+    # what each kind makes when it runs
+    return None
+
+
+def _not_known(path: Path, planned: Mapping[Path, Planned | None]) -> bool:
+    """Whether a step writes ``path`` without its kind being known before it runs (an output
+    of another run; an image inside a folder a step fills): its stage checks it then."""
+    key = Path(path).absolute()
+    return key in planned or (_planned(path, planned) is None
+                              and any(p in planned for p in key.parents))
 
 
 def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> str:

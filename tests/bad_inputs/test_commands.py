@@ -241,7 +241,14 @@ CASES = [
     ("flat-white-not-bias-corrected", ["flat", "{i}/biased.tif", "--white", "{i}/frames.tif",
                                        "-o", "{o}/f.tif"], 1, ("run plenocli bias first",)),
     ("flat-gain-not-gain", ["flat", "{i}/biased.tif", "--gain", "{i}/biased_copy.tif", "-o",
-                            "{o}/f.tif"], 1, ("not a gain",)),
+                            "{o}/f.tif"], 1, ("`plenocli bias` output", "flat takes as gain")),
+    # audit 13 E3: a photograph as --gain was "no CFA in its plenocli metadata ... use the output
+    # of plenocli bias": it is named, as every other input names it
+    *[(f"flat-gain-{name}", ["flat", "{i}/biased.tif", "--gain", f"{{i}}/{name}", "-o",
+                             "{o}/f.tif"], 1, (what, "flat takes as gain the gain map"))
+      for name, what in (("photo.tif", "`plenocli develop` photograph"),
+                         ("photo.jpg", "`plenocli develop` photograph"),
+                         ("linear.tif", "`plenocli develop --linear` output"))],
     ("flat-white-other-size", ["flat", "{i}/biased.tif", "--white", "{i}/f512.tif", "-o",
                                "{o}/f.tif"], 1, ("white image",)),
     # refocus and sai: other options
@@ -378,6 +385,9 @@ CASES = [
     # audit 12 W: develop's linear TIFF is white-balanced already
     ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
                                 "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
+    ("develop-linear-recover", ["develop", "{i}/linear.tif", "--recover-highlights",
+                                "{i}/biased.tif", "-o", "{o}/d.jpg"], 1,
+     ("linear TIFF (R, G, B pages)", "when developing the views it came from")),
     # batch
     ("batch-timeout-0", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout", "0"],
      2, ("'--timeout'", "x>0")),

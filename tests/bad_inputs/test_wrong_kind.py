@@ -93,6 +93,33 @@ def test_decode_names_only_the_stages_that_take_the_file(inputs, tmp_path):
         assert result.output.rstrip().endswith(where) or "decode the capture" in result.output
 
 
+def test_a_side_file_role_names_the_plenocli_output_it_is_given(inputs, tmp_path):
+    """audit 13 E3: flat --gain of a depth map said "no CFA ... use the output of plenocli
+    bias", of a panorama "white image is 897x401 but ..."; a grid or transform given a TIFF
+    was "not a YAML lens grid". Every side-file role names what a plenocli output is and what
+    it takes (pipeline/kinds.SIDE_INPUTS)."""
+    made = tmp_path / "made"
+    made.mkdir()
+    simulate("dualpixel-depth", made / "dd", pixels="96x128", seed=2)
+    result = CliRunner().invoke(cli, [str(a) for a in [
+        "depth", made / "dd" / "views.tif", "-o", made / "disp.tif"]])
+    assert result.exit_code == 0, result.output
+    views, meta = tiffio.read_image(inputs / "biased.tif")
+    plenocli_tiff(made / "pano.tif", views[:3], views=["R", "G", "B"],
+                  provenance={"stage": "stitch"})
+    cases = [(["flat", "{i}/biased.tif", "--gain", made / "disp.tif"],
+              "disp.tif is a `plenocli depth` output; flat takes as gain the gain map"),
+             (["flat", "{i}/biased.tif", "--gain", made / "pano.tif"],
+              "pano.tif is a `plenocli stitch` output; flat takes as gain"),
+             (["stitch", "{i}/biased.tif", "--views", "A,B", "--transform-in",
+               made / "disp.tif"], "stitch takes as transform-in the JSON transform"),
+             (["refocus", "{i}/rt/frames.tif", "--grid", "{i}/biased.tif"],
+              "`plenocli bias` output; refocus takes as grid a lens grid")]
+    for args, words in cases:
+        result = run_bad(inputs, tmp_path / "out", [*map(str, args), "-o", "{o}/x.tif"])
+        assert_one_line(result, 1, (words,))
+
+
 @pytest.mark.parametrize("args", [
     ["crosstalk", "{i}/frames.tif", "-o", "{o}/r.json"],
     ["crosstalk", "{b}/views.tif", "--views", "A,B", "-o", "{o}/r.json"],

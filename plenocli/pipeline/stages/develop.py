@@ -165,11 +165,8 @@ def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.Col
 def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, path: str
            ) -> tuple[np.ndarray, str]:
     """White-balance gains from --wb-from, --wb R,G,B or the raw's as-shot metadata; for
-    develop's linear TIFF, as shot is as developed (1, 1, 1), and --wb a correction on top."""
-    if wb_from is not None and _developed(meta):
-        raise InputError(f"--wb-from {wb_from}: {path} is develop's linear TIFF, white-balanced "
-                         "already, and a white image measures the camera's gains: give --wb "
-                         "R,G,B for a correction on top, or develop the views it came from")
+    develop's linear TIFF, as shot is as developed (1, 1, 1), and --wb a correction on top
+    (--wb-from on it is refused with the kinds of the inputs, pipeline/kinds.EXCLUDED)."""
     if wb_from is not None:
         if wb != "as-shot":
             raise ConfigError("give --wb or --wb-from, not both")
