@@ -80,8 +80,8 @@ def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = Non
     """The lattice the judges choose on ``image`` (its views built by ``search.views``), or
     CalibrationError saying why none can be vouched for. Whether it contradicts a hint is
     :func:`check_hints`'s to say, once its lens centres are found too: a lattice refused
-    there is not what the image shows (a scene's strong period passed the border judge as
-    hex 16.05 px on a 20.2 px array, and the true --pitch was called a contradiction)."""
+    there is not what the image shows (a scene's strong period can pass the border judge as
+    another lattice, and a true --pitch would be called a contradiction)."""
     free = find_lattice(all_views, hypotheses(all_views, pitch_hint=None))
     own = None if start is None else Lattice(start.lattice, start.pitch_px, start.angle_rad)
     extra: list[tuple[Lattice, float]] = []

@@ -173,8 +173,8 @@ def demosaic(frame: np.ndarray, cfa: str, *, method: str = DEFAULT_METHOD, gains
 def _check_every_site(unknown: np.ndarray, pattern: str) -> None:
     """Refuse a mosaic in which one site of the 2 x 2 pattern (a whole colour plane, or one of
     the two greens) holds no known pixel: no neighbour of that colour is left to interpolate
-    from, and rebuilt from the other colours it came out as the frame's median, then as the
-    clipped-highlight estimate (a red plane all NaN developed with R 54 % off, exit 0)."""
+    from, and rebuilt from the other colours it would be invented (the frame's median, then
+    the clipped-highlight estimate)."""
     if unknown.all():
         raise ValueError("frame has no finite pixel to demosaic")
     for k, colour in enumerate(pattern):

@@ -400,8 +400,7 @@ def _check_options(n_views: int, *, layout: str, model: str, blend: str, overlap
 
 def _model_of(model: str, transform: dict | None) -> str:
     """The model to place the views with: a saved transform's (its matrices are of that model,
-    as its layout is its own), refused when ``model`` contradicts it; translation by default.
-    Before, a homography transform was refused unless --model homography was passed too."""
+    as its layout is its own), refused when ``model`` contradicts it; translation by default."""
     if transform is None:
         return "translation" if model == "auto" else model
     saved = transform.get("model") if isinstance(transform, dict) else None

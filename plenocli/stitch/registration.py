@@ -223,7 +223,8 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
                     k1: float = 0.0, rig=None, frame_shape: tuple[int, int] | None = None,
                     max_overlap: float = 0.7):
     """The view transforms and layout of a saved transform, refused (StitchError, one line)
-    unless it fits the views: its model, layout, view size, distortion and rig as given, finite
+    unless it fits the views: its layout, view size, distortion and rig as given (``model``,
+    its own: ``panorama._model_of``), finite
     matrices, view 0 the reference, and every neighbour pair overlapping along its direction
     by at most ``max_overlap`` (in ``frame_shape``: the rig's canvases, else the views)."""
     again = "register them again (without --transform-in)"
@@ -243,8 +244,6 @@ def check_transform(transform: dict, n_views: int, shape: tuple[int, int], model
     if view_shape != tuple(shape):
         raise StitchError(f"the transform was made for views of {view_shape[-1]} x "
                          f"{view_shape[0]} px, these are {shape[1]} x {shape[0]}; {again}")
-    if transform.get("model") != model:  # the caller takes the model from the transform
-        raise StitchError(f"the transform's model {transform.get('model')!r} is not {model}")
     if saved_k1 != k1:
         raise StitchError(f"the transform was made with --distortion {saved_k1:g}, not {k1:g}; "
                          f"pass --distortion {saved_k1:g} or {again}")

@@ -116,8 +116,7 @@ def estimate_translation(a: np.ndarray, b: np.ndarray, *, direction: str = "h",
 def _textures(a: np.ndarray, b: np.ndarray):
     """The views at their own levels and their high-passed textures; a view without texture
     (against its own level) is refused. At its own level, the search, ECC and the photometric
-    polish see two views of one scale whatever their unit or exposure (views x 1e-9 were
-    registered 0.37 px off, one view x 2 0.04 px off, x 1e-6 refused; now all as at x 1)."""
+    polish see two views of one scale whatever their unit or exposure."""
     a, b = at_own_level(a, b)
     ha, hb = highpass(a), highpass(b)
     for name, h, view in (("a", ha, a), ("b", hb, b)):

@@ -121,10 +121,9 @@ def unit_level(luma: np.ndarray, *, copied: bool = False) -> np.ndarray:
     """The views (V, rows, cols) multiplied by the one power of two that brings their level
     (the median of the views' :func:`level`) into [0.5, 1): exact, and the registration sees
     the views at the scale its thresholds were set on, so their unit does not move the match
-    (views x 1e-9 were registered 0.37 px off, x 1e12 and 1e-12 refused; now as at x 1). One
-    factor for all (each pair is then matched at its two views' own levels:
-    :func:`at_own_level`). ``copied``: ``luma`` is the caller's own and may be scaled in
-    place."""
+    (float32's floors and the fits' tolerances are absolute). One factor for all (each pair
+    is then matched at its two views' own levels: :func:`at_own_level`). ``copied``:
+    ``luma`` is the caller's own and may be scaled in place."""
     exponent = int(np.frexp(float(np.median([level(v) for v in luma])))[1])
     if not exponent:
         return luma
@@ -136,8 +135,7 @@ def unit_level(luma: np.ndarray, *, copied: bool = False) -> np.ndarray:
 
 def at_own_level(*views: np.ndarray) -> list[np.ndarray]:
     """Each view divided by its :func:`level` (float32), for the sub-pixel fits of a pair: their
-    photometric model and floors then see two views of one level whatever their exposures (a
-    view x 2 moved the shift 0.04 px, x 1e-12 0.48 px; now none)."""
+    photometric model and floors then see two views of one level whatever their exposures."""
     out = []
     for view in views:
         found = level(view)

@@ -197,8 +197,8 @@ def _check_uncropped(inputs: list[str], side_file: str) -> None:
     """Refuse views cut out of the sensor by ``bias --crop`` when a rig places them: a rig
     describes the whole active area (optical axis at its centre, ``sensor_mm`` across its
     width), and a crop's file records its sensor origin but not the active area it was cut
-    from, so the rig cannot be put on it. Before, the rig's check refused them saying to
-    register without it, and the registration said to give the rig."""
+    from, so the rig cannot be put on it (nor can the views be registered without it: their
+    overlap is the prism's)."""
     for path in inputs:
         meta = tiffio.read_meta(path)
         crop = _bias_crop(meta)
@@ -228,7 +228,7 @@ def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
 # what a panorama keeps of its first input's metadata: what describes the camera, not the
 # input's pixels (an `sai` block's micro-lens layout and crop origin, bias's row levels, the
 # input's clipped-pixel count, a flat's masked gain: none of them is the panorama's)
-_CAMERA_KEYS = ("plenocli_format", "colour", "color", "camera", "exif", "provenance", "history")
+_CAMERA_KEYS = ("plenocli_format", "colour", "camera", "exif", "provenance", "history")
 
 
 def _of_the_camera(meta: dict) -> dict:
