@@ -32,13 +32,18 @@ LK_STEPS = 1
 TILE_ROWS = 512
 QUAD_AGREE_PX = 1.0     # x and y disparities of a quad-pixel pixel this far apart: unknown
 QUAD_AGREE_SHARE = 0.1  # or this share of the disparity, whichever is larger
-# A/B parallax runs along rows: of the row search's clear matches, the share that a vertical
-# shift fits clearly (cost below CLEARLY times) better than every horizontal one is 0-2.5 %
-# for views side by side (simulated bands of up to 12 px, six textures; the Pixel 4 pair
-# 0.1-0.4 %) and 29-97 % for the same views transposed (Pixel 4: 68-70 %), which the row
-# search read with clear confidence (2 px as 0.89)
+# A/B parallax runs along rows. Of the row search's clear matches, a pixel is one a vertical
+# shift explains and no horizontal one does when, both fitted to the sub-pixel, the vertical
+# cost is under POOR times the mean cost of the horizontal shifts tried and under CLEARLY
+# times the horizontal one, which is over POOR. Where a horizontal shift fits, a slanted or
+# striped texture lets a vertical one fit as well, and nothing says which is the parallax.
+# Views side by side: 0-2.6 % (simulated bands of up to 10 px, six textures; grain and
+# stripes at 0-60 degrees; the Pixel 4 pair 0.1-0.2 %; prism views looking apart 1.8 %); the
+# same views transposed 24-99 % (Pixel 4: 27-29 %), which the row search read with clear
+# confidence (2 px as 0.89)
 MAX_VERTICAL_SHARE = 0.1
 CLEARLY = 0.7
+POOR = 0.1
 MIN_TEXTURED = 0.01  # share of clear matches below which views share no texture (the stage)
 # larger views are checked on SAMPLE_SIDE x SAMPLE_SIDE blocks of SAMPLE_BLOCK px spread over
 # the frame (about 4 Mpx: the whole frame of 30 Mpx took 1.4 s, 40 % of the map's time)
@@ -153,33 +158,49 @@ def _check_rows(pa: np.ndarray, pb: np.ndarray, reach: int) -> None:
     share = vertical_share(pa, pb, reach)
     if share is not None and share > MAX_VERTICAL_SHARE:
         raise ValueError(f"the views' parallax runs along columns, not rows: a vertical shift "
-                         f"fits {100 * share:.0f} % of their clear matches clearly better "
-                         "than any horizontal one (views side by side: under 3 %); disparity "
-                         "is measured along rows, A left of B as the sensor records them: "
-                         "views turned by 90 degrees (a portrait capture) or a sensor split "
-                         "top/bottom are not measured; nothing was written")
+                         f"explains {100 * share:.0f} % of their clear matches, which no "
+                         "horizontal one does (views side by side: under 3 %); disparity is "
+                         "measured along rows, B's content right of A's: turn both views by "
+                         "90 degrees (a portrait capture, a sensor split top/bottom) so that "
+                         "their baseline runs along rows; nothing was written")
 
 
 def vertical_share(pa: np.ndarray, pb: np.ndarray, reach: int) -> float | None:
     """Of the pixels the row search matches clearly (confidence >= 0.5, what the map gives
-    with confidence), the share a vertical shift fits CLEARLY better than every horizontal
-    one; None when under MIN_TEXTURED of them match clearly (the stage refuses those views as
-    sharing no texture). On the views shrunk by two, as the coarse search, whole shifts."""
+    with confidence), the share a vertical shift explains and no horizontal one does (above);
+    None when under MIN_TEXTURED of them match clearly (the stage refuses those views as
+    sharing no texture). On the views shrunk by two, as the coarse search. Costs at whole
+    shifts do not do: a horizontal disparity of 1 px is 0.5 px there, which no whole shift
+    fits, while on a slanted texture a whole vertical shift does (grain at 60 degrees and
+    stripes at 10-30 degrees from vertical read 91-100 % so)."""
     steps = (reach + 1) // 2 + 1
     textured = vertical = pixels = 0
     for block in _sample_blocks(pa.shape):
         size = (max(1, (block[1].stop - block[1].start) // 2),
                 max(1, (block[0].stop - block[0].start) // 2))
         sa, sb = (cv2.resize(v[block], size, interpolation=cv2.INTER_AREA) for v in (pa, pb))
-        by_row = _best_cost(sa, sb, steps)
-        by_col = _best_cost(np.ascontiguousarray(sa.T), np.ascontiguousarray(sb.T), steps)[0].T
+        row, conf, mean = _fitted_cost(sa, sb, steps)
+        col = _fitted_cost(np.ascontiguousarray(sa.T), np.ascontiguousarray(sb.T), steps)[0].T
         # not the column search's clear matches: a white's row noise, opposite in A and
         # B = S - A, fits any vertical shift better than none
-        sure = by_row[0] <= 0.5 * by_row[1]
+        sure = conf >= 0.5
         textured += int(sure.sum())
-        vertical += int(np.sum(by_col[sure] < CLEARLY * by_row[0][sure]))
+        explained = (col < CLEARLY * row) & (col < POOR * mean) & (row > POOR * mean)
+        vertical += int(np.sum(explained & sure))
         pixels += sure.size
     return vertical / textured if textured >= MIN_TEXTURED * pixels else None
+
+
+def _fitted_cost(pa: np.ndarray, pb: np.ndarray, reach: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Windowed SSD of A(x) against B(x + d) at the row search's sub-pixel best d (B sampled
+    there, cubic), its confidence, and the mean cost of the whole shifts |s| <= reach."""
+    d, conf, mean = _search(pa, pb, reach)
+    rows, cols = pa.shape
+    grid_y = np.ascontiguousarray(np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None],
+                                                  (rows, cols)))
+    moved = _shift_x(pb, d, np.arange(cols, dtype=np.float32)[None, :], grid_y)
+    return _box((moved - pa) ** 2), conf, mean
 
 
 def _sample_blocks(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
@@ -191,18 +212,6 @@ def _sample_blocks(shape: tuple[int, int]) -> list[tuple[slice, slice]]:
     tops = np.unique(np.linspace(0, rows - side_r, SAMPLE_SIDE).astype(int))
     lefts = np.unique(np.linspace(0, cols - side_c, SAMPLE_SIDE).astype(int))
     return [(slice(t, t + side_r), slice(c, c + side_c)) for t in tops for c in lefts]
-
-
-def _best_cost(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per pixel, the lowest and the mean windowed SSD of A(x) against B(x + s) over whole
-    horizontal shifts |s| <= reach."""
-    best = np.full(pa.shape, np.inf, np.float32)
-    total = np.zeros(pa.shape, np.float32)
-    for s in range(-reach, reach + 1):
-        cost = _box((pa - _shift_whole(pb, s)) ** 2)
-        np.minimum(best, cost, out=best)
-        total += cost
-    return best, total / (2 * reach + 1)
 
 
 def consistent_share(disparity: np.ndarray, confidence: np.ndarray, *,
@@ -235,7 +244,7 @@ def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.nd
     half = (max(1, cols // 2), max(1, rows // 2))
     # one shift past the bound: a disparity just inside it then has a cost on both sides
     # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown)
-    d2, conf2 = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
+    d2, conf2, _ = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
                         cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
                         (reach + 1) // 2 + 1)
     d = 2 * cv2.resize(d2, (cols, rows), interpolation=cv2.INTER_LINEAR)
@@ -243,9 +252,10 @@ def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.nd
     return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf
 
 
-def _search(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
+def _search(pa: np.ndarray, pb: np.ndarray, reach: int
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Whole-pixel search kept as a running minimum (best cost and its neighbours on both
-    sides), parabola through them; confidence 1 - best / mean cost."""
+    sides), parabola through them; confidence 1 - best / mean cost; the mean cost."""
     shape = pa.shape
     best = np.full(shape, np.inf, np.float32)
     left = np.full(shape, np.inf, np.float32)
@@ -273,7 +283,7 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.
         conf = np.clip(1.0 - best / (total / len(shifts)), 0.0, 1.0)
     d = (k_best - reach + np.clip(frac, -0.5, 0.5)).astype(np.float32)
     conf[~inner] = 0.0
-    return d, np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
+    return d, np.where(np.isfinite(conf), conf, 0.0).astype(np.float32), total / len(shifts)
 
 
 def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.ndarray:
