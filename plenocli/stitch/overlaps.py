@@ -185,40 +185,10 @@ def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
     return out
 
 
-# An exposure gain is a ratio of light, measured where zero is black. Noise about a black of
-# 0 (a dark, bias-subtracted scene) goes below zero by a few sigma, never 5: a view with more
-# than MAX_BELOW_NOISE of its pixels past -5 sigma holds an offset (zero is not black), and the
-# ratio of its means is not its exposure. Measured on the views as recorded: resampling rings
-# below zero at every edge of a black area.
-BELOW_NOISE_SIGMAS = 5.0
-MAX_BELOW_NOISE = 0.005
-NOISE_SAMPLE_PX = 1 << 18
-
-
-def below_noise(view: np.ndarray) -> np.ndarray:
-    """Per channel of a view (C, rows, cols), the share of its known pixels further below zero
-    than BELOW_NOISE_SIGMAS x its noise (from the median absolute difference of row
-    neighbours), on rows spread over the view (about NOISE_SAMPLE_PX pixels: a share needs no
-    more)."""
-    shares = np.zeros(len(view))
-    every = max(1, view[0].size // NOISE_SAMPLE_PX)
-    for c, channel in enumerate(view):
-        rows = channel[::every]
-        steps = (rows[:, 1:] - rows[:, :-1]).ravel()
-        steps = steps[np.isfinite(steps)]
-        known = rows[np.isfinite(rows)]
-        if steps.size < 16 or known.size == 0:
-            continue
-        sigma = 1.4826 * float(np.median(np.abs(steps - np.median(steps)))) / np.sqrt(2.0)
-        shares[c] = np.count_nonzero(known < -BELOW_NOISE_SIGMAS * sigma) / known.size
-    return shares
-
-
 def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
-                n_chan: int, below: list[np.ndarray]) -> np.ndarray:
+                n_chan: int) -> np.ndarray:
     """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed);
-    refused (StitchError) where an overlap holds no light or a view an offset (``below``: each
-    view's :func:`below_noise`)."""
+    refused (StitchError) where an overlap holds no light in either view."""
     gains = np.ones((n_views, n_chan))
     for c in range(n_chan):
         rows, rhs = [], []
@@ -226,7 +196,7 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
             if overlap is None:
                 continue
             mean_a, mean_b = overlap.sums[:, c] / overlap.count
-            _check_light((mean_a, mean_b), (below[a][c], below[b][c]), (a, b), c, n_chan)
+            _check_light((mean_a, mean_b), (a, b), c, n_chan)
             rows.append(difference_row(a, b, n_views))
             rhs.append(np.log(mean_a / mean_b))
         if rows:
@@ -235,18 +205,19 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
     return gains
 
 
-def _check_light(means, below, pair: tuple[int, int], channel: int, n_chan: int) -> None:
-    """Refuse a pair whose overlap holds no light in either view, or a view with an offset
-    (MAX_BELOW_NOISE)."""
+def _check_light(means, pair: tuple[int, int], channel: int, n_chan: int) -> None:
+    """Refuse a pair whose overlap averages zero or less in either view: an exposure gain is a
+    ratio of light, and there is none to take it from (zero is not black: an offset left in).
+    Noise about a black of 0 (a dark, bias-subtracted scene) leaves the mean above zero; an
+    offset that does too cannot be told from the scene by the pixels alone (resampled views,
+    refocused or stitched, ring below zero at every edge of a black area) and biases the
+    gains: --gains none keeps the views as recorded."""
     for k, view in enumerate(pair):
-        if means[k] > 0 and below[k] <= MAX_BELOW_NOISE:
+        if means[k] > 0:
             continue
         where = f" (channel {channel})" if n_chan > 1 else ""
-        found = (f"'s overlap with view {pair[1 - k]} averages {means[k]:.4g}{where}"
-                 if not means[k] > 0 else
-                 f" has {100 * below[k]:.2g} % of its pixels{where} further below zero than "
-                 "its noise reaches")
         raise StitchError(
-            f"view {view}{found}: zero is not black there (an offset left in), so no exposure "
-            "gain can be measured: subtract the black level (plenocli bias), or stitch "
-            "without exposure matching (--gains none)")
+            f"view {view}'s overlap with view {pair[1 - k]} averages {means[k]:.4g}{where}: "
+            "zero is not black there (an offset left in), so no exposure gain can be "
+            "measured: subtract the black level (plenocli bias), or stitch without exposure "
+            "matching (--gains none)")

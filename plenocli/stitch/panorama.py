@@ -350,9 +350,7 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = overlap_measure.match_gains(overlaps, pairs, *stack.shape[:2],
-                                            below=[overlap_measure.below_noise(view)
-                                                   for view in stack])
+        gains = overlap_measure.match_gains(overlaps, pairs, *stack.shape[:2])
     areas = [0 if overlap is None else overlap.area for overlap in overlaps]
     del overlaps
     box = compose.covered_box(maps, boxes, holes)
