@@ -41,6 +41,8 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "stitch": {"inputs": VIEWS},
 }
 # the maps stages write beside their result (their own stage names): never light levels
+# the command that writes an output recorded under another stage name
+COMMANDS = {"flat-gain": "flat --save-gain"}
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
 # the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
@@ -117,7 +119,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
             if made[-1] not in accepted:
                 foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
                 what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
-                raise InputError(f"{path} is a `plenocli {made[-1]}` output{what}; {stage} "
+                raise InputError(f"{path} is a `plenocli {COMMANDS.get(made[-1], made[-1])}` "
+                                 f"output{what}; {stage} "
                                  f"takes as {role.replace('_', '-')} the output of "
                                  f"{', '.join(accepted)}{foreign}")
             if made[-1] == "develop" and (plan.photograph if plan is not None
@@ -292,7 +295,8 @@ def _not_a_raw(path: Path, made: list) -> str:
     takers = _takers(path, stage, made)
     where = (f"give it as it is to {', '.join(takers)}" if takers
              else "no stage reads it as an image; decode the capture it came from")
-    return (f"{path} is a `plenocli {stage}` output, not a raw capture or sensor image "
+    return (f"{path} is a `plenocli {COMMANDS.get(stage, stage)}` output, not a raw capture "
+            "or sensor image "
             f"(decoding it again would drop its record and levels): {where}")
 
 

@@ -342,7 +342,7 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
     ("  flat:\n    input: \"{out}/b.tif\"\n    white: {i}/biased.tif\n"
      "    save-gain: \"{out}/g.tif\"\n    output: \"{out}/fl.tif\"\n"
      "  stitch:\n    inputs: \"{out}/g.tif\"\n    output: \"{out}/p.tif\"\n",
-     ("step 'stitch'", "`plenocli flat-gain` output (a gain map")),
+     ("step 'stitch'", "`plenocli flat --save-gain` output (a gain map")),
     ("  develop:\n    input: \"{out}/b.tif\"\n    view: S\n    wb: 1,1,1\n    matrix: none\n"
      "    output: \"{out}/p.tif\"\n  develop2:\n    stage: develop\n"
      "    input: \"{out}/p.tif\"\n    output: \"{out}/p2.jpg\"\n",

@@ -37,7 +37,7 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         (["flat", made / "flat.tif", "--gain", made / "gain.tif", "-o", "{o}/x.tif"],
          "already went through `plenocli flat`"),
         (["flat", inputs / "biased.tif", "--white", made / "gain.tif", "-o", "{o}/x.tif"],
-         "`plenocli flat-gain` output"),
+         "`plenocli flat --save-gain` output"),
         (["bias", inputs / "biased.tif", "-o", "{o}/x.tif"], "`plenocli bias` output"),
     ]
     for args, words in cases:
