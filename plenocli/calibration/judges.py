@@ -32,7 +32,7 @@ from plenocli.calibration.search import (
 )
 from plenocli.calibration.verify import NULL_RATIO, Verdict, control_contrast, doubt, nested
 from plenocli.errors import CalibrationError
-from plenocli.model.lensgrid import LensGrid
+from plenocli.model.lensgrid import LATTICES, LensGrid
 
 HINT_RANGE = 1.15               # a pitch hint admits lattices within 15 %
 START_ANGLE_RAD = np.radians(5.0)  # a start's rotation admits lattices within 5 deg
@@ -196,7 +196,7 @@ def within_hint(found: Lattice, pitch_hint: float | None) -> bool:
 def fits_start(found: Lattice, own: Lattice) -> bool:
     """Whether ``found`` has a start lattice's kind, its pitch within HINT_RANGE and its
     rotation within START_ANGLE_RAD."""
-    step = np.pi / 3 if found.kind == "hex" else np.pi / 2
+    step = LATTICES[found.kind]
     turn = abs((found.angle_rad - own.angle_rad + step / 2) % step - step / 2)
     return (found.kind == own.kind and 1 / HINT_RANGE <= found.pitch_px / own.pitch_px
             <= HINT_RANGE and turn <= START_ANGLE_RAD)

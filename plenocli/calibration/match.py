@@ -197,10 +197,9 @@ def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
     (peak to the higher of the two ends), from steps that move the image's corners by up to
     PEAK_REACH of a pitch either side; inf where it does not fall clearly on both sides (a
     lattice far off the peak, or a flat match). The top of the curve is flat over about
-    two thirds of a pitch at the corners and may lean: a parabola through it placed the Raytrix
-    scene simulator's 14.5 px at +0.26 % (its top rises towards larger pitches); the falls are
-    steep and symmetric about the lattice. Also the step that moves the corners by
-    CORNER_SHARE of a pitch."""
+    two thirds of a pitch at the corners and may lean, so a parabola through it follows the
+    lean; the falls are steep and symmetric about the lattice. Also the step that moves the
+    corners by CORNER_SHARE of a pitch."""
     step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
     at = np.linspace(-1.0, 1.0, 2 * PEAK_SAMPLES + 1) * PEAK_REACH / CORNER_SHARE * step
     out = []

@@ -41,10 +41,10 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "stitch": {"inputs": VIEWS},
 }
 # the maps stages write beside their result (their own stage names): never light levels
-# the command that writes an output recorded under another stage name
-COMMANDS = {"flat-gain": "flat --save-gain"}
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
+# the command that writes an output recorded under another stage name
+COMMANDS = {"flat-gain": "flat --save-gain"}
 # the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
 # output role); what it is, in words). A plenocli output of another role is refused here,
 # before any step runs; a foreign file is its reader's to check.
@@ -121,7 +121,7 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
                 what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
                 raise InputError(f"{path} is a `plenocli {COMMANDS.get(made[-1], made[-1])}` "
                                  f"output{what}; {stage} "
-                                 f"takes as {role.replace('_', '-')} the output of "
+                                 f"takes as {_label(role)} the output of "
                                  f"{', '.join(accepted)}{foreign}")
             if made[-1] == "develop" and (plan.photograph if plan is not None
                                           else _photograph(path)):
@@ -206,7 +206,7 @@ def _photograph_refused(path: Path, stage: str, role: str, source: str | None = 
                        if isinstance(i, dict) and i.get("role") == "input"), None)
     came = f" ({source})" if source else ""
     return (f"{path} is a `plenocli develop` photograph (display-encoded levels, not light); "
-            f"{stage} takes as {role.replace('_', '-')} the views it was developed from{came}, "
+            f"{stage} takes as {_label(role)} the views it was developed from{came}, "
             "or the scene-referred TIFF `develop --linear` writes")
 
 
@@ -222,7 +222,7 @@ def _check_not_raw(path: Path, stage: str, role: str) -> None:
     if kind in ("canon-dp", "dng"):
         name = "DNG" if kind == "dng" else "Canon dual-pixel CR2"
         raise InputError(f"{path} is a raw capture ({name}), not the decoded frames or views "
-                         f"{stage} takes as {role.replace('_', '-')}: decode it first "
+                         f"{stage} takes as {_label(role)}: decode it first "
                          f"(plenocli decode{'' if stage == 'bias' else ', then plenocli bias'})")
 
 
@@ -252,7 +252,7 @@ def _check_not_a_document(path: Path, stage: str, role: str) -> None:
         what = ("a JSON document (a report, transform or record)" if text[:1] in (b"{", b"[")
                 else "an XML document" if text[:1] == b"<" else "a text document")
     raise InputError(f"{path} is {what}, not an image {stage} can take as "
-                     f"{role.replace('_', '-')}" if stage != "decode" else
+                     f"{_label(role)}" if stage != "decode" else
                      f"{path} is {what}, not a raw capture or sensor image")
 
 
@@ -408,7 +408,7 @@ def _not_known(path: Path, planned: Mapping[Path, Planned | None]) -> bool:
 def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> str:
     if plan.raw:
         return (f"{path} is a raw capture, not the decoded frames or views {stage} takes as "
-                f"{role.replace('_', '-')}: decode it first")
+                f"{_label(role)}: decode it first")
     return (f"{path} is {plan.document}, not an image {stage} can take as "
-            f"{role.replace('_', '-')}" if stage != "decode" else
+            f"{_label(role)}" if stage != "decode" else
             f"{path} is {plan.document}, not a raw capture or sensor image")

@@ -163,8 +163,9 @@ def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.nda
 def holes_of(view: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """For a view (C, rows, cols) with no-data pixels: (valid as float32, distance (px) to the
     nearest no-data pixel); None when every pixel has data."""
-    if np.isfinite(np.sum(view, dtype=np.float32)):  # the usual view: one pass, no mask (an
-        return None  # overflowing sum takes the masked way)
+    # the usual view: one pass and no mask (a sum that overflows takes the masked way)
+    if np.isfinite(np.sum(view, dtype=np.float32)):
+        return None
     valid = np.isfinite(view[0])
     for channel in view[1:]:  # channel by channel: fast whatever their layout in memory
         valid &= np.isfinite(channel)
