@@ -319,3 +319,42 @@ def test_depth_with_the_grid_calibrate_measures_on_the_same_scene():
     found = depth_map(frame, measured, s=S, g_range=(2, 8)).g
     ok = np.isfinite(found) & _inner(truth.shape)
     assert np.median(np.abs(found[ok] - truth[ok])) <= 0.03  # measured 0.01
+
+
+@pytest.mark.parametrize("period, degrees, max_disparity", [(7.3, 0, 3.0), (7.3, 0, 4.0),
+                                                            (None, -20, 4.0), (None, 20, 4.0)])
+def test_stripes_across_the_baseline_are_measured(period, degrees, max_disparity):
+    """audit 14 F1: 1 px of horizontal parallax on vertical stripes (a 7.3 px sinusoid; review
+    12's stripes at -20..20 deg) was refused as "no texture": the coarse search took its best
+    over the shift past the bound too, where the stripes' next copy (-6.3 px, -3.15 on the views
+    shrunk by two) nearly fits a whole shift while the parallax (0.5) lies between two."""
+    if period is None:
+        a, b = _oriented_views("stripes", degrees, 1.0)
+    else:
+        from scipy import ndimage
+
+        rng = np.random.default_rng(2)
+        a = 0.5 + 0.3 * np.sin(2 * np.pi * np.arange(512) / period) * np.ones((256, 1))
+        b = ndimage.shift(a, (0, 1.0), order=3, mode="reflect")
+        a, b = (v + rng.normal(0, 0.002, v.shape) for v in (a, b))
+    result = disparity_x(a, b, max_disparity=max_disparity)
+    assert np.mean(result.confidence >= 0.5) > 0.8   # measured 0.83 (0 before)
+    assert abs(np.nanmedian(result.disparity) - 1.0) <= 0.02   # measured 0.997-1.000
+
+
+def test_stripes_repeating_within_the_search_are_refused_as_such(tmp_path):
+    """audit 14 F1: the same stripes searched to 8 px (their copies 6.3 and 7.3 px away lie
+    inside) cannot be told from their copies: refused naming the repeat, not "no texture"."""
+    from plenocli.errors import InputError
+    from plenocli.io import tiffio
+    from plenocli.pipeline.stages import depth
+    from plenocli.pipeline.stages.simulate import simulate
+
+    simulate("dualpixel-depth", tmp_path / "sim", seed=1, pixels="64x64")
+    _, meta = tiffio.read_image(tmp_path / "sim" / "views.tif")
+    views = _oriented_views("stripes", 0, 1.0).astype(np.float32)
+    path = tmp_path / "v.tif"
+    tiffio.write_image(path, views, {**meta, "active_area": [0, 0, 256, 512]})
+    with pytest.raises(InputError, match="repeats within --max-disparity 8.*lower") as refused:
+        depth.run(str(path), str(tmp_path / "d.tif"), max_disparity=8.0)
+    assert "no texture" not in str(refused.value) and not (tmp_path / "d.tif").exists()

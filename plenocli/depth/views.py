@@ -44,6 +44,8 @@ QUAD_AGREE_SHARE = 0.1  # or this share of the disparity, whichever is larger
 MAX_VERTICAL_SHARE = 0.1
 CLEARLY = 0.7
 POOR = 0.1
+CLEAR = 0.5  # confidence of a clear match (as lenslet.CLEAR_MATCH)
+REPEATS = 3  # local minima of the coarse search kept to tell a repeating texture
 MIN_TEXTURED = 0.01  # share of clear matches below which views share no texture (the stage)
 # larger views are checked on SAMPLE_SIDE x SAMPLE_SIDE blocks of SAMPLE_BLOCK px spread over
 # the frame (about 4 Mpx: the whole frame of 30 Mpx took 1.4 s, 40 % of the map's time)
@@ -53,10 +55,13 @@ SAMPLE_SIDE = 8
 
 @dataclass(frozen=True)
 class Disparity:
-    """Disparity (rows, cols) float32 px (NaN: unknown) and confidence (0..1)."""
+    """Disparity (rows, cols) float32 px (NaN: unknown) and confidence (0..1); ``repeat_px``:
+    where the texture repeats within the search (two shifts match clearly, so the pixel is
+    unknown), how far apart they lie in px, else 0."""
 
     disparity: np.ndarray
     confidence: np.ndarray
+    repeat_px: np.ndarray | None = None
 
 
 def _prepare(view: np.ndarray) -> np.ndarray:
@@ -121,20 +126,25 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
     pa, pb = _prepare(a), _prepare(b)
     d = np.empty(a.shape, np.float32)
     conf = np.empty(a.shape, np.float32)
+    repeat = np.empty(a.shape, np.float32)
     reach = int(np.ceil(max_disparity))
     if check_rows:
         _check_rows(pa, pb, reach)
     margin = WINDOW
     for top in range(0, a.shape[0], TILE_ROWS):  # tiles keep the working set small
         lo, hi = max(0, top - margin), min(a.shape[0], top + TILE_ROWS + margin)
-        td, tc = _tile(pa[lo:hi], pb[lo:hi], reach)
+        td, tc, tr = _tile(pa[lo:hi], pb[lo:hi], reach)
         keep = slice(top - lo, top - lo + min(TILE_ROWS, a.shape[0] - top))
         d[top:top + TILE_ROWS] = td[keep]
         conf[top:top + TILE_ROWS] = tc[keep]
+        repeat[top:top + TILE_ROWS] = tr[keep]
     lost = cv2.dilate(missing.astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8)) > 0
     # a best shift pinned at the search bound is no minimum, and a cost that does not vary
     # with the shift (confidence 0: no texture) measures nothing
     lost |= (np.abs(d) >= reach - 1e-3) | ~(conf > 0)
+    # two shifts that both match clearly (a texture repeating within the search) say nothing
+    # of which one is the parallax: 7.3 px stripes 1 px apart, searched to 8, read -6.3
+    lost |= repeat > 0
     # a window reaching past the frame's edge, in a or at the found shift in b, matched the
     # padding there: a patch at a simulated frame's corner read +7 px as -9.3, confidently.
     # The coarse search's windows, on the views shrunk by two, reach a whole WINDOW
@@ -147,7 +157,7 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
         lost |= (y < half) | (y > rows - 1 - half)
     d[lost] = np.nan
     conf[lost] = 0.0
-    return Disparity(d, conf)
+    return Disparity(d, conf, repeat)
 
 
 def _check_rows(pa: np.ndarray, pb: np.ndarray, reach: int) -> None:
@@ -195,7 +205,7 @@ def _fitted_cost(pa: np.ndarray, pb: np.ndarray, reach: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Windowed SSD of A(x) against B(x + d) at the row search's sub-pixel best d (B sampled
     there, cubic), its confidence, and the mean cost of the whole shifts |s| <= reach."""
-    d, conf, mean = _search(pa, pb, reach)
+    d, conf, mean, _ = _search(pa, pb, reach)
     rows, cols = pa.shape
     grid_y = np.ascontiguousarray(np.broadcast_to(np.arange(rows, dtype=np.float32)[:, None],
                                                   (rows, cols)))
@@ -236,54 +246,92 @@ def consistent_share(disparity: np.ndarray, confidence: np.ndarray, *,
     return float(np.mean((count > 0.5) & (np.abs(d[sure] - local) < tolerance)))
 
 
-def _tile(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[np.ndarray, np.ndarray]:
-    """Disparity and confidence of one tile: the coarse search on the tile shrunk by two
-    (disparities halve, so do the shifts to try, on a quarter of the pixels), then
-    Lucas-Kanade at full size."""
+def _tile(pa: np.ndarray, pb: np.ndarray, reach: int
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Disparity, confidence and repeat (px, see ``Disparity``) of one tile: the coarse search
+    on the tile shrunk by two (disparities halve, so do the shifts to try, on a quarter of the
+    pixels), then Lucas-Kanade at full size."""
     rows, cols = pa.shape
     half = (max(1, cols // 2), max(1, rows // 2))
     # one shift past the bound: a disparity just inside it then has a cost on both sides
     # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown)
-    d2, conf2, _ = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
-                        cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
-                        (reach + 1) // 2 + 1)
+    d2, conf2, _, repeat2 = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
+                                             cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
+                                             (reach + 1) // 2 + 1)
     d = 2 * cv2.resize(d2, (cols, rows), interpolation=cv2.INTER_LINEAR)
     conf = cv2.resize(conf2, (cols, rows), interpolation=cv2.INTER_NEAREST)
-    return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf
+    repeat = 2 * cv2.resize(repeat2, (cols, rows), interpolation=cv2.INTER_NEAREST)
+    return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf, repeat
 
 
 def _search(pa: np.ndarray, pb: np.ndarray, reach: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Whole-pixel search kept as a running minimum (best cost and its neighbours on both
-    sides), parabola through them; confidence 1 - best / mean cost; the mean cost."""
+    sides), parabola through them; confidence 1 - best / mean cost; the mean cost; and where
+    the REPEATS lowest local minima all match clearly (cost under 1 - CLEAR of the mean: a
+    texture that repeats within the search), the least distance between them in shifts (else
+    0).
+    The best is taken among the shifts inside +-(reach - 1): the outer two only give the
+    parabola its second side, and where one of them is lower the minimum lies past the search
+    (confidence 0). Taken over them too, a periodic texture's next copy just past the bound
+    won: vertical stripes of 7.3 px, 1 px apart, are 0.5 px apart on the views shrunk by two,
+    between whole shifts, while their copy at -3.15 nearly fits the whole shift -3 (cost 0.03
+    of the mean against 0.35): every pixel's best was the last shift tried, none was known."""
     shape = pa.shape
     best = np.full(shape, np.inf, np.float32)
     left = np.full(shape, np.inf, np.float32)
     right = np.full(shape, np.inf, np.float32)
     k_best = np.zeros(shape, np.int16)
     total = np.zeros(shape, np.float32)
-    previous = None
+    # the lowest REPEATS local minima, lowest first, and their shifts: of a periodic texture's
+    # copies the two lowest need not be neighbours (7.3 px stripes 1 px apart, searched to 8:
+    # -6.3 and +7.3 fit whole shifts, +1 lies between them)
+    lows = [(np.full(shape, np.inf, np.float32), np.zeros(shape, np.int16))
+            for _ in range(REPEATS)]
+    before = previous = None
     shifts = range(-reach, reach + 1)
     for k, s in enumerate(shifts):
         cost = _box((pa - _shift_whole(pb, s)) ** 2)
         total += cost
         np.copyto(right, cost, where=k_best == k - 1)
-        new = cost < best
-        if previous is not None:
+        if before is not None:
+            _track_minima(before, previous, cost, k - 1, lows)
+        if 0 < k < len(shifts) - 1:
+            new = cost < best
             np.copyto(left, previous, where=new)
-        np.copyto(left, np.float32(np.inf), where=new & (k == 0))
-        np.copyto(right, np.float32(np.inf), where=new)
-        np.copyto(best, cost, where=new)
-        np.copyto(k_best, np.int16(k), where=new)
-        previous = cost
+            np.copyto(right, np.float32(np.inf), where=new)
+            np.copyto(best, cost, where=new)
+            np.copyto(k_best, np.int16(k), where=new)
+        before, previous = previous, cost
     curv = left - 2 * best + right
-    inner = np.isfinite(curv) & (curv > 0)
+    inner = np.isfinite(curv) & (curv > 0) & (left >= best) & (right >= best)
+    mean = total / len(shifts)
     with np.errstate(invalid="ignore", divide="ignore"):
         frac = np.where(inner, 0.5 * (left - right) / np.where(inner, curv, 1), 0.0)
-        conf = np.clip(1.0 - best / (total / len(shifts)), 0.0, 1.0)
+        conf = np.clip(1.0 - best / mean, 0.0, 1.0)
     d = (k_best - reach + np.clip(frac, -0.5, 0.5)).astype(np.float32)
     conf[~inner] = 0.0
-    return d, np.where(np.isfinite(conf), conf, 0.0).astype(np.float32), total / len(shifts)
+    conf = np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
+    # a texture repeating twice within the search: all REPEATS lowest minima match clearly
+    # (two need not be a repeat: the simulated bands of 5 px searched to 6 match at -d as well,
+    # a weaker echo of the texture's low frequencies, and the best is right)
+    clear = np.logical_and.reduce([cost <= (1 - CLEAR) * mean for cost, _ in lows])
+    apart = [np.abs(k_i - k_j) for i, (_, k_i) in enumerate(lows) for _, k_j in lows[i + 1:]]
+    repeat = np.where(clear & (conf >= CLEAR), np.minimum.reduce(apart), 0).astype(np.float32)
+    return d, conf, mean, repeat
+
+
+def _track_minima(before, cost, after, k, lows) -> None:
+    """Where cost (shift k) is a local minimum, insert it into ``lows`` (the lowest local
+    minima so far, lowest first: (cost, shift) pairs of maps), in place."""
+    held = (cost < before) & (cost <= after)
+    value, shift = cost.copy(), np.full(cost.shape, k, np.int16)
+    for low, k_low in lows:  # insertion: a lower newcomer takes the place, the old one moves on
+        swap = held & (value < low)
+        for mine, theirs in ((low, value), (k_low, shift)):
+            keep = mine.copy()
+            np.copyto(mine, theirs, where=swap)
+            np.copyto(theirs, keep, where=swap)
 
 
 def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.ndarray:
@@ -318,7 +366,8 @@ def quad_disparity(views: np.ndarray, *, max_disparity: float = 4.0
                      check_rows=False)
     dy = disparity_x((0.5 * (s00 + s01)).T, (0.5 * (s10 + s11)).T, max_disparity=max_disparity,
                      check_rows=False)
-    dy = Disparity(np.ascontiguousarray(dy.disparity.T), np.ascontiguousarray(dy.confidence.T))
+    dy = Disparity(*(np.ascontiguousarray(v.T) for v in (dy.disparity, dy.confidence,
+                                                         dy.repeat_px)))
     # the two baselines of a 2 x 2 split are equal (the pupil's quarters sit at (+-c, +-c)),
     # so a defocused point has one disparity along both: where x and y disagree, one of them
     # matched texture at a wrong shift (simulated bands of 10-20 px: 59-99 % of a band known

@@ -208,6 +208,24 @@ def _check_shared_texture(confidence: np.ndarray) -> None:
                          "do not see one scene; nothing was written")
 
 
+def _refuse_repeats(repeat: np.ndarray, disparity: np.ndarray, max_disparity: float) -> None:
+    """Views refused for another reason that lose more pixels to a texture repeating within
+    the search (two shifts matching clearly: stripes, a fence) than they keep are refused as
+    such: vertical stripes of 7.3 px searched to 8 were called "no texture", the best case for
+    a horizontal baseline, which a search below half their period measures (1.000 px)."""
+    share = float(np.mean(repeat > 0))
+    if share < MIN_CLEAR or share <= float(np.isfinite(disparity).mean()):
+        return
+    apart = float(np.median(repeat[repeat > 0]))
+    raise InputError(f"depth: the views' texture repeats within --max-disparity "
+                     f"{max_disparity:g} ({100 * share:.0f} % of the pixels match clearly at "
+                     f"three shifts or more, {apart:g} px apart: a periodic texture such as "
+                     "stripes), "
+                     "so which shift is the parallax cannot be told: lower --max-disparity "
+                     f"below half the repeat ({apart / 2:g}) if the disparities are smaller; "
+                     "nothing was written")
+
+
 def _check_consistent(disparities: list[np.ndarray], confidence: np.ndarray) -> None:
     """Refuse views whose clear matches scatter: views of two different fields (a prism pair
     looking in different directions) still match clearly here and there by chance, 2-3 % of
@@ -219,7 +237,9 @@ def _check_consistent(disparities: list[np.ndarray], confidence: np.ndarray) -> 
         raise InputError(f"depth: the views' clear matches do not agree with each other (only "
                          f"{100 * share:.0f} % lie within 1 px of the clear matches around "
                          "them): views that do not see one scene, e.g. prism views looking "
-                         "in different directions; nothing was written")
+                         "in different directions, or a periodic texture (stripes) repeating "
+                         "within --max-disparity: lower it below half the repeat; nothing was "
+                         "written")
 
 
 def _views(input, data, meta, max_disparity):
@@ -232,9 +252,11 @@ def _views(input, data, meta, max_disparity):
             conf = np.minimum(dx.confidence, dy.confidence)
             pages, out = [dx.disparity, dy.disparity, conf], ["disparity_x", "disparity_y",
                                                               "confidence"]
+            repeat = np.maximum(dx.repeat_px, dy.repeat_px)
         elif all(n in have for n in DUAL):
             d = views.disparity_x(data[have["A"]], data[have["B"]], max_disparity=max_disparity)
             pages, out = [d.disparity, d.confidence], ["disparity", "confidence"]
+            repeat = d.repeat_px
         else:
             _refuse_colour(input, names)
             raise InputError(f"{input} holds views {', '.join(names)}; depth needs "
@@ -242,8 +264,13 @@ def _views(input, data, meta, max_disparity):
                              "lenslet frames with --grid")
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
-    _check_shared_texture(pages[-1])
-    _check_consistent(pages[:-1], pages[-1])
+    try:
+        _check_shared_texture(pages[-1])
+        _check_consistent(pages[:-1], pages[-1])
+        _check_known(pages[0], f"disparity within --max-disparity {max_disparity:g}")
+    except InputError:
+        _refuse_repeats(repeat, pages[0], max_disparity)
+        raise
     info = {"method": "shift of B against A along the baseline (+: B's content to the right)",
             "max_disparity": max_disparity, "normalisation": "each view / its Gaussian "
             f"low-pass (sigma {views.FLAT_SIGMA:g} px)", "window_px": views.WINDOW}
