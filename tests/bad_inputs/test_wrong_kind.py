@@ -298,8 +298,8 @@ def test_no_output_may_take_a_records_name(inputs, tmp_path):
     (["calibrate", "{i}/rt/grid.yaml", "-o", "{o}/g.yaml"], ("is a plenocli lens grid",
                                                              "calibrate's --start")),
     (["calibrate", "{i}/rt/calib.xml", "-o", "{o}/g.yaml"], ("is a Raytrix RayCalibData XML",)),
-    (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], ("is a JSON document",
-                                                        "not an image bias can take as input")),
+    (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], (
+        "is the ground truth `plenocli simulate` writes", "not an image bias can take as input")),
     (["unmix", "{i}/biased.tif", "--mixing", "{i}/rt/grid.yaml", "-o", "{o}/u.tif"],
      ("not an image unmix can take as mixing",)),
     (["decode", "{i}/rt/calib.xml", "-o", "{o}/d.tif"], ("RayCalibData XML",
