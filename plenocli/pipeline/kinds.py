@@ -44,7 +44,10 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
 # the command that writes an output recorded under another stage name
-COMMANDS = {"flat-gain": "flat --save-gain"}
+COMMANDS = {"flat-gain": "flat --save-gain", "unmix-noise-gain": "unmix --noise-map"}
+# the option that writes a stage's image where -o does not (crosstalk's -o is a JSON report;
+# develop's -o a photograph, refused past develop): its record names the stage only
+IMAGE_OPTION = {"crosstalk": "mixing_out", "develop": "linear"}
 # the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
 # output role); what it is, in words). A plenocli output of another role is refused here,
 # before any step runs; a foreign file is its reader's to check.
@@ -119,11 +122,10 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
                 raise InputError(_not_a_raw(path, made))
             if made[-1] not in accepted:
                 foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
-                what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
-                raise InputError(f"{path} is a `plenocli {COMMANDS.get(made[-1], made[-1])}` "
-                                 f"output{what}; {stage} "
-                                 f"takes as {_label(role)} the output of "
-                                 f"{', '.join(accepted)}{foreign}")
+                wrote = plan.wrote if plan is not None else _wrote(path, planned or {})
+                raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
+                                 f"{_label(role)} the output of "
+                                 f"{', '.join(map(_producer, accepted))}{foreign}")
             if made[-1] == "develop" and (plan.photograph if plan is not None
                                           else _photograph(path)):
                 raise InputError(_photograph_refused(path, stage, role,
@@ -166,7 +168,14 @@ def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str
         return ("", "preview")
     if made[-1] == "develop":
         return ("develop", "output" if _photograph(path) else "linear")
-    return RECORDED_AS.get(made[-1], (made[-1], "output"))
+    return RECORDED_AS.get(made[-1], (made[-1], IMAGE_OPTION.get(made[-1], "output")))
+
+
+def _producer(name: str) -> str:
+    """The command (and option) writing the images a record names ``name``."""
+    if name in IMAGE_OPTION:
+        return f"{name} --{_label(IMAGE_OPTION[name])}"
+    return COMMANDS.get(name, name)
 
 
 def _simulated_document(path: Path) -> tuple[str, str] | None:
@@ -320,7 +329,7 @@ def _not_a_raw(path: Path, made: list) -> str:
     takers = _takers(path, stage, made)
     where = (f"give it as it is to {', '.join(takers)}" if takers
              else "no stage reads it as an image; decode the capture it came from")
-    return (f"{path} is a `plenocli {COMMANDS.get(stage, stage)}` output, not a raw capture "
+    return (f"{path} is a `plenocli {_producer(stage)}` output, not a raw capture "
             "or sensor image "
             f"(decoding it again would drop its record and levels): {where}")
 
@@ -352,7 +361,8 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
             continue
         for role, accepted in roles.items():
             if stage in accepted:
-                takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
+                takers.append(name if role in ("input", "inputs")
+                              else f"{name} --{_label(role)}")
                 break
     kind = RECORDED_AS.get(stage, (stage, "output"))
     return takers + [f"{name} --{_label(role)}" for name, roles in SIDE_INPUTS.items()
