@@ -377,6 +377,26 @@ def test_a_vertical_pair_forced_side_by_side_is_told_its_layout():
         stitch(views, layout="1x2")
 
 
+def test_a_negated_view_or_a_pair_its_names_place_is_not_told_another_layout():
+    """audit 13 E1: views named L,R (placed side by side by their names) with R negated were
+    told to give --layout 2x1, which the names forbid. A view whose levels are mostly below
+    zero where the other's are above is named; a pair the names place that matches only the
+    other way is not told to change --layout."""
+    views, _, _ = make_rig(layout="2x1", view_shape=(300, 400), overlap=0.3, seed=5)
+    with pytest.raises(StitchError, match=r"do not register side by side, where their names "
+                                          r"L,R place them .*rule out"):
+        stitch(views, layout="1x2", named=["L", "R"])
+    flipped = np.stack([views[0], -views[1]])
+    for layout in ("1x2", "auto"):
+        with pytest.raises(StitchError, match=r"view 1's levels are mostly below zero "
+                                              r"\(median -.*check how view 1 was made"):
+            stitch(flipped, layout=layout, named=["L", "R"] if layout == "1x2" else None)
+    dark = np.stack([views[0], views[1]]) - np.float32(np.median(views[1]))  # above black
+    with pytest.raises(StitchError) as err:
+        stitch(dark, layout="1x2")
+    assert "below zero" not in str(err.value)
+
+
 def test_a_pair_not_found_within_the_users_overlap_is_told_the_overlap_found_without_it():
     """audit 9 E7: a wrong --overlap was "ambiguous overlap (a periodic scene?); give the
     expected overlap (--overlap)"; the search the user restricted is named, and what a search

@@ -44,15 +44,19 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
 MAPS = {"flat-gain": "a gain map, not an image",
         "unmix-noise-gain": "a noise-gain map, not views"}
 # the command that writes an output recorded under another stage name
-COMMANDS = {"flat-gain": "flat --save-gain"}
+COMMANDS = {"flat-gain": "flat --save-gain", "unmix-noise-gain": "unmix --noise-map"}
+# the option that writes a stage's image where -o does not (crosstalk's -o is a JSON report;
+# develop's -o a photograph, refused past develop): its record names the stage only
+IMAGE_OPTION = {"crosstalk": "mixing_out", "develop": "linear"}
 # the other input roles: stage -> role -> (the outputs that make such a file, as (stage,
 # output role); what it is, in words). A plenocli output of another role is refused here,
 # before any step runs; a foreign file is its reader's to check.
-GRIDS = (("calibrate", "output"), ("calibrate", "xml"))
+GRIDS = (("calibrate", "output"), ("calibrate", "xml"), ("simulate", "grid"),
+         ("simulate", "xml"))
 GRID = "a lens grid (the YAML or --xml of calibrate, or a Raytrix RayCalibData XML)"
 SIDE_INPUTS: dict[str, dict[str, tuple[tuple[tuple[str, str], ...], str]]] = {
-    "decode": {"calib": ((("calibrate", "xml"),), "a Raytrix RayCalibData XML (or the one "
-                                                 "calibrate --xml writes)")},
+    "decode": {"calib": ((("calibrate", "xml"), ("simulate", "xml")),
+                         "a Raytrix RayCalibData XML (or the one calibrate --xml writes)")},
     "flat": {"gain": ((("flat", "save_gain"),), "the gain map flat --save-gain writes")},
     "calibrate": {"start": (GRIDS, GRID), "compare": (GRIDS, GRID)},
     "refocus": {"grid": (GRIDS, GRID)},
@@ -118,11 +122,10 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
                 raise InputError(_not_a_raw(path, made))
             if made[-1] not in accepted:
                 foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
-                what = f" ({MAPS[made[-1]]})" if made[-1] in MAPS else ""
-                raise InputError(f"{path} is a `plenocli {COMMANDS.get(made[-1], made[-1])}` "
-                                 f"output{what}; {stage} "
-                                 f"takes as {_label(role)} the output of "
-                                 f"{', '.join(accepted)}{foreign}")
+                wrote = plan.wrote if plan is not None else _wrote(path, planned or {})
+                raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
+                                 f"{_label(role)} the output of "
+                                 f"{', '.join(map(_producer, accepted))}{foreign}")
             if made[-1] == "develop" and (plan.photograph if plan is not None
                                           else _photograph(path)):
                 raise InputError(_photograph_refused(path, stage, role,
@@ -160,17 +163,46 @@ def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str
         return plan.wrote if plan is not None else None
     made = made_by(path)
     if not made or made[-1] is None:
-        return None
+        return _simulated_document(path)
     if made[-1] == "preview":
         return ("", "preview")
     if made[-1] == "develop":
         return ("develop", "output" if _photograph(path) else "linear")
-    return RECORDED_AS.get(made[-1], (made[-1], "output"))
+    return RECORDED_AS.get(made[-1], (made[-1], IMAGE_OPTION.get(made[-1], "output")))
+
+
+def _producer(name: str) -> str:
+    """The command (and option) writing the images a record names ``name``."""
+    if name in IMAGE_OPTION:
+        return f"{name} --{_label(IMAGE_OPTION[name])}"
+    return COMMANDS.get(name, name)
+
+
+def _simulated_document(path: Path) -> tuple[str, str] | None:
+    """("simulate", "truth") for a simulate step's truth.json already written (its record is
+    its provenance); None for any other file (its reader checks it)."""
+    import json
+
+    if Path(path).suffix.lower() != ".json" or not Path(path).is_file():
+        return None
+    try:
+        with open(path, "rb") as f:
+            if f.read(1) != b"{" or Path(path).stat().st_size > 1 << 24:
+                return None
+            f.seek(0)
+            doc = json.load(f)
+    except (OSError, ValueError):
+        return None
+    record = doc.get("provenance") if isinstance(doc, dict) else None
+    return ("simulate", "truth") if (isinstance(record, dict)
+                                     and record.get("stage") == "simulate") else None
 
 
 def _output_name(wrote: tuple[str, str]) -> str:
     """How a message names what a stage wrote in one of its output roles."""
     stage, role = wrote
+    if stage == "simulate" and role in SIMULATED_ROLES:
+        return SIMULATED_ROLES[role]
     if role == "preview":
         return "a plenocli preview (display-stretched 8-bit levels)"
     if wrote == ("develop", "output"):
@@ -248,6 +280,8 @@ def _check_not_a_document(path: Path, stage: str, role: str) -> None:
     if b"\0" in head or not (suffix in DOCUMENT_SUFFIXES or text[:1] in (b"{", b"<")):
         return
     what = next((name for mark, name in DOCUMENTS if mark in head), None)
+    if what is None and _simulated_document(path):
+        what = SIMULATED_ROLES["truth"]
     if what is None:
         what = ("a JSON document (a report, transform or record)" if text[:1] in (b"{", b"[")
                 else "an XML document" if text[:1] == b"<" else "a text document")
@@ -295,7 +329,7 @@ def _not_a_raw(path: Path, made: list) -> str:
     takers = _takers(path, stage, made)
     where = (f"give it as it is to {', '.join(takers)}" if takers
              else "no stage reads it as an image; decode the capture it came from")
-    return (f"{path} is a `plenocli {COMMANDS.get(stage, stage)}` output, not a raw capture "
+    return (f"{path} is a `plenocli {_producer(stage)}` output, not a raw capture "
             "or sensor image "
             f"(decoding it again would drop its record and levels): {where}")
 
@@ -327,7 +361,8 @@ def _takers(path: Path, stage: str, made: list) -> list[str]:
             continue
         for role, accepted in roles.items():
             if stage in accepted:
-                takers.append(name if role in ("input", "inputs") else f"{name} --{role}")
+                takers.append(name if role in ("input", "inputs")
+                              else f"{name} --{_label(role)}")
                 break
     kind = RECORDED_AS.get(stage, (stage, "output"))
     return takers + [f"{name} --{_label(role)}" for name, roles in SIDE_INPUTS.items()
@@ -340,6 +375,16 @@ SIDE_OUTPUTS = {("flat", "save_gain"): ("flat-gain", "white"),
                 ("unmix", "noise_map"): ("unmix-noise-gain", "inputs")}
 RECORDED_AS = {name: wrote for wrote, (name, _) in SIDE_OUTPUTS.items()}
 RAW_SUFFIXES = (".dng", ".cr2")
+# what simulate writes into its folder beside its images, told by suffix (its kinds write one
+# file of each: truth.json, truth.npz, grid.yaml, grid_true.xml; raws): the role each plays
+SIMULATED = {".json": "truth", ".npz": "truth_arrays", ".yaml": "grid", ".xml": "xml",
+             **dict.fromkeys(RAW_SUFFIXES, "raw")}
+SIMULATED_ROLES = {
+    "truth": "the ground truth `plenocli simulate` writes (truth.json)",
+    "truth_arrays": "the ground-truth arrays `plenocli simulate` writes (truth.npz)",
+    "grid": "the true lens grid `plenocli simulate` writes (grid.yaml)",
+    "xml": "the true lens grid `plenocli simulate` writes as a Raytrix RayCalibData XML",
+    "raw": "a raw capture `plenocli simulate` writes"}
 
 
 def planned_outputs(stage: str, outputs: Mapping[str, Sequence[Path]],
@@ -388,8 +433,10 @@ def _planned(path: Path, planned: Mapping[Path, Planned | None]) -> Planned | No
     if folder is None:
         return None
     suffix = key.suffix.lower()
-    if suffix in RAW_SUFFIXES:
-        return Planned(raw=True)
+    if suffix in SIMULATED:  # only simulate writes a folder
+        role = SIMULATED[suffix]
+        return Planned(raw=role == "raw", document=None if role == "raw" else
+                       SIMULATED_ROLES[role], wrote=("simulate", role))
     if suffix in DOCUMENT_SUFFIXES:
         return Planned(document=f"a {suffix[1:].upper()} document (not an image)")
     # simulate writes plenocli TIFFs and plain sensor TIFFs (decode's), told apart only by

@@ -87,7 +87,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
            tolerance_px: float | None = None, out: Callable[..., Callable] | None = None,
-           claim: tuple[str, str] | None = None) -> tuple[np.ndarray, StitchReport]:
+           claim: tuple[str, str] | None = None, named: Sequence[str] | None = None
+           ) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -114,6 +115,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     claim : (what placed the views, what to do) as the refusal says them when the views do not
         line up at a seam (:mod:`plenocli.stitch.verify`, before the blend); by default the
         transform, the rig or the registration (:func:`plenocli.stitch.verify.default_claim`).
+    named : the views' names when they gave ``layout`` (L,R: 1x2): a pair that registers only
+        the other way is then not told to take another --layout, which the names rule out.
 
     Returns
     -------
@@ -133,7 +136,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     step("registering the views")
     transforms, layout, source, pair_info, closure = _transforms(
         luminance(stack), transform, layout, model, origins, search, view_shape=(rows, cols),
-        frame_shape=frame_shape, k1=distortion_k1, rig=rig)
+        frame_shape=frame_shape, k1=distortion_k1, rig=rig, named=named)
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
@@ -179,7 +182,8 @@ def _pair_report(pair_info: list[dict] | None, pairs, fits: list, areas: list
 
 def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
                 origins: np.ndarray | None, search: dict, *, view_shape: tuple[int, int],
-                frame_shape: tuple[int, int], k1: float, rig: PrismRig | None):
+                frame_shape: tuple[int, int], k1: float, rig: PrismRig | None,
+                named: Sequence[str] | None = None):
     """View -> view 0 transforms (with a rig: between the views' canvases of ``frame_shape``):
     registered (priors from the rig or the expected overlap), or a saved transform checked
     against the input views' ``view_shape``. Returns them, the layout, their source, the
@@ -200,7 +204,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     if layout == "auto" and n_views == 4:
         layout = "2x2"
     elif layout == "auto":
-        with hint(), _prism_hint(rig, luma):
+        with _sign_hint(luma), hint(), _prism_hint(rig, luma):
             layout = auto_layout(luma, limits, overlap, overlap_tolerance)
     tolerance = search["tolerance_px"]
     if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
@@ -219,7 +223,8 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               windows[(a, b)], across[(a, b)])
-    with hint(), _layout_hint(forced, luma, limits, overlap, overlap_tolerance), \
+    with _sign_hint(luma), hint(), \
+            _layout_hint(forced, luma, limits, overlap, overlap_tolerance, named), \
             _prism_hint(rig, luma):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
                                                   limits, windows)
@@ -261,7 +266,7 @@ def _overlap_hint(luma: np.ndarray | None, search: dict, layout: str):
 
 @contextlib.contextmanager
 def _layout_hint(forced: str | None, luma: np.ndarray, limits: dict, overlap: float | None,
-                 overlap_tolerance: float):
+                 overlap_tolerance: float, named: Sequence[str] | None = None):
     """Two views given a --layout they do not have: when the pair is not found that way but
     registers the other way, say so (not "no overlap", nor "a periodic scene?")."""
     try:
@@ -275,8 +280,31 @@ def _layout_hint(forced: str | None, luma: np.ndarray, limits: dict, overlap: fl
             found = None
         if found is None or found == forced:
             raise
+        if named:  # the names place them: the other way is a chance or ghost match
+            raise StitchError(f"views 0 and 1 do not register {WAYS[forced]}, where their "
+                              f"names {','.join(named)} place them (they match only "
+                              f"{WAYS[found]}, which the names rule out): check that both "
+                              "are views of one scene, in one unit") from None
         raise StitchError(f"views 0 and 1 show no overlap {WAYS[forced]} (--layout {forced}) "
                           f"but register {WAYS[found]}: give --layout {found}, or auto") from None
+
+
+@contextlib.contextmanager
+def _sign_hint(luma: np.ndarray):
+    """A view not found where another is seen, whose levels are mostly below zero where the
+    other's are above: a negated view (a sign lost in a subtraction) does not correlate with
+    the scene, whatever the layout or overlap the other hints would advise."""
+    try:
+        yield
+    except StitchError as err:
+        medians = [float(np.nanmedian(v)) if np.isfinite(v).any() else 0.0 for v in luma]
+        low, high = int(np.argmin(medians)), int(np.argmax(medians))
+        if not (medians[high] > 0 and medians[low] <= -0.5 * medians[high]):
+            raise
+        raise StitchError(f"view {low}'s levels are mostly below zero (median "
+                          f"{medians[low]:.3g}, view {high}'s {medians[high]:.3g}): light is "
+                          "not negative, and a negated view does not register with the "
+                          f"others; check how view {low} was made") from err
 
 
 @contextlib.contextmanager

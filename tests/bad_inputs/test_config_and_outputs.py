@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -349,7 +350,8 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
      ("step 'develop2'", "`plenocli develop` photograph", "/b.tif)")),
     ("  simulate:\n    kind: dualpixel\n    output: \"{out}/sim\"\n"
      "  decode2:\n    stage: decode\n    input: \"{out}/sim/truth.json\"\n"
-     "    output: \"{out}/t.tif\"\n", ("step 'decode2'", "JSON document", "not a raw")),
+     "    output: \"{out}/t.tif\"\n", ("step 'decode2'", "ground truth `plenocli simulate`",
+                                       "not a raw")),
     ("  simulate:\n    kind: dualpixel\n    output: \"{out}/sim\"\n"
      "  bias2:\n    stage: bias\n    input: \"{out}/sim/capture.dng\"\n"
      "    output: \"{out}/b2.tif\"\n", ("step 'bias2'", "raw capture", "decode it first")),
@@ -371,6 +373,18 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
      "  refocus:\n    input: \"{out}/f.tif\"\n    grid: \"{out}/d.tif\"\n"
      "    output: \"{out}/r.tif\"\n", ("step 'refocus'", "`plenocli depth` output",
                                          "takes as grid a lens grid")),
+    # audit 14 E1: simulate's documents in a side role passed (run ran every earlier step)
+    *[("  simulate:\n    kind: dualpixel\n    output: \"{out}/sim\"\n"
+       f"  last:\n    {step}: \"{{out}}/sim/{name}\"\n    output: \"{{out}}/x.{suffix}\"\n",
+       ("step 'last'", f"`plenocli simulate` writes ({name})", f"takes as {role}"))
+      for step, name, suffix, role in (
+          ("stage: calibrate\n    input: \"{out}/b.tif\"\n    start", "truth.json", "yaml",
+           "start"),
+          ("stage: stitch\n    inputs: \"{out}/b.tif\"\n    views: A,B\n    transform-in",
+           "truth.json", "tif", "transform-in"),
+          ("stage: depth\n    input: {i}/rt/frames.tif\n    grid: {i}/rt/grid.yaml\n    camera",
+           "truth.json", "tif", "camera"),
+          ("stage: flat\n    input: \"{out}/b.tif\"\n    gain", "truth.npz", "tif", "gain"))],
     *[("  develop:\n    input: \"{out}/b.tif\"\n    view: S\n    wb: 1,1,1\n    matrix: none\n"
        "    output: \"{out}/p.jpg\"\n    linear: \"{out}/l.tif\"\n  develop2:\n"
        f"    stage: develop\n    input: \"{{out}}/l.tif\"\n    {role}: {{i}}/biased.tif\n"
@@ -380,6 +394,7 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
 ], ids=["develop-of-depth", "bias-twice", "gain-as-views", "photograph-to-develop",
         "decode-of-truth-json", "bias-of-simulated-raw", "gain-of-flat-output",
         "transform-in-of-gain", "transform-in-of-report", "grid-of-depth-map",
+        "start-of-truth", "transform-in-of-truth", "camera-of-truth", "gain-of-truth-arrays",
         "linear-with-wb-from", "linear-with-recover-highlights"])
 def test_a_step_fed_an_output_its_stage_refuses_is_refused_before_any_step_runs(
         steps, words, inputs, tmp_path):
@@ -416,6 +431,33 @@ def test_side_files_wired_to_the_step_that_makes_them_would_run(inputs, tmp_path
         result = CliRunner().invoke(cli, ["run", str(config), mode])
         assert result.exit_code == 0, result.output
     assert not out.exists()
+
+
+def test_simulated_grids_wired_as_grids_would_run_and_its_truth_is_refused_from_the_shell(
+        inputs, tmp_path):
+    """audit 14 E1: simulate's documents are judged by kind, its true grids (grid.yaml,
+    grid_true.xml) still go where a grid goes; a truth.json already written is named in a side
+    role from the shell too (it was "the transform's view_to_reference is NoneType")."""
+    config = tmp_path / "c.yaml"
+    steps = {"hw": {"stage": "simulate", "kind": "hexgrid-white", "output": "hw"},
+             "ld": {"stage": "simulate", "kind": "lenslet-depth", "output": "ld"},
+             "decode": {"input": "hw/white.tif", "calib": "hw/grid_true.xml", "camera": "raytrix",
+                        "output": "wf.tif"},
+             "calibrate": {"input": "wf.tif", "start": "hw/grid_true.xml",
+                           "compare": "ld/grid.yaml", "output": "g.yaml"},
+             "refocus": {"input": "ld/frames.tif", "grid": "ld/grid.yaml", "s": 0.2, "g": 4,
+                         "output": "r.tif"}}
+    config.write_text(yaml.safe_dump({"steps": steps}, sort_keys=False))
+    for mode in ("--dry-run", "--print-make"):
+        result = CliRunner().invoke(cli, ["run", str(config), mode])
+        assert result.exit_code == 0, result.output
+    truth = tmp_path / "truth.json"
+    truth.write_text(json.dumps({"kind": "stereo-rig", "provenance": {"stage": "simulate"}}))
+    result = CliRunner().invoke(cli, ["stitch", str(inputs / "biased.tif"), "--views", "A,B",
+                                      "--transform-in", str(truth), "-o",
+                                      str(tmp_path / "p.tif")])
+    assert_one_line(result, 1, ("ground truth `plenocli simulate` writes",
+                                "takes as transform-in"))
 
 
 def test_a_plain_sensor_tiff_a_simulate_step_writes_is_decoded(tmp_path):

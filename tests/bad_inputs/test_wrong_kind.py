@@ -39,7 +39,17 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         (["flat", inputs / "biased.tif", "--white", made / "gain.tif", "-o", "{o}/x.tif"],
          "`plenocli flat --save-gain` output"),
         (["bias", inputs / "biased.tif", "-o", "{o}/x.tif"], "`plenocli bias` output"),
+        # audit 14 M1: each producer named by the command and option that writes it
+        (["unmix", inputs / "biased.tif", "--mixing", made / "gain.tif", "-o", "{o}/x.tif"],
+         "unmix takes as mixing the output of crosstalk --mixing-out, simulate"),
+        (["develop", made / "gain.tif", "-o", "{o}/x.tif"], "stitch, develop --linear (or"),
+        (["bias", made / "mixing.tif", "-o", "{o}/x.tif"],
+         "is a `plenocli crosstalk --mixing-out` output; bias takes"),
+        (["decode", made / "mixing.tif", "-o", "{o}/x.tif"],
+         "`plenocli crosstalk --mixing-out` output, not a raw capture"),
     ]
+    plenocli_tiff(made / "mixing.tif", np.ones((2, 8, 8), np.float32),
+                  provenance={"stage": "crosstalk"})
     for args, words in cases:
         result = run_bad(inputs, out, [str(a) for a in args])
         assert_one_line(result, 1, ())
@@ -179,7 +189,7 @@ def test_a_noise_gain_map_is_a_map_of_its_own_refused_as_views(inputs, infinite,
                  ["crosstalk", made / "noise.tif", "-o", "{o}/c.json"],
                  ["decode", made / "noise.tif", "-o", "{o}/x.tif"]):
         result = run_bad(inputs, out, [str(a) for a in args])
-        assert_one_line(result, 1, ("`plenocli unmix-noise-gain` output",))
+        assert_one_line(result, 1, ("`plenocli unmix --noise-map` output",))
 
 
 def test_sais_of_a_per_pixel_bayer_frame_are_read_by_every_stage(inputs, tmp_path):
@@ -298,8 +308,8 @@ def test_no_output_may_take_a_records_name(inputs, tmp_path):
     (["calibrate", "{i}/rt/grid.yaml", "-o", "{o}/g.yaml"], ("is a plenocli lens grid",
                                                              "calibrate's --start")),
     (["calibrate", "{i}/rt/calib.xml", "-o", "{o}/g.yaml"], ("is a Raytrix RayCalibData XML",)),
-    (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], ("is a JSON document",
-                                                        "not an image bias can take as input")),
+    (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], (
+        "is the ground truth `plenocli simulate` writes", "not an image bias can take as input")),
     (["unmix", "{i}/biased.tif", "--mixing", "{i}/rt/grid.yaml", "-o", "{o}/u.tif"],
      ("not an image unmix can take as mixing",)),
     (["decode", "{i}/rt/calib.xml", "-o", "{o}/d.tif"], ("RayCalibData XML",

@@ -137,6 +137,8 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
     stack, names, bayer, meta = load_views(inputs, views)
     placed = layout if transform_in or rig else _verified(layout_of_names, names, layout)
+    # views whose names place them are not told to take another --layout
+    named = None if transform_in or rig or layout_of_names(names, "auto") == "auto" else names
     held = _held_views(inputs) if transform_in else []
     transform = read_transform(transform_in, names, held=held) if transform_in else None
     named_after_files = names == [Path(p).stem for p in inputs]
@@ -152,7 +154,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               distortion_k1=distortion, transform=transform, blend=blend,
                               rig=prism_rig, overlap=overlap,
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate,
-                              match_gain=gains == "match",
+                              match_gain=gains == "match", named=named,
                               claim=_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
