@@ -481,3 +481,35 @@ def test_frames_that_share_bytes_are_refused(tmp_path):
         start = int(tif.pages[0].dataoffsets[0])
     _patch_page_tag(path, 0, 273, start + 4)  # frame 0 read 4 bytes late: into frame 1
     _assert_refused(path, tmp_path, "share the bytes")
+
+
+@pytest.mark.parametrize("top,left,at_origin", [(0, 0, "RGGB"), (1, 0, "GBRG"), (0, 1, "GRBG"),
+                                                (1, 1, "BGGR")])
+def test_cfa_pattern_and_black_repeat_start_at_the_active_area(top, left, at_origin, tmp_path):
+    """DNG gives CFAPattern and the BlackLevel repeat at the ActiveArea's top-left (as the DNG
+    SDK, LibRaw and rawspeed read them): an active area from an odd row or column shifts both
+    on the stored frame (audit 15: red and blue were swapped, exit 0)."""
+    path = tmp_path / "odd.dng"
+    black = (50713, "H", 2, (2, 2), True), (50714, "H", 4, (10, 20, 30, 40), True)
+    _write_dng(path, _frame(), extratags=[(50829, "I", 4, (top, left, ROWS, COLS), True), *black])
+    assert _decode(path, tmp_path / "frames.tif").exit_code == 0
+    meta = tiffio.read_meta(tmp_path / "frames.tif")
+    assert meta["cfa"] == at_origin
+    grid = np.array([[10, 20], [30, 40]])
+    assert meta["black_level"][0] == [grid[(r - top) % 2, (c - left) % 2]
+                                      for r in (0, 1) for c in (0, 1)]
+
+
+def test_written_dng_keeps_the_pattern_of_its_frames(tmp_path):
+    """plenocli's own DNGs (simulate) round-trip with an active area from an odd row and
+    column, and LibRaw reads the colour plenocli meant at the active area's corner."""
+    from plenocli.io.dng import write_dng
+    frame = _frame()
+    path = tmp_path / "sim.dng"
+    write_dng(path, frame, cfa="RGGB", black_levels=[0.0], white_level=16383,
+              active_area=[1, 1, ROWS, COLS - 2])
+    assert _decode(path, tmp_path / "frames.tif").exit_code == 0
+    assert tiffio.read_meta(tmp_path / "frames.tif")["cfa"] == "RGGB"
+    import rawpy
+    with rawpy.imread(str(path)) as raw:
+        assert "RGBG"[raw.raw_color(1, 1)] == "B"  # RGGB at (0, 0): blue at (1, 1)

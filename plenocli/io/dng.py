@@ -14,6 +14,7 @@ import numpy as np
 import tifffile
 
 from plenocli.io.atomic import atomic_path
+from plenocli.model.cfa import shift_pattern
 
 CFA_CODES = {"R": 0, "G": 1, "B": 2}
 
@@ -27,6 +28,9 @@ def write_dng(path: str | os.PathLike, frames: np.ndarray, *, cfa: str | None,
               color_matrix: Sequence[float] | None = None) -> None:
     """Write uint16 ``frames`` (frames, rows, cols) as a multi-frame DNG, atomically.
 
+    ``cfa`` is the Bayer pattern at the frames' pixel (0, 0); it is written, as DNG defines
+    CFAPattern, for the ActiveArea's top-left pixel (the two differ where the active area
+    starts on an odd row or column).
     ``black_levels`` is one level per frame (DN), written as the DNG BlackLevel tag; the real
     per-row bias lives in the pixel data and its masked areas. ``active_area`` and each masked
     area are ``[top, left, bottom, right]``. ``as_shot_neutral`` (camera R, G, B of white) and
@@ -40,6 +44,7 @@ def write_dng(path: str | os.PathLike, frames: np.ndarray, *, cfa: str | None,
         raise ValueError(f"DNG frames must be uint16, got {data.dtype}")
     names = list(frame_names) if frame_names else [f"frame{k}" for k in range(len(data))]
     masked_flat = [int(v) for area in masked_areas for v in area]
+    at_active = shift_pattern(cfa, int(active_area[0]), int(active_area[1]))
     with atomic_path(path) as tmp:
         with tifffile.TiffWriter(tmp) as tw:
             for k, frame in enumerate(data):
@@ -60,7 +65,7 @@ def write_dng(path: str | os.PathLike, frames: np.ndarray, *, cfa: str | None,
                              (50778, "H", 1, (21,), True)]  # CalibrationIlluminant1 = D65
                 if cfa:
                     tags += [(33421, "H", 2, (2, 2), True),  # CFARepeatPatternDim
-                             (33422, "B", 4, tuple(CFA_CODES[c] for c in cfa), True)]
+                             (33422, "B", 4, tuple(CFA_CODES[c] for c in at_active), True)]
                 tw.write(np.ascontiguousarray(frame), photometric=32803 if cfa else "minisblack",
                          compression=None, subfiletype=0, description=names[k], metadata=None,
                          extratags=tags)

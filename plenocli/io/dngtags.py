@@ -107,7 +107,9 @@ def check_layout(path, k: int, page) -> None:
 
 def cfa_pattern(path, k: int, page) -> str:
     """The 2 x 2 Bayer pattern of a CFA IFD (CFARepeatPatternDim, CFAPattern, CFAPlaneColor,
-    CFALayout), or an InputError naming the tag that is missing or wrong."""
+    CFALayout) as the file gives it: at the ActiveArea's top-left pixel, as DNG readers
+    (the DNG SDK, LibRaw, rawspeed) take it; or an InputError naming the tag that is missing
+    or wrong."""
     dims = numbers(path, k, page, CFA_REPEAT_DIM, "CFARepeatPatternDim")
     dims = (2, 2) if dims is None else tuple(int(v) for v in dims)
     if dims != (2, 2):
@@ -140,9 +142,11 @@ def cfa_pattern(path, k: int, page) -> str:
     return pattern
 
 
-def black_levels(path, k: int, page) -> list[float]:
-    """BlackLevel per 2 x 2 position (DN), repeated over BlackLevelRepeatDim (default 1 x 1,
-    level 0); per-row or per-column deltas are refused: plenocli would not apply them."""
+def black_levels(path, k: int, page, corner: tuple[int, int] = (0, 0)) -> list[float]:
+    """BlackLevel per 2 x 2 position of the stored image from its pixel (0, 0) (DN), repeated
+    over BlackLevelRepeatDim (default 1 x 1, level 0) from ``corner``, the ActiveArea's top-left
+    (where DNG puts the repeat's origin); per-row or per-column deltas are refused: plenocli
+    would not apply them."""
     dims = numbers(path, k, page, BLACK_REPEAT_DIM, "BlackLevelRepeatDim")
     dims = (1, 1) if dims is None else tuple(int(v) for v in dims)
     if len(dims) != 2 or not all(d in (1, 2) for d in dims):
@@ -163,7 +167,8 @@ def black_levels(path, k: int, page) -> list[float]:
                              "offsets, which plenocli does not apply; convert the DNG without "
                              "them (plenocli bias measures the black from the over-scan)")
     grid = values.reshape(dims)
-    return [float(grid[r % dims[0], c % dims[1]]) for r in (0, 1) for c in (0, 1)]
+    return [float(grid[(r - corner[0]) % dims[0], (c - corner[1]) % dims[1]])
+            for r in (0, 1) for c in (0, 1)]
 
 
 def white_level(path, k: int, page, dtype: np.dtype, linearized: bool) -> float:

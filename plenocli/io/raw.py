@@ -24,7 +24,7 @@ import tifffile
 from plenocli.errors import InputError, OptionError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.io.plainimage import read_plain_image
-from plenocli.model.cfa import check_pattern, is_bayer
+from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
 from plenocli.progress import log
 
 CAMERAS = ("auto", "canon-dp", "dng", "raytrix", "image")
@@ -307,9 +307,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             if any(f.shape != shape for f in frames):
                 raise InputError(f"{path}: raw IFDs of different sizes "
                                  f"{sorted({f.shape for f in frames})}; cannot stack them")
-            layouts = [((dngtags.cfa_pattern(path, k, page)
-                         if page.photometric == PHOTOMETRIC_CFA else None),
-                        dngtags.areas(path, k, page, shape)) for k, page in enumerate(raws)]
+            layouts = [_dng_layout(path, k, page, shape) for k, page in enumerate(raws)]
             if any(layout != layouts[0] for layout in layouts):
                 k = next(k for k, layout in enumerate(layouts) if layout != layouts[0])
                 raise InputError(f"{path}: raw IFD {k} has another CFA pattern or active/masked "
@@ -327,6 +325,16 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
     }
 
 
+def _dng_layout(path, k: int, page, shape: tuple[int, int]) -> tuple:
+    """(CFA pattern at the stored image's pixel (0, 0), (active area, masked areas)) of a raw
+    IFD. DNG gives CFAPattern at the ActiveArea's top-left, which need not be the stored
+    image's (0, 0): an odd top or left swaps the pattern's rows or columns."""
+    active, masked = dngtags.areas(path, k, page, shape)
+    cfa = (shift_pattern(dngtags.cfa_pattern(path, k, page), -active[0], -active[1])
+           if page.photometric == PHOTOMETRIC_CFA else None)
+    return cfa, (active, masked)
+
+
 def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     """One raw IFD: its header checked before any pixel is read (io/dngtags), its samples
     decoded and linearised, its black levels per 2 x 2 position and its white level."""
@@ -336,7 +344,8 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
                          "one-sample raw (CFA or mono) DNGs: convert the capture "
                          "to DNG without demosaicing")
     dngtags.check_layout(path, k, page)
-    black = dngtags.black_levels(path, k, page)
+    top, left = dngtags.areas(path, k, page, page.shape)[0][:2]
+    black = dngtags.black_levels(path, k, page, (top, left))
     tiffio.check_segments(path, page)
     try:
         data = page.asarray()
