@@ -118,11 +118,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     named : the views' names when they gave ``layout`` (L,R: 1x2): a pair that registers only
         the other way is then not told to take another --layout, which the names rule out.
 
-    Returns
-    -------
-    panorama : (rows', cols') float32, or (C, rows', cols') for colour views; NaN where no view
-        covers the panorama.
-    report : :class:`StitchReport`.
+    Returns (panorama, :class:`StitchReport`): the panorama (rows', cols') float32, or (C, rows',
+    cols') for colour views, NaN where no view covers it.
     """
     stack, colour = as_view_stack(views)
     n_views, n_chan, rows, cols = stack.shape
