@@ -385,6 +385,11 @@ CASES = [
     # audit 12 W: develop's linear TIFF is white-balanced already
     ("develop-linear-wb-from", ["develop", "{i}/linear.tif", "--wb-from", "{i}/biased.tif",
                                 "-o", "{o}/d.jpg"], 1, ("white-balanced already", "--wb R,G,B")),
+    # audit 15 E1: --recover-highlights on view A changed nothing and recorded rebuilt pixels
+    ("develop-recover-view-a", ["develop", "{i}/biased.tif", "--view", "A",
+                                "--recover-highlights", "{i}/biased_copy.tif", "-o",
+                                "{o}/d.jpg"], 2,
+     ("view A is what it reads", "--view S or B")),
     ("develop-linear-recover", ["develop", "{i}/linear.tif", "--recover-highlights",
                                 "{i}/biased.tif", "-o", "{o}/d.jpg"], 1,
      ("linear TIFF (R, G, B pages)", "when developing the views it came from")),

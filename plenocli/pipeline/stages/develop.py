@@ -11,7 +11,7 @@ from plenocli import dualpixel
 from plenocli.colour import balance
 from plenocli.colour import develop as dev
 from plenocli.colour.demosaic import DEFAULT_METHOD, METHODS
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import photo as export
 from plenocli.io import tiffio
 from plenocli.io.atomic import outputs_together, write_bytes
@@ -47,6 +47,10 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
                 "decode` it first, which names an RGB image's pages R, G, B")
         raise InputError(f"{input}: {err}{hint}") from err
     chosen = _choose(views, view, input)
+    if recover_highlights and chosen.name == "A":
+        raise OptionError("--recover-highlights rebuilds S and B from A where only S clipped; "
+                          "view A is what it reads and comes out unchanged: drop the option, "
+                          "or develop --view S or B")
     rebuilt = None
     if recover_highlights:
         data, rebuilt = _recover(data, names, cfa, recover_highlights, input, meta)
