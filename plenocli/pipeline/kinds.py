@@ -181,17 +181,16 @@ def _producer(name: str) -> str:
 def _simulated_document(path: Path) -> tuple[str, str] | None:
     """("simulate", "truth") for a simulate step's truth.json already written (its record is
     its provenance); None for any other file (its reader checks it)."""
-    import json
+    from plenocli.io.yamlfile import DocumentError, read_json
 
     if Path(path).suffix.lower() != ".json" or not Path(path).is_file():
         return None
     try:
         with open(path, "rb") as f:
-            if f.read(1) != b"{" or Path(path).stat().st_size > 1 << 24:
+            if f.read(1) != b"{":
                 return None
-            f.seek(0)
-            doc = json.load(f)
-    except (OSError, ValueError):
+        doc = read_json(path)  # at most its reader's size, like every document
+    except (OSError, DocumentError):
         return None
     record = doc.get("provenance") if isinstance(doc, dict) else None
     return ("simulate", "truth") if (isinstance(record, dict)
