@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from plenocli.model.numbers import decimal
 from plenocli.model.views import g_label
 
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
@@ -55,7 +56,7 @@ def _g_values(spec: str, text) -> list[float]:
     usage = (f"g must be a number, a list like 2,3,4 or a range like 2:6:0.5 "
              f"(start:stop:step, step > 0), got {text!r}")
     try:
-        parts = [float(p) for p in (spec.split(":") if ":" in spec else spec.split(","))]
+        parts = [decimal(p) for p in (spec.split(":") if ":" in spec else spec.split(","))]
     except ValueError as err:
         raise ValueError(usage) from err
     if ":" in spec:

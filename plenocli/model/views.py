@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from plenocli.model.numbers import is_count
+
 CHANNELS = ("R", "G", "B")
 SWEEP_TAG = "@g"
 
@@ -45,7 +47,7 @@ def name_problem(name: str) -> str | None:
         return f"{name!r} reads as colour page {split[1]} of a view {split[0]}"
     if SWEEP_TAG in name:
         return f"{name!r} holds {SWEEP_TAG!r}, the tag of a focal sweep's pages (left{SWEEP_TAG}4)"
-    if name.isdigit():
+    if is_count(name):
         return f"{name!r} reads as a page number"
     if not name.isprintable():  # a newline splits every one-line message naming the page
         return f"{name!r} holds a control character"
@@ -137,6 +139,6 @@ class ViewNames:
         """The page called ``name``, or numbered ``name`` (a page number); None if neither."""
         if name in self.pages:
             return self.pages.index(name)
-        if name.isdigit() and int(name) < len(self.pages):
+        if is_count(name) and int(name) < len(self.pages):
             return int(name)
         return None

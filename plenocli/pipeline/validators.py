@@ -12,6 +12,7 @@ import math
 import os
 from typing import Any
 
+from plenocli.model.numbers import decimal, is_count, whole
 from plenocli.model.views import name_problem
 
 TIFF = (".tif", ".tiff")
@@ -114,7 +115,7 @@ class Int(Validator):
             number = int(value)  # a plain int (a YAML number may print as its word, 010)
         else:
             try:
-                number = int(shell_text(value))
+                number = whole(shell_text(value))
             except ValueError:
                 raise ValueError(f"{shell_text(value)!r} is not a valid integer.") from None
         if (self.min is not None and number < self.min) or (
@@ -140,7 +141,7 @@ class FiniteFloat(Validator):
         if isinstance(value, bool):
             raise ValueError(f"{shell_text(value)!r} is not a number")
         try:
-            number = float(value)
+            number = float(value) if isinstance(value, (int, float)) else decimal(value)
         except (TypeError, ValueError):
             raise ValueError(f"{shell_text(value)!r} is not a number") from None
         if not math.isfinite(number):
@@ -188,7 +189,7 @@ class RowsCols(Validator):
     def convert(self, value: Any) -> str:
         text = shell_text(value).strip().lower()
         rows, sep, cols = text.partition("x")
-        if not (sep and rows.isdigit() and cols.isdigit() and int(rows) > 0 and int(cols) > 0):
+        if not (sep and is_count(rows) and is_count(cols) and int(rows) > 0 and int(cols) > 0):
             raise ValueError(f"{shell_text(value)!r} is not ROWSxCOLS (e.g. 2000x2000)")
         return f"{int(rows)}x{int(cols)}"
 
@@ -200,7 +201,7 @@ class SensorSize(Validator):
 
     def convert(self, value: Any) -> str:
         text = shell_text(value).strip()
-        if text.isdigit() and int(text) > 0:
+        if is_count(text) and int(text) > 0:
             return str(int(text))
         try:
             return RowsCols().convert(text)

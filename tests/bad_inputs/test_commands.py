@@ -23,6 +23,17 @@ CASES = [
     ("depth-g-galilean-past-measurable", ["depth", "{i}/rt/frames.tif", "--grid",
                                           "{i}/rt/grid.yaml", "--g", "-1e6:-2", "-o",
                                           "{o}/d.tif"], 1, ("--g", "<= g < -1")),
+    # audit 15 E2: Python's int()/float() read '4_0' as 40 and digits of any script as digits
+    *[(f"number-word-{k}", [*argv, "-o", f"{{o}}/{out}"], 2, words) for k, (argv, out, words) in
+      enumerate([(["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "4_0"],
+                  "r.tif", ("'--g'",)),
+                 (["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g",
+                   "2:\u0665:1"], "r.tif", ("'--g'",)),
+                 (["bias", "{i}/frames.tif", "--smooth", "1_0"], "b.tif", ("'--smooth'",)),
+                 (["develop", "{i}/biased.tif", "--view", "S", "--exposure", "\u0663"], "d.jpg",
+                  ("'--exposure'",)),
+                 (["develop", "{i}/biased.tif", "--view", "S", "--wb", "1_0,1,1"], "d.jpg",
+                  ("'--wb'",))])],
     ("refocus-g0", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g", "0",
                     "-o", "{o}/r.tif"], 2, ("non-zero",)),
     ("refocus-g-neg", ["refocus", "{i}/rt/frames.tif", "--grid", "{i}/rt/grid.yaml", "--g=-1",

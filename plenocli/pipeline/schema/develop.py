@@ -5,6 +5,7 @@ from collections.abc import Collection
 
 from plenocli.errors import OptionError
 from plenocli.model.colour import DEFAULT_METHOD, MAX_GAIN_RATIO, METHODS, OUTPUT_SPACES
+from plenocli.model.numbers import decimal
 from plenocli.pipeline.params import PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import (
     TIFF,
@@ -27,7 +28,7 @@ class WhiteBalance(Text):
         if text == "as-shot":
             return text
         try:
-            gains = [float(p) for p in text.split(",")]
+            gains = [decimal(p) for p in text.split(",")]
         except ValueError:
             gains = []
         if len(gains) != 3 or not all(0 < g < float("inf") for g in gains):

@@ -17,6 +17,7 @@ from plenocli.io.mixingfile import write_mixing
 from plenocli.io.preview import write_heat_map
 from plenocli.io.views import check_black_subtracted, read_colour_views, read_masked_whites
 from plenocli.model.focus import check_mask_width
+from plenocli.model.numbers import decimal
 from plenocli.model.provenance import json_safe, processing_of, stage_record
 from plenocli.model.views import ViewNames, pupil_views, view_of
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
@@ -130,7 +131,7 @@ def parse_mask_widths(text: str) -> list[float]:
     the usage otherwise."""
     usage = f"expected comma-separated widths >= 0 px, each once (e.g. 0,1,2,3), got {text!r}"
     try:
-        widths = [float(w) for w in str(text).split(",")]
+        widths = [decimal(w) for w in str(text).split(",")]
     except ValueError as err:
         raise ValueError(usage) from err
     if not all(math.isfinite(w) and w >= 0 for w in widths) or len(set(widths)) < len(widths):

@@ -11,6 +11,7 @@ from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_depth_png
+from plenocli.model.numbers import decimal
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames, split_colour_page, view_of
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
@@ -26,7 +27,7 @@ MIN_CONSISTENT = 0.6  # share of those clear matches that must agree with the on
 def parse_range(text: str) -> tuple[float, float]:
     """MIN:MAX -> (min, max), ValueError with the usage otherwise."""
     try:
-        lo, hi = (float(v) for v in str(text).split(":"))
+        lo, hi = (decimal(v) for v in str(text).split(":"))
     except ValueError as err:
         raise ValueError(f"g range must be MIN:MAX (e.g. 2:8, Galilean -8:-2), got {text!r}") \
             from err
