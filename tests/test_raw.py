@@ -47,8 +47,9 @@ def test_metadata_carries_geometry_cfa_and_levels(capture):
     assert meta["black_level"][1] == [2036.0] * 4
 
 
-def test_canon_path_refuses_a_raw_whose_frames_are_the_same(monkeypatch, tmp_path):
-    """LibRaw may return frame 0 for shot_select=1: decode must notice, not trust it."""
+def _fake_cr2(monkeypatch, tmp_path, flip: int = 0):
+    """A CR2 path whose LibRaw reading is faked: the same frame for shot 0 and 1, LibRaw's
+    image flip ``flip``."""
     data = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96)
 
     class FakeRaw:
@@ -57,7 +58,8 @@ def test_canon_path_refuses_a_raw_whose_frames_are_the_same(monkeypatch, tmp_pat
         color_desc = b"RGBG"
         black_level_per_channel = [512, 512, 512, 512]
         white_level = 15000
-        sizes = type("S", (), {"top_margin": 8, "left_margin": 32, "height": 56, "width": 64})
+        sizes = type("S", (), {"top_margin": 8, "left_margin": 32, "height": 56, "width": 64,
+                               "flip": flip})
 
         def __enter__(self):
             return self
@@ -68,6 +70,24 @@ def test_canon_path_refuses_a_raw_whose_frames_are_the_same(monkeypatch, tmp_pat
     monkeypatch.setattr(rawpy, "imread", lambda path, shot_select=0: FakeRaw())
     path = tmp_path / "IMG.CR2"
     path.write_bytes(b"II*\x00\x10\x00\x00\x00CR\x02\x00" + bytes(100))
+    return path
+
+
+@pytest.mark.parametrize("flip,orientation", [(0, 1), (3, 3), (5, 8), (6, 6), (1, 2), (4, 5)])
+def test_canon_orientation_from_libraw_flip(monkeypatch, tmp_path, flip, orientation):
+    """A CR2's orientation is LibRaw's sizes.flip as the EXIF value (audit 15 W3: dropped)."""
+    _, meta = rawio.decode(_fake_cr2(monkeypatch, tmp_path, flip))
+    assert meta["orientation"] == orientation
+
+
+def test_canon_flip_libraw_does_not_define_is_refused(monkeypatch, tmp_path):
+    with pytest.raises(InputError, match="flip 9 .*tag 274"):
+        rawio.decode(_fake_cr2(monkeypatch, tmp_path, 9))
+
+
+def test_canon_path_refuses_a_raw_whose_frames_are_the_same(monkeypatch, tmp_path):
+    """LibRaw may return frame 0 for shot_select=1: decode must notice, not trust it."""
+    path = _fake_cr2(monkeypatch, tmp_path)
     with pytest.raises(InputError, match="same frame for frame 0 and frame 1"):
         rawio.decode(path, camera="canon-dp")
     frames, meta = rawio.decode(path)  # auto: one frame, honestly reported

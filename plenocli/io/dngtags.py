@@ -12,6 +12,7 @@ import numpy as np
 
 from plenocli.errors import InputError
 from plenocli.io.tiffio import rects_overlap
+from plenocli.model import orientation as turns
 from plenocli.model.cfa import is_bayer
 
 CFA_REPEAT_DIM, CFA_PATTERN, CFA_PLANE_COLOR, CFA_LAYOUT = 33421, 33422, 50710, 50711
@@ -90,6 +91,22 @@ def raw_pages(path, pages: list) -> list:
                              f"{start} (a wrong offset or byte count); the DNG is damaged: "
                              "copy or convert it again")
     return raws
+
+
+def orientation(path, main_page, raw_page) -> int:
+    """The DNG's Orientation (tag 274): IFD 0's, where DNG puts it (the raw IFD's when IFD 0
+    has none); 1 (as stored) when neither has one. A value outside 1-8 is damage: guessed, the
+    photograph would be turned or mirrored wrongly."""
+    tag = _tag(main_page, turns.TAG)
+    tag = _tag(raw_page, turns.TAG) if tag is None else tag
+    if tag is None:
+        return 1
+    value = tag.value[0] if isinstance(tag.value, tuple) and len(tag.value) == 1 else tag.value
+    try:
+        return turns.check(value)
+    except ValueError as err:
+        raise InputError(f"{path}: {err} (1 to 8 say how the image stands); the DNG is "
+                         "damaged: copy or convert it again") from err
 
 
 def check_layout(path, k: int, page) -> None:

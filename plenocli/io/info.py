@@ -20,12 +20,13 @@ from plenocli.io.photo import photo_record
 from plenocli.io.preview import is_preview
 from plenocli.io.tiffio import open_tiff, read_meta
 from plenocli.io.yamlfile import DocumentError, read_json, read_yaml
+from plenocli.model import orientation
 from plenocli.model.lensgrid import LensGrid
 from plenocli.model.provenance import json_safe
 
 PHOTO_SUFFIXES = (".jpg", ".jpeg", ".png")
 IMAGE_KEYS = ("views", "cfa", "origin", "black_level", "white_level", "active_area",
-              "masked_areas")
+              "masked_areas", "orientation")
 TIFF_MODEL_TAGS = (50708, 272)  # DNG UniqueCameraModel, TIFF Model
 
 
@@ -249,6 +250,8 @@ def _image_fields(info: dict) -> list[tuple[str, object]]:
                        "(views x rows x cols)"),
               ("camera", info.get("camera_model"))]
     fields += [(key.replace("_", " "), info.get(key)) for key in IMAGE_KEYS]
+    if info.get("orientation") is not None:  # what the number means (checked where read)
+        fields[-1] = ("orientation", orientation.said(info["orientation"]))
     if info["kind"] == "image":
         fields.append(("values", f"min {info['min']:g}, max {info['max']:g}"))
     fields += [(f"view {s['view']}", f"active area min {s['min']}, max {s['max']}, "

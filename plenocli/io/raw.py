@@ -24,6 +24,7 @@ import tifffile
 from plenocli.errors import InputError, OptionError, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.io.plainimage import read_plain_image
+from plenocli.model import orientation as turns
 from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
 from plenocli.progress import log
 
@@ -74,7 +75,8 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         The raw data as stored (uint16 for raws), margins included.
     meta : dict
         ``views``, ``cfa``, ``origin``, ``black_level`` (per view, per 2 x 2 position, DN),
-        ``white_level`` (per view, DN), ``active_area``, ``masked_areas``, ``camera``.
+        ``white_level`` (per view, DN), ``active_area``, ``masked_areas``, ``camera``; for a
+        raw, ``orientation`` (1-8, how the stored frames stand upright; they stay as stored).
     """
     if camera not in CAMERAS:
         raise InputError(f"unknown camera {camera!r}; choose one of {', '.join(CAMERAS)}")
@@ -232,7 +234,7 @@ def _decode_canon(path, *, require_dual: bool) -> tuple[np.ndarray, dict]:
                 frames.append(raw.raw_image.copy())  # only valid while the file is open
                 blacks.append(_black_by_position(raw))
                 if shot == 0:
-                    meta = _rawpy_meta(raw)
+                    meta = _rawpy_meta(raw, path)
         except (rawpy.LibRawError, OSError, ValueError) as err:
             if shot == 0:
                 raise InputError(f"{path}: LibRaw cannot read this raw ({err}); "
@@ -257,7 +259,7 @@ def _black_by_position(raw) -> list[float]:
     return [float(per_channel[int(pattern[k // 2][k % 2])]) for k in range(4)]
 
 
-def _rawpy_meta(raw) -> dict:
+def _rawpy_meta(raw, path) -> dict:
     sizes = raw.sizes
     desc = raw.color_desc.decode("ascii")
     pattern = raw.raw_pattern
@@ -276,7 +278,17 @@ def _rawpy_meta(raw) -> dict:
         "active_area": [top, left, bottom, right],
         "masked_areas": masked,
         "colour": rawmeta.rawpy_colour(raw, desc),
+        "orientation": _libraw_orientation(raw, path),
     }
+
+
+def _libraw_orientation(raw, path) -> int:
+    """The raw's Orientation (1-8) from LibRaw's ``sizes.flip``."""
+    flip = int(raw.sizes.flip)
+    if flip not in turns.FROM_LIBRAW_FLIP:
+        raise InputError(f"{path}: LibRaw reads an image flip {flip} (the raw's Orientation, tag "
+                         f"{turns.TAG}), not one of 0-7; the raw is damaged")
+    return turns.FROM_LIBRAW_FLIP[flip]
 
 
 def _raw_pages(tif: tifffile.TiffFile):
@@ -315,6 +327,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
                                  "stacks frames of one sensor layout")
             cfa, (active, masked) = layouts[0]
             colour = rawmeta.dng_colour(raws[0], tif.pages[0])
+            turned = dngtags.orientation(path, tif.pages[0], raws[0])
     except tiffio.READ_ERRORS as err:
         raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
     if len(set(names)) != len(names):
@@ -322,6 +335,7 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
     return np.stack(frames), {
         "cfa": cfa, "origin": [0, 0], "black_level": blacks, "white_level": whites,
         "active_area": active, "masked_areas": masked, "views": names, "colour": colour,
+        "orientation": turned,
     }
 
 

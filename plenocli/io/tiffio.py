@@ -45,6 +45,7 @@ from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used 
     check_segments,
 )
 from plenocli.io.yamlfile import DocumentError, load_json
+from plenocli.model import orientation
 from plenocli.model.cfa import is_bayer
 from plenocli.model.provenance import json_safe
 from plenocli.progress import log
@@ -321,6 +322,13 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
             raise InputError(f"{path}: masked area {area} overlaps active_area {active} (the "
                              "over-scan lies outside the image area); the file was edited or "
                              "damaged: decode the capture again")
+    turned = meta.get("orientation")
+    if turned is not None:
+        try:
+            orientation.check(turned)
+        except ValueError as err:
+            raise InputError(f"{path}: {err} in its metadata; the file was edited or damaged: "
+                             "decode the capture again") from err
     origin = meta.get("origin")
     if origin is not None and not (isinstance(origin, list) and len(origin) == 2
                                    and all(isinstance(v, int) and not isinstance(v, bool)

@@ -17,6 +17,7 @@ from plenocli.io import tiffio
 from plenocli.io.atomic import outputs_together, write_bytes
 from plenocli.io.framing import active_area
 from plenocli.model import colour as colour_matrix
+from plenocli.model import orientation
 from plenocli.model.provenance import json_safe, stage_record
 from plenocli.model.views import ViewNames
 from plenocli.progress import log, shown
@@ -66,27 +67,35 @@ def run(input: str, output: str, *, view: str | None = None, method: str = DEFAU
         encoded[blown] = 1.0
     except ValueError as err:
         raise InputError(f"{input}: view {chosen.name}: {err}") from err
+    # the photograph stands as the camera was held (turned where it is written, io/photo);
+    # the --linear TIFF stays in sensor order and carries the value (checked where read)
+    turned = meta.get("orientation")
     params = dict(view=chosen.name, method=method if chosen.cfa else None, wb=wb,
                   wb_from=wb_from, matrix=matrix, space=space, exposure=exposure,
                   quality=quality, recover_highlights=recover_highlights,
                   rebuilt_pixels=None if rebuilt is None else int(rebuilt.sum()),
                   gains=gains.tolist(), scale=scale,
-                  camera_to_srgb=None if to_srgb is None else to_srgb.tolist())
+                  camera_to_srgb=None if to_srgb is None else to_srgb.tolist(),
+                  orientation=turned,
+                  turned=None if turned is None else orientation.TURNS[turned])
     record = stage_record("develop", params, {"input": input, "wb_from": wb_from,
                                               "recover_highlights": recover_highlights})
     description = json_safe({"plenocli": record, "history": tiffio.history_of(meta)})
     try:
         body = export.image_bytes(encoded, fmt, space=space, exif=meta.get("exif"),
-                                  description=description, quality=quality)
-        preview_body = _preview_bytes(encoded, space, description) if preview else None
+                                  description=description, quality=quality,
+                                  orientation=turned or 1)
+        preview_body = (_preview_bytes(encoded, space, description, turned or 1)
+                        if preview else None)
     except ValueError as err:
         raise ConfigError(str(err)) from err
     protect = (input,) + tuple(p for p in (wb_from, recover_highlights) if p)
     if linear and rebuilt is not None:  # the mask plane: 1 where S (and B) were rebuilt
         scene = np.concatenate([scene, rebuilt[..., np.newaxis].astype(np.float32)], axis=-1)
     _write_together(output, body, linear, scene, meta, record, preview, preview_body, protect)
-    log.info("develop: %s view %s -> %s (%s, %s, gains %s)", shown(input), chosen.name,
-             shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains))
+    log.info("develop: %s view %s -> %s (%s, %s, gains %s%s)", shown(input), chosen.name,
+             shown(output), fmt, space, ",".join(f"{g:.3f}" for g in gains),
+             f", {orientation.TURNS[turned]}" if turned not in (None, 1) else "")
 
 
 def _read(path: str) -> tuple[np.ndarray, dict, str | None, list[str]]:
@@ -226,13 +235,15 @@ def _camera_matrix(choice: str, meta: dict, path: str) -> np.ndarray | None:
         raise InputError(f"{path}: {err}") from err
 
 
-def _preview_bytes(encoded: np.ndarray, space: str, description: dict) -> bytes:
+def _preview_bytes(encoded: np.ndarray, space: str, description: dict,
+                   turned: int) -> bytes:
     scale = max(encoded.shape[:2]) / PREVIEW_SIDE
     small = encoded
     if scale > 1:
         size = (round(encoded.shape[1] / scale), round(encoded.shape[0] / scale))
         small = cv2.resize(encoded.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    return export.image_bytes(small, "png", space=space, exif=None, description=description)
+    return export.image_bytes(small, "png", space=space, exif=None, description=description,
+                              orientation=turned)
 
 
 def _write_together(output, body, linear, scene, meta, record, preview, preview_body,

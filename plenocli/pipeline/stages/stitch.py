@@ -230,7 +230,8 @@ def _claim(transform_in: str | None, rig: str | None, distortion: float = 0.0
 # what a panorama keeps of its first input's metadata: what describes the camera, not the
 # input's pixels (an `sai` block's micro-lens layout and crop origin, bias's row levels, the
 # input's clipped-pixel count, a flat's masked gain: none of them is the panorama's)
-_CAMERA_KEYS = ("plenocli_format", "colour", "camera", "exif", "provenance", "history")
+_CAMERA_KEYS = ("plenocli_format", "colour", "camera", "exif", "orientation", "provenance",
+                "history")
 
 
 def _of_the_camera(meta: dict) -> dict:
