@@ -428,6 +428,23 @@ def refocus(frame: np.ndarray, grid: LensGrid, *, s: float = 0.2, g: float = 4.0
     return image, weights
 
 
+def unjudged(g: float, pitch_px: float, *, mosaic: bool = False) -> str | None:
+    """Why :func:`sharpness` cannot judge the focus of a plane refocused at ``g`` from
+    micro-images of ``pitch_px``, or None. A channel sampled every ``step`` sensor pixels (1;
+    2 for a Bayer ``mosaic``'s colours) is magnified to samples s |g| step apart: from
+    |g| >= pitch / step on they are at least the lens period s * pitch apart, which the score
+    smooths away, so nothing of the plane is left at its scale, only the moire of unrelated
+    micro-images' samples, which scores high (raytrix-scene, g_true 4: 0.032 there, 0.53 at
+    g = 44; the rise starts near that bound for pitches of 10 to 30 px, Bayer too, while true
+    planes up to 0.9 of it peak where they lie)."""
+    step = 2 if mosaic else 1
+    if abs(g) * step >= pitch_px:
+        return (f"|g| >= the lens pitch {pitch_px:.3g} px" if step == 1 else
+                f"|g| >= {pitch_px / step:.3g}, the lens pitch over the {step} px step of a "
+                "CFA colour")
+    return None
+
+
 def sharpness(image: np.ndarray, *, lens_period_px: float | None = None) -> float:
     """Focus score of a refocused image: normalised Laplacian energy below the lens frequency.
 
@@ -442,23 +459,31 @@ def sharpness(image: np.ndarray, *, lens_period_px: float | None = None) -> floa
     over covered pixels (5-point Laplacian, only where all five are covered). Dividing by the
     variance makes the score independent of brightness and contrast, so scores of one focal
     sweep compare planes by their share of fine (but lens-resolved) detail: the sharpest plane
-    has the highest score. Returns NaN when fewer than 16 pixels are usable.
+    has the highest score, among planes it can judge (:func:`unjudged`). Returns NaN when
+    fewer than 16 pixels are usable.
     """
     from scipy import ndimage
 
     img = np.asarray(image, float)
-    if img.ndim == 3:
-        img = img.mean(axis=0)
-    if img.ndim != 2:
+    if img.ndim not in (2, 3):
         raise ValueError(f"image must be 2-D or 3-D, got shape {img.shape}")
+    planes = img.reshape(-1, *img.shape[-2:])
     if lens_period_px is not None:
         if not (np.isfinite(lens_period_px) and lens_period_px > 0):
             raise ValueError(f"lens_period_px must be positive, got {lens_period_px}")
-        covered = np.isfinite(img)
+        # each channel smoothed over its own covered pixels, kept where it has half its usual
+        # cover: a Bayer plane's R and B can be holed on alternate rows and columns (g = 5 at
+        # pitch 20.2: 49 % covered), which left their mean all NaN and the plane unscored
         sigma = lens_period_px / 2.0
-        num = ndimage.gaussian_filter(np.where(covered, img, 0.0), sigma)
-        den = ndimage.gaussian_filter(covered.astype(float), sigma)
-        img = np.where(covered & (den > 0.5), num / np.maximum(den, 1e-12), np.nan)
+        covered = np.isfinite(planes)
+        num = ndimage.gaussian_filter(np.where(covered, planes, 0.0), (0, sigma, sigma))
+        den = ndimage.gaussian_filter(covered.astype(float), (0, sigma, sigma))
+        typical = np.array([np.median(d[c]) if c.any() else 1.0
+                            for d, c in zip(den, covered, strict=True)])
+        planes = np.where(den > 0.5 * typical[:, None, None], num / np.maximum(den, 1e-12),
+                          np.nan)
+        planes[:, ~covered.any(axis=0)] = np.nan
+    img = planes.mean(axis=0)
     c = img[1:-1, 1:-1]
     lap = img[:-2, 1:-1] + img[2:, 1:-1] + img[1:-1, :-2] + img[1:-1, 2:] - 4.0 * c
     ok = np.isfinite(lap)

@@ -16,6 +16,7 @@ from plenocli.refocus import (
     refocus,
     sharpness,
     splat_sums,
+    unjudged,
 )
 from plenocli.synth.focused import raytrix_scene, texture_at
 
@@ -261,6 +262,23 @@ def test_sharpness_ignores_the_lens_pattern_and_prefers_detail():
     assert (sharpness(blurred + lens * blurred.std(), lens_period_px=period)
             < sharpness(detail, lens_period_px=period))
     assert sharpness(blurred + lens) > sharpness(blurred)  # an unsmoothed Laplacian is fooled
+
+
+def test_planes_at_g_beyond_the_pitch_are_not_judged():
+    """A channel's samples s |g| step apart reach the lens period s * pitch at |g| = pitch /
+    step (step 2 for a Bayer colour): the score has nothing of the plane to judge there."""
+    assert unjudged(20.1, 20.2) is None and unjudged(-20.1, 20.2) is None
+    assert "lens pitch 20.2 px" in unjudged(20.2, 20.2) and unjudged(-44, 20.2)
+    assert unjudged(10.0, 20.2, mosaic=True) is None
+    assert "10.1, the lens pitch over the 2 px step" in unjudged(10.1, 20.2, mosaic=True)
+
+
+def test_sharpness_smooths_each_channel_on_its_own_cover():
+    rng = np.random.default_rng(3)
+    image = np.repeat(rng.random((1, 60, 80)), 3, axis=0)
+    image[0, ::2], image[2, :, ::2] = np.nan, np.nan  # R, B holed on alternate rows / columns
+    assert np.isfinite(sharpness(image, lens_period_px=4.04))
+    assert np.isnan(sharpness(np.full((60, 80), np.nan), lens_period_px=4.04))
 
 
 @pytest.mark.parametrize("text,words", [

@@ -60,6 +60,52 @@ def test_focal_sweep_finds_the_true_g(scene, tmp_path):
     assert any("g = 4  sharpness" in m for m in said)
 
 
+def test_a_sweep_past_the_pitch_names_no_plane_it_cannot_judge(scene, tmp_path):
+    """audit 15 W2: at g 30 (pitch 20.2) the score rated the splatting's moire 0.46 against
+    the true plane's 0.025, and the sweep named g = 30 the sharpest, exit 0."""
+    folder, truth = scene
+    out = tmp_path / "wide.tif"
+    with plenocli_messages(logging.INFO) as said:
+        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                        "--g", "4,30,44", "-o", out)
+    assert result.exit_code == 0, result.output
+    sharp = tiffio.read_meta(out)["sharpness"]
+    assert sharp["best_g"] == pytest.approx(truth["g_true"])
+    assert [sc["sharpness"] is None for sc in sharp["scores"]] == [False, True, True]
+    assert "lens pitch 20.2 px" in sharp["scores"][1]["not_judged"]
+    assert any("2 plane(s) of the sweep not judged: g = 30, 44" in m for m in said)
+    assert any("sharpest g = 4" in m for m in said)
+
+
+def test_a_sweep_wholly_past_the_pitch_names_none(scene, tmp_path):
+    folder, _ = scene
+    out, png = tmp_path / "far.tif", tmp_path / "far.png"
+    with plenocli_messages(logging.INFO) as said:
+        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                        "--g", "30,44", "-o", out, "--preview", png)
+    assert result.exit_code == 0, result.output
+    assert tiffio.read_meta(out)["sharpness"]["best_g"] is None
+    assert not any("sharpest g =" in m for m in said)
+    assert any("no sharpest g is named" in m for m in said)
+    assert any("preview shows g = 30 (no plane judged)" in m for m in said)
+
+
+def test_bayer_sweep_judges_below_half_the_pitch(tmp_path):
+    """A CFA colour is sampled every 2 px: its bound is pitch / 2. R and B of a plane can be
+    holed on alternate rows (g = 5): each colour is smoothed on its own cover, so it is
+    scored (it was NaN: their mean held no pixel)."""
+    simulate("raytrix-scene", tmp_path, seed=5, rows=240, cols=320, cfa="RGGB")
+    out = tmp_path / "sweep.tif"
+    result = invoke("refocus", tmp_path / "frames.tif", "--grid", tmp_path / "grid.yaml",
+                    "--g", "4,5,10,13", "-o", out)
+    assert result.exit_code == 0, result.output
+    sharp = tiffio.read_meta(out)["sharpness"]
+    scores = [sc["sharpness"] for sc in sharp["scores"]]
+    assert all(np.isfinite(scores[:3])) and scores[3] is None
+    assert "10.1, the lens pitch over the 2 px step" in sharp["scores"][3]["not_judged"]
+    assert sharp["best_g"] == 4
+
+
 def test_bayer_frames_give_rgb_pages(tmp_path):
     simulate("raytrix-scene", tmp_path, seed=22, rows=160, cols=200, cfa="RGGB")
     out = tmp_path / "rgb.tif"

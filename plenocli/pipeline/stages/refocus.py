@@ -21,6 +21,8 @@ from plenocli.progress import log, shown
 
 MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
 MIN_COVERED = 0.25  # share of the output that must be covered (as depth's MIN_KNOWN)
+PATTERN = (": a sensor sample covers a lens period of the output, the score would rate the "
+           "splatting's pattern, not focus")
 
 
 def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = "4",
@@ -72,8 +74,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     out_pages, names, scores = _refocus_pages(
         data, pages, framing, g_values, s=s, view=view, mask_width=mask_width, kernel=kernel,
         radius=radius, min_weight=min_weight, **options)
-    finite = [sc for sc in scores if np.isfinite(sc["sharpness"])]
-    best = max(finite, key=lambda sc: sc["sharpness"])["g"] if finite else None
+    best = _best_g(scores, sweep=sweep)
     if sweep:
         _warn_vignetted(input, grey, framing.grid)
     params = dict(grid=grid, s=s, g=g, view=view, mask_width=mask_width, kernel=kernel,
@@ -98,6 +99,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
              100 * covered,
              f", sharpest g = {best:g}" if sweep and best is not None else "")
     if preview:
+        if sweep and best is None:
+            log.info("refocus: the preview shows g = %g (no plane judged)", g_values[0])
         write_png(preview, _best_picture(stack, names, g_values, best, rgb=bool(cfa)),
                   protect=protect, colour=meta.get("colour"))
 
@@ -163,12 +166,44 @@ def _refocus_pages(data: np.ndarray, pages: list[str], framing, g_values: list[f
                         f"{framing.grid.pitch_px:.3g} px micro-images; check them")
                 per_g.append(chan)
                 names.append(sweep_page(label, g_value) if sweep else label)
-        score = rf.sharpness(np.stack(per_g), lens_period_px=period)
-        scores.append({"g": g_value, "sharpness": score})
-        log.info("refocus: %s  sharpness %.5g", "g from the depth map" if "lens_g" in options
-                 else f"g = {g_value:g}", score)
+        scores.append(_score(np.stack(per_g), g_value, framing.grid.pitch_px, period,
+                             depth="lens_g" in options, mosaic=bool(cfa)))
         out_pages.extend(per_g)
     return out_pages, names, scores
+
+
+def _score(pages: np.ndarray, g: float, pitch_px: float, period: float, *,
+           depth: bool, mosaic: bool) -> dict:
+    """The sharpness entry of one g, logged: a score, or None with why it is not judged (a
+    depth map's lenses each have their own g, which the plane's score does not rest on)."""
+    reason = None if depth else rf.unjudged(g, pitch_px, mosaic=mosaic)
+    score = None if reason else rf.sharpness(pages, lens_period_px=period)
+    if score is not None and not np.isfinite(score):
+        score, reason = None, "fewer than 16 covered pixels"
+    label = "g from the depth map" if depth else f"g = {g:g}"
+    if reason:
+        log.info("refocus: %s  sharpness not judged (%s)", label, reason)
+        return {"g": g, "sharpness": None, "not_judged": reason}
+    log.info("refocus: %s  sharpness %.5g", label, score)
+    return {"g": g, "sharpness": score}
+
+
+def _best_g(scores: list[dict], *, sweep: bool) -> float | None:
+    """The judged g of the highest score; a sweep warns when it leaves planes unjudged."""
+    judged = [sc for sc in scores if sc["sharpness"] is not None]
+    best = max(judged, key=lambda sc: sc["sharpness"])["g"] if judged else None
+    by_reason: dict[str, list[str]] = {}
+    for sc in scores:
+        if sc["sharpness"] is None:
+            by_reason.setdefault(sc["not_judged"], []).append(f"{sc['g']:g}")
+    if sweep and by_reason:
+        why = "; ".join(f"g = {', '.join(gs)} ({reason}{PATTERN if 'pitch' in reason else ''})"
+                        for reason, gs in by_reason.items())
+        log.warning("refocus: %d plane(s) of the sweep not judged: %s; %s",
+                    len(scores) - len(judged), why,
+                    f"sharpest g = {best:g} among the others" if best is not None else
+                    "no sharpest g is named: sweep g nearer 0 than the pitch")
+    return best
 
 
 def _check_sign(grey: np.ndarray, grid, g: float) -> None:
