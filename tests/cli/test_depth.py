@@ -190,11 +190,12 @@ def test_a_depth_map_that_does_not_fit_is_refused(lenslet, tmp_path):
 
 
 def test_the_record_holds_the_resolved_range_and_only_what_applied(lenslet, tmp_path):
-    """P1 (audit 6): --g '２:８' was recorded as typed, and a lenslet depth recorded the
-    --max-disparity it did not use."""
+    """P1 (audit 6): --g was recorded as typed, and a lenslet depth recorded the
+    --max-disparity it did not use. (Full-width digits, the audit's example, are refused since
+    audit 15 E2: numbers are decimal ASCII.)"""
     out = tmp_path / "d.tif"
     result = invoke("depth", lenslet / "frames.tif", "--grid", lenslet / "grid.yaml", "--g",
-                    " ２ : ８ ", "-o", out)
+                    " 2.0 : 8 ", "-o", out)
     assert result.exit_code == 0, result.output
     recorded = tiffio.read_meta(out)["provenance"]["parameters"]
     assert recorded["g"] == "2:8" and recorded["s"] == 0.2
