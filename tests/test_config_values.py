@@ -287,3 +287,18 @@ def test_one_parameter_given_twice_in_a_step_or_by_set_is_refused(tmp_path):
         load_config(path, ["bias.smooth=5", "bias.smooth=7"])
     steps = load_config(path, ["bias.smooth=5"])  # --set replaces the config's value
     assert steps[1].params["smooth"] == 5
+
+
+def test_whole_numbers_take_a_sign_everywhere_and_name_decimal_forms():
+    """Audit 16 F2/M1: '+128' was taken by --seed but refused by --pixels and --crop; '1e2'
+    for a whole number was refused without saying how to write it."""
+    from plenocli.pipeline.validators import Int, RowsCols, SensorSize
+
+    assert SensorSize().convert("+128") == "128" and RowsCols().convert("+64x064") == "64x64"
+    assert Int(min=1).convert("+3") == 3
+    for bad, words in (("1e2", "written in digits: 100"), ("10.0", "written in digits: 10"),
+                       ("4_0", "not a valid integer.")):
+        with pytest.raises(ValueError, match=words):
+            Int().convert(bad)
+    with pytest.raises(ValueError, match="ROWSxCOLS"):
+        RowsCols().convert("-64x64")

@@ -12,7 +12,7 @@ import math
 import os
 from typing import Any
 
-from plenocli.model.numbers import decimal, is_count, whole
+from plenocli.model.numbers import decimal, whole
 from plenocli.model.views import name_problem
 
 TIFF = (".tif", ".tiff")
@@ -117,7 +117,8 @@ class Int(Validator):
             try:
                 number = whole(shell_text(value))
             except ValueError:
-                raise ValueError(f"{shell_text(value)!r} is not a valid integer.") from None
+                raise ValueError(f"{shell_text(value)!r} is not a valid integer"
+                                 f"{_in_digits(shell_text(value))}.") from None
         if (self.min is not None and number < self.min) or (
                 self.max is not None and number > self.max):
             raise ValueError(f"{number} is not in the range {self.bounds}.")
@@ -189,9 +190,29 @@ class RowsCols(Validator):
     def convert(self, value: Any) -> str:
         text = shell_text(value).strip().lower()
         rows, sep, cols = text.partition("x")
-        if not (sep and is_count(rows) and is_count(cols) and int(rows) > 0 and int(cols) > 0):
+        size = _positive(rows), _positive(cols)
+        if not (sep and all(size)):
             raise ValueError(f"{shell_text(value)!r} is not ROWSxCOLS (e.g. 2000x2000)")
-        return f"{int(rows)}x{int(cols)}"
+        return f"{size[0]}x{size[1]}"
+
+
+def _in_digits(word: str) -> str:
+    """For a whole value written as a decimal number ('1e2', '10.0'): how to write it."""
+    try:
+        number = decimal(word)
+    except ValueError:
+        return ""
+    return f" (a whole number is written in digits: {int(number)})" if (
+        math.isfinite(number) and number.is_integer()) else ""
+
+
+def _positive(word: str) -> int | None:
+    """A positive whole number written in digits ('+64', '064'), else None."""
+    try:
+        number = whole(word)
+    except ValueError:
+        return None
+    return number if number > 0 else None
 
 
 class SensorSize(Validator):
@@ -201,8 +222,8 @@ class SensorSize(Validator):
 
     def convert(self, value: Any) -> str:
         text = shell_text(value).strip()
-        if is_count(text) and int(text) > 0:
-            return str(int(text))
+        if _positive(text):
+            return str(_positive(text))
         try:
             return RowsCols().convert(text)
         except ValueError:

@@ -246,8 +246,11 @@ def _check_type(kind: str, key: str, value, default) -> None:
         ok = isinstance(value, type(default))
     if not ok:
         shown_default = list(default) if isinstance(default, tuple) else default
+        digits = ("; a whole number is written in digits, as YAML reads one: "
+                  f"{key}={int(value)}" if isinstance(value, float) and math.isfinite(value)
+                  and value.is_integer() and _expected(default) == "a whole number" else "")
         raise ValueError(f"simulate {kind}: {key} = {value!r} is not {_expected(default)} "
-                         f"(its default is {shown_default!r})")
+                         f"(its default is {shown_default!r}){digits}")
 
 
 def _expected(default) -> str:
