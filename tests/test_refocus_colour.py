@@ -59,8 +59,8 @@ def test_develop_takes_the_refocused_rgb(refocused):
 
 def test_stitch_takes_refocused_rgb_as_one_colour_view(refocused):
     tmp, _ = refocused
-    stack, names, bayer, _ = stitch.load_views([str(tmp / "rgb.tif")], None)
-    assert names == ["rgb"] and not bayer and stack.shape[:2] == (1, 3)
+    stack, names, levels, _ = stitch.load_views([str(tmp / "rgb.tif")], None)
+    assert names == ["rgb"] and levels is None and stack.shape[:2] == (1, 3)
 
 
 def test_refocus_preview_is_in_colour(refocused):

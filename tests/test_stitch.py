@@ -391,6 +391,10 @@ def test_a_negated_view_or_a_pair_its_names_place_is_not_told_another_layout():
         with pytest.raises(StitchError, match=r"view 1's levels are mostly below zero "
                                               r"\(median -.*check how view 1 was made"):
             stitch(flipped, layout=layout, named=["L", "R"] if layout == "1x2" else None)
+    _, report = stitch(views, layout="2x1")  # audit 16 M2: placed by a saved transform
+    with pytest.raises(StitchError, match=r"view 1's levels are mostly below zero "
+                                          r"\(median -.*check how view 1 was made"):
+        stitch(np.stack([views[0], -views[1]]), transform=report.transform)
     dark = np.stack([views[0], views[1]]) - np.float32(np.median(views[1]))  # above black
     with pytest.raises(StitchError) as err:
         stitch(dark, layout="1x2")

@@ -121,11 +121,8 @@ def check_kinds(stage: str, inputs: Mapping[str, Sequence[Path]],
             if not accepted:
                 raise InputError(_not_a_raw(path, made))
             if made[-1] not in accepted:
-                foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
                 wrote = plan.wrote if plan is not None else _wrote(path, planned or {})
-                raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
-                                 f"{_label(role)} the output of "
-                                 f"{', '.join(map(_producer, accepted))}{foreign}")
+                raise InputError(f"{path} is {_output_name(wrote)}; {_takes(stage, role)}")
             if made[-1] == "develop" and (plan.photograph if plan is not None
                                           else _photograph(path)):
                 raise InputError(_photograph_refused(path, stage, role,
@@ -148,6 +145,11 @@ def _check_side_inputs(stage: str, inputs: Mapping[str, Sequence[Path]],
             if wrote is not None and wrote not in makers:
                 raise InputError(f"{path} is {_output_name(wrote)}; {stage} takes as "
                                  f"{_label(role)} {takes}")
+            on_disk = _planned(path, planned) is None and not _not_known(path, planned)
+            made = _document_stage(path) if wrote is None and on_disk else None
+            if made is not None and made not in (m for m, _ in makers):
+                raise InputError(f"{path} is a JSON document `plenocli {made}` writes; "
+                                 f"{stage} takes as {_label(role)} {takes}")
     main = (inputs.get("input") or [None])[0]
     excluded = EXCLUDED.get((stage, _wrote(main, planned))) if main is not None else None
     for role, why in (excluded or {}).items():
@@ -171,6 +173,13 @@ def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str
     return RECORDED_AS.get(made[-1], (made[-1], IMAGE_OPTION.get(made[-1], "output")))
 
 
+def _takes(stage: str, role: str) -> str:
+    """What ``stage`` takes in an image role, by the commands (and options) writing it."""
+    foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
+    return (f"{stage} takes as {_label(role)} the output of "
+            f"{', '.join(map(_producer, ACCEPTS[stage][role]))}{foreign}")
+
+
 def _producer(name: str) -> str:
     """The command (and option) writing the images a record names ``name``."""
     if name in IMAGE_OPTION:
@@ -181,6 +190,12 @@ def _producer(name: str) -> str:
 def _simulated_document(path: Path) -> tuple[str, str] | None:
     """("simulate", "truth") for a simulate step's truth.json already written (its record is
     its provenance); None for any other file (its reader checks it)."""
+    return ("simulate", "truth") if _document_stage(path) == "simulate" else None
+
+
+def _document_stage(path: Path) -> str | None:
+    """The stage recorded in a plenocli JSON document's provenance (a report, a transform,
+    simulate's truth); None for any other file (its reader checks it)."""
     from plenocli.io.yamlfile import DocumentError, read_json
 
     if Path(path).suffix.lower() != ".json" or not Path(path).is_file():
@@ -193,8 +208,8 @@ def _simulated_document(path: Path) -> tuple[str, str] | None:
     except (OSError, DocumentError):
         return None
     record = doc.get("provenance") if isinstance(doc, dict) else None
-    return ("simulate", "truth") if (isinstance(record, dict)
-                                     and record.get("stage") == "simulate") else None
+    stage = record.get("stage") if isinstance(record, dict) else None
+    return stage if isinstance(stage, str) and stage.isidentifier() else None
 
 
 def _output_name(wrote: tuple[str, str]) -> str:
@@ -279,13 +294,15 @@ def _check_not_a_document(path: Path, stage: str, role: str) -> None:
     if b"\0" in head or not (suffix in DOCUMENT_SUFFIXES or text[:1] in (b"{", b"<")):
         return
     what = next((name for mark, name in DOCUMENTS if mark in head), None)
-    if what is None and _simulated_document(path):
-        what = SIMULATED_ROLES["truth"]
+    made = _document_stage(path) if what is None else None
+    if made is not None:  # a report, a transform: its producer, not its role, is recorded
+        what = (SIMULATED_ROLES["truth"] if made == "simulate"
+                else f"a JSON document `plenocli {made}` writes")
     if what is None:
         what = ("a JSON document (a report, transform or record)" if text[:1] in (b"{", b"[")
                 else "an XML document" if text[:1] == b"<" else "a text document")
     raise InputError(f"{path} is {what}, not an image {stage} can take as "
-                     f"{_label(role)}" if stage != "decode" else
+                     f"{_label(role)}; {_takes(stage, role)}" if stage != "decode" else
                      f"{path} is {what}, not a raw capture or sensor image")
 
 
@@ -456,5 +473,5 @@ def _planned_not_an_image(path: Path, plan: Planned, stage: str, role: str) -> s
         return (f"{path} is a raw capture, not the decoded frames or views {stage} takes as "
                 f"{_label(role)}: decode it first")
     return (f"{path} is {plan.document}, not an image {stage} can take as "
-            f"{_label(role)}" if stage != "decode" else
+            f"{_label(role)}; {_takes(stage, role)}" if stage != "decode" else
             f"{path} is {plan.document}, not a raw capture or sensor image")

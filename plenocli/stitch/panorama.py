@@ -87,8 +87,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
            min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
            tolerance_px: float | None = None, out: Callable[..., Callable] | None = None,
-           claim: tuple[str, str] | None = None, named: Sequence[str] | None = None
-           ) -> tuple[np.ndarray, StitchReport]:
+           claim: tuple[str, str] | None = None, named: Sequence[str] | None = None,
+           levels: Sequence[float] | None = None) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -117,6 +117,8 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         transform, the rig or the registration (:func:`plenocli.stitch.verify.default_claim`).
     named : the views' names when they gave ``layout`` (L,R: 1x2): a pair that registers only
         the other way is then not told to take another --layout, which the names rule out.
+    levels : each view's median before it became ``views`` where that lost its sign (a Bayer
+        mosaic demosaiced clips negatives to 0): a refused negated view is named from them.
 
     Returns (panorama, :class:`StitchReport`): the panorama (rows', cols') float32, or (C, rows',
     cols') for colour views, NaN where no view covers it.
@@ -132,19 +134,17 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
     step("registering the views")
     transforms, layout, source, pair_info, closure = _transforms(
-        luminance(stack), transform, layout, model, origins, search, view_shape=(rows, cols),
-        frame_shape=frame_shape, k1=distortion_k1, rig=rig, named=named)
+        stack, transform, layout, model, origins, search, view_shape=(rows, cols),
+        frame_shape=frame_shape, k1=distortion_k1, rig=rig, named=named, levels=levels)
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
+    claim = claim or verify.default_claim(transform=transform is not None, rig=rig is not None)
     panorama, covered, offset, gains, fits, areas = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, out=out, claim=claim or verify.default_claim(transform=transform is not None,
-                                                              rig=rig is not None))
+        rig=rig, out=out, claim=claim, levels=levels)
     pair_info, measured = _pair_report(pair_info, pairs, fits, areas)
-    axis_px, field_deg = (None, None) if rig is None else rig_axis_and_field(
-        rig, (rows, cols), origins, offset, covered)
-    rig_dict = None if rig is None else rig.to_dict()
+    rig_dict, axis_px, field_deg = _rig_report(rig, (rows, cols), origins, offset, covered)
     return (panorama if colour or panorama is None else panorama[0]), StitchReport(
         model=model, layout=layout, n_views=n_views, channels=n_chan if colour else 1,
         view_shape=[rows, cols], distortion_k1=distortion_k1, blend=blend, rig=rig_dict,
@@ -162,6 +162,13 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         coverage_fraction=np.count_nonzero(covered) / covered.size)
 
 
+def _rig_report(rig: PrismRig | None, shape: tuple[int, int], origins, offset, covered):
+    """The rig (as a dict), the panorama's optical axis and angular field: None without one."""
+    if rig is None:
+        return None, None, None
+    return rig.to_dict(), *rig_axis_and_field(rig, shape, origins, offset, covered)
+
+
 def _pair_report(pair_info: list[dict] | None, pairs, fits: list, areas: list
                  ) -> tuple[list[dict], list[float]]:
     """Each pair's registration figures (a given transform's pairs: only named) with how well
@@ -177,19 +184,24 @@ def _pair_report(pair_info: list[dict] | None, pairs, fits: list, areas: list
     return pair_info, [fit.residual_px for fit in fits if fit is not None]
 
 
-def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: str,
+def _transforms(stack: np.ndarray, transform: dict | None, layout: str, model: str,
                 origins: np.ndarray | None, search: dict, *, view_shape: tuple[int, int],
                 frame_shape: tuple[int, int], k1: float, rig: PrismRig | None,
-                named: Sequence[str] | None = None):
+                named: Sequence[str] | None = None, levels: Sequence[float] | None = None):
     """View -> view 0 transforms (with a rig: between the views' canvases of ``frame_shape``):
     registered (priors from the rig or the expected overlap), or a saved transform checked
     against the input views' ``view_shape``. Returns them, the layout, their source, the
-    per-pair reports (None for a saved transform) and the closure."""
-    n_views = luma.shape[0]
+    per-pair reports (None for a saved transform) and the closure; a negated view named by
+    its ``levels`` when the views are refused (:func:`_sign_hint`)."""
+    n_views = stack.shape[0]
+    signs = functools.partial(_sign_hint, stack, levels)
+    with signs():  # a negated Bayer view is demosaiced to 0: a constant view
+        luma = luminance(stack)
     if transform is not None:
-        transforms, layout, source = check_transform(
-            transform, n_views, view_shape, model, k1=k1, rig=rig, frame_shape=frame_shape,
-            max_overlap=search["max_overlap"])
+        with signs():
+            transforms, layout, source = check_transform(
+                transform, n_views, view_shape, model, k1=k1, rig=rig,
+                frame_shape=frame_shape, max_overlap=search["max_overlap"])
         return transforms, layout, source, None, None
     limits = {k: search[k] for k in ("max_overlap", "min_overlap_px", "min_correlation")}
     overlap, overlap_tolerance = search["overlap"], search["overlap_tolerance"]
@@ -201,7 +213,7 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
     if layout == "auto" and n_views == 4:
         layout = "2x2"
     elif layout == "auto":
-        with _sign_hint(luma), hint(), _prism_hint(rig, luma):
+        with signs(), hint(), _prism_hint(rig, luma):
             layout = auto_layout(luma, limits, overlap, overlap_tolerance)
     tolerance = search["tolerance_px"]
     if rig is not None and tolerance is None:  # the default of the whole canvases, not strips
@@ -215,12 +227,13 @@ def _transforms(luma: np.ndarray, transform: dict | None, layout: str, model: st
             return luma[a], luma[b], (0, 0), (0, 0)
     else:
         if model == "translation":
-            windows, across = fine_windows(luma, rig, origins, layout, expected, limits)
+            with signs():
+                windows, across = fine_windows(luma, rig, origins, layout, expected, limits)
 
         def images(a, b, direction):
             return rig_strips(luma, rig, origins, frame_shape, a, b, direction,
                               windows[(a, b)], across[(a, b)])
-    with _sign_hint(luma), hint(), \
+    with signs(), hint(), \
             _layout_hint(forced, luma, limits, overlap, overlap_tolerance, named), \
             _prism_hint(rig, luma):
         transforms, pair_info, closure = register(images, n_views, frame_shape, layout, model,
@@ -287,21 +300,25 @@ def _layout_hint(forced: str | None, luma: np.ndarray, limits: dict, overlap: fl
 
 
 @contextlib.contextmanager
-def _sign_hint(luma: np.ndarray):
+def _sign_hint(views: np.ndarray, levels: Sequence[float] | None = None):
     """A view not found where another is seen, whose levels are mostly below zero where the
     other's are above: a negated view (a sign lost in a subtraction) does not correlate with
-    the scene, whatever the layout or overlap the other hints would advise."""
+    the scene, nor lines up with it where a transform or a rig places it, whatever the layout
+    or overlap the other hints would advise. ``levels`` (see :func:`stitch`) stand for the
+    views' own medians where those lost their sign."""
     try:
         yield
     except StitchError as err:
-        medians = [float(np.nanmedian(v)) if np.isfinite(v).any() else 0.0 for v in luma]
+        medians = list(levels) if levels is not None else [
+            float(np.nanmedian(v)) if np.isfinite(v).any() else 0.0 for v in views]
         low, high = int(np.argmin(medians)), int(np.argmax(medians))
         if not (medians[high] > 0 and medians[low] <= -0.5 * medians[high]):
             raise
         raise StitchError(f"view {low}'s levels are mostly below zero (median "
                           f"{medians[low]:.3g}, view {high}'s {medians[high]:.3g}): light is "
-                          "not negative, and a negated view does not register with the "
-                          f"others; check how view {low} was made") from err
+                          "not negative, and a negated view matches none of the others "
+                          "(registered, or placed by a transform or a rig); check how view "
+                          f"{low} was made") from err
 
 
 @contextlib.contextmanager
@@ -360,15 +377,17 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
                match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
-               claim: tuple[str, str], out):
+               claim: tuple[str, str], out, levels: Sequence[float] | None = None):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
     cover, the reference -> panorama translation, the per-view, per-channel gains, and per pair
     how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area;
-    refused before the blend where the seams do not line up (``claim``: see :func:`stitch`)."""
+    refused before the blend where the seams do not line up (``claim``: see :func:`stitch`; a
+    negated view named by its ``levels``)."""
     maps, boxes, offset, shape = compose.place(frame_to_ref, stack.shape[-2:], k1=k1, rig=rig)
     step("checking the seams")
     fits = verify.seam_fits(stack, maps, boxes, pairs)
-    verify.check_fits(fits, pairs, what=claim[0], remedy=claim[1])
+    with _sign_hint(stack, levels):
+        verify.check_fits(fits, pairs, what=claim[0], remedy=claim[1])
     holes = [holes_of(view) for view in stack]
     filled = [view if h is None else fill_nan_channels(view) for view, h in
               zip(stack, holes, strict=True)]

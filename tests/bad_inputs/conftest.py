@@ -33,6 +33,18 @@ from tests.bad_inputs.files import (
 )
 
 
+def _write_misfits(d: Path) -> None:
+    """Sound files of a kind a stage misreads: view B of the bias output negated (a sign lost
+    in a subtraction; its masked pixels filled, so its demosaic clips it), and a report
+    another stage writes (its record: the provenance), not a side file."""
+    biased, meta = tiffio.read_image(d / "biased.tif")
+    page = meta["views"].index("B")
+    biased[page] = -np.nan_to_num(biased[page])
+    tiffio.write_image(d / "biased_neg_b.tif", biased, meta)
+    (d / "crosstalk.json").write_text(json.dumps({"r": 0.1,
+                                                  "provenance": {"stage": "crosstalk"}}))
+
+
 @pytest.fixture(scope="package")
 def inputs(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("inputs")
@@ -96,6 +108,7 @@ def inputs(tmp_path_factory) -> Path:
     plain_tiff(d / "bool.tif", rng.random((16, 16)) > 0.5)
     plain_tiff(d / "int8.tif", rng.integers(-100, 100, (16, 16)).astype(np.int8))
     plain_tiff(d / "nan_plain.tif", np.full((16, 16), np.nan, np.float32))
+    _write_misfits(d)
     good = (d / "biased.tif").read_bytes()
     (d / "biased_copy.tif").write_bytes(good)  # another file with the same views
     (d / "truncated.tif").write_bytes(good[: len(good) * 2 // 3])

@@ -185,6 +185,12 @@ CASES = [
     ("stitch-rig-on-cropped-views", ["stitch", "{i}/biased_crop.tif", "--views", "A,B", "--rig",
                                      "{i}/dualpixel_prism.yaml", "-o", "{o}/p.tif"], 1,
      ("bias --crop 24x32", "whole active area", "without --crop")),
+    # audit 16 M2: a Bayer view negated, chosen by --views, was told to pass the rig (and with
+    # it "no reliable overlap"): its demosaic had clipped it to 0, hiding the sign
+    *[(f"stitch-bayer-view-negated{'-rig' * bool(rig)}",
+       ["stitch", "{i}/biased_neg_b.tif", "--views", "A,B", *rig, "-o", "{o}/p.tif"], 1,
+       ("view 1's levels are mostly below zero", "check how view 1 was made"))
+      for rig in ([], ["--rig", "{i}/dualpixel_prism.yaml"])],
     ("decode-huge-header", ["decode", "{i}/huge.tif", "-o", "{o}/d.tif"], 1, ("200000",)),
     ("decode-empty-file", ["decode", "{i}/empty.tif", "-o", "{o}/d.tif"], 1,
      ("empty.tif", "not a raw capture")),

@@ -369,6 +369,12 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
      "    output: \"{out}/p.tif\"\n  stitch2:\n    stage: stitch\n    inputs: \"{out}/b.tif\"\n"
      "    views: A,B\n    transform-in: \"{out}/r.json\"\n    output: \"{out}/p2.tif\"\n",
      ("step 'stitch2'", "`plenocli stitch --report` output", "stitch --transform-out")),
+    # audit 16 M3: crosstalk's report as mixing was not told what unmix takes
+    ("  crosstalk:\n    inputs: \"{out}/b.tif\"\n    output: \"{out}/x.json\"\n"
+     "  unmix:\n    inputs: \"{out}/b.tif\"\n    mixing: \"{out}/x.json\"\n"
+     "    output: \"{out}/u.tif\"\n", ("step 'unmix'", "not an image unmix can take as mixing",
+                                       "unmix takes as mixing the output of crosstalk "
+                                       "--mixing-out")),
     ("  depth:\n    input: \"{out}/b.tif\"\n    output: \"{out}/d.tif\"\n"
      "  refocus:\n    input: \"{out}/f.tif\"\n    grid: \"{out}/d.tif\"\n"
      "    output: \"{out}/r.tif\"\n", ("step 'refocus'", "`plenocli depth` output",
@@ -393,7 +399,7 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
                           ("recover-highlights", "no dual-pixel A, B, S views"))],
 ], ids=["develop-of-depth", "bias-twice", "gain-as-views", "photograph-to-develop",
         "decode-of-truth-json", "bias-of-simulated-raw", "gain-of-flat-output",
-        "transform-in-of-gain", "transform-in-of-report", "grid-of-depth-map",
+        "transform-in-of-gain", "transform-in-of-report", "mixing-of-report", "grid-of-depth-map",
         "start-of-truth", "transform-in-of-truth", "camera-of-truth", "gain-of-truth-arrays",
         "linear-with-wb-from", "linear-with-recover-highlights"])
 def test_a_step_fed_an_output_its_stage_refuses_is_refused_before_any_step_runs(

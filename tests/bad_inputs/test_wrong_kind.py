@@ -311,7 +311,17 @@ def test_no_output_may_take_a_records_name(inputs, tmp_path):
     (["bias", "{i}/rt/truth.json", "-o", "{o}/b.tif"], (
         "is the ground truth `plenocli simulate` writes", "not an image bias can take as input")),
     (["unmix", "{i}/biased.tif", "--mixing", "{i}/rt/grid.yaml", "-o", "{o}/u.tif"],
-     ("not an image unmix can take as mixing",)),
+     ("not an image unmix can take as mixing", "the output of crosstalk --mixing-out")),
+    # audit 16 M3: another stage's JSON report in a side role is named, with what to give
+    (["unmix", "{i}/biased.tif", "--mixing", "{i}/crosstalk.json", "-o", "{o}/u.tif"],
+     ("a JSON document `plenocli crosstalk` writes", "not an image unmix can take as mixing",
+      "unmix takes as mixing the output of crosstalk --mixing-out")),
+    (["develop", "{i}/biased.tif", "--view", "S", "--wb-from", "{i}/crosstalk.json", "-o",
+      "{o}/d.jpg"], ("`plenocli crosstalk` writes", "develop takes as wb-from the output of")),
+    (["stitch", "{i}/biased.tif", "--views", "A,B", "--rig", "{i}/crosstalk.json", "-o",
+      "{o}/p.tif"], ("`plenocli crosstalk` writes; stitch takes as rig a prism rig YAML",)),
+    (["refocus", "{i}/rt/frames.tif", "--grid", "{i}/crosstalk.json", "-o", "{o}/r.tif"],
+     ("`plenocli crosstalk` writes; refocus takes as grid a lens grid",)),
     (["decode", "{i}/rt/calib.xml", "-o", "{o}/d.tif"], ("RayCalibData XML",
                                                          "not a raw capture or sensor image")),
 ])

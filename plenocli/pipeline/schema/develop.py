@@ -54,8 +54,8 @@ PARAMS = (
           default=DEFAULT_METHOD),
     Param("wb", WhiteBalance(), "White balance: the raw's as-shot gains, or R,G,B multipliers.",
           default="as-shot"),
-    Param("wb_from", InputFile(), "White balance measured on a white image (bias-corrected views "
-          "TIFF).", role="input"),
+    Param("wb_from", InputFile(), "White balance measured on a white image (its decode, bias or "
+          "flat TIFF: decode's black levels are taken off).", role="input"),
     Param("matrix", Choice(["as-shot", "none"]), "Camera colour matrix from the raw, or none "
           "(camera RGB taken as sRGB).", default="as-shot"),
     Param("space", Choice(OUTPUT_SPACES), "Output colour space (its ICC profile is embedded).",

@@ -59,11 +59,12 @@ def _held_views(inputs: list[str]) -> list[str]:
     return held
 
 
-def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], bool, dict]:
+def load_views(inputs: list[str], views: str | None
+               ) -> tuple[np.ndarray, list[str], list[float] | None, dict]:
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32 (colour channels
-    interleaved in memory), their names, whether any was a Bayer mosaic (demosaiced at full
-    resolution), and the first file's metadata. Only the views wanted are demosaiced, one at a
-    time, straight into the stack."""
+    interleaved in memory), their names, when any was a Bayer mosaic (demosaiced at full
+    resolution) each view's median level as stored (None otherwise), and the first file's
+    metadata. Only the views wanted are demosaiced, one at a time, straight into the stack."""
     found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
@@ -102,7 +103,19 @@ def load_views(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[s
         stack = np.empty((len(found),) + shapes[0], np.float32)
     for k, (name, source) in enumerate(found):
         _fill_view(stack[k], name, *source)
-    return stack, [n for n, _ in found], any(s[3] for _, s in found), first_meta
+    # a demosaic clips negative values to 0: a negated view is told as such from its mosaic
+    levels = [_level(data, pages) for _, (_, data, pages, _, _) in found] \
+        if any(s[3] for _, s in found) else None
+    return stack, [n for n, _ in found], levels, first_meta
+
+
+LEVEL_STRIDE = 3  # odd: every CFA phase is in the sample; a ninth of the pixels tells the sign
+
+
+def _level(data: np.ndarray, pages: list[int]) -> float:
+    """The median of a view's pages as stored, sampled every 3 px (0 where none is finite)."""
+    sample = data[pages][:, ::LEVEL_STRIDE, ::LEVEL_STRIDE]
+    return float(np.nanmedian(sample)) if np.isfinite(sample).any() else 0.0
 
 
 def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None, wb) -> tuple:
@@ -135,7 +148,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
-    stack, names, bayer, meta = load_views(inputs, views)
+    stack, names, levels, meta = load_views(inputs, views)
     placed = layout if transform_in or rig else _verified(layout_of_names, names, layout)
     # views whose names place them are not told to take another --layout
     named = None if transform_in or rig or layout_of_names(names, "auto") == "auto" else names
@@ -154,14 +167,15 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               distortion_k1=distortion, transform=transform, blend=blend,
                               rig=prism_rig, overlap=overlap,
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate,
-                              match_gain=gains == "match", named=named,
+                              match_gain=gains == "match", named=named, levels=levels,
                               claim=_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
                       overlap_tolerance=overlap_tolerance, gains=gains)
         record = stage_record("stitch", params, {"inputs": inputs, "transform_in": transform_in,
                                                  "rig": rig})
-        rep = {**dataclasses.asdict(result), "input_views": names, "bayer_demosaiced": bayer}
+        rep = {**dataclasses.asdict(result), "input_views": names,
+               "bayer_demosaiced": levels is not None}
         n_pages, height, width = canvas.shape
         page_names = (list(CHANNELS) if n_pages == 3 else ["panorama"]
                       if n_pages == 1 else [f"C{c}" for c in range(n_pages)])
