@@ -45,8 +45,10 @@ demo: $(STAMP) fixtures
 	@echo "demo results and PNG previews are in $(DEMO)/ (panoramas: $(DEMO)/*/panorama.png):"
 	@find $(DEMO) -name '*.png' | sort | sed 's/^/  /'
 
+# two processes (the CI machine's cores), a test module in one process at a time: its
+# module-scoped fixtures are built once
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadscope
 
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow"
