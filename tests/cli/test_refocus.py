@@ -45,13 +45,19 @@ def test_refocus_writes_the_image_and_preview(scene, tmp_path):
     assert png.stat().st_size > 0
 
 
+def _sweep(folder, g: str, out, *extra) -> list[str]:
+    """Refocus a sweep of ``g`` into ``out``; the messages logged at INFO."""
+    with plenocli_messages(logging.INFO) as said:
+        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
+                        "--g", g, "-o", out, *extra)
+    assert result.exit_code == 0, result.output
+    return said
+
+
 def test_focal_sweep_finds_the_true_g(scene, tmp_path):
     folder, truth = scene
     out = tmp_path / "sweep.tif"
-    with plenocli_messages(logging.INFO) as said:
-        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
-                        "--g", "2:6:0.5", "-o", out)
-    assert result.exit_code == 0, result.output
+    said = _sweep(folder, "2:6:0.5", out)
     image, meta = tiffio.read_image(out)
     assert image.shape[0] == 9 and meta["views"][4] == "raw@g4"
     scores = meta["sharpness"]["scores"]
@@ -65,10 +71,7 @@ def test_a_sweep_past_the_pitch_names_no_plane_it_cannot_judge(scene, tmp_path):
     the true plane's 0.025, and the sweep named g = 30 the sharpest, exit 0."""
     folder, truth = scene
     out = tmp_path / "wide.tif"
-    with plenocli_messages(logging.INFO) as said:
-        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
-                        "--g", "4,30,44", "-o", out)
-    assert result.exit_code == 0, result.output
+    said = _sweep(folder, "4,30,44", out)
     sharp = tiffio.read_meta(out)["sharpness"]
     assert sharp["best_g"] == pytest.approx(truth["g_true"])
     assert [sc["sharpness"] is None for sc in sharp["scores"]] == [False, True, True]
@@ -80,10 +83,7 @@ def test_a_sweep_past_the_pitch_names_no_plane_it_cannot_judge(scene, tmp_path):
 def test_a_sweep_wholly_past_the_pitch_names_none(scene, tmp_path):
     folder, _ = scene
     out, png = tmp_path / "far.tif", tmp_path / "far.png"
-    with plenocli_messages(logging.INFO) as said:
-        result = invoke("refocus", folder / "frames.tif", "--grid", folder / "grid.yaml",
-                        "--g", "30,44", "-o", out, "--preview", png)
-    assert result.exit_code == 0, result.output
+    said = _sweep(folder, "30,44", out, "--preview", png)
     assert tiffio.read_meta(out)["sharpness"]["best_g"] is None
     assert not any("sharpest g =" in m for m in said)
     assert any("no sharpest g is named" in m for m in said)
