@@ -8,7 +8,8 @@ one, and the bottom row S10, S11 against the top one, + downwards). Steps (docs/
    what is left of the vignetting and of the A/B split after ``plenocli flat`` (or without it)
    does not bias the match; then both are smoothed by a small Gaussian.
 2. Coarse: the windowed sum of squared differences of A(x) and B(x + d) for whole-pixel d in
-   [-max, max], parabola through the minimum.
+   [-max, max] at full size, parabola through the minimum; a pixel with two clear minima (a
+   texture repeating within the search) is unknown.
 3. Refinement: Lucas-Kanade steps with symmetric warps (A moved by -d/2, B by +d/2, cubic
    interpolation), the gradient the mean of both: the asymmetric half-pupil blur of the two
    views (mirror images of each other) enters both sides alike instead of biasing one.
@@ -23,12 +24,16 @@ import cv2
 import numpy as np
 
 from plenocli.depth import MAX_DISPARITY
+from plenocli.depth.searchkernel import search_step
 
 FLAT_SIGMA = 24.0
 FLAT_SHRINK = 8
 PRE_BLUR = 1.0
 WINDOW = 15
-LK_STEPS = 1
+# the coarse search's window, at full size: the WINDOW it had on the views shrunk by two (a
+# 15 px window there, noisier at full size: the Pixel 4 pair's clear matches agreed 44 %)
+COARSE_WINDOW = 2 * WINDOW + 1
+LK_STEPS = 2
 TILE_ROWS = 512
 QUAD_AGREE_PX = 1.0     # x and y disparities of a quad-pixel pixel this far apart: unknown
 QUAD_AGREE_SHARE = 0.1  # or this share of the disparity, whichever is larger
@@ -58,7 +63,6 @@ POOR = 0.1
 TWO_WAY = 0.25
 FIT_FLOOR = 0.01
 CLEAR = 0.5  # confidence of a clear match (as lenslet.CLEAR_MATCH)
-REPEATS = 3  # local minima of the coarse search kept to tell a repeating texture
 MIN_TEXTURED = 0.01  # share of clear matches below which views share no texture (the stage)
 # larger views are checked on SAMPLE_SIDE x SAMPLE_SIDE blocks of SAMPLE_BLOCK px spread over
 # the frame (about 4 Mpx: the whole frame of 30 Mpx took 1.4 s, 40 % of the map's time)
@@ -118,9 +122,8 @@ def _shift_whole(img: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
-def _box(img: np.ndarray) -> np.ndarray:
-    return cv2.boxFilter(img, -1, (WINDOW, WINDOW), normalize=True,
-                         borderType=cv2.BORDER_REFLECT)
+def _box(img: np.ndarray, side: int = WINDOW) -> np.ndarray:
+    return cv2.boxFilter(img, -1, (side, side), normalize=True, borderType=cv2.BORDER_REFLECT)
 
 
 def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
@@ -280,29 +283,25 @@ def consistent_share(disparity: np.ndarray, confidence: np.ndarray, *,
 
 def _tile(pa: np.ndarray, pb: np.ndarray, reach: int
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Disparity, confidence and repeat (px, see ``Disparity``) of one tile: the coarse search
-    on the tile shrunk by two (disparities halve, so do the shifts to try, on a quarter of the
-    pixels), then Lucas-Kanade at full size."""
-    rows, cols = pa.shape
-    half = (max(1, cols // 2), max(1, rows // 2))
+    """Disparity, confidence and repeat (px, see ``Disparity``) of one tile: the coarse search,
+    then Lucas-Kanade."""
     # one shift past the bound: a disparity just inside it then has a cost on both sides
-    # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown)
-    d2, conf2, _, repeat2 = _search(cv2.resize(pa, half, interpolation=cv2.INTER_AREA),
-                                             cv2.resize(pb, half, interpolation=cv2.INTER_AREA),
-                                             (reach + 1) // 2 + 1)
-    d = 2 * cv2.resize(d2, (cols, rows), interpolation=cv2.INTER_LINEAR)
-    conf = cv2.resize(conf2, (cols, rows), interpolation=cv2.INTER_NEAREST)
-    repeat = 2 * cv2.resize(repeat2, (cols, rows), interpolation=cv2.INTER_NEAREST)
+    # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown).
+    # At full size: on the views shrunk by two a texture repeating every 5-6 px is at 2.5-3
+    # px, near their Nyquist, and 1 px of parallax (0.5 there) lies between whole shifts
+    # while the copy a repeat away fits one: sine and checker patterns of 5 px read -4 px for
+    # 1 (the copy), those of 6 px were refused as "no texture" (0.00-0.17 % clear)
+    d, conf, _, repeat = _search(pa, pb, reach + 1, COARSE_WINDOW)
     return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf, repeat
 
 
-def _search(pa: np.ndarray, pb: np.ndarray, reach: int
+def _search(pa: np.ndarray, pb: np.ndarray, reach: int, side: int = WINDOW
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Whole-pixel search kept as a running minimum (best cost and its neighbours on both
     sides), parabola through them; confidence 1 - best / mean cost; the mean cost; and where
-    the REPEATS lowest local minima all match clearly (cost under 1 - CLEAR of the mean: a
-    texture that repeats within the search), the least distance between them in shifts (else
-    0).
+    the two lowest local minima inside the search all match clearly (fitted cost under
+    1 - CLEAR of the mean: a texture that repeats within the search), the least distance
+    between them in shifts (else 0).
     The best is taken among the shifts inside +-(reach - 1): the outer two only give the
     parabola its second side, and where one of them is lower the minimum lies past the search
     (confidence 0). Taken over them too, a periodic texture's next copy just past the bound
@@ -315,25 +314,21 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int
     right = np.full(shape, np.inf, np.float32)
     k_best = np.zeros(shape, np.int16)
     total = np.zeros(shape, np.float32)
-    # the lowest REPEATS local minima, lowest first, and their shifts: of a periodic texture's
+    # the two lowest local minima, lowest first, and their shifts: of a periodic texture's
     # copies the two lowest need not be neighbours (7.3 px stripes 1 px apart, searched to 8:
-    # -6.3 and +7.3 fit whole shifts, +1 lies between them)
-    lows = [(np.full(shape, np.inf, np.float32), np.zeros(shape, np.int16))
-            for _ in range(REPEATS)]
-    before = previous = None
+    # -6.3 and +7.3 fit whole shifts, +1 lies between them). A copy on the bound itself is
+    # inside (noise moves its vertex by hundredths either way: patterns of 5 px, 1 px apart,
+    # searched to 4, have their copy at -4); one past it (a repeat's next copy, 8.3 px away
+    # when searching to 8) is no second candidate
+    low_cost = np.full((2, *shape), np.inf, np.float32)
+    low_shift = np.zeros((2, *shape), np.int16)
+    none = np.empty((0, 0), np.float32)
+    before = previous = none
     shifts = range(-reach, reach + 1)
     for k, s in enumerate(shifts):
-        cost = _box((pa - _shift_whole(pb, s)) ** 2)
-        total += cost
-        np.copyto(right, cost, where=k_best == k - 1)
-        if before is not None:
-            _track_minima(before, previous, cost, k - 1, lows)
-        if 0 < k < len(shifts) - 1:
-            new = cost < best
-            np.copyto(left, previous, where=new)
-            np.copyto(right, np.float32(np.inf), where=new)
-            np.copyto(best, cost, where=new)
-            np.copyto(k_best, np.int16(k), where=new)
+        cost = _box((pa - _shift_whole(pb, s)) ** 2, side)
+        search_step(before, previous, cost, k, 0 < k < len(shifts) - 1, s - 1, reach - 0.75,
+                    best, left, right, k_best, total, low_cost, low_shift)
         before, previous = previous, cost
     curv = left - 2 * best + right
     inner = np.isfinite(curv) & (curv > 0) & (left >= best) & (right >= best)
@@ -344,26 +339,17 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int
     d = (k_best - reach + np.clip(frac, -0.5, 0.5)).astype(np.float32)
     conf[~inner] = 0.0
     conf = np.where(np.isfinite(conf), conf, 0.0).astype(np.float32)
-    # a texture repeating twice within the search: all REPEATS lowest minima match clearly
-    # (two need not be a repeat: the simulated bands of 5 px searched to 6 match at -d as well,
-    # a weaker echo of the texture's low frequencies, and the best is right)
-    clear = np.logical_and.reduce([cost <= (1 - CLEAR) * mean for cost, _ in lows])
-    apart = [np.abs(k_i - k_j) for i, (_, k_i) in enumerate(lows) for _, k_j in lows[i + 1:]]
-    repeat = np.where(clear & (conf >= CLEAR), np.minimum.reduce(apart), 0).astype(np.float32)
+    # two minima that both match clearly: a texture repeating within the search, and nothing
+    # tells which copy is the parallax. Fitted, not at whole shifts: a copy between two shifts
+    # costs more there than one that falls on a shift (the 7.3 px stripes above). Simulated
+    # bands (their texture's echo at -d, as low as 0.2 of the mean on one seed: 5-28 % of those
+    # pixels wrong by more than 1 px), natural pictures and oriented textures: 0-0.3 % of
+    # their clear matches have a second clear minimum; patterns of 5 px, 1 px of parallax,
+    # searched to 4: 100 % (sine) or 92 % (checker; its copy 4 px away fits less well)
+    clear = np.all(low_cost <= (1 - CLEAR) * mean, axis=0)
+    apart = np.abs(low_shift[0] - low_shift[1])
+    repeat = np.where(clear & (conf >= CLEAR), apart, 0).astype(np.float32)
     return d, conf, mean, repeat
-
-
-def _track_minima(before, cost, after, k, lows) -> None:
-    """Where cost (shift k) is a local minimum, insert it into ``lows`` (the lowest local
-    minima so far, lowest first: (cost, shift) pairs of maps), in place."""
-    held = (cost < before) & (cost <= after)
-    value, shift = cost.copy(), np.full(cost.shape, k, np.int16)
-    for low, k_low in lows:  # insertion: a lower newcomer takes the place, the old one moves on
-        swap = held & (value < low)
-        for mine, theirs in ((low, value), (k_low, shift)):
-            keep = mine.copy()
-            np.copyto(mine, theirs, where=swap)
-            np.copyto(theirs, keep, where=swap)
 
 
 def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.ndarray:
@@ -381,8 +367,12 @@ def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.n
         wa = _shift_x(pa, -0.5 * d, grid_x, grid_y, how)
         wb = _shift_x(pb, 0.5 * d, grid_x, grid_y, how)
         grad = cv2.filter2D(wa + wb, -1, 0.5 * diff, borderType=cv2.BORDER_REPLICATE)
-        num = _box((wb - wa) * grad)
-        den = _box(grad * grad)
+        # the steps before it over the coarse window: the whole-shift parabola leans towards
+        # the whole shift (0.6 px read 0.56-0.58 after one step), and a second step over 15 px
+        # doubled the 90th percentile error on natural pictures
+        side = WINDOW if k == LK_STEPS - 1 else COARSE_WINDOW
+        num = _box((wb - wa) * grad, side)
+        den = _box(grad * grad, side)
         step = np.where(den > 1e-12, -num / np.maximum(den, 1e-12), 0.0)
         d = np.clip(d + np.clip(step, -0.5, 0.5), -limit, limit).astype(np.float32)
     return d

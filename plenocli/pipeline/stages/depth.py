@@ -211,16 +211,17 @@ def _check_shared_texture(confidence: np.ndarray) -> None:
 
 def _refuse_repeats(repeat: np.ndarray, disparity: np.ndarray, max_disparity: float) -> None:
     """Views refused for another reason that lose more pixels to a texture repeating within
-    the search (two shifts matching clearly: stripes, a fence) than they keep are refused as
-    such: vertical stripes of 7.3 px searched to 8 were called "no texture", the best case for
-    a horizontal baseline, which a search below half their period measures (1.000 px)."""
+    the search (two shifts matching clearly: stripes, a fence, a tiled floor) than they keep
+    are refused as such: vertical stripes of 7.3 px searched to 8 were called "no texture",
+    the best case for a horizontal baseline, which a search below half their period measures
+    (1.000 px); a 5 px sine or checker pattern, 1 px apart, searched to 4 read -4 px."""
     share = float(np.mean(repeat > 0))
     if share < MIN_CLEAR or share <= float(np.isfinite(disparity).mean()):
         return
     apart = float(np.median(repeat[repeat > 0]))
     raise InputError(f"depth: the views' texture repeats within --max-disparity "
                      f"{max_disparity:g} ({100 * share:.0f} % of the pixels match clearly at "
-                     f"three shifts or more, {apart:g} px apart: a periodic texture such as "
+                     f"two shifts or more, {apart:g} px apart: a periodic texture such as "
                      "stripes), "
                      "so which shift is the parallax cannot be told: lower --max-disparity "
                      f"below half the repeat ({apart / 2:g}) if the disparities are smaller; "
