@@ -147,7 +147,9 @@ def _check_side_inputs(stage: str, inputs: Mapping[str, Sequence[Path]],
                                  f"{_label(role)} {takes}")
             on_disk = _planned(path, planned) is None and not _not_known(path, planned)
             made = _document_stage(path) if wrote is None and on_disk else None
-            if made is not None and made not in (m for m, _ in makers):
+            # the stage's own documents are its reader's to tell apart (a stitch report given
+            # as --rig holds the rig it used; a transform there is named as one)
+            if made is not None and made != stage and made not in (m for m, _ in makers):
                 raise InputError(f"{path} is a JSON document `plenocli {made}` writes; "
                                  f"{stage} takes as {_label(role)} {takes}")
     main = (inputs.get("input") or [None])[0]

@@ -10,7 +10,7 @@ import tifffile
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
-from plenocli.errors import ConfigError
+from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
 from plenocli.pipeline.config import load_config
 from plenocli.pipeline.stages.simulate import simulate
@@ -329,3 +329,17 @@ def test_a_document_given_as_an_image_is_named(inputs, tmp_path, args, words):
     # audit 10 E3: calibrate called a sound grid YAML (a JSON report, an XML) "unreadable
     # image; the file may be truncated, damaged or of another type"
     assert_one_line(run_bad(inputs, tmp_path / "out", args), 1, words)
+
+
+def test_a_stages_own_json_in_its_side_role_is_left_to_its_reader(tmp_path):
+    """A stitch report given as --rig holds the rig it used (the rig reader takes it, and names
+    a transform given there as one): the document check refuses only other stages' JSON."""
+    from plenocli.pipeline.kinds import check_kinds
+
+    report = tmp_path / "report.json"
+    report.write_text(json.dumps({"provenance": {"stage": "stitch"}, "rig": {}}))
+    check_kinds("stitch", {"input": [], "rig": [report]})
+    other = tmp_path / "crosstalk.json"
+    other.write_text(json.dumps({"provenance": {"stage": "crosstalk"}}))
+    with pytest.raises(InputError, match="`plenocli crosstalk` writes; stitch takes as rig"):
+        check_kinds("stitch", {"input": [], "rig": [other]})
