@@ -447,3 +447,16 @@ def test_a_pattern_whose_copy_lies_past_the_search_is_measured(kind, period):
     result = disparity_x(*_pattern_views(kind, period))
     assert np.isfinite(result.disparity).mean() > 0.8   # measured 0.83
     assert abs(np.nanmedian(result.disparity) - 1.0) < 0.02   # measured 0.999-1.000
+
+
+@pytest.mark.parametrize("max_disparity", [4.0, 3.9])
+def test_a_copy_just_past_the_bound_is_never_read_as_the_bound(max_disparity):
+    """audit 17 W1: 2-D sines of 8 px, 3.5 px of parallax: the copy a repeat away (-4.5) lies
+    just past +-4, and 10 % of the known pixels read -3.999 at the confidence of the right
+    ones (also with --max-disparity 3.9, outside the range asked). A minimum whose vertex lies
+    past the search is no minimum: those pixels are unknown."""
+    result = disparity_x(*_pattern_views("sine", 8.0, d=3.5).astype(np.float32),
+                         max_disparity=max_disparity)
+    known = result.disparity[np.isfinite(result.disparity)]
+    assert known.size and np.all(np.abs(known) <= max_disparity)
+    assert np.mean(np.abs(known - 3.5) > 0.5) < 0.001

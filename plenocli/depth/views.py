@@ -157,7 +157,7 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
     lost = cv2.dilate(missing.astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8)) > 0
     # a best shift pinned at the search bound is no minimum, and a cost that does not vary
     # with the shift (confidence 0: no texture) measures nothing
-    lost |= (np.abs(d) >= reach - 1e-3) | ~(conf > 0)
+    lost |= (np.abs(d) >= reach - 1e-3) | (np.abs(d) > max_disparity) | ~(conf > 0)
     # two shifts that both match clearly (a texture repeating within the search) say nothing
     # of which one is the parallax: 7.3 px stripes 1 px apart, searched to 8, read -6.3
     lost |= repeat > 0
@@ -292,6 +292,10 @@ def _tile(pa: np.ndarray, pb: np.ndarray, reach: int
     # while the copy a repeat away fits one: sine and checker patterns of 5 px read -4 px for
     # 1 (the copy), those of 6 px were refused as "no texture" (0.00-0.17 % clear)
     d, conf, _, repeat = _search(pa, pb, reach + 1, COARSE_WINDOW)
+    # a best whole shift on the bound whose parabola's vertex lies past it: the minimum is
+    # outside the search (8 px sines 3.5 px apart, searched to 4: their copy at -4.5 read
+    # -3.999 on 10 % of the pixels, confidently), so the pixel is unknown
+    conf = np.where(np.abs(d) > reach, np.float32(0), conf)
     return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf, repeat
 
 
