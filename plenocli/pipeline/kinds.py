@@ -64,9 +64,12 @@ SIDE_INPUTS: dict[str, dict[str, tuple[tuple[tuple[str, str], ...], str]]] = {
                                                     "focus_distance_m, mla_sensor_mm)")},
     "sai": {"grid": (GRIDS, GRID)},
     "crosstalk": {"grid": (GRIDS, GRID)},
-    "stitch": {"rig": ((), "a prism rig YAML (configs/rigs/)"),
-               "transform_in": ((("stitch", "transform_out"),),
-                                "the JSON transform stitch --transform-out writes")},
+    "stitch": {"rig": ((("stitch", "report"),), "a prism rig YAML (configs/rigs/), or the "
+                       "--report of a stitch with --rig (it holds the rig it used); a "
+                       "--transform-out goes to --transform-in"),
+               "transform_in": ((("stitch", "transform_out"), ("stitch", "report")),
+                                "the JSON transform stitch --transform-out writes (or its "
+                                "--report)")},
     "optics": {"input": ((), "a lens prescription YAML")},
 }
 # side roles that a main input of one kind leaves without meaning:

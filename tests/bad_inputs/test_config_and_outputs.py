@@ -365,10 +365,12 @@ def test_print_make_refuses_what_run_refuses(steps, inputs, tmp_path):
      "  stitch:\n    inputs: \"{out}/fl.tif\"\n    views: A,B\n    transform-in: \"{out}/g.tif\"\n"
      "    output: \"{out}/p.tif\"\n",
      ("step 'stitch'", "`plenocli flat --save-gain` output", "takes as transform-in")),
-    ("  stitch:\n    inputs: \"{out}/b.tif\"\n    views: A,B\n    report: \"{out}/r.json\"\n"
+    # audit 17 M1: a transform given as the rig is told where it goes
+    ("  stitch:\n    inputs: \"{out}/b.tif\"\n    views: A,B\n    transform-out: \"{out}/t.json\"\n"
      "    output: \"{out}/p.tif\"\n  stitch2:\n    stage: stitch\n    inputs: \"{out}/b.tif\"\n"
-     "    views: A,B\n    transform-in: \"{out}/r.json\"\n    output: \"{out}/p2.tif\"\n",
-     ("step 'stitch2'", "`plenocli stitch --report` output", "stitch --transform-out")),
+     "    views: A,B\n    rig: \"{out}/t.json\"\n    output: \"{out}/p2.tif\"\n",
+     ("step 'stitch2'", "`plenocli stitch --transform-out` output",
+      "a --transform-out goes to --transform-in")),
     # audit 16 M3: crosstalk's report as mixing was not told what unmix takes
     ("  crosstalk:\n    inputs: \"{out}/b.tif\"\n    output: \"{out}/x.json\"\n"
      "  unmix:\n    inputs: \"{out}/b.tif\"\n    mixing: \"{out}/x.json\"\n"
@@ -429,6 +431,14 @@ def test_side_files_wired_to_the_step_that_makes_them_would_run(inputs, tmp_path
         "    transform-out: \"{out}/t.json\"\n    output: \"{out}/p.tif\"\n"
         "  stitch2:\n    stage: stitch\n    inputs: \"{out}/fl2.tif\"\n    views: A,B\n"
         "    transform-in: \"{out}/t.json\"\n    output: \"{out}/p2.tif\"\n"
+        # audit 17 F1: a stitch report holds its transform and the rig it used, as the
+        # command takes it
+        "  stitch3:\n    stage: stitch\n    inputs: \"{out}/fl.tif\"\n    views: A,B\n"
+        "    report: \"{out}/r.json\"\n    output: \"{out}/p3.tif\"\n"
+        "  stitch4:\n    stage: stitch\n    inputs: \"{out}/fl2.tif\"\n    views: A,B\n"
+        "    rig: \"{out}/r.json\"\n    output: \"{out}/p4.tif\"\n"
+        "  stitch5:\n    stage: stitch\n    inputs: \"{out}/fl2.tif\"\n    views: A,B\n"
+        "    transform-in: \"{out}/r.json\"\n    output: \"{out}/p5.tif\"\n"
         "  develop:\n    input: \"{out}/fl.tif\"\n    view: S\n    wb: 1,1,1\n"
         "    matrix: none\n    output: \"{out}/p.jpg\"\n    linear: \"{out}/l.tif\"\n"
         "  develop2:\n    stage: develop\n    input: \"{out}/l.tif\"\n    wb: 1,1.1,1\n"
