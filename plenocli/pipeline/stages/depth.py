@@ -205,8 +205,9 @@ def _check_shared_texture(confidence: np.ndarray) -> None:
     if clear < MIN_CLEAR:
         raise InputError(f"depth: the views share no texture to measure a disparity from "
                          f"(only {100 * clear:.2f} % of the pixels match clearly, confidence >= "
-                         f"{lenslet.CLEAR_MATCH:g}): a white, a blank surface, or views that "
-                         "do not see one scene; nothing was written")
+                         f"{lenslet.CLEAR_MATCH:g}): a white, a blank surface, views that "
+                         "do not see one scene, or a parallax past the search (try a wider "
+                         "--max-disparity); nothing was written")
 
 
 def _refuse_repeats(repeat: np.ndarray, disparity: np.ndarray, max_disparity: float) -> None:
