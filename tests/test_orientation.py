@@ -56,21 +56,15 @@ def _correlation(a: np.ndarray, b: np.ndarray) -> float:
 
 
 @pytest.mark.parametrize("value", range(1, 9))
-def test_upright_turns_as_pillow_reads_the_tag(value):
-    image = np.arange(12, dtype=np.uint8).reshape(3, 4)
-    pil = Image.fromarray(image)
-    pil.getexif()[274] = value
-    assert np.array_equal(orientation.upright(image, value),
-                          np.asarray(ImageOps.exif_transpose(pil)))
-
-
-@pytest.mark.parametrize("value", range(1, 9))
-@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
-def test_the_photograph_writer_turns_as_the_model_says(value, dtype):
+def test_the_photograph_writer_turns_as_pillow_reads_the_tag(value):
     from plenocli.io.photo import _upright
 
-    pixels = np.random.default_rng(value).integers(0, 255, (5, 7, 3)).astype(dtype)
-    assert np.array_equal(_upright(pixels, value), orientation.upright(pixels, value))
+    pixels = np.random.default_rng(value).integers(0, 255, (5, 7, 3)).astype(np.uint8)
+    pil = Image.fromarray(pixels, mode="RGB")
+    pil.getexif()[274] = value
+    assert np.array_equal(_upright(pixels, value), np.asarray(ImageOps.exif_transpose(pil)))
+    wide = pixels.astype(np.uint16) * 257  # 16-bit TIFF photographs take the same turns
+    assert np.array_equal(_upright(wide, value), _upright(pixels, value).astype(np.uint16) * 257)
 
 
 @pytest.mark.parametrize("turned", range(1, 9))

@@ -127,9 +127,10 @@ def _pil_value(value, kind: str):
 
 
 def _upright(pixels: np.ndarray, orientation: int) -> np.ndarray:
-    """``pixels`` (rows, cols, 3; 8 or 16 bits) turned as ``orientation`` says: the turns of
-    model/orientation.upright (the tests hold them equal), by OpenCV, on the quantised image:
-    numpy's strided copy of a turned 30 MP float image took 1-2 s more."""
+    """``pixels`` (rows, cols, 3; 8 or 16 bits) turned as ``orientation`` (model/orientation)
+    says, as readers honouring the tag turn it (the tests hold it to Pillow's exif_transpose);
+    by OpenCV, on the quantised image: numpy's strided copy of a turned 30 MP float image took
+    1-2 s more."""
     import cv2
 
     check(orientation)

@@ -28,16 +28,6 @@ def check(value) -> int:
     return int(value)
 
 
-def upright(image: np.ndarray, orientation: int) -> np.ndarray:
-    """``image`` (rows, cols, ...) turned as ``orientation`` says (a view, no copy)."""
-    orientation = check(orientation)
-    if orientation >= 5:  # the four that swap rows and columns
-        image = image.swapaxes(0, 1)
-    rows_reversed = orientation in (3, 4, 7, 8)
-    cols_reversed = orientation in (2, 3, 6, 7)
-    return image[::-1 if rows_reversed else 1, ::-1 if cols_reversed else 1]
-
-
 def said(orientation: int) -> str:
     """``6 (rotated 90 degrees clockwise to stand upright)``, for logs and ``info``."""
     if orientation == 1:
