@@ -164,6 +164,18 @@ def load_yaml(text: str, *, words: bool = False) -> Any:
         raise YamlError(yaml_problem(err)) from err
 
 
+def comment_in(text: str) -> str | None:
+    """The end of a one-line YAML value that YAML reads as a comment (``img #2.dng`` reads as
+    ``img``), or None when the value is read whole. A shell word has no comments: a value given
+    as one (``--set``) must not lose its end silently."""
+    try:
+        node = yaml.compose(text, Loader=WordLoader)
+    except yaml.YAMLError:
+        return None  # load_yaml says what is wrong
+    rest = text if node is None else text[node.end_mark.index:]
+    return rest.strip() or None
+
+
 def _unique_pairs(pairs: list) -> dict:
     doc = {}
     for key, value in pairs:

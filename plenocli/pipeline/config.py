@@ -43,7 +43,7 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io.atomic import check_distinct
-from plenocli.io.yamlfile import DocumentError, load_yaml
+from plenocli.io.yamlfile import DocumentError, comment_in, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
 from plenocli.pipeline.validators import shell_text
 
@@ -406,6 +406,10 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
                               "quote it") from err
         if isinstance(parsed, Mapping):  # 'g= 2 : 8' reads as YAML's {2: 8}: no shell word
             parsed = value
+        elif value != "" and (comment := comment_in(value)) is not None:
+            raise OptionError(f"--set {item!r}: YAML reads {comment!r} as a comment, not as "
+                              "part of the value; quote the value to keep it "
+                              f"(--set '{target}=\"{value}\"')")
         _check_set_value(f"--set {item!r}: step {step!r}", path, steps[step].get("stage", step),
                          norm, parsed)
         steps[step][param] = parsed

@@ -266,6 +266,8 @@ def _check_not_raw(path: Path, stage: str, role: str) -> None:
     pages are the sensor's data as stored, margins and black level included."""
     from plenocli.io import raw as raw_io
 
+    if not Path(path).is_file():
+        return  # a pipe would block the open; the stage's reader says what it is
     try:
         kind = raw_io.sniff(path)
     except (InputError, OSError):
@@ -290,6 +292,8 @@ def _check_not_a_document(path: Path, stage: str, role: str) -> None:
     """A grid, config, report or calibration given where an image goes is named, not called a
     damaged image."""
     suffix = Path(path).suffix.lower()
+    if not Path(path).is_file():
+        return  # a pipe would block the open; the stage's reader says what it is
     try:
         with open(path, "rb") as f:
             head = f.read(4096)

@@ -24,7 +24,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from plenocli.errors import ConfigError, InputError
+from plenocli.errors import ConfigError, InputError, not_a_file
 from plenocli.io.atomic import check_outputs, outputs_together
 from plenocli.io.folderlock import folders_locked
 from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
@@ -107,6 +107,9 @@ class Stage:
         files = tuple(name for name in self.outputs if name not in self.folder_outputs)
         shared = getattr(self.schema, "shared_inputs", None)
         _check_inputs_apart(params, self.params, shared(params) if shared else ())
+        for path in self.paths(params, self.inputs):  # opening a pipe would wait for a writer
+            if os.path.exists(path) and not (os.path.isfile(path) or os.path.isdir(path)):
+                raise not_a_file(path)
         check_kinds(self.name, self.by_role(params, self.inputs))
         check_outputs(self.paths(params, files), self.paths(params, self.inputs),
                       folders=self.paths(params, self.folder_outputs))

@@ -209,6 +209,9 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     ("a: b", 2, ("--set 'depth.g=a: b': step 'depth'", "got 'a: b'")),
     ("abc", 2, ("--set 'depth.g=abc': step 'depth'", "Invalid value for '--g'")),
     ("[2", 2, ("--set 'depth.g=[2'", "not valid YAML")),
+    # audit 18 W1: YAML read ' # c' as a comment and ran with 2:4 (another file, for a path)
+    ("2:4 # c", 2, ("--set 'depth.g=2:4 # c'", "'# c' as a comment", "quote the value")),
+    ("#2:4", 2, ("'#2:4' as a comment",)),
 ])
 def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words, inputs,
                                                                 tmp_path):

@@ -100,6 +100,7 @@ def test_options_reach_the_generator(tmp_path):
     (["dualpixel", "--pixels", "-5"], 2, "'-5' is not one positive whole number"),
     (["hexgrid-white", "--param", "pitch_px=1000"], 2, "pitch_px must be"),
     (["hexgrid-white", "--param", "size="], 2, "no value after '='"),
+    (["hexgrid-white", "--param", "pitch_px=12 # c"], 2, "'# c' as a comment"),
     (["moon-rig"], 2, "moon-rig"),
     (["quadpixel-pyramid", "--rays", "0"], 2, "rays"),
 ])

@@ -45,7 +45,7 @@ OWN_OPTIONS = tuple(p.name for p in PARAMS if p.name not in ("kind", "output", "
 def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
     """The keyword arguments of the kind's generator that ``params`` ask for; a value given
     twice (a key repeated, or one that has its own option) is refused: one would be dropped."""
-    from plenocli.io.yamlfile import DocumentError, load_yaml
+    from plenocli.io.yamlfile import DocumentError, comment_in, load_yaml
     from plenocli.synth.params import PARAMS as SYNTH_PARAMS
 
     kwargs: dict[str, Any] = {"seed": params["seed"]}
@@ -68,6 +68,9 @@ def generator_kwargs(params: dict[str, Any]) -> dict[str, Any]:
         if not value.strip():
             raise OptionError(f"--param {item!r}: no value after '='; give KEY=VALUE, "
                               "e.g. noise=0")
+        if (comment := comment_in(value)) is not None:
+            raise OptionError(f"--param {item!r}: YAML reads {comment!r} as a comment, not as "
+                              "part of the value; quote the value to keep it")
         try:
             parsed = load_yaml(value)
             text = name in SYNTH_PARAMS and SYNTH_PARAMS[name].text
