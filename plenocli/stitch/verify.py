@@ -97,6 +97,10 @@ _REGISTRATION_REMEDY = ("a false match, or views that no shift lines up: give th
                         "(--distortion), try --model homography, check the views' order "
                         "(--views)")
 _SIDE_FILE_REMEDY = "register the views without it"
+# a prism's views may not register without a rig: the remedy is the rig of this capture
+_RIG_REMEDY = ("it is not this capture's rig (another prism, lens or focus): give the rig "
+               "of the camera and prism that took it (its prism and lens values), or register "
+               "the views without it")
 
 
 def default_claim(*, transform: bool, rig: bool) -> tuple[str, str]:
@@ -104,7 +108,7 @@ def default_claim(*, transform: bool, rig: bool) -> tuple[str, str]:
     if transform:
         return "the transform", _SIDE_FILE_REMEDY
     if rig:
-        return "the rig", _SIDE_FILE_REMEDY
+        return "the rig", _RIG_REMEDY
     return "the registration", _REGISTRATION_REMEDY
 
 
