@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError, PlenocliError, os_error_message
+from plenocli.errors import ConfigError, InputError, PlenocliError, not_a_file, os_error_message
 from plenocli.io.atomic import check_outputs
 from plenocli.io.folderlock import folders_locked
 from plenocli.pipeline.config import Step
@@ -59,6 +59,8 @@ def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
             if not p.exists() and not _within(p, made):
                 raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
                                   "step makes it")
+            if p.exists() and not (p.is_file() or p.is_dir()) and not _within(p, made):
+                raise ConfigError(f"step {step.name!r}: {not_a_file(p)}")
         inputs = step.stage.by_role(step.params, step.stage.inputs)
         try:
             check_kinds(step.stage.name, inputs, planned)
