@@ -82,8 +82,9 @@ EXCLUDED = {("develop", ("develop", "linear")): {
                           "A, B, S views; give --recover-highlights when developing the views "
                           "it came from"}}
 PHOTOS = (".png", ".jpg", ".jpeg")
-# stages that read what only their producer records (bias: decode's areas and levels)
-RECORD_NEEDED = ("bias",)
+# (stage, role) whose reader needs what only the producer records (bias: decode's areas and
+# levels; unmix's mixing: the matrix crosstalk --mixing-out records): no foreign file
+RECORD_NEEDED = (("bias", "input"), ("unmix", "mixing"))
 # stages a capture goes through once: applied again they correct what is already corrected
 ONCE = ("bias", "flat", "unmix")
 
@@ -180,9 +181,11 @@ def _wrote(path: Path, planned: Mapping[Path, Planned | None]) -> tuple[str, str
 
 def _takes(stage: str, role: str) -> str:
     """What ``stage`` takes in an image role, by the commands (and options) writing it."""
-    foreign = "" if stage in RECORD_NEEDED else " (or a foreign file)"
+    foreign = "" if (stage, role) in RECORD_NEEDED else " (or a foreign file)"
+    once = stage in ONCE and role in ("input", "inputs")  # its own output is refused
+    producers = [p for p in ACCEPTS[stage][role] if not (once and p == stage)]
     return (f"{stage} takes as {_label(role)} the output of "
-            f"{', '.join(map(_producer, ACCEPTS[stage][role]))}{foreign}")
+            f"{', '.join(map(_producer, producers))}{foreign}")
 
 
 def _producer(name: str) -> str:

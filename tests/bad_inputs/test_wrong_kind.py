@@ -41,7 +41,11 @@ def test_a_file_of_the_wrong_kind_or_already_processed_is_refused(inputs, tmp_pa
         (["bias", inputs / "biased.tif", "-o", "{o}/x.tif"], "`plenocli bias` output"),
         # audit 14 M1: each producer named by the command and option that writes it
         (["unmix", inputs / "biased.tif", "--mixing", made / "gain.tif", "-o", "{o}/x.tif"],
-         "unmix takes as mixing the output of crosstalk --mixing-out, simulate"),
+         # audit 18 M3: a mixing file needs its record: no "(or a foreign file)"
+         "unmix takes as mixing the output of crosstalk --mixing-out, simulate\n"),
+        # audit 18 M3: unmix's own output is refused as an input: not in the list
+        (["unmix", made / "gain.tif", "--mixing", made / "mixing.tif", "-o", "{o}/x.tif"],
+         "unmix takes as inputs the output of decode, bias, flat, simulate, sai, refocus (or"),
         (["develop", made / "gain.tif", "-o", "{o}/x.tif"], "stitch, develop --linear (or"),
         (["bias", made / "mixing.tif", "-o", "{o}/x.tif"],
          "is a `plenocli crosstalk --mixing-out` output; bias takes"),
