@@ -15,7 +15,11 @@ from plenocli.optics.analysis import (
     spot_rms_um,
 )
 from plenocli.optics.lens import Lens, Surface
-from plenocli.optics.prism import prism_deviation_deg
+from plenocli.optics.prism import (
+    apex_for_deviation_deg,
+    max_minimum_deviation_deg,
+    prism_deviation_deg,
+)
 from tests.conftest import ROOT
 
 TABLE2 = ROOT / "configs" / "lenses" / "paper_table2.yaml"
@@ -147,8 +151,22 @@ def test_prism_deviation(n, apex):
 
 def test_prism_deviation_of_the_paper_is_not_the_half_field():
     """The paper sets alpha = theta = atan(T / 2F) ~ 16.3 deg, but (n - 1) A = 12.4 deg for
-    A = 16.7 deg: the apex that gives alpha = theta is ~22 deg. Reported, not hidden."""
+    A = 16.7 deg: the apex that gives alpha = theta is 21.4 deg (exact minimum deviation; the
+    thin rule says 22.0). Reported, not hidden."""
     rep = lens_report(read_lens(TABLE2), spot_rays_across=4)
     assert rep["prism"]["thin_deg"] == pytest.approx(12.358)
-    assert rep["prism"]["apex_for_half_field_deg"] == pytest.approx(
-        math.degrees(math.atan(1.8 / rep["efl_mm"])) / 0.74)
+    apex = rep["prism"]["apex_for_half_field_deg"]
+    half = math.degrees(math.atan(1.8 / rep["efl_mm"]))
+    assert prism_deviation_deg(1.74, apex)["minimum_deg"] == pytest.approx(half, abs=1e-9)
+
+
+@pytest.mark.parametrize("n", [1.2, 1.5, 1.74, 2.0])
+def test_the_apex_for_a_deviation_is_one_the_prism_model_takes(n):
+    """audit 18 W3: the thin rule D / (n - 1) gave 85.7 deg for D = 63.6 deg and n = 1.74, an
+    apex that reflects every ray totally (optics refuses it as input). The exact apex deviates
+    by D at minimum deviation; past the largest deviation a prism of that glass gives: None."""
+    top = max_minimum_deviation_deg(n)
+    for deviation in np.linspace(0.5, top - 1e-3, 9):
+        apex = apex_for_deviation_deg(n, float(deviation))
+        assert prism_deviation_deg(n, apex)["minimum_deg"] == pytest.approx(deviation, abs=1e-7)
+    assert apex_for_deviation_deg(n, top + 1e-6) is None

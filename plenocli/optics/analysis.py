@@ -14,7 +14,11 @@ import numpy as np
 
 from plenocli.optics.glass import D_LINE_UM
 from plenocli.optics.lens import Lens, trace
-from plenocli.optics.prism import prism_deviation_deg
+from plenocli.optics.prism import (
+    apex_for_deviation_deg,
+    max_minimum_deviation_deg,
+    prism_deviation_deg,
+)
 
 # A focal length this many times the lens's size (track to the image plane or largest clear
 # aperture) is no lens: real objectives have |EFL| within ~0.1-20 x their length, and a single
@@ -302,7 +306,7 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
                          f"deg off axis (the sensor's corner is at {half_diag:.1f} deg): the lens "
                          "vignettes it completely; give a smaller sensor (--sensor-mm)")
     ideal_half = math.degrees(math.atan(sensor_mm / 2 / par["efl_mm"]))
-    apex = ideal_half / (prism_n - 1.0)
+    apex = apex_for_deviation_deg(prism_n, ideal_half)
     return {
         "lens": lens.name,
         "wavelength_um": wavelength_um,
@@ -319,6 +323,7 @@ def lens_report(lens: Lens, *, sensor_mm: float = 3.6, wavelength_um: float = D_
                         for f, s in zip([0.0, *fields], spots, strict=True)],
         "prism": {"n": prism_n, "apex_deg": prism_apex_deg,
                   **prism_deviation_deg(prism_n, prism_apex_deg),
-                  # no prism's apex reaches 90 deg: n too close to 1 for this field
-                  "apex_for_half_field_deg": apex if apex < 90 else None},
+                  # None: no prism of this glass deviates light by half the field
+                  "apex_for_half_field_deg": apex,
+                  "max_minimum_deviation_deg": max_minimum_deviation_deg(prism_n)},
     }

@@ -63,6 +63,25 @@ def prism_deviation_deg(n: float, apex_deg: float) -> dict:
     return out
 
 
+def apex_for_deviation_deg(n: float, deviation_deg: float) -> float | None:
+    """The apex angle whose exact minimum deviation is ``deviation_deg``: from n sin(A/2) =
+    sin((A + D)/2), tan(A/2) = sin(D/2) / (n - cos(D/2)). None when no apex the prism model
+    takes (below 90 deg, and below 2 asin(1/n), past which every ray is reflected totally)
+    deviates that much (:func:`max_minimum_deviation_deg`)."""
+    if deviation_deg >= max_minimum_deviation_deg(n):
+        return None
+    half = math.radians(deviation_deg) / 2
+    return math.degrees(2 * math.atan(math.sin(half) / (n - math.cos(half))))
+
+
+def max_minimum_deviation_deg(n: float) -> float:
+    """The largest minimum deviation of a prism of index ``n`` whose apex the model takes:
+    the minimum deviation grows with the apex, up to 90 deg or 2 asin(1/n) (total reflection),
+    whichever comes first."""
+    apex = min(math.pi / 2, 2 * math.asin(1.0 / n))
+    return math.degrees(2 * math.asin(min(1.0, n * math.sin(apex / 2))) - apex)
+
+
 def deviate(direction: np.ndarray, *, n: float, apex_deg: float, towards: tuple[int, int],
             reverse: bool = False) -> np.ndarray:
     """Directions (..., 3) of light (going +z) after a thin prism whose thin edge points

@@ -81,8 +81,9 @@ def format_report(report: dict) -> str:
                  + (f"{normal:.3f} deg at normal incidence" if normal == normal else
                     "none at normal incidence (totally reflected: n sin A > 1)")
                  + "; A for alpha = half field: "
-                 + (f"{apex:.2f} deg" if apex is not None else
-                    "none (n too close to 1: (n-1)A stays below half the field up to 90 deg)"))
+                 + (f"{apex:.2f} deg (exact, at minimum deviation)" if apex is not None else
+                    f"none (a prism of index {p['n']} deviates light by at most "
+                    f"{p['max_minimum_deviation_deg']:.2f} deg at minimum deviation)"))
     ct = report.get("crosstalk")
     if ct:
         def pct(v):
