@@ -365,14 +365,17 @@ class SignEvidence:
                 f"{self.ours:.2f}): a {self.kind} camera")
 
 
-def _other_sign(frame, grid, g_range, lenses: LensDepth) -> SignEvidence | None:
+def _other_sign(frame, grid, g_range, lenses: LensDepth, theirs: float | None = None
+                ) -> SignEvidence | None:
     """Evidence that the frame matches far better with g of the other sign (a Galilean camera
-    searched with a Keplerian range, or the reverse), or None."""
+    searched with a Keplerian range, or the reverse), or None. ``theirs``: the other sign's
+    median confidence, when measured already."""
     ours = float(np.median(lenses.confidence))
     if ours >= CLEAR_MATCH:
         return None
     other = (-g_range[1], -g_range[0])
-    theirs = float(np.median(lens_depth(frame, grid, g_range=other).confidence))
+    if theirs is None:
+        theirs = float(np.median(lens_depth(frame, grid, g_range=other).confidence))
     if theirs <= ours + SIGN_MARGIN:
         return None
     kind = "Galilean (inverted micro-images)" if other[0] < 0 else "Keplerian"
@@ -382,11 +385,22 @@ def _other_sign(frame, grid, g_range, lenses: LensDepth) -> SignEvidence | None:
 SIGN_CHECK_PX = 512    # side of the central region whose micro-images tell refocus g's sign
 
 
-def contradicted_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> SignEvidence | None:
-    """Evidence that the micro-images of ``frame``'s central region match their neighbours far
-    better with g of the other sign than ``sign``'s (a Galilean camera's inverted micro-images
-    refocused at g > 0, or the reverse: no plane of the scene is in focus then), or None.
-    Frames that match neither clearly (a white) or hold too few lenses are not judged."""
+@dataclass(frozen=True)
+class CentralMatch:
+    """How the micro-images of a frame's central region match their neighbours on a grid:
+    ``best``, the median lens confidence of the better sign of g searched, and ``evidence``
+    when the other sign matches far better than the one asked for."""
+
+    best: float
+    evidence: SignEvidence | None
+
+
+def central_match(frame: np.ndarray, grid: LensGrid, sign: float) -> CentralMatch | None:
+    """:class:`CentralMatch` of ``frame``'s central region with g of ``sign`` (the other sign
+    is searched only when this one matches weakly); None when the region holds too few lenses
+    or the pitch measures no g. On a grid the frames cannot check, a weak ``best`` is what
+    tells a wrong grid (another camera's, a few per cent off in pitch or turned):
+    neighbours are compared at wrong offsets."""
     side = int(max(SIGN_CHECK_PX, 12 * grid.pitch_px))  # hundreds of lenses
     rows, cols = frame.shape
     top, left = max(0, (rows - side) // 2), max(0, (cols - side) // 2)
@@ -399,7 +413,11 @@ def contradicted_sign(frame: np.ndarray, grid: LensGrid, sign: float) -> SignEvi
         lenses = lens_depth(crop, sub, g_range=ours)
     except ValueError:  # too few lenses in the region to judge
         return None
-    return _other_sign(crop, sub, ours, lenses)
+    median = float(np.median(lenses.confidence))
+    if median >= CLEAR_MATCH:
+        return CentralMatch(median, None)
+    theirs = float(np.median(lens_depth(crop, sub, g_range=(-ours[1], -ours[0])).confidence))
+    return CentralMatch(max(median, theirs), _other_sign(crop, sub, ours, lenses, theirs))
 
 
 def check_range(g_range: tuple[float, float]) -> tuple[float, float]:

@@ -34,6 +34,19 @@ def warn_unchecked(grid_path: str) -> None:
                 "frames or on the camera's white image)", grid_path)
 
 
+def weak_match(stage: str, grid_path: str, median: float, clear: float) -> InputError:
+    """The refusal of a grid the frames cannot check (no lattice shows) whose micro-images
+    match their neighbours only weakly on it: on its own lattice they match clearly (median
+    lens confidence 0.98 on the simulator's scene); turned 1-7 deg, 2-4 % off in pitch or
+    another camera's, neighbours are compared at wrong offsets and the median falls to 0.3-0.4
+    (depth's g off by 0.3-0.6, a refocused image at correlation 0.5 with the scene)."""
+    return InputError(f"{stage}: the frames show no micro-image lattice to check {grid_path} "
+                      f"against, and their micro-images match their neighbours on it only "
+                      f"weakly (median lens confidence {median:.2f}, below {clear:g}): the "
+                      "grid is likely not this camera's; make it with `plenocli calibrate` on "
+                      "this camera's white image")
+
+
 def centred_on(frame: np.ndarray, grid, grid_path: str, *, refit: bool = False):
     """(grid moved onto the frame's lens centres, the move (dx, dy) px or None where the frame
     does not show them); InputError for a grid more than a quarter pitch off (depth).

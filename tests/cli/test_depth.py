@@ -341,8 +341,10 @@ def test_a_grid_of_another_camera_is_refused(lenslet, tmp_path):
 
 def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refused(tmp_path):
     """The simulator's scene frames show no micro-image lattice (no vignetting): the grid is
-    used unchecked, which refocus says and records; depth vouches for it by the matches (its
-    own grid: median lens confidence 0.98) and refuses a grid turned by 2 deg (0.3-0.4)."""
+    used unchecked, which refocus says and records; depth and refocus vouch for it by the
+    matches (its own grid: median lens confidence 0.98) and refuse a grid turned by 2 deg or
+    4 % off in pitch (0.3-0.4; audit 18 W2: refocus wrote an image at correlation 0.48 with
+    the scene)."""
     from dataclasses import replace
 
     from plenocli.io.gridfile import read_grid, write_grid
@@ -352,15 +354,21 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     grid = read_grid(grid_path)
     write_grid(tmp_path / "turned.yaml", replace(grid, angle_rad=grid.angle_rad + np.radians(2)),
                {})
+    write_grid(tmp_path / "scaled.yaml", replace(grid, pitch_px=grid.pitch_px * 1.04), {})
     with plenocli_messages() as said:
-        result = invoke("refocus", frames, "--grid", tmp_path / "turned.yaml", "-o",
-                        tmp_path / "r.tif")
+        result = invoke("refocus", frames, "--grid", grid_path, "-o", tmp_path / "r.tif")
     assert result.exit_code == 0, result.output
     assert any("used unchecked" in line for line in said)
     assert tiffio.read_meta(tmp_path / "r.tif")["refocus"]["grid_checked"] is False
-    refused = invoke("depth", frames, "--grid", tmp_path / "turned.yaml", "-o", tmp_path / "d.tif")
-    assert refused.exit_code == 1 and "not this camera's" in refused.output
-    assert len(refused.output.strip().splitlines()) == 1 and not (tmp_path / "d.tif").exists()
+    # depth refits a lattice-only grid's pitch on the frames: the scaled one is measured
+    for wrong, commands in (("turned.yaml", ("depth", "refocus")), ("scaled.yaml", ("refocus",))):
+        for command in commands:
+            refused = invoke(command, frames, "--grid", tmp_path / wrong, "-o",
+                             tmp_path / "d.tif")
+            assert refused.exit_code == 1 and "not this camera's" in refused.output, (
+                command, wrong, refused.output)
+            assert len(refused.output.strip().splitlines()) == 1
+            assert not (tmp_path / "d.tif").exists()
     own = invoke("depth", frames, "--grid", grid_path, "-o", tmp_path / "d.tif")
     assert own.exit_code == 0, own.output
     assert tiffio.read_meta(tmp_path / "d.tif")["depth"]["grid_checked"] is False

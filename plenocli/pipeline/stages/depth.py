@@ -14,7 +14,7 @@ from plenocli.io.preview import write_depth_png
 from plenocli.model.numbers import decimal
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames, split_colour_page, view_of
-from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
+from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked, weak_match
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
@@ -166,18 +166,10 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
 
 
 def _check_unchecked_grid(grid_path: str, confidence: np.ndarray) -> None:
-    """A grid the frames cannot check (no lattice shows) is vouched for by the matches alone:
-    on its own lattice every micro-image matches its neighbours clearly (median lens confidence
-    0.98 on the simulator's scene); turned 1-7 deg, 4 % off in pitch or another camera's, the
-    neighbours are compared at wrong offsets and the median falls to 0.3-0.4, with g off by
-    0.3-0.6. Below CLEAR_MATCH the map is refused, not written with g that look plausible."""
+    """A grid the frames cannot check is vouched for by the matches alone (fits.weak_match)."""
     median = float(np.median(confidence))
     if median < lenslet.CLEAR_MATCH:
-        raise InputError(f"depth: the frames show no micro-image lattice to check {grid_path} "
-                         f"against, and their micro-images match their neighbours on it only "
-                         f"weakly (median lens confidence {median:.2f}, below "
-                         f"{lenslet.CLEAR_MATCH:g}): the grid is likely not this camera's; make "
-                         "it with `plenocli calibrate` on this camera's white image")
+        raise weak_match("depth", grid_path, median, lenslet.CLEAR_MATCH)
 
 
 def _type_ranges(grid_path, grid) -> np.ndarray | None:

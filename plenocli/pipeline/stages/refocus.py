@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from plenocli import refocus as rf
-from plenocli.depth.lenslet import contradicted_sign, sensor_grey
+from plenocli.depth.lenslet import CLEAR_MATCH, central_match, sensor_grey
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
@@ -16,7 +16,7 @@ from plenocli.io.preview import write_png
 from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
-from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
+from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked, weak_match
 from plenocli.progress import log, shown
 
 MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
@@ -58,11 +58,10 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     cfa = framing.cfa
     grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
     checked = check_fits(grey, framing.grid, grid, frames_path=input)
+    lens_grid, moved = centred_on(grey, framing.grid, grid)
+    _check_match(grey, lens_grid, grid, g=None if depth else g_values[0], checked=checked)
     if not checked:
         warn_unchecked(grid)
-    lens_grid, moved = centred_on(grey, framing.grid, grid)
-    if not depth:
-        _check_sign(grey, lens_grid, g_values[0])
     framing = replace(framing, grid=lens_grid)
     if depth:
         options = {"lens_g": _lens_g(depth, grid, framing, s)}
@@ -206,12 +205,21 @@ def _best_g(scores: list[dict], *, sweep: bool) -> float | None:
     return best
 
 
-def _check_sign(grey: np.ndarray, grid, g: float) -> None:
-    """Refused: g of the sign the frames' micro-images contradict."""
-    evidence = contradicted_sign(grey, grid, g)
-    if evidence is not None:
-        raise InputError(f"refocus: --g {g:g}: {evidence}; refocus at g of that sign (e.g. "
-                         f"--g {-g:g})")
+def _check_match(grey: np.ndarray, lens_grid, grid_path: str, *, g: float | None,
+                 checked: bool) -> None:
+    """Refused: g of the sign the frames' micro-images contradict (``g`` None: the depth map
+    gives each lens its g), or a grid the frames cannot check on which the micro-images
+    match their neighbours only weakly (another camera's, a few per cent off)."""
+    if g is None and checked:
+        return
+    match = central_match(grey, lens_grid, 1.0 if g is None else g)
+    if match is None:
+        return
+    if g is not None and match.evidence is not None:
+        raise InputError(f"refocus: --g {g:g}: {match.evidence}; refocus at g of that sign "
+                         f"(e.g. --g {-g:g})")
+    if not checked and match.best < CLEAR_MATCH:
+        raise weak_match("refocus", grid_path, match.best, CLEAR_MATCH)
 
 
 def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
