@@ -105,3 +105,25 @@ def test_an_overlap_with_nothing_known_is_not_reported_as_a_correlation_of_minus
     with pytest.raises(StitchError, match="nothing to correlate") as err:
         estimate_translation(a, b, direction="h")
     assert "-1.00" not in str(err.value) and "NaN" in str(err.value)
+
+
+@pytest.mark.parametrize("which, refused", [(0, True), (1, False)])
+def test_views_brought_below_float32s_normal_range_are_refused(which, refused):
+    """audit 18 W7: view 0 at 1e-38 (a subnormal level) made every gain match down to it, and
+    the panorama held zeros where a bright view alone covered it, exit 0. One view that dark
+    is matched up to the others instead; the panorama's level set by such a view is refused."""
+    views, _, _ = make_rig(layout="2x2", model="translation", view_shape=(200, 260),
+                           overlap=0.3, noise=0.003, seed=12)
+    scaled = views.astype(np.float64)
+    scaled[which] *= 1e-38 / np.median(np.abs(views[which]))
+    scaled = scaled.astype(np.float32)
+    if refused:
+        with pytest.raises(StitchError, match="view 0 has a level of .* below float32's normal"):
+            stitch(scaled, layout="2x2", model="translation")
+        stitch(scaled, layout="2x2", model="translation", match_gain=False)
+    else:
+        panorama, _ = stitch(scaled, layout="2x2", model="translation")
+        plain, _ = stitch(views, layout="2x2", model="translation")
+        covered = np.isfinite(plain)
+        assert np.array_equal(np.isfinite(panorama), covered)
+        assert np.abs(panorama[covered] - plain[covered]).max() < 1e-3

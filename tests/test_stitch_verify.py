@@ -215,3 +215,16 @@ def test_a_seam_without_texture_cannot_vouch_for_a_transform():
         t["view_to_reference"][1][0][2] += off
         with pytest.raises(ValueError, match="no overlap large enough, and textured, to check"):
             stitch(flat, transform=t)
+
+
+def test_views_in_another_order_than_the_rigs_are_told_so():
+    """audit 18 M4: the right rig with the views swapped was refused as "no reliable overlap
+    ... or the overlap has no texture" alone, though the pair overlaps and is textured."""
+    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
+    views = np.stack([np.moveaxis(b, -1, 0), np.moveaxis(a, -1, 0)])
+    cam = truth["camera"]
+    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
+    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
+                   optics, cam["aperture_mm"], cam["object_distance_mm"])
+    with pytest.raises(ValueError, match="not in the rig's order"):
+        stitch(views, rig=rig)

@@ -18,6 +18,7 @@ from plenocli.stitch.compose import Box, coverage, intersect, region_shape, warp
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import difference_row
+from plenocli.stitch.views import level
 from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, apply_matrix, feather
 
 # An overlap's exposure is measured on up to MEASURE_BLOCKS blocks spread
@@ -185,10 +186,13 @@ def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
     return out
 
 
-def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
-                n_chan: int) -> np.ndarray:
-    """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed);
-    refused (StitchError) where an overlap holds no light in either view."""
+def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], stack: np.ndarray
+                ) -> np.ndarray:
+    """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed) for
+    the views ``stack`` (V, C, rows, cols); refused (StitchError) where an overlap holds no
+    light in either view, or where a view brought to view 0's exposure would fall out of
+    float32's normal range."""
+    n_views, n_chan = stack.shape[:2]
     gains = np.ones((n_views, n_chan))
     for c in range(n_chan):
         rows, rhs = [], []
@@ -202,7 +206,25 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], n_views: int,
         if rows:
             sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
             gains[1:, c] = np.exp(sol)
+    _check_scaled_levels(stack, gains)
     return gains
+
+
+def _check_scaled_levels(stack: np.ndarray, gains: np.ndarray) -> None:
+    """A view at view 0's exposure is written in float32: a level below its normal range is
+    stored with fewer bits and its darker pixels as 0 (view 0 at 1e-38 took a view 1e-77 times
+    as bright to zeros). Past its largest value, the written result is refused as any is."""
+    tiny = float(np.finfo(np.float32).tiny)
+    for k, view in enumerate(stack):
+        for c, channel in enumerate(view):
+            scaled = level(channel) * gains[k, c]
+            if 0 < scaled < tiny:
+                who = "view 0" if k == 0 else f"view {k} brought to view 0's exposure"
+                raise StitchError(
+                    f"{who} has a level of {scaled:.3g}, below float32's normal range "
+                    f"({tiny:.3g}): its pixels would be stored with fewer bits or as 0; scale "
+                    "the views (all by one factor) nearer 1, or stitch without exposure "
+                    "matching (--gains none)")
 
 
 def _check_light(means, pair: tuple[int, int], channel: int, n_chan: int) -> None:

@@ -323,12 +323,18 @@ def _sign_hint(views: np.ndarray, levels: Sequence[float] | None = None):
 
 @contextlib.contextmanager
 def _prism_hint(rig: PrismRig | None, luma: np.ndarray):
-    """Without a rig, an overlap not found gets the way out: views that show one field (a
-    stereo or dual-pixel pair: nothing to extend), or views seen through prisms."""
+    """An overlap not found gets the way out: without a rig, views that show one field (a
+    stereo or dual-pixel pair: nothing to extend), or views seen through prisms; with one, the
+    rig or the views' order."""
     try:
         yield
     except StitchError as err:
-        if rig is None and ("no reliable overlap" in str(err) or "no overlap" in str(err)):
+        not_found = "no reliable overlap" in str(err) or "no overlap" in str(err)
+        if rig is not None and not_found:
+            raise StitchError(f"{err}; through the rig: it may not be this capture's rig "
+                              "(another prism, lens or focus), or the views are not in the "
+                              "rig's order (--views)") from err
+        if rig is None and not_found:
             if _same_field(luma):
                 raise StitchError(f"{err}; the views show one field, shifted by a few pixels "
                                   "at most (a stereo or dual-pixel pair, not views through "
@@ -394,7 +400,7 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = overlap_measure.match_gains(overlaps, pairs, *stack.shape[:2])
+        gains = overlap_measure.match_gains(overlaps, pairs, stack)
     areas = [0 if overlap is None else overlap.area for overlap in overlaps]
     del overlaps
     box = compose.covered_box(maps, boxes, holes)
