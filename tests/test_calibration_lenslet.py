@@ -150,3 +150,21 @@ def test_anova_p_value_is_scipys_f_oneway():
     for shift in (0.0, 0.05, 0.3):
         groups = [rng.normal(k * shift, 1.0, 40 + 7 * k) for k in range(3)]
         assert anova_p_value(groups) == pytest.approx(stats.f_oneway(*groups).pvalue, rel=1e-9)
+
+
+def test_regions_contradict_a_border_lattice_off_the_lenses():
+    """Audit 18 W1's rule: on a scene, a lattice pinned by the border repetition must place
+    the regions' mean micro-images (4 x 4 regions, each folded alone) within 2 x the corner
+    tolerance; a lattice 1 % or 1.6 % short (the texture-locked 22.835 px of a 23.21 px
+    origami crop) does not, the true one and one 0.5 % off do."""
+    from plenocli.calibration import _regions_contradict
+
+    angle = 0.3
+    image, truth = lenslet_scene((600, 600), pitch_px=23.2, angle_rad=angle, seed=5)
+    flat = calibration.flatten(image, scale_px=1.5 * 23.2)
+    for scale, contradicted in ((1.0, False), (0.995, False), (0.99, True), (0.984, True)):
+        grid = LensGrid(23.2 * scale, angle, tuple(truth["offset_xy"]), "hex",
+                        image_shape=image.shape)
+        why = _regions_contradict(flat, grid)
+        assert bool(why) == contradicted, (scale, why)
+    assert "regions' mean micro-images" in why and "0.30 pitch" in why

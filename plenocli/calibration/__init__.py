@@ -154,39 +154,81 @@ def _refusal(err: CalibrationError, shape, pitch_hint, start) -> CalibrationErro
 def _grid(image, cfa, decision: Decision, all_views, pitch_hint, start
           ) -> tuple[LensGrid, CalibrationReport]:
     """Centres, lattice and lens types on the lattice a judge decided (steps 4 and 5)."""
-    verdict = decision.border
     found = decision.lattice
     if decision.judge == "match":
         return _matched_grid(image, cfa, decision)
     border = border_lattice(found, all_views)
     sure = _corner_error(border, image.shape) <= CORNER_TOLERANCE * found.pitch_px
-    pinned = "the border repetition" if sure else ""
-    if sure:
-        found = border.lattice
+    hints = (image.shape, pitch_hint, start)
+    flat, grid, fit, centre, pinned = _placed(image, cfa, border.lattice if sure else found,
+                                              border, sure, hints)
+    if pinned == BY_BORDER and not fit.centres_refined:
+        # a scene's texture can pull the far border peaks onto a nearby period (issue 21
+        # audit 18 W1: a crop of origami at 22.835 px, +-0.028 px claimed, for 23.21): the
+        # regions' mean micro-images, each lens placed by its own region, must agree
+        why = _regions_contradict(flat, grid)
+        if why:
+            flat, grid, fit, centre, pinned = _placed(image, cfa, found, border, False, hints,
+                                                      contradiction=why)
+    grid, type_info = _with_lens_types(flat, grid)
+    pinned = "the micro-images' symmetry centres" if fit.centres_refined else pinned
+    return grid, CalibrationReport(fit=fit, verdict=decision.border, lens_types=type_info,
+                                   lens_centre=centre, decision=decision, lattice_from=pinned)
+
+
+BY_BORDER = "the border repetition"
+BY_REGIONS = "the regions' mean micro-images"
+
+
+def _placed(image, cfa, found: Lattice, border, sure: bool, hints, contradiction: str = ""):
+    """The lens centre and the grid on ``found`` (pinned by the border repetition when
+    ``sure``, else by the regions' mean micro-images when they can): flat image, grid, fit,
+    centre and what pinned the lattice, or CalibrationError."""
     flat = flatten(image, cfa=cfa, scale_px=max(1.5 * found.pitch_px, 8.0))
     centre = lens_centre(flat, LensGrid(found.pitch_px, found.angle_rad, (0.0, 0.0), found.kind))
     if not centre.sure:
         raise _unvouched(
             found, "its lens centres cannot be told from the holes between them (the mean "
             f"micro-image is as round about a hole: asymmetry {centre.asymmetry:.2f} against "
-            f"{centre.rival_asymmetry:.2f})", image.shape, pitch_hint, start)
+            f"{centre.rival_asymmetry:.2f})", *hints)
+    pinned = BY_BORDER if sure else ""
     if not sure:   # the regions' mean micro-images may pin it down where the borders do not
         found, border, sure = _regional(flat, found, centre, border, image.shape)
-        pinned = "the regions' mean micro-images" if sure else ""
+        pinned = BY_REGIONS if sure else ""
     guess = LensGrid(found.pitch_px, found.angle_rad, centre.offset_xy, found.kind,
                      image_shape=image.shape)
     grid, fit = fit_grid(flat, guess, border=(found.pitch_px, found.angle_rad,
                                               border.pitch_err_px, border.angle_err_rad)
                          if sure else None)
     if not fit.centres_refined and not sure:
-        raise _unvouched(
-            found, "neither the micro-image centres nor the border repetition pin its pitch "
-            f"down on this image (+-{border.pitch_err_px:.3f} px)", image.shape, pitch_hint,
-            start)
-    grid, type_info = _with_lens_types(flat, grid)
-    pinned = "the micro-images' symmetry centres" if fit.centres_refined else pinned
-    return grid, CalibrationReport(fit=fit, verdict=verdict, lens_types=type_info,
-                                   lens_centre=centre, decision=decision, lattice_from=pinned)
+        why = (f"{contradiction}, and the regions' lattice alone is not sure enough"
+               if contradiction else "neither the micro-image centres nor the border "
+               f"repetition pin its pitch down on this image (+-{border.pitch_err_px:.3f} px)")
+        raise _unvouched(found, why, *hints)
+    return flat, grid, fit, centre, pinned
+
+
+def _regions_contradict(flat: np.ndarray, grid: LensGrid) -> str:
+    """Why the lattice of ``grid`` (pinned by the border repetition on a scene) is not what
+    the micro-images show, or "": the lattice through the regions' mean micro-images
+    (``regional_lattice``: 4 x 4 regions, each folded on its own, scene content averaged
+    over its lenses) places some lens of the frame more than 2 x CORNER_TOLERANCE pitch
+    away, so at least one of the two misses the lenses by more than a grid vouches for. No
+    regions' lattice (fewer than 12 round regions): nothing to contradict."""
+    lattice = LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
+                       image_shape=grid.image_shape)
+    regional = regional_lattice(flat, lattice)
+    if regional is None:
+        return ""
+    pitch, angle, offset, _ = regional
+    theirs = reindexed(pitch, angle, offset, grid.lattice, grid.image_shape)
+    apart = compare_grids(lattice, theirs, grid.image_shape)["max_px"]
+    if apart <= 2 * CORNER_TOLERANCE * grid.pitch_px:
+        return ""
+    return (f"the border repetition ({grid.pitch_px:.3f} px) and the regions' mean "
+            f"micro-images ({pitch:.3f} px) place lenses up to {apart:.1f} px "
+            f"({apart / grid.pitch_px:.2f} pitch) apart (a scene's texture can repeat near the "
+            "pitch)")
 
 
 def _unvouched(found: Lattice, why: str, shape, pitch_hint, start: LensGrid | None

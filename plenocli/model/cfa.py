@@ -68,18 +68,33 @@ def phase_gains(image: np.ndarray, *, max_blocks: int = 1 << 20) -> np.ndarray:
     (image detail averages out over many blocks); a Bayer mosaic without its pattern shows
     its channels' sensitivities (0.7-1.2 for a white). At most ``max_blocks`` blocks are read
     (whole block rows, evenly spaced)."""
+    return phase_balance(image, max_blocks=max_blocks)[0]
+
+
+def phase_balance(image: np.ndarray, *, max_blocks: int = 1 << 20
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`phase_gains` and, per phase, the share (2, 2) of the brighter half of the blocks
+    in which that phase is off its block's mean in the same direction as its median. A colour
+    filter sets a phase's share in every block alike (a white's red phase is low in every
+    block: 0.9-1.0); an imbalance that comes from the image's own detail at the 2-px scale, a
+    micro-image's rim falling across a block, follows the image instead: its sign turns with
+    the side of the lens (about 0.5-0.63 on mono whites of an even whole-pixel pitch)."""
     rows, cols = image.shape[0] // 2 * 2, image.shape[1] // 2 * 2
     if rows == 0 or cols == 0:
-        return np.ones((2, 2))
+        return np.ones((2, 2)), np.full((2, 2), 0.5)
     step = max(1, -(-(rows // 2) * (cols // 2) // max_blocks))
     blocks = np.asarray(image[:rows, :cols], np.float32).reshape(rows // 2, 2, cols // 2, 2)
     blocks = blocks[::step]
     means = blocks.mean(axis=(1, 3))
     finite = np.isfinite(means)
     if not finite.any():
-        return np.ones((2, 2))
+        return np.ones((2, 2)), np.full((2, 2), 0.5)
     bright = finite & (means >= np.median(means[finite])) & (means > 0)
     if not bright.any():
-        return np.ones((2, 2))
-    return np.array([[np.median(blocks[:, r, :, c][bright] / means[bright]) for c in range(2)]
-                     for r in range(2)])
+        return np.ones((2, 2)), np.full((2, 2), 0.5)
+    shares = [[blocks[:, r, :, c][bright] / means[bright] for c in range(2)] for r in range(2)]
+    gains = np.array([[np.median(share) for share in row] for row in shares])
+    alike = np.array([[np.mean(np.sign(share - 1) == np.sign(gain - 1))
+                       for share, gain in zip(row, grow, strict=True)]
+                      for row, grow in zip(shares, gains, strict=True)])
+    return gains, alike

@@ -14,7 +14,8 @@ import yaml
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
-from plenocli.pipeline.stages.calibrate import _pitch_error
+from plenocli.errors import InputError
+from plenocli.pipeline.stages.calibrate import _pitch_error, _refuse_hidden_mosaic
 from plenocli.pipeline.stages.simulate import simulate
 from plenocli.synth.whiteimage import white_image
 
@@ -194,6 +195,33 @@ def test_a_bayer_mosaic_without_its_pattern_is_refused(tmp_path):
     assert res.exit_code == 1, res.output
     assert "looks like a 2 x 2 Bayer mosaic" in res.output and "--cfa" in res.output
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+
+
+@pytest.mark.parametrize("pitch", [10, 12])
+def test_a_mono_white_of_an_even_whole_pixel_pitch_is_no_mosaic(tmp_path, pitch):
+    """Audit 18 F1: a mono white whose square lenses sit every ``pitch`` pixels along the pixel
+    axes puts every lens at one pixel phase, and its sharp rims leave the four phases 3-7 %
+    apart: refused as a hidden Bayer mosaic, with no way through. Its imbalance turns sign
+    with the side of the lens (half the blocks either way); a filter's does not."""
+    from plenocli.model.cfa import phase_balance
+
+    offset = np.array([256.37, 255.79])
+    rows, cols = np.mgrid[0:512, 0:512].astype(float)
+    dx = (cols - offset[0] + pitch / 2) % pitch - pitch / 2
+    dy = (rows - offset[1] + pitch / 2) % pitch - pitch / 2
+    r = np.hypot(dx, dy) / (pitch / 2)
+    image = (np.clip(1 - (r / 0.92) ** 8, 0, 1) * np.cos(np.minimum(r, 1) * 1.2) ** 2 * 1000)
+    gains, alike = phase_balance(image)
+    assert np.abs(gains / gains.mean() - 1).max() > 0.03 and alike.max() < 0.7
+    with pytest.raises(InputError, match="looks like a 2 x 2 Bayer mosaic"):   # still refused
+        _refuse_hidden_mosaic("w.tif", image * np.tile([[0.7, 1.0], [1.0, 0.9]], (256, 256)))
+    src, out = tmp_path / "white.tif", tmp_path / "g.yaml"
+    tifffile.imwrite(src, image.astype(np.float32))
+    res = CliRunner().invoke(cli, ["calibrate", str(src), "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    lens = yaml.safe_load(out.read_text())["lens_grid"]
+    xy = np.array(lens["lenses"]["rows"], float)[:, 2:4]
+    assert np.abs((xy - offset + pitch / 2) % pitch - pitch / 2).max() <= 0.1
 
 
 @pytest.mark.parametrize("se, text", [(4.7267e-05, " (pitch +-0.000047 px)"),

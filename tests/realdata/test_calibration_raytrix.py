@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -300,3 +301,23 @@ def test_wrong_hints_on_a_real_frame_are_refused(realdata):
     start = raytrix.grid_from_calib(raytrix.read_calib(other), image.shape)
     with pytest.raises(CalibrationError, match="start grid .* does not fit this image"):
         calibration.calibrate(image, start=start)
+
+
+def test_a_crop_whose_texture_misleads_the_border_repetition(realdata):
+    """Audit 18 W1: a 600 px crop of origami (a scene) was written at 22.835 px (+-0.028 px
+    claimed; the whole frame, its XML and other crops: 23.21 px), lenses up to 7.3 px off,
+    with exit 0: the far border peaks had locked onto the texture. The regions' mean
+    micro-images contradict such a lattice (0.30 pitch apart); now right or refused."""
+    image, _ = _frame(realdata, "origami")
+    whole, _ = _no_hint(_png(realdata, "origami"))
+    top, left = 401, 517
+    crop = np.ascontiguousarray(image[top:top + 600, left:left + 600])
+    try:
+        grid, _ = calibration.calibrate(crop)
+    except CalibrationError as err:
+        assert "regions' mean micro-images" in str(err)
+        return
+    moved = replace(whole, image_shape=None, centres_xy=None, indices=None,
+                    offset_xy=(whole.offset_xy[0] - left, whole.offset_xy[1] - top))
+    far = calibration.compare_grids(grid, moved, crop.shape)
+    assert abs(grid.pitch_px / whole.pitch_px - 1) <= 0.002 and far["max_px"] <= 1.5, far
