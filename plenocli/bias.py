@@ -173,7 +173,7 @@ def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int
             raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
     top, left, bottom, right = (int(v) for v in active_area)
     if not (0 <= top < bottom <= shape[0] and 0 <= left < right <= shape[1]):
-        raise ValueError(f"active_area {list(active_area)} is not inside the "
+        raise ValueError(f"active_area [{top}, {left}, {bottom}, {right}] is not inside the "
                          f"{shape[1]} x {shape[0]} frame")
     areas = {side: _area_beside(masked_areas, active_area, side=side, guard=guard)
              for side in ("left", "top")}

@@ -2,6 +2,7 @@
 
 import errno
 import os
+import re
 
 
 class PlenocliError(Exception):
@@ -98,3 +99,48 @@ def not_a_file(path: "str | os.PathLike") -> InputError:
         return InputError(f"{path}: a symbolic link to {os.readlink(path)}, which does not "
                           "exist; pass the file itself")
     return InputError(f"{path}: no such file")
+
+
+# Python's own phrases in a library's exception, and what they mean for a file being read: a
+# message names what is wrong with the file, not the line of Python that tripped on it.
+_PYTHON_PHRASES = (
+    (re.compile(r"unpack requires a buffer of \d+ bytes"), "it ends inside a header or table"),
+    (re.compile(r"(?:list |tuple )?index -?\d* ?out of range(?:\(\d+\))?"),
+     "a table is shorter than its header says"),
+    (re.compile(r"\braised (\w+)\((['\"])(.*?)\2\)"), r": \3"),   # tifffile's log lines
+    (re.compile(r"\bb(['\"])(.*?)\1"), r"\2"),                      # bytes reprs (LibRaw)
+    (re.compile(r"\bnp\.\w+\(([^()]*)\)"), r"\1"),                # numpy scalar reprs
+    (re.compile(r"\s@(\d+)"), r" at byte \1"),
+)
+
+
+def library_words(err: BaseException) -> str:
+    """A third-party library's exception (tifffile, LibRaw, Pillow, ...) as plain words for a
+    one-line message: bytes decoded, Python's phrases said as what they mean for the file
+    (a buffer too short: the file ends inside a header; an index out of range: a table shorter
+    than its header says), numpy reprs as numbers, whitespace on one line."""
+    args = [a.decode("utf-8", "replace") if isinstance(a, bytes) else a for a in err.args]
+    if isinstance(err, KeyError):
+        text = f"no {args[0]} entry" if args else "a required entry is missing"
+    elif len(args) == 1 and isinstance(args[0], str):
+        text = args[0]
+    else:
+        text = str(err)
+    return plain_words(text) or type(err).__name__
+
+
+def plain_words(text: str) -> str:
+    """``text`` with Python's phrases and reprs replaced (see ``library_words``), one line."""
+    for pattern, words in _PYTHON_PHRASES:
+        text = pattern.sub(words, text)
+    return " ".join(text.replace(" :", ":").split()).rstrip(".")
+
+
+def numbers(values) -> str:
+    """Numbers for a message: '0, 900, 0.5' (whole numbers whole, others :g), not a list of
+    numpy reprs."""
+    return ", ".join(_number(float(v)) for v in values)
+
+
+def _number(v: float) -> str:
+    return str(int(v)) if v.is_integer() and abs(v) < 1e15 else f"{v:g}"

@@ -89,10 +89,11 @@ def test_a_view_with_one_finite_pixel_is_written(tmp_path):
     assert np.isfinite(tiffio.read_image(tmp_path / "out.tif")[0]).sum() == 1
 
 
-@pytest.mark.parametrize("dtype", [np.complex64, np.bool_, np.int8])
-def test_samples_that_are_not_real_sensor_values_are_refused(tmp_path, dtype):
+@pytest.mark.parametrize("dtype, words", [(np.complex64, "not real-valued"),
+                                          (np.bool_, "1-bit"), (np.int8, "not real-valued")])
+def test_samples_that_are_not_real_sensor_values_are_refused(tmp_path, dtype, words):
     tifffile.imwrite(tmp_path / "x.tif", np.zeros((4, 4), dtype))
-    with pytest.raises(InputError, match="not real-valued"):
+    with pytest.raises(InputError, match=words):
         tiffio.read_image(tmp_path / "x.tif")
 
 

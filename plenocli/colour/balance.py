@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from plenocli.errors import numbers
 from plenocli.model.colour import gains_from_neutral, normalised_gains
 
 
@@ -32,7 +33,7 @@ def gains_from_mosaic(frame: np.ndarray, cfa: str, *, centre_fraction: float = 0
         counts["RGB".index(colour)] += finite.size
     if np.any(counts == 0):
         raise ValueError("the white frame has no finite pixel of some colour in its centre")
-    return gains_from_neutral(sums / counts)
+    return gains_from_neutral(_measured(sums / counts))
 
 
 def gains_from_rgb(rgb: np.ndarray, *, centre_fraction: float = 0.5) -> np.ndarray:
@@ -44,7 +45,20 @@ def gains_from_rgb(rgb: np.ndarray, *, centre_fraction: float = 0.5) -> np.ndarr
     centre = centre[np.isfinite(centre).all(axis=1)]
     if centre.size == 0:
         raise ValueError("the white image has no finite pixel in its centre")
-    return gains_from_neutral(centre.mean(axis=0))
+    return gains_from_neutral(_measured(centre.mean(axis=0)))
+
+
+def _measured(neutral: np.ndarray) -> np.ndarray:
+    """The white's mean per colour, refused in words when a colour holds no light (a mean at or
+    below zero: that colour's sites are at or below black, so no gain can balance it)."""
+    dark = [name for name, value in zip(("red", "green", "blue"), neutral, strict=True)
+            if not value > 0]
+    if dark:
+        raise ValueError(f"the white's {' and '.join(dark)} sites average "
+                         f"{numbers(v for v in neutral if not v > 0)} (at or below black): it "
+                         "holds no light of that colour; use a white lit in every colour, above "
+                         "black and not clipped")
+    return neutral
 
 
 def apply_gains(rgb: np.ndarray, gains) -> np.ndarray:

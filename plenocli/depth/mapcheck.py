@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from plenocli.depth.lenslet import check_range
+from plenocli.errors import numbers
 
 
 def depth_misfit(data: np.ndarray, meta: dict, *, grid_sha256: str, s: float,
@@ -33,7 +34,7 @@ def depth_misfit(data: np.ndarray, meta: dict, *, grid_sha256: str, s: float,
     origin = info.get("crop_sensor_origin")
     if list(origin or []) != list(sensor_origin):
         return (f"it was made on the crop at sensor origin {origin}, this refocus works on "
-                f"{list(sensor_origin)}")
+                f"[{numbers(sensor_origin)}]")
     return _values_misfit(data, list(meta.get("views") or []), info.get("g_range"))
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from plenocli.errors import InputError, not_a_file
+from plenocli.errors import InputError, library_words, not_a_file
 from plenocli.io import raw as raw_io
 from plenocli.io.photo import photo_record
 from plenocli.io.preview import is_preview
@@ -114,7 +114,7 @@ def _describe_photo(p: Path) -> dict:
             cols, rows = image.size
             mode, fmt = image.mode, image.format
     except (OSError, UnidentifiedImageError) as err:
-        raise InputError(f"{p}: not a readable photograph ({err})") from err
+        raise InputError(f"{p}: not a readable photograph ({library_words(err)})") from err
     doc = photo_record(p) or {}
     return {"kind": "photo", "format": fmt, "rows": rows, "cols": cols, "mode": mode,
             "provenance": doc.get("plenocli"), "history": doc.get("history", [])}

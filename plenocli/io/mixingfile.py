@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, library_words
 from plenocli.io import tiffio
 from plenocli.model.cfa import is_bayer
 from plenocli.model.mixing import MixingField, tile_centres
@@ -75,8 +75,8 @@ def read_mixing(path: str | os.PathLike) -> tuple[MixingField, dict]:
         if info["layout"] not in LAYOUTS:
             raise ValueError(f"layout {info['layout']!r}")
     except (KeyError, ValueError, TypeError) as err:
-        raise InputError(f"{path}: damaged mixing file ({err}); measure it again with "
-                         "plenocli crosstalk --mixing-out") from err
+        raise InputError(f"{path}: damaged mixing file ({library_words(err)}); measure it "
+                         "again with plenocli crosstalk --mixing-out") from err
     if meta.get("views") != page_names(field):
         raise InputError(f"{path}: its pages are not named for views {','.join(views)} and "
                          f"colours {','.join(colours)} (M[k<-j].colour); the file was edited or "

@@ -19,23 +19,23 @@ from pathlib import Path
 import numpy as np
 
 from plenocli.errors import InputError
+from plenocli.io import samplekind
 from plenocli.progress import log
 
 MAX_SAID = 4096  # bytes of a codec's messages kept
+TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # TIFF, BigTIFF
 # what a codec says when it decoded only part of the pixels and made up the rest
 PIXELS_LOST = ("premature end", "corrupt jpeg data")
 
 
 def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
-    """The pixels of a plain image as OpenCV decodes them, colour channels in RGB(A) order;
-    InputError in one line for a file it cannot decode."""
+    """The pixels of a plain image as OpenCV decodes them, colour channels in RGB(A) order, a
+    grey image (or a palette of grey entries) as one plane; InputError in one line for a file
+    it cannot decode or whose samples are no light levels (``samplekind``)."""
     import cv2
 
     p = Path(path)
-    png_colour = _png_colour_type(p)
-    if png_colour == PNG_PALETTE:
-        raise InputError(f"{p}: a palette (colour-index) PNG: its samples are indices into a "
-                         "colour table, not light levels; save the sensor image as grey or RGB")
+    grey = samplekind.declared_kind(p) == "grey"
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     with _codec_messages() as said:
         try:
@@ -55,26 +55,21 @@ def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
                          "of another type")
     for line in said:
         log.debug("%s: %s", p, line)
-    if png_colour == PNG_GREY_ALPHA and data.ndim == 3:
-        return data[..., 0]  # OpenCV spreads the grey over B, G, R (the alpha dropped)
+    if grey and data.ndim == 3:
+        return data[..., 0]  # OpenCV spreads a grey (or a grey table's entries) over B, G, R
     if data.ndim == 3 and data.shape[2] >= 3:
         data = np.concatenate([data[..., 2::-1], data[..., 3:]], axis=2)  # BGR(A) -> RGB(A)
     return data
 
 
-PNG_PALETTE, PNG_GREY_ALPHA = 3, 4  # IHDR colour types that OpenCV turns into colour
-
-
-def _png_colour_type(path: Path) -> int | None:
-    """The colour type in a PNG's header (byte 25), None for another file."""
+def is_tiff(path: str | os.PathLike) -> bool:
+    """A TIFF by its first bytes, whatever its name: a TIFF goes to the TIFF reader and its
+    rules (OpenCV's libtiff would read a palette or MinIsWhite page as colours or inverted)."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(26)
+            return fh.read(4) in TIFF_MAGIC
     except OSError:
-        return None
-    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return head[25]
+        return False
 
 
 @contextlib.contextmanager

@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError, OptionError, not_a_file
+from plenocli.errors import InputError, OptionError, library_words, not_a_file
 from plenocli.io import dngtags, rawmeta, tiffio
-from plenocli.io.plainimage import read_plain_image
+from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_image
 from plenocli.model import orientation as turns
 from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
 from plenocli.progress import log
@@ -44,7 +44,7 @@ def sniff(path: str | os.PathLike) -> str:
         raise not_a_file(p)
     with open(p, "rb") as fh:
         head = fh.read(16)
-    if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):  # TIFF, BigTIFF
+    if head[:4] in TIFF_MAGIC:
         if head[8:10] == b"CR":
             return "canon-dp"
         try:
@@ -52,7 +52,7 @@ def sniff(path: str | os.PathLike) -> str:
                 if 50706 in tif.pages[0].tags:  # DNGVersion
                     return "dng"
         except tiffio.READ_ERRORS as err:
-            raise InputError(f"{p}: a TIFF header but an unreadable file ({err}); "
+            raise InputError(f"{p}: a TIFF header but an unreadable file ({library_words(err)}); "
                              "is it truncated?") from err
         return "image"
     if head[:8] == b"\x89PNG\r\n\x1a\n" or head[:2] == b"BM":
@@ -237,7 +237,7 @@ def _decode_canon(path, *, require_dual: bool) -> tuple[np.ndarray, dict]:
                     meta = _rawpy_meta(raw, path)
         except (rawpy.LibRawError, OSError, ValueError) as err:
             if shot == 0:
-                raise InputError(f"{path}: LibRaw cannot read this raw ({err}); "
+                raise InputError(f"{path}: LibRaw cannot read this raw ({library_words(err)}); "
                                  "the file may be truncated or not a raw") from err
             break
     dual = len(frames) == 2 and not np.array_equal(frames[0], frames[1])
@@ -329,7 +329,8 @@ def _decode_dng(path) -> tuple[np.ndarray, dict]:
             colour = rawmeta.dng_colour(raws[0], tif.pages[0])
             turned = dngtags.orientation(path, tif.pages[0], raws[0])
     except tiffio.READ_ERRORS as err:
-        raise InputError(f"{path}: unreadable DNG ({err}); the file may be truncated") from err
+        raise InputError(f"{path}: unreadable DNG ({library_words(err)}); the file may be "
+                         "truncated") from err
     if len(set(names)) != len(names):
         names = [f"frame{k}" for k in range(len(names))]
     return np.stack(frames), {
@@ -364,8 +365,8 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     try:
         data = page.asarray()
     except tiffio.READ_ERRORS as err:  # the codecs' own errors too
-        raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged ({err}); "
-                                "copy or export the DNG again") from err
+        raise tiffio.read_error(path, err, f"{path}: raw IFD {k} is damaged "
+                                f"({library_words(err)}); copy or export the DNG again") from err
     dngtags.check_samples(path, k, data)
     data, mapped = dngtags.linearized(path, k, page, data)
     return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
@@ -379,7 +380,7 @@ def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
     same = len({(page.shape, str(page.dtype)) for page in pages}) == 1
     if len(pages) > 1 and named == len(pages) and same and len(pages[0].shape) == 2:
-        return np.stack([page.asarray() for page in pages]), True
+        return np.stack([tiffio.page_levels(p, page) for page in pages]), True
     if len(pages) > 1:
         shapes = [" x ".join(map(str, page.shape)) for page in pages]
         if len(set(shapes)) > 1:
@@ -391,7 +392,7 @@ def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
                          "decode reads a sensor image of one page, or grey pages each named by "
                          f"--frames ({len(pages)} names, e.g. --frames A,B for a dual-pixel "
                          "pair)")
-    data = pages[0].asarray()
+    data = tiffio.page_levels(p, pages[0])
     if pages[0].axes[:1] == "S":   # planar samples (PlanarConfiguration 2): colour last
         data = np.moveaxis(data, 0, -1)
     return data, False
@@ -400,7 +401,7 @@ def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
 def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray, dict]:
     p = Path(path)
     data, stacked = None, False
-    if p.suffix.lower() in (".tif", ".tiff"):
+    if is_tiff(p):   # by its first bytes: a TIFF's kinds are judged by the TIFF rules
         try:
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
@@ -408,8 +409,8 @@ def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray,
                     tiffio.check_light_levels(p, page)
                 data, stacked = _frame_pages(p, tif, named)
         except tiffio.READ_ERRORS as err:
-            raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({err}); the file may be "
-                                            "truncated") from err
+            raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({library_words(err)}); "
+                                            "the file may be truncated") from err
     else:
         data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
     if stacked:  # pages named by --frames (renamed by _apply_user_values)

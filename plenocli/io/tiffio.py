@@ -35,7 +35,7 @@ import numpy as np
 import tifffile
 
 from plenocli import __version__
-from plenocli.errors import InputError, not_a_file
+from plenocli.errors import InputError, library_words, not_a_file, plain_words
 from plenocli.io.atomic import atomic_path
 from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used via tiffio)
     MAX_PAGE_PIXELS,
@@ -43,6 +43,7 @@ from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used 
     check_page,
     check_real_dtype,
     check_segments,
+    page_levels,
 )
 from plenocli.io.yamlfile import DocumentError, load_json
 from plenocli.model import orientation
@@ -191,8 +192,8 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
                 tif = stack.enter_context(tifffile.TiffFile(p))
                 pages = list(tif.pages)
             except TypeError as err:  # a tag of the wrong count or type: tifffile trips on it
-                raise InputError(f"{p}: damaged TIFF (a malformed tag: {err}); copy or write "
-                                 "it again") from err
+                raise InputError(f"{p}: damaged TIFF (a malformed tag: "
+                                 f"{library_words(err)}); copy or write it again") from err
             except struct.error as err:  # cut inside its header or first IFD's offset
                 raise InputError(f"{p}: damaged TIFF (it ends inside its header, "
                                  f"{p.stat().st_size} bytes); the file may be truncated: copy "
@@ -200,7 +201,7 @@ def open_tiff(path: str | os.PathLike) -> Iterator[tifffile.TiffFile]:
             damage = [m for m in collect.messages
                       if any(w in m.lower() for w in ("offset", "truncat", "corrupt", "invalid"))]
             if damage:
-                reason = re.sub(r"<[^>]*>\s*", "", damage[0].splitlines()[0]).strip()
+                reason = plain_words(re.sub(r"<[^>]*>\s*", "", damage[0].splitlines()[0]))
                 raise InputError(f"{p}: damaged TIFF ({reason}); the file may be truncated: "
                                  "copy or write it again")
             for page in pages:
@@ -225,13 +226,14 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
             for page in tif.pages:
                 check_segments(p, page)
                 check_light_levels(p, page)
-            if series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages):
+            if (series is not None and series.ndim == 3 and series.shape[0] == len(tif.pages)
+                    and all(int(page.photometric) != 3 for page in tif.pages)):  # no table
                 data = series.asarray()  # equal grey pages (plenocli's own): one read, no copy
             else:
                 data = _stack_pages(p, list(tif.pages))
     except READ_ERRORS as err:
-        raise read_error(p, err, f"{p}: not a readable TIFF image ({err}); pass an image "
-                                 "written by plenocli or a plain TIFF") from err
+        raise read_error(p, err, f"{p}: not a readable TIFF image ({library_words(err)}); "
+                                 "pass an image written by plenocli or a plain TIFF") from err
     meta = plenocli_meta(p, description)
     check_geometry(p, meta, data.shape)
     check_levels(p, meta, data.shape[0])
@@ -408,7 +410,7 @@ def _stack_pages(path: Path, pages: list) -> np.ndarray:
     interleaved (rows, cols, samples) or planar (samples, rows, cols)."""
     arrays = []
     for page in pages:
-        data = page.asarray()
+        data = page_levels(path, page)
         if data.ndim == 3:
             planar = page.axes.startswith("S")  # PlanarConfiguration 2: samples first
             arrays.extend(data if planar else np.moveaxis(data, -1, 0))

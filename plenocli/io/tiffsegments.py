@@ -12,7 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from plenocli.errors import InputError
+from plenocli.errors import InputError, library_words
+from plenocli.io import samplekind
 
 # Sizes read from a header are checked before anything is allocated: 2^30 pixels (1 Gpx) per
 # page is 30 times a full-frame raw; a larger claim is damage, not a sensor.
@@ -26,10 +27,12 @@ JPEG_FRAME_MARKERS = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}  # SOF0..
 # LZMA, Zstandard): the decoded size of a segment is checked against the header's.
 BYTE_CODECS = frozenset({5, 8, 32946, 32773, 34925, 50000})
 # Photometric values whose samples are light levels: grey, RGB, a raw's CFA and LinearRaw (and
-# YCbCr as JPEG codes it, which the codec returns as RGB); anything else is named, never read.
+# YCbCr as JPEG codes it, which the codec returns as RGB); a palette of grey entries is read
+# through its table (``samplekind``, the rule of every format); anything else is named, never read.
 LIGHT_LEVELS = (1, 2, 32803, 34892)
-NOT_LEVELS = {0: "MinIsWhite (inverted)", 3: "palette (colour-index)",
-              4: "transparency-mask", 5: "CMYK (separated: ink amounts)", 6: "YCbCr",
+PALETTE = 3
+NOT_LEVELS = {0: "MinIsWhite (inverted)", 4: "transparency-mask",
+              5: "CMYK (separated: ink amounts)", 6: "YCbCr",
               8: "CIELab", 9: "ICCLab", 10: "ITULab", 32844: "LogL", 32845: "LogLuv",
               51177: "depth"}
 JPEG = 7
@@ -42,13 +45,15 @@ def check_page(path: Path, page) -> None:
         shape = tuple(int(v) for v in page.shape)
         compression = int(page.compression)
     except (TypeError, ValueError) as err:
-        raise InputError(f"{path}: damaged TIFF (a malformed tag: {err}); copy or write it "
-                         "again") from err
+        raise InputError(f"{path}: damaged TIFF (a malformed tag: {library_words(err)}); copy or "
+                         "write it again") from err
     pixels = int(np.prod(shape, dtype=np.float64))
     if pixels > MAX_PAGE_PIXELS:
         raise InputError(f"{path}: the TIFF header claims an image of {' x '.join(map(str, shape))}"
                          f" samples, more than plenocli reads ({MAX_PAGE_PIXELS} per page); the "
                          "file is damaged or not a sensor image")
+    if int(page.bitspersample) == 1:  # bool to tifffile: the rule of every format names it
+        raise samplekind.refusal(path, samplekind.BILEVEL, "TIFF")
     check_real_dtype(path, page.dtype)
     if page.databytecounts:
         _check_segment_layout(path, page)
@@ -240,11 +245,22 @@ def _packed_rows(page, samples: int) -> int:
 
 
 def check_light_levels(path, page) -> None:
-    """A page whose samples are not light levels (inverted grey, palette indices, CMYK ink,
-    Lab) is refused: plenocli would take them for light."""
+    """A page whose samples are not light levels (inverted grey, CMYK ink, Lab, a palette with
+    a colour entry) is refused, by the rule of every format (``samplekind``)."""
     photometric = int(page.photometric)
     if photometric in LIGHT_LEVELS or (photometric == 6 and int(page.compression) == JPEG):
         return
+    if photometric == PALETTE:
+        samplekind.tiff_grey_table(path, page.colormap)
+        return
     kind = NOT_LEVELS.get(photometric, f"Photometric {photometric}")
-    raise InputError(f"{path}: a {kind} TIFF holds no light levels; save the image as a grey "
-                     "(MinIsBlack) or RGB TIFF")
+    raise samplekind.refusal(path, kind, "TIFF")
+
+
+def page_levels(path, page) -> np.ndarray:
+    """A page's samples as light levels: a palette of grey entries read through its table
+    (checked by :func:`check_light_levels`), any other page as stored."""
+    data = page.asarray()
+    if int(page.photometric) == PALETTE:
+        return samplekind.tiff_grey_table(path, page.colormap)[data]
+    return data

@@ -14,6 +14,8 @@ import warnings
 
 import numpy as np
 
+from plenocli.errors import numbers
+
 OUTPUT_SPACES = {"srgb": "sRGB", "display-p3": "Display P3", "rec2020-linear": "ITU-R BT.2020"}
 # Demosaicing methods (plenocli.colour.demosaic; compared in docs/colour.md).
 METHODS = ("rcd", "menon2007", "opencv-ea", "opencv-vng", "malvar2004", "bilinear")
@@ -76,7 +78,7 @@ def normalised_gains(gains) -> np.ndarray:
         g = g[:3]
     if g.size != 3 or not np.all(np.isfinite(g)) or np.any(g <= 0):
         raise ValueError(f"white-balance gains must be three finite positive numbers R,G,B, "
-                         f"got {list(np.ravel(gains))}")
+                         f"got {numbers(np.ravel(gains))}")
     return g / g[1]
 
 
@@ -84,5 +86,6 @@ def gains_from_neutral(neutral) -> np.ndarray:
     """Gains from a camera-RGB neutral (DNG AsShotNeutral, or the mean RGB of a grey card)."""
     n = np.asarray(neutral, np.float64).ravel()
     if n.size != 3 or not np.all(np.isfinite(n)) or np.any(n <= 0):
-        raise ValueError(f"neutral must be three finite positive camera values, got {list(n)}")
+        raise ValueError(f"neutral must be three finite positive camera values, got "
+                         f"{numbers(n)}")
     return normalised_gains(1.0 / n)

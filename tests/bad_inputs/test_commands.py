@@ -138,8 +138,8 @@ CASES = [
     *[(f"decode-raw-{name}", ["decode", "{i}/dp.dng", f"--{name}", value, "-o", "{o}/d.tif"],
        2, (f"--{name}", "records its own black and white levels and CFA pattern"))
       for name, value in (("black", "100"), ("white", "9000"), ("cfa", "BGGR"))],
-    *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, ("real",))
-      for kind in ("complex", "bool", "int8")],
+    *[(f"decode-{kind}", ["decode", f"{{i}}/{kind}.tif", "-o", "{o}/d.tif"], 1, (words,))
+      for kind, words in (("complex", "real"), ("bool", "1-bit"), ("int8", "real"))],
     ("decode-all-nan", ["decode", "{i}/nan_plain.tif", "-o", "{o}/d.tif"], 1, ("no valid",)),
     # audit 7 E2: a frame name that reads as another page (colour page S.R of a view S, a sweep
     # page, a page number) or twice is a usage error, before the raw is read

@@ -189,10 +189,12 @@ def test_messages_name_what_is_wrong(inputs, tmp_path):
     assert result.exit_code == 1 and "Bayer" not in result.stderr
 
 
-def test_a_palette_png_is_refused_and_grey_with_alpha_is_one_grey_frame(inputs, tmp_path):
+def test_a_palette_png_is_read_through_its_grey_table_and_grey_with_alpha_is_one_frame(
+        inputs, tmp_path):
     """audit 8 E1: OpenCV expands a palette PNG, and a grey PNG with alpha, into three colour
     channels: the palette's indices were decoded as R, G, B light levels, and a grey image
-    became three identical frames, exit 0."""
+    became three identical frames, exit 0. audit 18 P1: a table of greys is how the file stores
+    a grey image (read through it, one frame); a table of colours is refused."""
     from PIL import Image
 
     side = tmp_path / "side"
@@ -200,14 +202,17 @@ def test_a_palette_png_is_refused_and_grey_with_alpha_is_one_grey_frame(inputs, 
     grey = np.random.default_rng(5).integers(0, 255, (24, 32), dtype=np.uint8)
     Image.fromarray(grey).convert("P", palette=Image.Palette.ADAPTIVE).save(side / "pal.png")
     Image.fromarray(grey).convert("LA").save(side / "la.png")
-    result = run_bad(inputs, tmp_path / "out", ["decode", str(side / "pal.png"), "-o",
+    Image.fromarray(np.stack([grey, grey // 2, grey], -1)).convert(
+        "P", palette=Image.Palette.ADAPTIVE).save(side / "colour.png")
+    result = run_bad(inputs, tmp_path / "out", ["decode", str(side / "colour.png"), "-o",
                                                 "{o}/p.tif"])
-    assert_one_line(result, 1, ("palette", "not light levels"))
-    result = CliRunner().invoke(cli, ["decode", str(side / "la.png"), "-o",
-                                      str(tmp_path / "l.tif")])
-    assert result.exit_code == 0, result.output
-    frames, _ = tiffio.read_image(tmp_path / "l.tif")
-    assert frames.shape == (1, 24, 32) and np.array_equal(frames[0], grey)
+    assert_one_line(result, 1, ("colour-palette PNG", "no light levels"))
+    for name in ("la", "pal"):
+        result = CliRunner().invoke(cli, ["decode", str(side / f"{name}.png"), "-o",
+                                          str(tmp_path / f"{name}.tif")])
+        assert result.exit_code == 0, result.output
+        frames, _ = tiffio.read_image(tmp_path / f"{name}.tif")
+        assert frames.shape == (1, 24, 32) and np.array_equal(frames[0], grey), name
 
 
 def test_a_focal_sweep_is_not_taken_for_pupil_views(inputs, tmp_path):

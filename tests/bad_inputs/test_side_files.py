@@ -230,7 +230,9 @@ def test_tiffs_of_palette_indices_or_inverted_grey_are_not_light(photometric, st
     side = tmp_path / "side"
     side.mkdir()
     grey = np.random.default_rng(4).integers(0, 255, (32, 48)).astype(np.uint8)
-    extra = {"palette": {"colormap": np.tile(np.arange(256, dtype=np.uint16) * 257, (3, 1))}}
+    # a table of colours (a grey table is read through: tests/test_samplekind.py)
+    ramp = np.arange(256, dtype=np.uint16) * 257
+    extra = {"palette": {"colormap": np.stack([ramp, ramp[::-1], ramp])}}
     samples = {"separated": 4, "cielab": 3}.get(photometric)
     image = grey if samples is None else np.repeat(grey[..., None], samples, axis=2)
     tifffile.imwrite(side / "x.tif", image, photometric=photometric, metadata=None,

@@ -10,7 +10,7 @@ import numpy as np
 from plenocli import calibration
 from plenocli.errors import CalibrationError, InputError, not_a_file
 from plenocli.io import gridfile, raytrix, tiffio
-from plenocli.io.plainimage import read_plain_image
+from plenocli.io.plainimage import is_tiff, read_plain_image
 from plenocli.io.preview import write_grid_overlay
 from plenocli.model.cfa import phase_balance, shift_pattern
 from plenocli.model.provenance import stage_record
@@ -25,7 +25,7 @@ def load_image(path: str) -> tuple[np.ndarray, str | None, float, tuple[int, int
     p = Path(path)
     if not p.is_file():
         raise not_a_file(p)
-    if p.suffix.lower() in (".tif", ".tiff"):
+    if is_tiff(p):   # by its first bytes, not its name (as decode)
         views, meta = tiffio.read_image(p)
     else:
         data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)

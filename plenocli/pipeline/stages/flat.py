@@ -54,8 +54,8 @@ def run(input: str, output: str, *, white: str | None = None, gain: str | None =
     masked = int(np.isnan(gains).any(axis=0).sum())
     tiffio.write_image(output, corrected, tiffio.derived_meta(meta, record, gain_masked=masked),
                        protect=(input, source))
-    log.info("flat: %s -> %s (gain from %s, %d pixels masked by the floor)",
-             shown(input), shown(output), shown(source), masked)
+    log.info("flat: %s -> %s (gain from %s, %s)", shown(input), shown(output), shown(source),
+             _masked_words(masked, ref if white is not None else None, gains))
     if save_gain:
         gain_record = stage_record("flat-gain", params, {"white": source})
         gain_meta = tiffio.derived_meta(ref_meta, gain_record)
@@ -88,3 +88,13 @@ def _check_match(path, meta, views, ref_path, ref_meta, ref) -> None:
     names, ref_names = meta.get("views"), ref_meta.get("views")
     if ref.shape[0] != views.shape[0] or (names and ref_names and names != ref_names):
         raise InputError(f"{ref_path}: {what} views {ref_names} do not match {path}'s {names}")
+
+
+def _masked_words(masked: int, white: np.ndarray | None, gains: np.ndarray) -> str:
+    """How many pixels the gain masks, and why: NaN in the white itself (clipped, or masked by
+    an earlier stage) or below the floor; a saved gain's count is only its own."""
+    if white is None:
+        return f"{masked} pixels masked in the gain"
+    holes = int((np.isnan(white).any(axis=0) & np.isnan(gains).any(axis=0)).sum())
+    return (f"{masked} pixels masked: {holes} NaN in the white, {masked - holes} below the "
+            "floor")
