@@ -10,6 +10,7 @@ method on one page):
 - ``translation``: the sub-pixel shift of a pair (NCC search, ECC, photometric polish);
 - ``photometric``: direct photometric refinement of a homography or a shift;
 - ``homography``: SIFT + RANSAC + photometric refinement;
+- ``nodata``: NaN pixels, isolated ones estimated for the measurements, holes kept out;
 - ``registration``: priors, pairwise estimates and their global solve;
 - ``compose``: canvas, warping, exposure matching, trimming, blending;
 - ``quality``: overlap correlation and the local shifts left after stitching;

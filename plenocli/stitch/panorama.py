@@ -24,6 +24,7 @@ from plenocli.stitch import overlaps as overlap_measure
 from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
+from plenocli.stitch.nodata import NoData
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
 from plenocli.stitch.rig import PrismRig, canvases, rig_axis_and_field, rig_strips
 from plenocli.stitch.translation import estimate_translation
@@ -38,7 +39,6 @@ from plenocli.stitch.views import (
     translation_matrix,
     undistort,
 )
-from plenocli.stitch.warp import holes_of
 
 
 @dataclass(frozen=True)
@@ -94,14 +94,12 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     Parameters
     ----------
     views : (V, rows, cols) or (V, C, rows, cols) array, or a sequence of V equal arrays;
-        V = 2 (side by side or one above the other) or 4 (2 x 2, row-major). NaN = no data.
+        V = 2 (1x2 or 2x1) or 4 (2 x 2, row-major). NaN = no data (see :mod:`.nodata`).
     layout : "1x2", "2x1", "2x2" or "auto" (4 views -> 2x2; 2 views -> the direction whose
         overlap correlates best, or the rig's).
     model : "translation", "homography" or "auto" (a saved transform's own, else translation).
-    distortion_k1 : known constant radial distortion removed from every view first (see
-        :func:`plenocli.stitch.views.undistort`); 0 = none.
-    transform : a previous report's ``transform`` to reapply to views of the same rig instead
-        of registering them again.
+    distortion_k1 : known radial distortion removed first (:func:`~.views.undistort`); 0: none.
+    transform : a previous report's ``transform``, reapplied instead of registering the views.
     blend : "feather" (weights = distance to the view's edge) or "multiband".
     match_gain : match per-view, per-channel exposure from the overlaps (view 0 is the reference).
     max_overlap, min_overlap_px, min_correlation : registration search limits, see
@@ -132,17 +130,19 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
+    stack = (nodata := NoData(stack)).measured(stack)  # isolated NaN estimated: nodata.py
     step("registering the views")
-    transforms, layout, source, pair_info, closure = _transforms(
-        stack, transform, layout, model, origins, search, view_shape=(rows, cols),
-        frame_shape=frame_shape, k1=distortion_k1, rig=rig, named=named, levels=levels)
+    with nodata.too_few_known():
+        transforms, layout, source, pair_info, closure = _transforms(
+            stack, transform, layout, model, origins, search, view_shape=(rows, cols),
+            frame_shape=frame_shape, k1=distortion_k1, rig=rig, named=named, levels=levels)
     pairs = neighbour_pairs(layout)
     frame_to_ref = list(transforms) if rig is None else [
         t @ translation_matrix(-o[0], -o[1]) for t, o in zip(transforms, origins, strict=True)]
     claim = claim or verify.default_claim(transform=transform is not None, rig=rig is not None)
     panorama, covered, offset, gains, fits, areas = _composite(
         stack, frame_to_ref, pairs, match_gain=match_gain, blend=blend, k1=distortion_k1,
-        rig=rig, out=out, claim=claim, levels=levels)
+        rig=rig, out=out, claim=claim, levels=levels, nodata=nodata)
     pair_info, measured = _pair_report(pair_info, pairs, fits, areas)
     rig_dict, axis_px, field_deg = _rig_report(rig, (rows, cols), origins, offset, covered)
     return (panorama if colour or panorama is None else panorama[0]), StitchReport(
@@ -383,20 +383,22 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
                match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
-               claim: tuple[str, str], out, levels: Sequence[float] | None = None):
+               claim: tuple[str, str], out, levels: Sequence[float] | None = None,
+               nodata: NoData):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
     cover, the reference -> panorama translation, the per-view, per-channel gains, and per pair
     how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area;
     refused before the blend where the seams do not line up (``claim``: see :func:`stitch`; a
-    negated view named by its ``levels``)."""
+    negated view named by its ``levels``). ``stack`` is ``nodata``'s measured views: when
+    they are its copy, their holes are filled in place for the blend."""
     maps, boxes, offset, shape = compose.place(frame_to_ref, stack.shape[-2:], k1=k1, rig=rig)
     step("checking the seams")
     fits = verify.seam_fits(stack, maps, boxes, pairs)
-    with _sign_hint(stack, levels):
+    with nodata.too_few_known(), _sign_hint(stack, levels):
         verify.check_fits(fits, pairs, what=claim[0], remedy=claim[1])
-    holes = [holes_of(view) for view in stack]
-    filled = [view if h is None else fill_nan_channels(view) for view, h in
-              zip(stack, holes, strict=True)]
+    holes = nodata.holes()
+    filled = [view if h is None else fill_nan_channels(view, in_place=nodata.copied)
+              for view, h in zip(stack, holes, strict=True)]
     overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
     gains = np.ones(stack.shape[:2])
     if match_gain:

@@ -136,10 +136,11 @@ def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray
 
 
 def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.ndarray | None,
-            holes: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+            holes: tuple[np.ndarray, np.ndarray | None] | None) -> np.ndarray:
     """The view's feather weight at the maps, float32: its distance (view px) to the view's edge,
-    or to its nearest no-data pixel when it has some (``holes`` = (valid as float32, distance
-    map)); 0 where the view does not fully cover the pixel."""
+    or to its nearest hole when it has some (``holes`` = (valid as float32, distance map or
+    None): :meth:`plenocli.stitch.nodata.NoData.holes`); 0 where the view does not fully cover
+    the pixel (a no-data pixel's resampling footprint included)."""
     rows, cols = shape
     weight = np.empty(np.shape(mx), np.float32)
     # the distance to the edge is below 1 exactly where the source lies off the view; maps of
@@ -153,23 +154,9 @@ def feather(mx: np.ndarray, my: np.ndarray, shape: tuple[int, int], lost: np.nda
         weight[lost] = 0
     if holes is not None:
         valid, distance = holes
-        np.minimum(weight, cv2.remap(distance, mx, my, cv2.INTER_LINEAR,
-                                     borderMode=cv2.BORDER_REPLICATE), out=weight)
+        if distance is not None:
+            np.minimum(weight, cv2.remap(distance, mx, my, cv2.INTER_LINEAR,
+                                         borderMode=cv2.BORDER_REPLICATE), out=weight)
         weight[cv2.remap(valid, mx, my, cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REPLICATE) <= 0.999] = 0
     return weight
-
-
-def holes_of(view: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """For a view (C, rows, cols) with no-data pixels: (valid as float32, distance (px) to the
-    nearest no-data pixel); None when every pixel has data."""
-    # the usual view: one pass and no mask (a sum that overflows takes the masked way)
-    if np.isfinite(np.sum(view, dtype=np.float32)):
-        return None
-    valid = np.isfinite(view[0])
-    for channel in view[1:]:  # channel by channel: fast whatever their layout in memory
-        valid &= np.isfinite(channel)
-    if valid.all():
-        return None
-    distance = cv2.distanceTransform(valid.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return valid.astype(np.float32), distance
