@@ -35,8 +35,6 @@ WINDOW = 15
 COARSE_WINDOW = 2 * WINDOW + 1
 LK_STEPS = 2
 TILE_ROWS = 512
-QUAD_AGREE_PX = 1.0     # x and y disparities of a quad-pixel pixel this far apart: unknown
-QUAD_AGREE_SHARE = 0.1  # or this share of the disparity, whichever is larger
 # A/B parallax runs along rows. Of the row search's clear matches, a pixel is one a vertical
 # shift explains and no horizontal one does when, both fitted to the sub-pixel, the vertical
 # cost is under POOR times the mean cost of the horizontal shifts tried and under CLEARLY
@@ -81,7 +79,7 @@ class Disparity:
     repeat_px: np.ndarray | None = None
 
 
-def _prepare(view: np.ndarray) -> np.ndarray:
+def prepare(view: np.ndarray) -> np.ndarray:
     v = np.asarray(view, np.float32)
     valid = np.isfinite(v)
     v = np.where(valid, v, 0.0).astype(np.float32)
@@ -139,7 +137,7 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
     if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= MAX_DISPARITY):
         raise ValueError(f"max_disparity must be 0.5 to {MAX_DISPARITY:g} px, got {max_disparity}")
     missing = ~(np.isfinite(a) & np.isfinite(b))
-    pa, pb = _prepare(a), _prepare(b)
+    pa, pb = prepare(a), prepare(b)
     d = np.empty(a.shape, np.float32)
     conf = np.empty(a.shape, np.float32)
     repeat = np.empty(a.shape, np.float32)
@@ -181,17 +179,27 @@ def _check_rows(pa: np.ndarray, pb: np.ndarray, reach: int) -> None:
     views turned by 90 degrees (a portrait capture) or a sensor split top/bottom. The row
     search alone finds a best horizontal shift there too, with clear confidence, and it is
     wrong."""
+    wrong = crossing(pa, pb, reach)
+    if wrong:
+        raise ValueError(f"the views' parallax runs along columns, not rows: a vertical shift "
+                         f"explains {100 * wrong[0]:.0f} % of their {wrong[1]}, which no "
+                         "horizontal one does (views side by side: under 3 %); disparity "
+                         "is measured along rows, B's content right of A's: turn both "
+                         "views by 90 degrees (a portrait capture, a sensor split "
+                         "top/bottom) so that their baseline runs along rows; nothing was "
+                         "written")
+
+
+def crossing(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[float, str] | None:
+    """(share, of what) when B differs from A by a vertical shift that no horizontal one
+    explains (over MAX_VERTICAL_SHARE of either share of ``vertical_share``: parallax along
+    columns), else None. ``pa``, ``pb`` prepared."""
     for share, where in zip(vertical_share(pa, pb, reach),
                             ("clear matches", "clear matches on texture of two directions"),
                             strict=True):
         if share is not None and share > MAX_VERTICAL_SHARE:
-            raise ValueError(f"the views' parallax runs along columns, not rows: a vertical "
-                             f"shift explains {100 * share:.0f} % of their {where}, which no "
-                             "horizontal one does (views side by side: under 3 %); disparity "
-                             "is measured along rows, B's content right of A's: turn both "
-                             "views by 90 degrees (a portrait capture, a sensor split "
-                             "top/bottom) so that their baseline runs along rows; nothing was "
-                             "written")
+            return share, where
+    return None
 
 
 def vertical_share(pa: np.ndarray, pb: np.ndarray, reach: int
@@ -380,30 +388,3 @@ def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.n
         step = np.where(den > 1e-12, -num / np.maximum(den, 1e-12), 0.0)
         d = np.clip(d + np.clip(step, -0.5, 0.5), -limit, limit).astype(np.float32)
     return d
-
-
-def quad_disparity(views: np.ndarray, *, max_disparity: float = 4.0
-                   ) -> tuple[Disparity, Disparity]:
-    """(x, y) disparities of 2 x 2 SAIs (S00, S01, S10, S11): right column against left,
-    bottom row against top."""
-    s00, s01, s10, s11 = (np.asarray(v, np.float32) for v in views)
-    # each baseline is measured on its own and the two checked against each other (below)
-    dx = disparity_x(0.5 * (s00 + s10), 0.5 * (s01 + s11), max_disparity=max_disparity,
-                     check_rows=False)
-    dy = disparity_x((0.5 * (s00 + s01)).T, (0.5 * (s10 + s11)).T, max_disparity=max_disparity,
-                     check_rows=False)
-    dy = Disparity(*(np.ascontiguousarray(v.T) for v in (dy.disparity, dy.confidence,
-                                                         dy.repeat_px)))
-    # the two baselines of a 2 x 2 split are equal (the pupil's quarters sit at (+-c, +-c)),
-    # so a defocused point has one disparity along both: where x and y disagree, one of them
-    # matched texture at a wrong shift (simulated bands of 10-20 px: 59-99 % of a band known
-    # and wrong, 5-24 % after; within 4 px x and y agree to 0.54 px, 99th percentile)
-    with np.errstate(invalid="ignore"):
-        apart = ~(np.abs(dx.disparity - dy.disparity)
-                  <= np.maximum(QUAD_AGREE_PX, QUAD_AGREE_SHARE
-                                * np.abs(dx.disparity + dy.disparity) / 2))
-    apart &= np.isfinite(dx.disparity) | np.isfinite(dy.disparity)
-    for d in (dx, dy):
-        d.disparity[apart] = np.nan
-        d.confidence[apart] = 0.0
-    return dx, dy

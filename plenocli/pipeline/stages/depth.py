@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli.depth import lenslet, metric, views
+from plenocli.depth import lenslet, metric, quad, views
 from plenocli.depth.directions import check_directions
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
@@ -250,7 +250,7 @@ def _views(input, data, meta, max_disparity):
     have = {n: k for k, n in enumerate(names)}
     try:
         if all(n in have for n in QUAD):
-            dx, dy = views.quad_disparity(np.stack([data[have[n]] for n in QUAD]),
+            dx, dy = quad.quad_disparity(np.stack([data[have[n]] for n in QUAD]),
                                           max_disparity=max_disparity)
             conf = np.minimum(dx.confidence, dy.confidence)
             pages, out = [dx.disparity, dy.disparity, conf], ["disparity_x", "disparity_y",
