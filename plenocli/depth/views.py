@@ -4,9 +4,10 @@ The disparity d is the shift of B's content against A's along the baseline, in p
 B's content lies to the right of A's (quad-pixel: the right column S01, S11 against the left
 one, and the bottom row S10, S11 against the top one, + downwards). Steps (docs/depth.md):
 
-1. Photometry: each view is divided by its own low-pass (Gaussian, sigma ``FLAT_SIGMA`` px), so
-   what is left of the vignetting and of the A/B split after ``plenocli flat`` (or without it)
-   does not bias the match; then both are smoothed by a small Gaussian.
+1. Photometry: each view is divided by its own slow level (the geometric mean over a Gaussian
+   of sigma ``FLAT_SIGMA`` px), so what is left of the vignetting and of the A/B split after
+   ``plenocli flat`` (or without it) does not bias the match; then both are smoothed by a
+   small Gaussian. NaN pixels (no data) are left out of every window's sums and stay NaN.
 2. Coarse: the windowed sum of squared differences of A(x) and B(x + d) for whole-pixel d in
    [-max, max] at full size, parabola through the minimum; a pixel with two clear minima (a
    texture repeating within the search) is unknown.
@@ -29,14 +30,15 @@ from plenocli.depth.searchkernel import search_step
 FLAT_SIGMA = 24.0
 FLAT_SHRINK = 8
 PRE_BLUR = 1.0
+LOG_FLOOR = 0.02  # of a view's median: the darkest level its log low-pass takes (_level)
+# share of a window's pixels with data in both views below which its pixel is unknown
+MIN_DATA = 0.5
 WINDOW = 15
 # the coarse search's window, at full size: the WINDOW it had on the views shrunk by two (a
 # 15 px window there, noisier at full size: the Pixel 4 pair's clear matches agreed 44 %)
 COARSE_WINDOW = 2 * WINDOW + 1
 LK_STEPS = 2
 TILE_ROWS = 512
-QUAD_AGREE_PX = 1.0     # x and y disparities of a quad-pixel pixel this far apart: unknown
-QUAD_AGREE_SHARE = 0.1  # or this share of the disparity, whichever is larger
 # A/B parallax runs along rows. Of the row search's clear matches, a pixel is one a vertical
 # shift explains and no horizontal one does when, both fitted to the sub-pixel, the vertical
 # cost is under POOR times the mean cost of the horizontal shifts tried and under CLEARLY
@@ -74,32 +76,102 @@ SAMPLE_SIDE = 8
 class Disparity:
     """Disparity (rows, cols) float32 px (NaN: unknown) and confidence (0..1); ``repeat_px``:
     where the texture repeats within the search (two shifts match clearly, so the pixel is
-    unknown), how far apart they lie in px, else 0."""
+    unknown), how far apart they lie in px, else 0; ``no_data``: where a view has no data
+    (NaN pixels, windows mostly NaN: ``_no_data``), so the disparity is unknown."""
 
     disparity: np.ndarray
     confidence: np.ndarray
     repeat_px: np.ndarray | None = None
+    no_data: np.ndarray | None = None
 
 
-def _prepare(view: np.ndarray) -> np.ndarray:
+def prepare(view: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(the view divided by its level (``_level``) and smoothed by PRE_BLUR; where it has
+    data, None when every pixel has). Pixels without data (NaN) are filled from their
+    neighbours for the smoothing and the warps (``data`` says to leave them out of every
+    sum)."""
     v = np.asarray(view, np.float32)
-    valid = np.isfinite(v)
-    v = np.where(valid, v, 0.0).astype(np.float32)
-    level = _low_pass(v) / np.maximum(_low_pass(valid.astype(np.float32)), 1e-6)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = np.where(valid & (level > 0), v / level, 0.0).astype(np.float32)
-    return cv2.GaussianBlur(out, (0, 0), PRE_BLUR)
+    data = np.isfinite(v)
+    v = np.where(data, v, 0.0).astype(np.float32)
+    out = v / _level(v, data)
+    weight = None if data.all() else data.astype(np.float32)
+    return _blur(out, weight, PRE_BLUR), None if weight is None else data
 
 
-def _low_pass(img: np.ndarray) -> np.ndarray:
-    """Gaussian of sigma FLAT_SIGMA, computed on an image shrunk by FLAT_SHRINK (the result is
-    smooth on that scale, so nothing is lost, and 30 Mpx take a fraction of a second)."""
+def _level(v: np.ndarray, data: np.ndarray) -> np.ndarray:
+    """The view's slow level: the geometric mean over a Gaussian of sigma FLAT_SIGMA (the
+    exponential of the low-pass of its log), over the pixels with data.
+    Of the log, not of the view: a gain is a factor. A view g t (g slow) has log g + log t,
+    whose low-pass is log g + LP(log t) wherever log g is linear within the Gaussian, so g
+    comes out whatever the scene; the low-pass of g t itself is g LP(t) + sigma^2 g' LP(t)',
+    a few % of the level where the scene's own low-pass slopes, which a slow gain ramp (the
+    A/S split) leaves as an offset between the views that moves the match: opposite ramps
+    across A and B put 1.4-12 % of natural pictures' known pixels > 1 px off at confidence
+    0.93 (audit 18 W5). Pixels darker than LOG_FLOOR of the view's median (noise about the
+    black level) count as that floor here only."""
+    sample = v[::7, ::7][data[::7, ::7]]
+    typical = float(np.median(sample)) if sample.size else 0.0
+    if not typical > 0:
+        typical = float(np.max(np.abs(sample))) if sample.size else 1.0
+    logs = np.where(data, np.log(np.maximum(v, LOG_FLOOR * max(typical, 1e-30))), 0.0)
+    return np.exp(_low_pass(logs.astype(np.float32), data.astype(np.float32)))
+
+
+def _extend(img: np.ndarray, pad: int, band: int) -> np.ndarray:
+    """``img`` extended by ``pad`` columns either side, each row along the straight line
+    fitted (least squares) to its ``band`` columns nearest that edge: a ramp stays a ramp,
+    and the line is not swayed by the one column at the edge as an odd reflection about it
+    is (a view's edge column holds what the other view does not see)."""
+    band = min(band, img.shape[1])
+    if band < 2:
+        return np.pad(img, ((0, 0), (pad, pad)), mode="edge")
+    x = np.arange(band, dtype=np.float64) - (band - 1) / 2
+    steps = np.arange(1, pad + 1, dtype=np.float64)
+    sides = []
+    for part, outward in ((img[:, :band], -1.0), (img[:, -band:], 1.0)):
+        mean = part.mean(axis=1, keepdims=True)
+        slope = ((part - mean) * x).sum(axis=1, keepdims=True) / (x * x).sum()
+        edge = (band - 1) / 2
+        sides.append(mean + slope * outward * (edge + steps[None, :]))
+    return np.concatenate([sides[0][:, ::-1], img, sides[1]], axis=1)
+
+
+def _blur(img: np.ndarray, weight: np.ndarray | None, sigma: float) -> np.ndarray:
+    """Gaussian of ``img`` over the pixels of ``weight`` 1 (all when None), normalised by the
+    weights there: a pixel without data neither darkens nor brightens its neighbours; one
+    with no data near takes 1, the divided views' level."""
+    if weight is None:
+        return cv2.GaussianBlur(img, (0, 0), sigma)
+    num = cv2.GaussianBlur(img * weight, (0, 0), sigma)
+    den = cv2.GaussianBlur(weight, (0, 0), sigma)
+    return np.where(den > 1e-3, num / np.maximum(den, 1e-3), 1.0).astype(np.float32)
+
+
+def _low_pass(img: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Gaussian of sigma FLAT_SIGMA of ``img`` over the pixels of ``weight`` 1, computed on
+    an image shrunk by FLAT_SHRINK (the result is smooth on that scale, so nothing is lost,
+    and 30 Mpx take a fraction of a second). Past the frame's edges the shrunk image is
+    extended along lines (``_extend``), which keeps a linear field linear: a reflection
+    folds a gain ramp back at the edges, and the views' opposite ramps then differed within
+    48 px of the left and right edges (most of the pixels still > 1 px off after the log)."""
     rows, cols = img.shape
-    small = cv2.resize(img, (max(1, cols // FLAT_SHRINK), max(1, rows // FLAT_SHRINK)),
-                       interpolation=cv2.INTER_AREA)
-    small = cv2.GaussianBlur(small, (0, 0), FLAT_SIGMA / FLAT_SHRINK,
-                             borderType=cv2.BORDER_REFLECT)
-    return cv2.resize(small, (cols, rows), interpolation=cv2.INTER_LINEAR)
+    size = (max(1, cols // FLAT_SHRINK), max(1, rows // FLAT_SHRINK))
+    num, den = (cv2.resize(x, size, interpolation=cv2.INTER_AREA) for x in (img, weight))
+    sigma = FLAT_SIGMA / FLAT_SHRINK
+    ok = den > 1e-3
+    small = np.where(ok, num / np.maximum(den, 1e-3), 0.0).astype(np.float32)
+    if not ok.all():  # cells without data take their neighbours' mean
+        small = _blur(small, ok.astype(np.float32), 2 * sigma)
+    pad = int(np.ceil(3 * sigma))
+    # the line through about one sigma of cells (4, 32 px): over 9 cells (72 px) the scene's
+    # own curvature bent it (2-4 % of a natural picture's known pixels > 1 px off, 0 at 4);
+    # an odd reflection about the edge cell put 0.6 % of a periodic texture's wrong
+    band = int(np.ceil(sigma)) + 1
+    big = _extend(_extend(small, pad, band).T, pad, band).T
+    small = cv2.GaussianBlur(np.ascontiguousarray(big, np.float32), (0, 0), sigma,
+                             borderType=cv2.BORDER_REFLECT)[pad:-pad, pad:-pad]
+    return cv2.resize(np.ascontiguousarray(small), (cols, rows),
+                      interpolation=cv2.INTER_LINEAR)
 
 
 def _shift_x(img: np.ndarray, dx: np.ndarray, grid_x: np.ndarray, grid_y: np.ndarray,
@@ -138,8 +210,10 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
                          f"small for {WINDOW} px windows")
     if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= MAX_DISPARITY):
         raise ValueError(f"max_disparity must be 0.5 to {MAX_DISPARITY:g} px, got {max_disparity}")
-    missing = ~(np.isfinite(a) & np.isfinite(b))
-    pa, pb = _prepare(a), _prepare(b)
+    (pa, ma), (pb, mb) = prepare(a), prepare(b)
+    masks = None if ma is None and mb is None else \
+        tuple(np.ones(a.shape, np.float32) if m is None else m.astype(np.float32)
+              for m in (ma, mb))
     d = np.empty(a.shape, np.float32)
     conf = np.empty(a.shape, np.float32)
     repeat = np.empty(a.shape, np.float32)
@@ -149,12 +223,14 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
     margin = WINDOW
     for top in range(0, a.shape[0], TILE_ROWS):  # tiles keep the working set small
         lo, hi = max(0, top - margin), min(a.shape[0], top + TILE_ROWS + margin)
-        td, tc, tr = _tile(pa[lo:hi], pb[lo:hi], reach)
+        td, tc, tr = _tile(pa[lo:hi], pb[lo:hi], reach,
+                           None if masks is None else tuple(m[lo:hi] for m in masks))
         keep = slice(top - lo, top - lo + min(TILE_ROWS, a.shape[0] - top))
         d[top:top + TILE_ROWS] = td[keep]
         conf[top:top + TILE_ROWS] = tc[keep]
         repeat[top:top + TILE_ROWS] = tr[keep]
-    lost = cv2.dilate(missing.astype(np.uint8), np.ones((WINDOW, WINDOW), np.uint8)) > 0
+    no_data = _no_data(masks) if masks is not None else np.zeros(a.shape, bool)
+    lost = no_data.copy()
     # a best shift pinned at the search bound is no minimum, and a cost that does not vary
     # with the shift (confidence 0: no texture) measures nothing
     lost |= (np.abs(d) >= reach - 1e-3) | (np.abs(d) > max_disparity) | ~(conf > 0)
@@ -173,7 +249,17 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
         lost |= (y < half) | (y > rows - 1 - half)
     d[lost] = np.nan
     conf[lost] = 0.0
-    return Disparity(d, conf, repeat)
+    return Disparity(d, conf, repeat, no_data)
+
+
+def _no_data(masks: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Pixels without data in either view (NaN: clipped or unknown; they stay NaN), and
+    pixels whose WINDOW holds data in both views on under MIN_DATA of its pixels. Each window
+    leaves such pixels out of its sums (weights), so a scattered one costs only itself: a NaN
+    poisoned its whole window before, and 1 % of them, scattered, left 9.6 % of the frame
+    known (audit 18 F3)."""
+    both = masks[0] * masks[1]
+    return (both < 0.5) | (_box(both) < MIN_DATA)
 
 
 def _check_rows(pa: np.ndarray, pb: np.ndarray, reach: int) -> None:
@@ -181,17 +267,27 @@ def _check_rows(pa: np.ndarray, pb: np.ndarray, reach: int) -> None:
     views turned by 90 degrees (a portrait capture) or a sensor split top/bottom. The row
     search alone finds a best horizontal shift there too, with clear confidence, and it is
     wrong."""
+    wrong = crossing(pa, pb, reach)
+    if wrong:
+        raise ValueError(f"the views' parallax runs along columns, not rows: a vertical shift "
+                         f"explains {100 * wrong[0]:.0f} % of their {wrong[1]}, which no "
+                         "horizontal one does (views side by side: under 3 %); disparity "
+                         "is measured along rows, B's content right of A's: turn both "
+                         "views by 90 degrees (a portrait capture, a sensor split "
+                         "top/bottom) so that their baseline runs along rows; nothing was "
+                         "written")
+
+
+def crossing(pa: np.ndarray, pb: np.ndarray, reach: int) -> tuple[float, str] | None:
+    """(share, of what) when B differs from A by a vertical shift that no horizontal one
+    explains (over MAX_VERTICAL_SHARE of either share of ``vertical_share``: parallax along
+    columns), else None. ``pa``, ``pb`` prepared."""
     for share, where in zip(vertical_share(pa, pb, reach),
                             ("clear matches", "clear matches on texture of two directions"),
                             strict=True):
         if share is not None and share > MAX_VERTICAL_SHARE:
-            raise ValueError(f"the views' parallax runs along columns, not rows: a vertical "
-                             f"shift explains {100 * share:.0f} % of their {where}, which no "
-                             "horizontal one does (views side by side: under 3 %); disparity "
-                             "is measured along rows, B's content right of A's: turn both "
-                             "views by 90 degrees (a portrait capture, a sensor split "
-                             "top/bottom) so that their baseline runs along rows; nothing was "
-                             "written")
+            return share, where
+    return None
 
 
 def vertical_share(pa: np.ndarray, pb: np.ndarray, reach: int
@@ -281,25 +377,25 @@ def consistent_share(disparity: np.ndarray, confidence: np.ndarray, *,
     return float(np.mean((count > 0.5) & (np.abs(d[sure] - local) < tolerance)))
 
 
-def _tile(pa: np.ndarray, pb: np.ndarray, reach: int
+def _tile(pa: np.ndarray, pb: np.ndarray, reach: int, masks=None
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Disparity, confidence and repeat (px, see ``Disparity``) of one tile: the coarse search,
-    then Lucas-Kanade."""
+    then Lucas-Kanade; ``masks`` (data of a, of b, float 0/1) weigh every window's sums."""
     # one shift past the bound: a disparity just inside it then has a cost on both sides
     # and its parabola; a minimum at the last shift tried is no minimum (its pixel unknown).
     # At full size: on the views shrunk by two a texture repeating every 5-6 px is at 2.5-3
     # px, near their Nyquist, and 1 px of parallax (0.5 there) lies between whole shifts
     # while the copy a repeat away fits one: sine and checker patterns of 5 px read -4 px for
     # 1 (the copy), those of 6 px were refused as "no texture" (0.00-0.17 % clear)
-    d, conf, _, repeat = _search(pa, pb, reach + 1, COARSE_WINDOW)
+    d, conf, _, repeat = _search(pa, pb, reach + 1, COARSE_WINDOW, masks)
     # a best whole shift on the bound whose parabola's vertex lies past it: the minimum is
     # outside the search (8 px sines 3.5 px apart, searched to 4: their copy at -4.5 read
     # -3.999 on 10 % of the pixels, confidently), so the pixel is unknown
     conf = np.where(np.abs(d) > reach, np.float32(0), conf)
-    return _refine(pa, pb, np.clip(d, -reach, reach), float(reach)), conf, repeat
+    return _refine(pa, pb, np.clip(d, -reach, reach), float(reach), masks), conf, repeat
 
 
-def _search(pa: np.ndarray, pb: np.ndarray, reach: int, side: int = WINDOW
+def _search(pa: np.ndarray, pb: np.ndarray, reach: int, side: int = WINDOW, masks=None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Whole-pixel search kept as a running minimum (best cost and its neighbours on both
     sides), parabola through them; confidence 1 - best / mean cost; the mean cost; and where
@@ -330,7 +426,9 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int, side: int = WINDOW
     before = previous = none
     shifts = range(-reach, reach + 1)
     for k, s in enumerate(shifts):
-        cost = _box((pa - _shift_whole(pb, s)) ** 2, side)
+        cost = _box((pa - _shift_whole(pb, s)) ** 2, side) if masks is None else \
+            _weighted_box((pa - _shift_whole(pb, s)) ** 2,
+                          masks[0] * _shift_whole(masks[1], s), side)
         search_step(before, previous, cost, k, 0 < k < len(shifts) - 1, s - 1, reach - 0.75,
                     best, left, right, k_best, total, low_cost, low_shift)
         before, previous = previous, cost
@@ -356,8 +454,15 @@ def _search(pa: np.ndarray, pb: np.ndarray, reach: int, side: int = WINDOW
     return d, conf, mean, repeat
 
 
-def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.ndarray:
-    """Lucas-Kanade steps on d with symmetric warps (A at x - d/2, B at x + d/2)."""
+def _weighted_box(img: np.ndarray, weight: np.ndarray, side: int) -> np.ndarray:
+    """Mean of ``img`` over the pixels of ``weight`` 1 in each side x side window."""
+    return _box(img * weight, side) / np.maximum(_box(weight, side), 1e-3)
+
+
+def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float, masks=None
+            ) -> np.ndarray:
+    """Lucas-Kanade steps on d with symmetric warps (A at x - d/2, B at x + d/2); the sums
+    over the pixels both warps take from data (``masks``) only."""
     rows, cols = pa.shape
     grid_x = np.ascontiguousarray(np.broadcast_to(np.arange(cols, dtype=np.float32),
                                                   (rows, cols)))
@@ -375,35 +480,11 @@ def _refine(pa: np.ndarray, pb: np.ndarray, d: np.ndarray, limit: float) -> np.n
         # the whole shift (0.6 px read 0.56-0.58 after one step), and a second step over 15 px
         # doubled the 90th percentile error on natural pictures
         side = WINDOW if k == LK_STEPS - 1 else COARSE_WINDOW
-        num = _box((wb - wa) * grad, side)
-        den = _box(grad * grad, side)
+        weight = 1.0 if masks is None else \
+            (_shift_x(masks[0], -0.5 * d, grid_x, grid_y, cv2.INTER_NEAREST)
+             * _shift_x(masks[1], 0.5 * d, grid_x, grid_y, cv2.INTER_NEAREST))
+        num = _box(weight * (wb - wa) * grad, side)
+        den = _box(weight * grad * grad, side)
         step = np.where(den > 1e-12, -num / np.maximum(den, 1e-12), 0.0)
         d = np.clip(d + np.clip(step, -0.5, 0.5), -limit, limit).astype(np.float32)
     return d
-
-
-def quad_disparity(views: np.ndarray, *, max_disparity: float = 4.0
-                   ) -> tuple[Disparity, Disparity]:
-    """(x, y) disparities of 2 x 2 SAIs (S00, S01, S10, S11): right column against left,
-    bottom row against top."""
-    s00, s01, s10, s11 = (np.asarray(v, np.float32) for v in views)
-    # each baseline is measured on its own and the two checked against each other (below)
-    dx = disparity_x(0.5 * (s00 + s10), 0.5 * (s01 + s11), max_disparity=max_disparity,
-                     check_rows=False)
-    dy = disparity_x((0.5 * (s00 + s01)).T, (0.5 * (s10 + s11)).T, max_disparity=max_disparity,
-                     check_rows=False)
-    dy = Disparity(*(np.ascontiguousarray(v.T) for v in (dy.disparity, dy.confidence,
-                                                         dy.repeat_px)))
-    # the two baselines of a 2 x 2 split are equal (the pupil's quarters sit at (+-c, +-c)),
-    # so a defocused point has one disparity along both: where x and y disagree, one of them
-    # matched texture at a wrong shift (simulated bands of 10-20 px: 59-99 % of a band known
-    # and wrong, 5-24 % after; within 4 px x and y agree to 0.54 px, 99th percentile)
-    with np.errstate(invalid="ignore"):
-        apart = ~(np.abs(dx.disparity - dy.disparity)
-                  <= np.maximum(QUAD_AGREE_PX, QUAD_AGREE_SHARE
-                                * np.abs(dx.disparity + dy.disparity) / 2))
-    apart &= np.isfinite(dx.disparity) | np.isfinite(dy.disparity)
-    for d in (dx, dy):
-        d.disparity[apart] = np.nan
-        d.confidence[apart] = 0.0
-    return dx, dy

@@ -146,6 +146,35 @@ def test_bayer_frames_of_the_refocus_simulator(tmp_path):
     assert abs(np.nanmedian(data[0][6:-6, 6:-6]) - 4.5) <= 0.03  # measured 0.007 at 480 x 640
 
 
+@pytest.mark.parametrize("share, words", [
+    (0.01, None),
+    (0.7, ("% of", "pixels have no data in a view (NaN", "nothing was written"))])
+def test_views_with_nan_pixels_are_measured_around_them_or_refused_naming_them(share, words,
+                                                                               tmp_path):
+    """audit 18 F3: 1 % of B's pixels NaN, scattered, poisoned every window they fell in
+    (9.6 % of the frame known, refused as "widen the range"); now each costs itself only,
+    keeps NaN, and views mostly NaN are refused naming the NaN pixels."""
+    simulate("dualpixel-depth", tmp_path / "sim", seed=2, pixels="96x256",
+             disparities=(-1.0,) * 4 + (1.0,) * 4)
+    data, meta = tiffio.read_image(tmp_path / "sim" / "views.tif")
+    data = data.copy()
+    lost = np.random.default_rng(4).random(data[1].shape) < share
+    data[1][lost] = np.nan
+    tiffio.write_image(tmp_path / "nan.tif", data, meta)
+    out = tmp_path / "d.tif"
+    result = invoke("depth", tmp_path / "nan.tif", "-o", out)
+    if words is None:
+        assert result.exit_code == 0, result.output
+        d = tiffio.read_image(out)[0][0]
+        assert not np.isfinite(d[lost]).any()  # a NaN pixel stays NaN
+        assert np.isfinite(d[20:-20, 20:-20]).mean() > 0.9  # 0.96 (before: a tenth)
+        assert abs(np.nanmedian(d[20:-20, 20:100]) + 1.0) < 0.1
+        assert abs(np.nanmedian(d[20:-20, 156:236]) - 1.0) < 0.1
+    else:
+        assert result.exit_code == 1 and not out.exists()
+        assert all(w in result.output for w in words), result.output
+
+
 def _edited(src, dst, page0=None, meta_change=None):
     data, meta = tiffio.read_image(src)
     if page0 is not None:

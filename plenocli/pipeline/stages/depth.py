@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli.depth import lenslet, metric, views
+from plenocli.depth import lenslet, metric, quad, views
 from plenocli.depth.directions import check_directions
 from plenocli.errors import ConfigError, InputError
 from plenocli.io import tiffio
@@ -101,14 +101,17 @@ def _refuse_colour(input, names: list[str]) -> None:
                              "its raw frames)")
 
 
-def _check_known(values, searched: str) -> None:
+def _check_known(values, searched: str, no_data: float = 0.0) -> None:
     """Refuse a map whose pixels are mostly unknown: there the best match lay at a bound of
-    the search (no minimum) or nothing matched (no texture); the few left are not a map."""
+    the search (no minimum) or nothing matched (no texture); the few left are not a map.
+    ``no_data``: the share of pixels without data (NaN in a view), said when there are any."""
     known = float(np.isfinite(values).mean())
     if known < MIN_KNOWN:
+        lost = (f" ({100 * no_data:.1f} % of the frame has no data: NaN pixels in a view)"
+                if no_data > 0 else "")
         raise InputError(f"depth: only {100 * known:.1f} % of the frame found a minimum of the "
                          f"match cost with {searched}; the rest lies at a bound of the search "
-                         "or has no texture: widen the range, or check the input")
+                         f"or has no texture{lost}: widen the range, or check the input")
 
 
 def _camera(path: str) -> metric.Camera:
@@ -237,21 +240,36 @@ def _check_consistent(disparities: list[np.ndarray], confidence: np.ndarray) -> 
                          "written")
 
 
+def _check_data(input, no_data: np.ndarray) -> None:
+    """Refuse views left with too few pixels to measure by their NaN pixels (clipped or
+    unknown: each costs only itself, but over most of the frame they leave no map), naming
+    them, not the search or the texture."""
+    share = float(no_data.mean())
+    if share > 1 - MIN_KNOWN:
+        raise InputError(f"depth: {100 * share:.1f} % of {input}'s pixels have no data in a "
+                         f"view (NaN: clipped or unknown, or windows of {views.WINDOW} px "
+                         "mostly NaN), leaving too few to measure a disparity map: give views "
+                         "with more measured pixels (bias writes NaN where a pixel clipped); "
+                         "nothing was written")
+
+
 def _views(input, data, meta, max_disparity):
     names = list(ViewNames.of(meta, data.shape[0]).pages)
     have = {n: k for k, n in enumerate(names)}
     try:
         if all(n in have for n in QUAD):
-            dx, dy = views.quad_disparity(np.stack([data[have[n]] for n in QUAD]),
+            dx, dy = quad.quad_disparity(np.stack([data[have[n]] for n in QUAD]),
                                           max_disparity=max_disparity)
             conf = np.minimum(dx.confidence, dy.confidence)
             pages, out = [dx.disparity, dy.disparity, conf], ["disparity_x", "disparity_y",
                                                               "confidence"]
             repeat = np.maximum(dx.repeat_px, dy.repeat_px)
+            no_data = dx.no_data | dy.no_data
         elif all(n in have for n in DUAL):
             d = views.disparity_x(data[have["A"]], data[have["B"]], max_disparity=max_disparity)
             pages, out = [d.disparity, d.confidence], ["disparity", "confidence"]
             repeat = d.repeat_px
+            no_data = d.no_data
         else:
             _refuse_colour(input, names)
             raise InputError(f"{input} holds views {', '.join(names)}; depth needs "
@@ -259,10 +277,12 @@ def _views(input, data, meta, max_disparity):
                              "lenslet frames with --grid")
     except ValueError as err:
         raise InputError(f"depth: {err}") from err
+    _check_data(input, no_data)
     try:
         _check_shared_texture(pages[-1])
         _check_consistent(pages[:-1], pages[-1])
-        _check_known(pages[0], f"disparity within --max-disparity {max_disparity:g}")
+        _check_known(pages[0], f"disparity within --max-disparity {max_disparity:g}",
+                     float(no_data.mean()))
     except InputError:
         _refuse_repeats(repeat, pages[0], max_disparity)
         raise
