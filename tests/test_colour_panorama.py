@@ -252,7 +252,7 @@ def test_views_with_their_own_bayer_patterns_are_each_demosaiced(tmp_path):
     meta = {"views": ["S00", "S01", "S10", "S11"], "cfa": None, "view_colours": patterns,
             "active_area": [0, 0, 32, 48]}
     tiffio.write_image(tmp_path / "sai.tif", pages, meta)
-    stack, names, levels, _ = stitch.load_views([str(tmp_path / "sai.tif")], None)
+    stack, names, levels, _, _ = stitch.load_views([str(tmp_path / "sai.tif")], None)
     assert levels is not None and names == meta["views"] and stack.shape == (4, 3, 32, 48)
     np.testing.assert_allclose(stack.mean(axis=(2, 3)), np.tile(colour, (4, 1)), atol=1e-5)
 

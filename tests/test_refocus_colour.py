@@ -59,7 +59,7 @@ def test_develop_takes_the_refocused_rgb(refocused):
 
 def test_stitch_takes_refocused_rgb_as_one_colour_view(refocused):
     tmp, _ = refocused
-    stack, names, levels, _ = stitch.load_views([str(tmp / "rgb.tif")], None)
+    stack, names, levels, _, _ = stitch.load_views([str(tmp / "rgb.tif")], None)
     assert names == ["rgb"] and levels is None and stack.shape[:2] == (1, 3)
 
 

@@ -22,7 +22,7 @@ from scipy import ndimage
 
 from plenocli.colour.balance import normalised_gains
 from plenocli.colour.demosaic import DEFAULT_METHOD, check_pattern, demosaic, grey_edge_gains
-from plenocli.colour.highlights import rebuild_partly_clipped
+from plenocli.colour.highlights import Estimated, rebuild_partly_clipped
 from plenocli.io.photo import encode
 from plenocli.model.colour import srgb_to_space
 from plenocli.model.views import CHANNELS, split_colour_page, split_sweep
@@ -74,13 +74,15 @@ def colour_views(names: list[str], *, cfa: str | None = None,
 
 
 def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_METHOD,
-               gains=None, out: np.ndarray | None = None) -> np.ndarray:
+               gains=None, out: np.ndarray | None = None,
+               estimated: Estimated | None = None) -> np.ndarray:
     """Camera RGB (rows, cols, 3) float32 of one colour view; a Bayer view is demosaiced
     white-balanced by ``gains`` (the ones the photograph is developed with; None: the mosaic's
     own estimate), see :func:`plenocli.colour.demosaic.demosaic`. Pixels clipped in some
     channels only are rebuilt (:func:`plenocli.colour.highlights.rebuild_partly_clipped`);
-    those clipped in every channel stay NaN. ``out`` (rows, cols, 3) float32: written in place
-    and returned."""
+    those clipped in every channel stay NaN; ``estimated`` (:class:`Estimated`) is told which
+    channels of which pixels that rebuild estimated. ``out`` (rows, cols, 3) float32: written
+    in place and returned."""
     _check_scalable(pages, view.pages)
     if view.cfa is None:
         rgb = np.stack([np.asarray(pages[k], np.float32) for k in view.pages], axis=-1)
@@ -92,7 +94,7 @@ def camera_rgb(pages: np.ndarray, view: ColourView, *, method: str = DEFAULT_MET
     if gains is None:
         gains = grey_edge_gains(frame, view.cfa)
     rgb = demosaic(frame, view.cfa, method=method, gains=gains, out=out)
-    rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains))
+    rebuild_partly_clipped(rgb, frame, view.cfa, normalised_gains(gains), estimated)
     return rgb
 
 

@@ -21,7 +21,49 @@ MARGIN = 32  # pixels around the masked area searched for unclipped colour first
 BRIGHT = 0.25  # unclipped colour taken from pixels within two stops of the lowest clip level
 
 
-def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gains) -> int:
+class Estimated:
+    """Which channels of which pixels of a view the rebuild estimated (a clipped or unknown
+    channel, floored at the clip level) rather than measured: one bit per pixel and channel
+    (at 6876 x 4584 px 3.9 MB a channel where a bool mask takes 31.5 MB), allocated for a
+    channel once a pixel of it is estimated. What compares views by their light (the stitch's
+    exposure gains) takes measured values only: an estimate is a colour guessed from the
+    surroundings, or the clip level, not the view's light."""
+
+    def __init__(self, shape: tuple[int, int]):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.bits: list[np.ndarray | None] = [None, None, None]
+
+    def mark(self, rows: np.ndarray, cols: np.ndarray, channels: np.ndarray) -> None:
+        """Mark pixels (rows, cols: sorted by row, as ``np.nonzero`` gives them) as estimated
+        in the channels ``channels`` (n, 3) bool; BAND_ROWS rows at a time (bounded scratch)."""
+        width = self.shape[1]
+        for c in range(3):
+            r, k = rows[channels[:, c]], cols[channels[:, c]]
+            if not len(r):
+                continue
+            if self.bits[c] is None:
+                self.bits[c] = np.zeros((self.shape[0], -(-width // 8)), np.uint8)
+            for start in range(int(r[0]), int(r[-1]) + 1, BAND_ROWS):
+                lo, hi = np.searchsorted(r, (start, start + BAND_ROWS))
+                if lo == hi:
+                    continue
+                mask = np.zeros((min(BAND_ROWS, self.shape[0] - start), width), bool)
+                mask[r[lo:hi] - start, k[lo:hi]] = True
+                self.bits[c][start:start + len(mask)] |= np.packbits(mask, axis=1)
+
+    def region(self, channel: int, rows: slice, cols: slice) -> np.ndarray | None:
+        """Where ``channel`` is estimated in the view's pixels [rows, cols] (bool), or None
+        when none of it is anywhere."""
+        bits = self.bits[channel]
+        if bits is None:
+            return None
+        first = cols.start // 8
+        out = np.unpackbits(bits[rows, first:-(-cols.stop // 8)], axis=1)
+        return out[:, cols.start - 8 * first:cols.stop - 8 * first].view(bool)
+
+
+def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gains,
+                           estimated: Estimated | None = None) -> int:
     """Fill, in place, the masked (NaN) pixels of ``rgb`` (rows, cols, 3; demosaiced from the
     Bayer ``frame`` with NaN where a photosite clipped) that still have an unclipped channel.
 
@@ -33,7 +75,8 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     largest finite value of their colour in the frame), nor, white balanced by ``gains``, than
     the darkest measured channel: a channel that clipped is not the pixel's darkest (a clipped
     green below red and blue is the magenta of a badly developed highlight). Returns the number
-    of pixels rebuilt.
+    of pixels rebuilt; ``estimated`` (:class:`Estimated`, the shape of ``rgb``) is told which
+    channels of them are estimates.
     """
     # nothing clipped: one cheap pass (a float32 sum that overflows only takes the long way)
     if np.isfinite(np.sum(frame)):
@@ -69,6 +112,8 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     floor = np.maximum(floor[partly], darkest)
     rebuilt = np.where(known, values, np.maximum(scale[:, None] * ratios, floor))
     region[where[0][partly], where[1][partly]] = rebuilt
+    if estimated is not None:
+        estimated.mark(where[0][partly] + top, where[1][partly] + left, ~known)
     return int(partly.sum())
 
 

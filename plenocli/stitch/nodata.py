@@ -46,9 +46,12 @@ MAX_LOST = 0.5
 
 class NoData:
     """The views' no-data pixels: per view its validity (all channels known; None: every pixel
-    is) and the NaN pixels estimated for the measurements (None: none)."""
+    is) and the NaN pixels estimated for the measurements (None: none); and the channels its
+    source estimated (``estimated``: a Bayer view's rebuilt clipped channels, see
+    :meth:`plenocli.colour.highlights.Estimated.region`; None per view, or for all: none)."""
 
-    def __init__(self, stack: np.ndarray):
+    def __init__(self, stack: np.ndarray, estimated=None):
+        self.estimated = list(estimated) if estimated is not None else [None] * len(stack)
         self.copied = False
         self.valid: list[np.ndarray | None] = []
         self.isolated: list[np.ndarray | None] = []

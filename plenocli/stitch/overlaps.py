@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from plenocli.progress import step
@@ -29,24 +30,36 @@ MEASURE_PIXELS = 1 << 20
 MEASURE_BLOCKS = 4
 MIN_BLOCK_PX = 64
 MEASURE_THREADS = 2  # neighbour pairs measured at once (the two cores the stitch is sized for)
+# a panorama pixel is measured in a channel when its bilinear footprint holds no estimated pixel
+# of that channel (the feather's rule for NaN pixels, :func:`plenocli.stitch.warp.feather`)
+MEASURED_SHARE = 0.999
 
 
 @dataclass(frozen=True)
 class Overlap:
     """A neighbour pair's overlap as measured: ``sums`` (2, C), the sums of view a's and view
-    b's channels over the ``count`` pixels of the blocks both views cover, and ``area``, the
-    pixels both cover in the whole overlap."""
+    b's channels over the ``counts`` (C) pixels of the blocks both views cover and both
+    measured in that channel (a channel a view's source estimated, e.g. a Bayer view's rebuilt
+    clipped channel, is left out: it is a guess, not the view's light); ``measured`` (2, C),
+    the pixels of the ``count`` both cover that each view measured; and ``area``, the pixels
+    both cover in the whole overlap."""
 
     sums: np.ndarray
+    counts: np.ndarray
+    measured: np.ndarray
     count: int
     area: int
 
 
 def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
-                     holes: list, pairs: list[tuple[int, int, str]]) -> list[Overlap | None]:
-    """Per neighbour pair: its :class:`Overlap`, or None where the views do not overlap. The
+                     holes: list, pairs: list[tuple[int, int, str]],
+                     estimated: Sequence | None = None) -> list[Overlap | None]:
+    """Per neighbour pair: its :class:`Overlap`, or None where the views do not overlap.
+    ``estimated``: per view, its estimated channels (see :func:`_measured_in`) or None. The
     pairs are measured in MEASURE_THREADS threads (OpenCV's remaps and numpy release the GIL);
     each pair's figures are those of a serial loop."""
+    estimated = estimated or [None] * len(views)
+
     def measure(pair):
         a, b, _ = pair
         region = intersect(boxes[a], boxes[b])
@@ -54,7 +67,8 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
             return None
         step(f"measuring the overlap of views {a} and {b}")
         n_chan = len(views[a])
-        sums, count = np.zeros((2, n_chan)), 0
+        sums, counts, measured, count = (np.zeros((2, n_chan)), np.zeros(n_chan, np.int64),
+                                         np.zeros((2, n_chan), np.int64), 0)
         for block in _measure_blocks(region, _long_axis(region)):
             crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a])
             crop_b, weight_b = warp_region(views[b], maps[b], block, holes[b])
@@ -64,14 +78,49 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
                 continue
             inside = both[box]
             count += int(inside.sum())
-            for k, crop in enumerate((crop_a, crop_b)):
-                for c in range(n_chan):
-                    sums[k, c] += float(crop[c][box][inside].sum(dtype=np.float64))
+            known = [_measured_in(estimated[k], maps[k], block, n_chan) for k in (a, b)]
+            for c in range(n_chan):
+                use = inside
+                for k in (0, 1):
+                    if known[k][c] is not None:
+                        measured[k, c] -= int((inside & ~known[k][c][box]).sum())
+                        use = use & known[k][c][box]
+                counts[c] += int(use.sum())
+                for k, crop in enumerate((crop_a, crop_b)):
+                    sums[k, c] += float(crop[c][box][use].sum(dtype=np.float64))
         area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
-        return Overlap(sums, count, area) if count else None
+        return Overlap(sums, counts, measured + count, count, area) if count else None
 
     with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
         return list(pool.map(measure, pairs))
+
+
+def _measured_in(estimated, vmap: ViewMap, block: Box, n_chan: int) -> list:
+    """Per channel, where a view measured it on the panorama ``block`` (bool; None: every
+    pixel): not where its resampling reaches a pixel whose channel its source estimated
+    (``estimated.region(c, rows, cols)``: bool, or None for a channel never estimated), as the
+    feather leaves out a NaN pixel's footprint."""
+    out: list = [None] * n_chan
+    if estimated is None:
+        return out
+    rows, cols = vmap.view_shape
+    for band, mx, my, _ in vmap.bands(block):
+        on = (mx >= -1) & (mx <= cols) & (my >= -1) & (my <= rows)
+        if not on.any():
+            continue
+        top, left = (max(int(np.floor(v[on].min())) - 1, 0) for v in (my, mx))
+        bottom, right = int(np.ceil(my[on].max())) + 2, int(np.ceil(mx[on].max())) + 2
+        window = (slice(top, min(bottom, rows)), slice(left, min(right, cols)))
+        for c in range(n_chan):
+            guessed = estimated.region(c, *window)
+            if guessed is None or not guessed.any():
+                continue
+            if out[c] is None:
+                out[c] = np.ones(region_shape(block), bool)
+            out[c][band] = cv2.remap((~guessed).astype(np.float32), mx - np.float32(left),
+                                     my - np.float32(top), cv2.INTER_LINEAR,
+                                     borderMode=cv2.BORDER_REPLICATE) > MEASURED_SHARE
+    return out
 
 
 def _covered_by_both(map_a: ViewMap, map_b: ViewMap, region: Box, holes_a, holes_b) -> int:
@@ -189,25 +238,75 @@ def _measure_blocks(region: Box, long_axis: int) -> list[Box]:
 def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], stack: np.ndarray
                 ) -> np.ndarray:
     """Per-view, per-channel gains from overlap means (log least squares, view 0 fixed) for
-    the views ``stack`` (V, C, rows, cols); refused (StitchError) where an overlap holds no
-    light in either view, or where a view brought to view 0's exposure would fall out of
-    float32's normal range."""
+    the views ``stack`` (V, C, rows, cols), each channel's from the overlaps where both views
+    measured enough of it (:func:`_enough_measured`); refused (StitchError) where that leaves
+    a view's channel out of reach of view 0's, where an overlap holds no light in either view,
+    or where a view brought to view 0's exposure would fall out of float32's normal range."""
     n_views, n_chan = stack.shape[:2]
     gains = np.ones((n_views, n_chan))
     for c in range(n_chan):
-        rows, rhs = [], []
+        rows, rhs, used = [], [], []
         for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
-            if overlap is None:
+            if overlap is None or not _enough_measured(overlap, c):
                 continue
-            mean_a, mean_b = overlap.sums[:, c] / overlap.count
+            mean_a, mean_b = overlap.sums[:, c] / overlap.counts[c]
             _check_light((mean_a, mean_b), (a, b), c, n_chan)
             rows.append(difference_row(a, b, n_views))
             rhs.append(np.log(mean_a / mean_b))
+            used.append((a, b))
+        _check_reached(used, pairs, overlaps, c, n_chan)
         if rows:
             sol, *_ = np.linalg.lstsq(np.array(rows), np.array(rhs), rcond=None)
             gains[1:, c] = np.exp(sol)
     _check_scaled_levels(stack, gains)
     return gains
+
+
+# An overlap's channel is matched from the pixels both views measured in it, when they are at
+# least MIN_MEASURED_PX (a 32 x 32 patch: their mean carries 1/32 of a pixel's noise) and
+# MIN_MEASURED_SHARE of the pixels both views cover (the gain is the overlap's: a few pixels
+# in a corner of it see the views' relative vignetting there). Left out where they are fewer:
+# the clipped channel of a highlight that fills the overlap, or a colour lost to unknown
+# photosites; a view's channel left with no measured overlap is refused (_check_reached).
+MIN_MEASURED_SHARE = 0.1
+MIN_MEASURED_PX = 1024
+
+
+def _enough_measured(overlap: Overlap, channel: int) -> bool:
+    return bool(overlap.counts[channel] >= max(MIN_MEASURED_PX,
+                                               MIN_MEASURED_SHARE * overlap.count))
+
+
+def _reached(links: list[tuple[int, int]]) -> set[int]:
+    """The views joined to view 0 by ``links`` (pairs of views)."""
+    reached, grew = {0}, True
+    while grew:
+        grew = False
+        for a, b in links:
+            if (a in reached) != (b in reached):
+                reached |= {a, b}
+                grew = True
+    return reached
+
+
+def _check_reached(used: list, pairs: list, overlaps: list, channel: int, n_chan: int) -> None:
+    """Refuse a channel whose gain some view would get from no measured overlap (it would be
+    left at 1 however the views' exposures differ), naming it in its first overlap left out."""
+    links = [(a, b) for (a, b, _), o in zip(pairs, overlaps, strict=True) if o is not None]
+    lost = _reached(links) - _reached(used)
+    for (a, b, _), overlap in zip(pairs, overlaps, strict=True):
+        if overlap is None or (a, b) in used or not {a, b} & lost:
+            continue
+        k = int(np.argmin(overlap.measured[:, channel]))
+        view, other = (a, b)[k], (a, b)[1 - k]
+        share = overlap.measured[k, channel] / overlap.count
+        share = f"only {100 * share:.2g} %" if share else "none"
+        colour = ("red", "green", "blue")[channel] if n_chan == 3 else f"channel {channel}"
+        raise StitchError(
+            f"view {view}'s {colour} is measured in {share} of its overlap "
+            f"with view {other} (the rest rebuilt from the colour around clipped or unknown "
+            f"photosites): too little to match its {colour} exposure; stitch without exposure "
+            "matching (--gains none), or views with fewer clipped photosites there")
 
 
 def _check_scaled_levels(stack: np.ndarray, gains: np.ndarray) -> None:

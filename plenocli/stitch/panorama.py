@@ -20,11 +20,11 @@ from threadpoolctl import threadpool_limits
 
 from plenocli.progress import step
 from plenocli.stitch import compose, verify
-from plenocli.stitch import overlaps as overlap_measure
 from plenocli.stitch.coarse import fine_windows
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.ncc import ncc
 from plenocli.stitch.nodata import NoData
+from plenocli.stitch.overlaps import match_gains, measure_overlaps
 from plenocli.stitch.registration import auto_layout, check_transform, priors, register
 from plenocli.stitch.rig import PrismRig, canvases, rig_axis_and_field, rig_strips
 from plenocli.stitch.translation import estimate_translation
@@ -81,14 +81,14 @@ class StitchReport:
 # machine (the bench's 2 x 2 homography: a third less CPU and wall time)
 @threadpool_limits.wrap(limits=1, user_api="blas")
 def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
-           model: str = "auto", distortion_k1: float = 0.0,
-           transform: dict | None = None, blend: str = "feather", match_gain: bool = True,
-           max_overlap: float = 0.7, min_overlap_px: int = 16,
-           min_correlation: float = 0.4, rig: PrismRig | None = None,
+           model: str = "auto", distortion_k1: float = 0.0, transform: dict | None = None,
+           blend: str = "feather", match_gain: bool = True, max_overlap: float = 0.7,
+           min_overlap_px: int = 16, min_correlation: float = 0.4, rig: PrismRig | None = None,
            overlap: float | None = None, overlap_tolerance: float = 0.1,
            tolerance_px: float | None = None, out: Callable[..., Callable] | None = None,
            claim: tuple[str, str] | None = None, named: Sequence[str] | None = None,
-           levels: Sequence[float] | None = None) -> tuple[np.ndarray, StitchReport]:
+           levels: Sequence[float] | None = None, estimated: Sequence | None = None
+           ) -> tuple[np.ndarray, StitchReport]:
     """Stitch 2 or 4 overlapping views into one extended-FOV panorama.
 
     Parameters
@@ -102,8 +102,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     transform : a previous report's ``transform``, reapplied instead of registering the views.
     blend : "feather" (weights = distance to the view's edge) or "multiband".
     match_gain : match per-view, per-channel exposure from the overlaps (view 0 is the reference).
-    max_overlap, min_overlap_px, min_correlation : registration search limits, see
-        :func:`plenocli.stitch.translation.estimate_translation`.
+    max_overlap, min_overlap_px, min_correlation : search limits (estimate_translation).
     rig : the prism rig (one entry per view): views are placed through its undistorted common
         frame, each pair searched within ``tolerance_px`` (default 5 % of the view, >= 8 px).
     overlap, overlap_tolerance : without a rig, the expected overlap (fraction of the view
@@ -117,6 +116,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
         the other way is then not told to take another --layout, which the names rule out.
     levels : each view's median before it became ``views`` where that lost its sign (a Bayer
         mosaic demosaiced clips negatives to 0): a refused negated view is named from them.
+    estimated : per view, its channels not measured (colour.highlights.Estimated): no gains.
 
     Returns (panorama, :class:`StitchReport`): the panorama (rows', cols') float32, or (C, rows',
     cols') for colour views, NaN where no view covers it.
@@ -130,7 +130,7 @@ def stitch(views: np.ndarray | Sequence[np.ndarray], *, layout: str = "auto",
     search = dict(max_overlap=max_overlap, min_overlap_px=min_overlap_px,
                   min_correlation=min_correlation, overlap=overlap,
                   overlap_tolerance=overlap_tolerance, tolerance_px=tolerance_px)
-    stack = (nodata := NoData(stack)).measured(stack)  # isolated NaN estimated: nodata.py
+    stack = (nodata := NoData(stack, estimated)).measured(stack)  # isolated NaN: nodata.py
     step("registering the views")
     with nodata.too_few_known():
         transforms, layout, source, pair_info, closure = _transforms(
@@ -382,9 +382,8 @@ def _check_rig_layout(expected: dict, layout: str, frame_shape: tuple[int, int])
 
 
 def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *,
-               match_gain: bool, blend: str, k1: float, rig: PrismRig | None,
-               claim: tuple[str, str], out, levels: Sequence[float] | None = None,
-               nodata: NoData):
+               match_gain: bool, blend: str, k1: float, rig: PrismRig | None, nodata: NoData,
+               claim: tuple[str, str], out, levels: Sequence[float] | None = None):
     """The blended panorama (C, rows', cols') trimmed to what the views cover, the pixels they
     cover, the reference -> panorama translation, the per-view, per-channel gains, and per pair
     how well its seam lines up (:func:`plenocli.stitch.verify.seam_fits`) and its overlap area;
@@ -399,10 +398,10 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     holes = nodata.holes()
     filled = [view if h is None else fill_nan_channels(view, in_place=nodata.copied)
               for view, h in zip(stack, holes, strict=True)]
-    overlaps = overlap_measure.measure_overlaps(filled, maps, boxes, holes, pairs)
+    overlaps = measure_overlaps(filled, maps, boxes, holes, pairs, nodata.estimated)
     gains = np.ones(stack.shape[:2])
     if match_gain:
-        gains = overlap_measure.match_gains(overlaps, pairs, stack)
+        gains = match_gains(overlaps, pairs, stack)
     areas = [0 if overlap is None else overlap.area for overlap in overlaps]
     del overlaps
     box = compose.covered_box(maps, boxes, holes)

@@ -6,9 +6,10 @@ a view of its own; unnamed pages are ``view0``, ``view1``, ...; ``--views`` take
 too). A file that holds a single view (e.g. a left or right refocused image) names it after the
 file (``left.tif`` -> ``left``). A single-page Bayer view is made camera RGB as develop makes it
 (``plenocli.colour.develop.camera_rgb``: the default demosaic, pixels clipped in some channels
-rebuilt) and stitched at full resolution; pixels clipped in every channel stay NaN. The panorama
-keeps the capture's colour metadata, so ``develop`` gives it the camera's white balance and colour
-matrix, and none of the records of the input's pixels.
+rebuilt, and left out of the exposure gains) and stitched at full resolution; pixels clipped
+in every channel stay NaN. The panorama keeps the capture's colour metadata, so ``develop``
+gives it the camera's white balance and colour matrix, and none of the records of the input's
+pixels.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from plenocli import stitch as stitch_lib
 from plenocli.colour.develop import ColourView, camera_rgb
+from plenocli.colour.highlights import Estimated
 from plenocli.errors import InputError
 from plenocli.io import tiffio
 from plenocli.io.atomic import write_text
@@ -60,11 +62,13 @@ def _held_views(inputs: list[str]) -> list[str]:
 
 
 def load_views(inputs: list[str], views: str | None
-               ) -> tuple[np.ndarray, list[str], list[float] | None, dict]:
+               ) -> tuple[np.ndarray, list[str], list[float] | None, dict, list]:
     """Views of ``inputs`` as (V, rows, cols) or (V, C, rows, cols) float32 (colour channels
     interleaved in memory), their names, when any was a Bayer mosaic (demosaiced at full
-    resolution) each view's median level as stored (None otherwise), and the first file's
-    metadata. Only the views wanted are demosaiced, one at a time, straight into the stack."""
+    resolution) each view's median level as stored (None otherwise), the first file's
+    metadata, and per view the channels its demosaic estimated (:class:`Estimated`; None for
+    a view that was not a mosaic). Only the views wanted are demosaiced, one at a time,
+    straight into the stack."""
     found: list[tuple[str, tuple]] = []  # (view name, (path, page data, pages, cfa, as-shot wb))
     first_meta = None
     for path in inputs:
@@ -101,12 +105,11 @@ def load_views(inputs: list[str], views: str | None
                                      np.float32), -1, 1)
     else:
         stack = np.empty((len(found),) + shapes[0], np.float32)
-    for k, (name, source) in enumerate(found):
-        _fill_view(stack[k], name, *source)
+    estimated = [_fill_view(stack[k], name, *source) for k, (name, source) in enumerate(found)]
     # a demosaic clips negative values to 0: a negated view is told as such from its mosaic
     levels = [_level(data, pages) for _, (_, data, pages, _, _) in found] \
         if any(s[3] for _, s in found) else None
-    return stack, [n for n, _ in found], levels, first_meta
+    return stack, [n for n, _ in found], levels, first_meta, estimated
 
 
 LEVEL_STRIDE = 3  # odd: every CFA phase is in the sample; a ninth of the pixels tells the sign
@@ -127,18 +130,21 @@ def _view_shape(path: str, data: np.ndarray, pages: list[int], cfa: str | None, 
 
 
 def _fill_view(out: np.ndarray, name: str, path: str, data: np.ndarray, pages: list[int],
-               cfa: str | None, wb) -> None:
+               cfa: str | None, wb) -> Estimated | None:
     """Write one view into ``out``: its pages, or its mosaic made camera RGB as develop makes it
     (balanced by the capture's as-shot white balance while interpolating, when the metadata has
-    one; pixels clipped in some channels only rebuilt, so a panorama keeps their colour)."""
+    one; pixels clipped in some channels only rebuilt, so a panorama keeps their colour, and
+    the channels so estimated returned: the exposure gains leave them out)."""
     if not cfa:
         out[...] = data[pages[0]] if len(pages) == 1 else data[pages]
-        return
+        return None
+    estimated = Estimated(out.shape[1:])
     try:  # demosaiced straight into the stack (its channels interleaved): no full-size copy
         camera_rgb(data, ColourView(name, (pages[0],), cfa), gains=wb,
-                   out=np.moveaxis(out, 0, -1))
+                   out=np.moveaxis(out, 0, -1), estimated=estimated)
     except ValueError as err:
         raise InputError(f"{path}: view {name}: {err}") from err
+    return estimated
 
 
 def run(inputs: list[str], output: str, *, views: str | None = None, layout: str = "auto",
@@ -149,7 +155,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
     """Stitch the views found in ``inputs`` into ``output``; optional report, transform and
     preview."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
-    stack, names, levels, meta = load_views(inputs, views)
+    stack, names, levels, meta, estimated = load_views(inputs, views)
     placed = layout if transform_in or rig else _verified(layout_of_names, names, layout)
     # views whose names place them are not told to take another --layout
     named = None if transform_in or rig or layout_of_names(names, "auto") == "auto" else names
@@ -169,6 +175,7 @@ def run(inputs: list[str], output: str, *, views: str | None = None, layout: str
                               rig=prism_rig, overlap=overlap,
                               overlap_tolerance=overlap_tolerance, out=canvas.allocate,
                               match_gain=gains == "match", named=named, levels=levels,
+                              estimated=estimated,
                               claim=_claim(transform_in, rig, distortion))
         params = dict(views=views, layout=layout, model=model, distortion=distortion,
                       transform_in=transform_in, blend=blend, rig=rig, overlap=overlap,
