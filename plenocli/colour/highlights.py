@@ -72,7 +72,8 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     to the measured channels of the nearest unclipped block bright enough to be the same
     surface (grey when only one channel is measured: two ratios from one value are guesses),
     and never less than its neighbouring photosites allow (clipped ones at the clip level, the
-    largest finite value of their colour in the frame), nor, white balanced by ``gains``, than
+    largest finite value of their colour in the frame; channels clipped together, white
+    balanced by ``gains``, at the highest of their floors), nor, white balanced, than
     the darkest measured channel: a channel that clipped is not the pixel's darkest (a clipped
     green below red and blue is the magenta of a badly developed highlight). Returns the number
     of pixels rebuilt; ``estimated`` (:class:`Estimated`, the shape of ``rgb``) is told which
@@ -105,11 +106,20 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
     values, known, ratios = values[partly], known[partly], ratios[partly]
     scale = (np.where(known, values, 0).sum(axis=1)
              / np.maximum(np.where(known, ratios, 0).sum(axis=1), 1e-12))
-    alone = known.sum(axis=1) == 1  # two unknowns from one measurement: grey at its level
-    ratios[alone] = 1.0 / gains
-    scale[alone] = np.where(known[alone], values[alone] * gains, 0).sum(axis=1)
     darkest = np.where(known, values * gains, np.inf).min(axis=1, keepdims=True) / gains
     floor = np.maximum(floor[partly], darkest)
+    # two unknowns from one measurement: the surroundings' colour where it explains the
+    # clipping (both clipped channels at or above their floors: an orange surface whose red and
+    # green clipped over its measured blue), else grey at the measured level, the clipped
+    # channels at one white-balanced floor (each at its own, they are as unequal as the gains:
+    # pink where red and green clipped)
+    alone = known.sum(axis=1) == 1
+    explained = (np.where(known, np.inf, scale[:, None] * ratios) >= floor).all(axis=1)
+    grey = alone & ~explained
+    ratios[grey] = 1.0 / gains
+    scale[grey] = np.where(known[grey], values[grey] * gains, 0).sum(axis=1)
+    shared = np.where(known, 0, floor * gains).max(axis=1, keepdims=True) / gains
+    floor = np.where(known | ~grey[:, None], floor, np.maximum(floor, shared))
     rebuilt = np.where(known, values, np.maximum(scale[:, None] * ratios, floor))
     region[where[0][partly], where[1][partly]] = rebuilt
     if estimated is not None:
