@@ -76,8 +76,9 @@ def demultiplex(frame: np.ndarray, n: int) -> np.ndarray:
                          f"at least {MIN_LENSES} x {MIN_LENSES} (check n)")
     if (rows * n, cols * n) != frame.shape:
         raise ValueError(f"a {frame.shape[1]} x {frame.shape[0]} frame is not a whole number of "
-                         f"{n} x {n} micro-images: check n, or crop the frame to "
-                         f"{cols * n} x {rows * n} pixels from its first micro-image")
+                         f"{n} x {n} micro-images: check n, or give frames of "
+                         f"{rows * n} rows and {cols * n} columns that start with a whole "
+                         "micro-image")
     blocks = frame.reshape(rows, n, cols, n)
     return np.ascontiguousarray(blocks.transpose(1, 3, 0, 2).reshape(n * n, rows, cols))
 

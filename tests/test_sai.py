@@ -43,8 +43,8 @@ def test_demultiplex_is_eq1():
 
 
 @pytest.mark.parametrize("shape,n,words", [
-    ((512, 512), 7, ["not a whole number", "511 x 511"]),
-    ((509, 511), 2, ["not a whole number", "510 x 508"]),
+    ((512, 512), 7, ["not a whole number", "511 rows and 511 columns"]),
+    ((509, 511), 2, ["not a whole number", "508 rows and 510 columns"]),
     ((3, 3), 2, ["1 x 1 micro-images", "at least 4 x 4"]),
     ((8, 40), 4, ["10 x 2 micro-images"]),
 ])

@@ -85,7 +85,7 @@ CASES = [
                          "-o", "{o}/r.tif"], 1, ("no valid pixel",)),
     # sai: whole micro-images, enough of them
     ("sai-n7-512", ["sai", "{i}/f512.tif", "-n", "7", "-o", "{o}/v.tif"], 1,
-     ("not a whole number", "511 x 511")),
+     ("not a whole number", "511 rows and 511 columns")),
     ("sai-n2-511x509", ["sai", "{i}/f511x509.tif", "-n", "2", "-o", "{o}/v.tif"], 1,
      ("not a whole number",)),
     ("sai-n2-3x3", ["sai", "{i}/f3.tif", "-n", "2", "-o", "{o}/v.tif"], 1, ("at least",)),

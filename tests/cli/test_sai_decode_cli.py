@@ -128,3 +128,27 @@ def test_decode_raytrix_refuses_another_cameras_calibration(tmp_path):
     result = invoke("decode", white, "--camera", "raytrix", "--calib",
                     tmp_path / "w" / "grid_true.xml", "-o", tmp_path / "good.tif")
     assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize("crop, refused", [("60x60", True), ("56x56", False)])
+def test_sai_after_a_central_crop_names_the_views_right_or_refuses(tmp_path, crop, refused):
+    """audit 19 W4: bias --crop 60x60 of a 64 x 64 frame of 4 x 4 micro-images starts 2 pixels
+    into one: sai named sub-aperture (2, 2) S00, and every other view after another's, exit 0."""
+    import tifffile
+
+    yy, xx = np.mgrid[:64, :64]
+    tifffile.imwrite(tmp_path / "q.tif", (100 + (yy % 4) * 10 + xx % 4).astype(np.uint16),
+                     photometric="minisblack")
+    run = CliRunner().invoke
+    assert run(cli, ["decode", str(tmp_path / "q.tif"), "--black", "50", "--cfa", "RGGB",
+                     "-o", str(tmp_path / "f.tif")]).exit_code == 0
+    assert run(cli, ["bias", str(tmp_path / "f.tif"), "--overscan", "none", "--crop", crop,
+                     "-o", str(tmp_path / "b.tif")]).exit_code == 0
+    result = run(cli, ["sai", str(tmp_path / "b.tif"), "-n", "4", "-o", str(tmp_path / "s.tif")])
+    if refused:
+        assert result.exit_code == 1 and "2 row(s) and 2 column(s) into" in result.output
+        assert not (tmp_path / "s.tif").exists()
+    else:
+        assert result.exit_code == 0, result.output
+        views, _ = tiffio.read_image(tmp_path / "s.tif")
+        assert np.array_equal(views[:, 0, 0], [50 + 10 * i + j for i in range(4) for j in range(4)])

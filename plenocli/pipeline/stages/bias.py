@@ -48,11 +48,15 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
         views, row0, col0 = _central_crop(views, crop, even=bool(cfa))
     origin0 = meta.get("origin", [0, 0])
     origin = [origin0[0] + top + row0, origin0[1] + left + col0]
+    # where the sensor's active area starts: an ideal N x N sensor's micro-image (0, 0), which
+    # sai needs to know once --crop has moved the origin into the micro-images
+    active_origin = meta.get("active_origin") or [origin0[0] + top, origin0[1] + left]
     new_cfa = shift_pattern(cfa, top + row0, left + col0)
     params = dict(overscan=overscan, smooth=smooth, guard=guard, crop=crop)
     record = stage_record("bias", params, {"input": input})
     rows, cols = views.shape[1:]
     out_meta = tiffio.derived_meta(meta, record, views=names, cfa=new_cfa, origin=origin,
+                                   active_origin=active_origin,
                                    active_area=[0, 0, rows, cols], masked_areas=[],
                                    black_level=[[0.0] * 4] * len(names),
                                    white_level=list(corrected.white_level),

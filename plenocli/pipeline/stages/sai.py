@@ -35,6 +35,8 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     # ideal sensor: micro-image (0, 0) starts at the active area's top-left pixel
     framing = (frame_grid(grid, meta, data.shape[1:], frames_path=input) if grid
                else active_area(meta, data.shape[1:]))
+    if grid is None:
+        _check_microimage_phase(input, meta, framing.sensor_origin, n)
     cfa = framing.cfa
     per_page = []
     for page in data:
@@ -77,6 +79,23 @@ def run(input: str, output: str, *, n: int = 2, grid: str | None = None,
     if preview:
         write_png(preview, view_mosaic(stack, n, pages, cfa=colours[0] if same else None),
                   protect=protect, colour=meta.get("colour"))
+
+
+def _check_microimage_phase(path: str, meta: dict, first: tuple[int, int], n: int) -> None:
+    """An ideal sensor's micro-image (0, 0) starts at the sensor's active area (recorded by
+    bias as ``active_origin``); a frame cropped into the micro-images (bias --crop with a
+    margin that is not a multiple of n) starts inside one, and every view would be named after
+    another sub-aperture."""
+    start = meta.get("active_origin")
+    if start is None:
+        return
+    into = [(first[k] - int(start[k])) % n for k in (0, 1)]
+    if any(into):
+        raise InputError(f"{path}: its first pixel lies {into[0]} row(s) and {into[1]} "
+                         f"column(s) into a {n} x {n} micro-image (a crop, bias --crop, of a "
+                         f"margin that is not a multiple of {n}): each view would be another "
+                         f"sub-aperture's; crop with a margin (the uncropped size less the "
+                         f"crop, halved) that is a multiple of {n}, or not at all")
 
 
 def _check_sensor_image(path: str, meta: dict, pages: list[str], cfa_layout: str) -> None:
