@@ -89,6 +89,10 @@ def _check_microimage_phase(path: str, meta: dict, first: tuple[int, int], n: in
     start = meta.get("active_origin")
     if start is None:
         return
+    if not (isinstance(start, list) and len(start) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) for v in start)):
+        raise InputError(f"{path}: its metadata's active_origin ({str(start)[:40]}) is not "
+                         "two whole numbers (row, column); make the file again with plenocli")
     into = [(first[k] - int(start[k])) % n for k in (0, 1)]
     if any(into):
         raise InputError(f"{path}: its first pixel lies {into[0]} row(s) and {into[1]} "
