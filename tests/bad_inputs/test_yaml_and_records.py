@@ -125,3 +125,13 @@ def test_a_record_that_is_a_link_is_replaced_never_written_through(tmp_path):
     record = tmp_path / ".s.tif.plenocli.json"
     assert (tmp_path / "victim.txt").read_text() == "keep"
     assert not record.is_symlink() and '"stage": "decode"' in record.read_text()
+
+
+@pytest.mark.parametrize("value, said", [("!!binary OQ==", "binary data (!!binary, 1 byte)"),
+                                         ("!!set {1}", "a set (!!set) of 1 value")])
+def test_a_simulate_param_of_another_kind_is_said_in_words(value, said, tmp_path):
+    # audit 19a M1: "noise = b'9' is not a finite number"
+    result = CliRunner().invoke(cli, ["simulate", "dualpixel", "-o", str(tmp_path / "sx"),
+                                      "--pixels", "32", "--param", f"noise={value}"])
+    assert_one_line(result, 2, (f"noise = {said} is not",))
+    assert "b'" not in result.output and not (tmp_path / "sx").exists()
