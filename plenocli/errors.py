@@ -144,3 +144,43 @@ def numbers(values) -> str:
 
 def _number(v: float) -> str:
     return str(int(v)) if v.is_integer() and abs(v) < 1e15 else f"{v:g}"
+
+
+def value_words(value, *, limit: int = 60) -> str:
+    """A value read from YAML (or JSON) for a message, in plain words: text quoted, numbers and
+    true/false as written, and for the kinds YAML's tags make (``!!binary``, ``!!set``,
+    ``!!timestamp``, ``!!omap``) what they are, never Python's repr (``b'9'``, ``{'a.dng'}``);
+    a long list or mapping by its size."""
+    import datetime
+
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "no value (null)"
+    if isinstance(value, str):
+        return repr(value) if len(value) <= limit else f"a text of {len(value)} characters"
+    if isinstance(value, (int, float)):
+        return str(value)
+    if isinstance(value, (bytes, bytearray)):
+        return f"binary data (!!binary, {_count(len(value), 'byte')})"
+    if isinstance(value, (datetime.date, datetime.datetime)):
+        return f"a date (!!timestamp {value.isoformat()})"
+    if isinstance(value, (set, frozenset)):
+        return f"a set (!!set) of {_count(len(value))}"
+    if isinstance(value, dict):
+        return f"a mapping of {_count(len(value), 'key')}"
+    if isinstance(value, tuple):  # YAML makes tuples only of !!omap and !!pairs items
+        return "a key: value pair (!!omap or !!pairs)"
+    if isinstance(value, list) and not value:
+        return "an empty list"
+    if isinstance(value, list):
+        if all(isinstance(v, (str, int, float)) for v in value):
+            said = ", ".join(value_words(v, limit=limit) for v in value)
+            if len(said) <= limit:
+                return f"a list ({said})"
+        return f"a list of {_count(len(value))}"
+    return "a value that is not text, a number, true or false"
+
+
+def _count(n: int, what: str = "value") -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")

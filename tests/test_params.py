@@ -168,7 +168,7 @@ def test_simulate_refuses_a_noise_beyond_the_sample_range(tmp_path):
     ("bias", "    smooth: {a: 1}\n", "--smooth: expected a value, got a mapping"),
     ("bias", "    crop: [[2, 3]]\n", "--crop: expected a plain value"),
     ("bias", "    preview: [a.png, b.png]\n", "--preview: expected one file path"),
-    ("bias", "    crop: []\n", "--crop: expected one value, got a list []"),
+    ("bias", "    crop: []\n", "--crop: expected one value, got an empty list"),
 ], ids=["flag-number", "flag-list", "mapping", "nested", "two-paths", "empty-list"])
 def test_what_no_shell_word_can_carry_is_refused(tmp_path, stage, extra, words):
     with pytest.raises(ConfigError, match=re.escape(words)):

@@ -8,7 +8,9 @@ a killed run (its process gone) is removed the next time anything writes NAME. A
 :data:`LONG_NAME` bytes is shortened there to its start and a hash (:func:`short_name`), so that
 any name a file system with the common 255-byte limit takes has a temporary it takes too. An
 output that is a symbolic link is written through: its target is replaced and the link stays (as
-the shell's ``>`` does).
+the shell's ``>`` does). An output that is there and is not a regular file (a pipe, a device, a
+socket, or a link to one) is refused: the shell's ``>`` writes into it, a rename would replace
+the node itself (as root, a link to /dev/null would replace /dev/null).
 """
 
 from __future__ import annotations
@@ -126,21 +128,25 @@ def _signals_held() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, *, protect: tuple = ()) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, *, protect: tuple = (),
+                through_links: bool = True) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` only on success.
 
     The temporary file lives in the destination folder so that the final rename is atomic on
     POSIX file systems. On any exception (or Ctrl-C) the temporary file is removed and the
     destination is left as it was. ``protect`` lists input files that must never be overwritten.
-    Inside :func:`outputs_together` the rename waits for the end of the block.
+    Inside :func:`outputs_together` the rename waits for the end of the block. Not
+    ``through_links``: a symbolic link at ``path`` is replaced, not written through (plenocli's
+    own side files, whose names no one chose to point somewhere).
     """
-    dest = written_path(path)
+    dest = written_path(path) if through_links else Path(path)
     for other in protect:
         if other is not None and _same_file(Path(other), dest):
             raise InputError(f"output {path} is also an input; choose another output path "
                              "(plenocli never overwrites its inputs)")
-    if dest.is_dir():
+    if dest.is_dir() and (through_links or not dest.is_symlink()):
         raise InputError(f"output {dest} is a folder; give a file name")
+    check_file_kind(dest, follow=through_links)
     pending = _PENDING.get()
     if pending is not None and any(_same_path(dest, d) for _, d in pending.files):
         raise InputError(f"{dest} is written twice by one command; give each output its own "
@@ -187,6 +193,21 @@ def written_path(path: str | os.PathLike) -> Path:
     return Path(os.path.realpath(dest)) if dest.is_symlink() else dest
 
 
+def check_file_kind(dest: Path, *, follow: bool = True) -> None:
+    """InputError when ``dest`` is there and is not a regular file (a folder is said by the
+    callers): a pipe, a device or a socket, after following links when ``follow`` (else a
+    link itself is fine: it is replaced)."""
+    try:
+        found = os.stat(dest) if follow else os.lstat(dest)
+    except OSError:
+        return  # not there (or a dangling link): a new file is made
+    if not (stat.S_ISREG(found.st_mode) or stat.S_ISDIR(found.st_mode)
+            or stat.S_ISLNK(found.st_mode)):
+        raise InputError(f"output {dest}: not a regular file (a device, pipe or socket); "
+                         "plenocli writes files, which would replace it: choose another "
+                         "output path")
+
+
 def _new_mode(dest: Path) -> int:
     """The permissions a plain ``open(dest, "w")`` would leave: those of the file it replaces,
     else 0666 less the umask (mkstemp makes its file 0600 whatever the umask)."""
@@ -214,15 +235,17 @@ def current_umask() -> int:
     return mask
 
 
-def write_bytes(path: str | os.PathLike, data: bytes, *, protect: tuple = ()) -> None:
-    """Write ``data`` to ``path`` atomically."""
-    with atomic_path(path, protect=protect) as tmp:
+def write_bytes(path: str | os.PathLike, data: bytes, *, protect: tuple = (),
+                through_links: bool = True) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
+    with atomic_path(path, protect=protect, through_links=through_links) as tmp:
         tmp.write_bytes(data)
 
 
-def write_text(path: str | os.PathLike, text: str, *, protect: tuple = ()) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically."""
-    write_bytes(path, text.encode("utf-8"), protect=protect)
+def write_text(path: str | os.PathLike, text: str, *, protect: tuple = (),
+               through_links: bool = True) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (see :func:`atomic_path`)."""
+    write_bytes(path, text.encode("utf-8"), protect=protect, through_links=through_links)
 
 
 def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
@@ -242,6 +265,7 @@ def check_outputs(outputs: Iterable[Path], inputs: Iterable[Path] = (), *,
     for out in outputs:
         if out.is_dir():
             raise InputError(f"output {out} is a folder; give a file name")
+        check_file_kind(out)
         _check_folder(written_path(out))
 
 

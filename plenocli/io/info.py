@@ -144,8 +144,13 @@ def _describe_yaml(p: Path) -> dict:
                 "lens_count": lenses.get("count") if isinstance(lenses, dict) else None,
                 "extra": others, "provenance": doc.get("provenance")}
     if isinstance(doc, dict) and isinstance(doc.get("steps"), dict):
-        steps = {name: (body or {}).get("stage", name) for name, body in doc["steps"].items()}
-        return {"kind": "pipeline-config", "description": doc.get("description"),
+        # what run reads: a description that is not text, or a step that is not a mapping,
+        # is said in "run refuses it" (the command's check), not described
+        steps = {name: (body or {}).get("stage", name) for name, body in doc["steps"].items()
+                 if isinstance(name, str) and isinstance(body, (dict, type(None)))}
+        description = doc.get("description")
+        return {"kind": "pipeline-config",
+                "description": description if isinstance(description, str) else None,
                 "out": doc.get("out"), "steps": steps}
     return {"kind": "yaml", "keys": list(doc) if isinstance(doc, dict) else None}
 
@@ -269,7 +274,8 @@ def _grid_fields(info: dict) -> list[tuple[str, object]]:
 def _config_fields(info: dict) -> list[tuple[str, object]]:
     return ([("description", (info.get("description") or "").strip() or None),
              ("out", info.get("out"))]
-            + [(f"step {name}", f"stage {stage}") for name, stage in info["steps"].items()])
+            + [(f"step {name}", f"stage {stage}") for name, stage in info["steps"].items()
+               if isinstance(stage, str)])
 
 
 def _raytrix_fields(info: dict) -> list[tuple[str, object]]:

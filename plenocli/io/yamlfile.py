@@ -8,7 +8,10 @@ and ``0o10`` (the shell's int() refuses them: left out of the core schema here s
 the same); a validator then reads that text exactly as it reads the shell's word, so a value
 means the same wherever it is written. A key given twice in one mapping or object is refused
 (PyYAML and ``json`` keep the last one silently: a file would be read with one of two values
-it states); so are two keys that Python reads as one (``1``, ``1.0`` and ``true``).
+it states); so are two keys that Python reads as one (``1``, ``1.0`` and ``true``). An alias
+(``*name``) is refused before anything is built: one to its own anchor makes a list that holds
+itself (every reader walking it recurses without end), and a few hundred bytes of aliases to
+aliases stand for millions of values (hours to walk); no file plenocli writes or ships uses one.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ _RESOLVERS = (  # (tag, pattern, first characters); the first match wins
     ("int", _INT, "-+0123456789"),
     ("float", _FLOAT, "-+0123456789."),
     ("null", re.compile(r"^(?:~|null|Null|NULL|)$"), ["~", "n", "N", ""]),
-    ("merge", re.compile(r"^(?:<<)$"), "<"),   # '<<: *base' in configs
+    ("merge", re.compile(r"^(?:<<)$"), "<"),   # '<<: {camera: dng}' (no aliases: see above)
 )
 
 
@@ -108,7 +111,7 @@ def _unique_mapping(self, node, deep=False):
     seen = {}  # key as Python compares it -> its YAML tag
     for key_node, _ in node.value:
         if key_node.tag == "tag:yaml.org,2002:merge":
-            continue  # '<<: *base': the base's keys may be given again (YAML's merge)
+            continue  # '<<: {...}': the merged keys may be given again (YAML's merge)
         key = self.construct_object(key_node, deep=True)
         if not isinstance(key, (str, int, float, bool)):
             continue  # an unhashable key: the base loader reports it
@@ -155,9 +158,29 @@ def yaml_problem(err: Exception) -> str:
     return where + " ".join(str(problem).split())
 
 
+def _refuse_aliases(text: str) -> None:
+    """YamlError at the first alias (``*name``) of ``text``. libyaml's composer, which joins an
+    alias to its anchor, cannot be told to refuse one, so the tokens are scanned first: only
+    when a '*' is there at all, and in libyaml's scanner (a grid of 100k lenses has none)."""
+    if "*" not in text:
+        return
+    try:
+        for token in yaml.scan(text, Loader=Loader):
+            if isinstance(token, yaml.AliasToken):
+                mark = token.start_mark
+                raise YamlError(f"line {mark.line + 1}, column {mark.column + 1}: an alias "
+                                f"(*{token.value}) stands for its anchor's value; plenocli "
+                                "does not read aliases: write the value out")
+    except YamlError:
+        raise
+    except yaml.YAMLError:
+        return  # a text that is not YAML: the loader says where
+
+
 def load_yaml(text: str, *, words: bool = False) -> Any:
     """One YAML document; :class:`DocumentError` says what is wrong with it. ``words``: numbers
     are :class:`IntWord`/:class:`FloatWord`, printing as written (stage parameters)."""
+    _refuse_aliases(text)
     try:
         return yaml.load(text, Loader=WordLoader if words else Loader)  # noqa: S506 (safe)
     except yaml.YAMLError as err:

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from plenocli.errors import ConfigError, InputError, OptionError
+from plenocli.errors import ConfigError, InputError, OptionError, value_words
 from plenocli.io.atomic import check_distinct
 from plenocli.io.yamlfile import DocumentError, comment_in, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
@@ -235,15 +235,20 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
     for key in doc:
         if key not in TOP_KEYS:
             raise ConfigError(f"{p}: unknown top-level key {key!r}{closest(key, TOP_KEYS)}")
+    if not isinstance(doc.get("description", ""), (str, type(None))):
+        # info shows it as the config's line of text; a number or a list is no description
+        raise ConfigError(f"{p}: 'description:' must be text (quote it), got "
+                          f"{value_words(doc['description'])}")
     for name, body in doc["steps"].items():
         if not isinstance(name, str) or not name:
-            raise ConfigError(f"{p}: step name {name!r} must be text (quote it), e.g. 'bias2'")
+            raise ConfigError(f"{p}: step name {value_words(name)} must be text (quote it), "
+                              "e.g. 'bias2'")
         if not (body is None or isinstance(body, dict)):
             raise ConfigError(f"{p}: step {name!r} must be a mapping of parameters "
-                              f"(e.g. input: ..., output: ...), got {body!r}")
+                              f"(e.g. input: ..., output: ...), got {value_words(body)}")
         if not isinstance((body or {}).get("stage", ""), str):
             raise ConfigError(f"{p}: step {name!r}: stage must be one stage name, got "
-                              f"{body['stage']!r}")
+                              f"{value_words(body['stage'])}")
     raw_steps = {name: {k: _unflow(v) for k, v in dict(body or {}).items()}
                  for name, body in doc["steps"].items()}
     _apply_overrides(p, raw_steps, overrides)
@@ -260,7 +265,7 @@ def _check_out_key(template: Template) -> None:
     if out is None:
         return
     if not isinstance(out, str):
-        raise ConfigError(f"{p}: 'out:' must be one folder path, got {out!r}")
+        raise ConfigError(f"{p}: 'out:' must be one folder path, got {value_words(out)}")
     if _ANY_PLACEHOLDER.search(out):
         # what {out} stands for: nothing fills a placeholder in it (it would name a folder '{out}')
         raise ConfigError(f"{p}: 'out:' {out!r} holds a placeholder; give a plain folder path "
@@ -308,7 +313,7 @@ def _fill(value, values: dict[str, str]):
         return _PLACEHOLDER.sub(lambda m: values[m.group(1)], value)
     if isinstance(value, dict):
         return {k: _fill(v, values) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
+    if isinstance(value, list):  # not a tuple (an !!omap pair): no path, refused as it is
         return [_fill(v, values) for v in value]
     return value
 
@@ -485,9 +490,11 @@ def _flat(value) -> list:
 
 
 def _resolve(base: Path, value):
-    if value is None or value == "" or isinstance(value, Mapping) or "\0" in str(value):
-        return value  # refused by its validator as the shell's word would be
-    if isinstance(value, (list, tuple)):
+    if isinstance(value, list):
         return [_resolve(base, v) for v in value]
+    if not isinstance(value, (str, int, float)) or value == "" or "\0" in str(value):
+        # refused by its validator as the shell's word would be; a YAML set, date or binary
+        # (or pairs, !!omap) is no path: made into one, it would name a file "b'a'"
+        return value
     word = shell_text(value)   # the word written: `false`, not Python's False
     return str((base / word).resolve()) if not Path(word).is_absolute() else word

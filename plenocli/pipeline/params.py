@@ -19,7 +19,7 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from plenocli.errors import ConfigError, OptionError
+from plenocli.errors import ConfigError, OptionError, value_words
 from plenocli.pipeline.validators import (
     TIFF,
     Flag,
@@ -129,18 +129,20 @@ def convert(param: Param, value: Any) -> Any:
     (``g: [2, 3]`` is ``--g=2,3``); the validator then accepts or refuses it.
     """
     if isinstance(value, Mapping):
-        raise ConfigError(f"{param.label}: expected a value, got a mapping {dict(value)!r}")
+        raise ConfigError(f"{param.label}: expected a value, got {value_words(value)}")
     items = list(value) if isinstance(value, (list, tuple)) else [value]
     if param.multiple:
         return tuple(_one(param, item) for item in items)
     if len(items) != 1:
         if param.type.is_path:  # a comma is part of a file name
-            raise ConfigError(f"{param.label}: expected one file path, got a list {items!r}")
+            raise ConfigError(f"{param.label}: expected one file path, got "
+                              f"{value_words(items)}")
         if param.positional or param.is_flag or not items:
-            raise ConfigError(f"{param.label}: expected one value, got a list {items!r}")
+            raise ConfigError(f"{param.label}: expected one value, got {value_words(items)}")
         items = [",".join(shell_text(_plain(param, v)) for v in items)]
     if param.is_flag and not isinstance(items[0], bool):
-        raise ConfigError(f"{param.label}: expected true or false, got {items[0]!r}")
+        raise ConfigError(f"{param.label}: expected true or false, got "
+                          f"{value_words(items[0])}")
     return _one(param, items[0])
 
 
@@ -148,7 +150,7 @@ def _plain(param: Param, value: Any) -> Any:
     # a YAML set, date or binary would be taken as Python's repr of it (a set in hash order)
     if not isinstance(value, (str, int, float)):
         raise ConfigError(f"{param.label}: expected a plain value (text, a number, true or "
-                          f"false), got {value!r}")
+                          f"false), got {value_words(value)}")
     if "\0" in str(value):
         raise ConfigError(f"{param.label}: {value!r} holds a NUL character, which no shell "
                           "word (and no file name) can")

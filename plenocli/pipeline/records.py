@@ -27,7 +27,7 @@ from typing import Any
 
 from plenocli import __version__
 from plenocli.errors import InputError
-from plenocli.io.atomic import short_name, write_text, written_path
+from plenocli.io.atomic import check_file_kind, short_name, write_text, written_path
 from plenocli.io.yamlfile import read_json
 from plenocli.model.provenance import json_safe, sha256_file
 from plenocli.pipeline.validators import RECORD_SUFFIX
@@ -44,16 +44,31 @@ def record_path(output: str | os.PathLike) -> Path:
 
 def check_record_paths(outputs: list[Path], inputs: list[Path]) -> None:
     """Before any work: the record each output gets beside it must be writable as a file, and
-    not another output or an input (the run would succeed, then fail to land)."""
+    not another output or an input (the run would succeed, then fail to land). A record is
+    plenocli's own hidden file: a symbolic link there is replaced, never written through
+    (:func:`write_records`), and one that leads to an input or an output is refused all the
+    same (a user's link onto the photograph being read says something is wrong)."""
     others = [Path(os.path.abspath(p)) for p in [*outputs, *inputs]]
     for output in outputs:
         record = record_path(output)
-        if record.is_dir():
+        if record.is_dir() and not record.is_symlink():
             raise InputError(f"{record}, where plenocli records how {output} was made, is a "
                              "folder; remove it or choose another output name")
-        if record in others:
+        if record.is_symlink() and any(_same_file(record, p) for p in others):
+            raise InputError(f"{record}, where plenocli records how {output} was made, is a "
+                             f"link to {os.readlink(record)}, a file of this command; remove "
+                             "the link")
+        if record in others or any(_same_file(record, p) for p in others):
             raise InputError(f"{record} is the record plenocli writes beside {output}; choose "
                              "another name for it")
+        check_file_kind(record, follow=False)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def file_state(path: str | os.PathLike, *, hashed: bool = True) -> list | None:
@@ -111,7 +126,8 @@ def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Ro
                 continue
             doc = {"software": "plenocli", "version": __version__, "stage": stage,
                    "role": role, "parameters": recorded, "inputs": states, "output": files}
-            write_text(record_path(output), json.dumps(doc, indent=1, allow_nan=False) + "\n")
+            write_text(record_path(output), json.dumps(doc, indent=1, allow_nan=False) + "\n",
+                       through_links=False)
 
 
 def read_record(output: str | os.PathLike) -> dict | None:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from plenocli.depth import MAX_DISPARITY
+from plenocli.errors import value_words
 
 MAX_PIXELS = 2 ** 27  # a 134 Mpx sensor: beyond every camera simulated here
 MAX_RAYS = 2 ** 31    # rays traced in all: hours of work, gigabytes of arrays
@@ -102,7 +103,7 @@ def check_params(kind: str, generate: Callable[..., object], params: dict) -> di
         if key in RULES and value is not None:
             problem = RULES[key](value)
             if problem:
-                raise ValueError(f"simulate {kind}: {key} = {value!r}: {problem}")
+                raise ValueError(f"simulate {kind}: {key} = {value_words(value)}: {problem}")
     # the size asked for, the generator's defaults filling what is not given (a default 256 px
     # sensor times --rays 100000 is 6.6e9 rays)
     defaults = {k: v.default for k, v in accepted.items()
@@ -202,7 +203,8 @@ def _check_used(kind: str, given: dict, values: dict) -> None:
     for key, unused in UNUSED_WHEN.items():
         problem = unused(values) if key in given else None
         if problem:
-            raise ValueError(f"simulate {kind}: {key} = {given[key]!r} is not used: {problem}")
+            raise ValueError(f"simulate {kind}: {key} = {value_words(given[key])} is not used: "
+                             f"{problem}")
 
 
 def _check_range(kind: str, key: str, value) -> None:
@@ -214,7 +216,7 @@ def _check_range(kind: str, key: str, value) -> None:
         if isinstance(number, (int, float)) and not isinstance(number, bool) \
                 and not param.contains(number):
             raise ValueError(f"simulate {kind}: {key} must be {param.describe()} "
-                             f"({param.meaning}), got {value!r}")
+                             f"({param.meaning}), got {value_words(value)}")
 
 
 def _check_pixels(kind: str, value, default) -> None:
@@ -249,7 +251,8 @@ def _check_type(kind: str, key: str, value, default) -> None:
         digits = ("; a whole number is written in digits, as YAML reads one: "
                   f"{key}={int(value)}" if isinstance(value, float) and math.isfinite(value)
                   and value.is_integer() and _expected(default) == "a whole number" else "")
-        raise ValueError(f"simulate {kind}: {key} = {value!r} is not {_expected(default)} "
+        raise ValueError(f"simulate {kind}: {key} = {value_words(value)} is not "
+                         f"{_expected(default)} "
                          f"(its default is {shown_default!r}){digits}")
 
 
