@@ -114,6 +114,30 @@ _PYTHON_PHRASES = (
 )
 
 
+# Codec libraries (imagecodecs, zlib, ...) report "FUNCTION returned CODE": said as which
+# compressed data does not decode and why, in words.
+_CODECS = (("lzw", "LZW"), ("packbits", "PackBits"), ("deflate", "Deflate"), ("zlib", "Deflate"),
+           ("zstd", "Zstandard"), ("lzma", "LZMA"), ("jpeg", "JPEG"), ("webp", "WebP"),
+           ("lerc", "LERC"), ("jxl", "JPEG XL"))
+_CODEC_FAILURE = re.compile(r"\b([A-Za-z]\w*_\w+)\s+returned\s+(?:'([^']*)'|\"([^\"]*)\"|(-?\w+))")
+
+
+def _codec_failure(match: "re.Match") -> str:
+    function = match.group(1).lower()
+    codec = next((name for key, name in _CODECS if key in function), "compressed")
+    code = next(g for g in match.groups()[1:] if g is not None)
+    detail = re.sub(r"^(?:(?:IMCD|LIBDEFLATE|LZMA|ZSTD|LZW|JPEG|Z)_)+", "", code)
+    return f"its {codec} data does not decode: {detail.replace('_', ' ').lower()}"
+
+
+# tifffile's enum reprs (<COMPRESSION.JPEG_99: 99>) as the TIFF tag's name and value
+_ENUM_REPR = re.compile(r"<([A-Z]+)\.\w+: (-?\d+)>")
+_ENUM_NAMES = {"COMPRESSION": "Compression", "PHOTOMETRIC": "Photometric",
+               "SAMPLEFORMAT": "SampleFormat", "PLANARCONFIG": "PlanarConfiguration",
+               "PREDICTOR": "Predictor", "FILLORDER": "FillOrder", "EXTRASAMPLE": "ExtraSamples",
+               "ORIENTATION": "Orientation", "RESUNIT": "ResolutionUnit"}
+
+
 def library_words(err: BaseException) -> str:
     """A third-party library's exception (tifffile, LibRaw, Pillow, ...) as plain words for a
     one-line message: bytes decoded, Python's phrases said as what they mean for the file
@@ -133,6 +157,9 @@ def plain_words(text: str) -> str:
     """``text`` with Python's phrases and reprs replaced (see ``library_words``), one line."""
     for pattern, words in _PYTHON_PHRASES:
         text = pattern.sub(words, text)
+    text = _CODEC_FAILURE.sub(_codec_failure, text)
+    text = _ENUM_REPR.sub(lambda m: f"{_ENUM_NAMES.get(m.group(1), m.group(1).title())} "
+                                    f"{m.group(2)}", text)
     return " ".join(text.replace(" :", ":").split()).rstrip(".")
 
 

@@ -111,12 +111,12 @@ LOSSLESS = {
     "lossless JPEG 16 bit LinearRaw": (_frame(high=65536), dict(
         linear=True, tile=(32, 64), **LOSSLESS_JPEG)),
     "Deflate, predictor 2": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2)),
-    "LZW, predictor 2, strips": (_frame(), dict(rowsperstrip=20, compression="lzw",
-                                                predictor=2)),
+    "Deflate, predictor 2, strips": (_frame(), dict(rowsperstrip=20, compression="zlib",
+                                                    predictor=2)),
     "float32 LinearRaw, Deflate, float predictor": (_frame(np.float32), dict(
         linear=True, tile=(32, 32), compression="zlib", predictor=3)),
-    "float32 LinearRaw, LZW, float predictor": (_frame(np.float32), dict(
-        linear=True, rowsperstrip=16, compression="lzw", predictor=3)),
+    "float32 LinearRaw, Deflate strips, float predictor": (_frame(np.float32), dict(
+        linear=True, rowsperstrip=16, compression="zlib", predictor=3)),
     "JPEG XL (DNG 1.7), lossless": (_frame(), dict(
         tile=(32, 64), compression="jpegxl_dng", compressionargs={"lossless": True})),
     "raw in a SubIFD, JPEG preview on top": (_frame(), dict(
@@ -225,8 +225,8 @@ DAMAGED = {  # name: (frame, write options, damage, words in the message)
     "lossy JPEG tile cut short": (_smooth8(), dict(linear=True, white=255, tile=(32, 32),
                                                    compression="jpeg"),
                                   _halve_count, "JPEG tile 1 has no end-of-image marker"),
-    "PackBits strip of no bytes": (_frame(), dict(rowsperstrip=16, compression="packbits"),
-                                   _zero_count, "strip 1 has no data"),
+    "Deflate strip of no bytes": (_frame(), dict(rowsperstrip=16, compression="zlib"),
+                                  _zero_count, "strip 1 has no data"),
     "JPEG samples wider than BitsPerSample": (
         _frame(high=65536), dict(tile=(32, 32), compression="jpeg",
                                  compressionargs={"lossless": True, "bitspersample": 16}),
@@ -235,10 +235,11 @@ DAMAGED = {  # name: (frame, write options, damage, words in the message)
                                   "has no end-of-image marker"),
     "Deflate tile zeroed": (_frame(), dict(tile=(32, 32), compression="zlib", predictor=2),
                             _zero_tile, "raw IFD 0 is damaged"),
-    "LZW tile offset at tile 0": (_frame(), dict(tile=(32, 32), compression="lzw", predictor=2),
-                                  _offset_at_tile_0, "two tiles share the bytes"),
-    "PackBits strip offset at strip 0": (_frame(), dict(rowsperstrip=16, compression="packbits"),
-                                         _offset_at_tile_0, "two strips share the bytes"),
+    "Deflate tile offset at tile 0": (_frame(), dict(tile=(32, 32), compression="zlib",
+                                                     predictor=2),
+                                      _offset_at_tile_0, "two tiles share the bytes"),
+    "Deflate strip offset at strip 0": (_frame(), dict(rowsperstrip=16, compression="zlib"),
+                                        _offset_at_tile_0, "two strips share the bytes"),
     "float Deflate byte count into the next tile": (
         _frame(np.float32), dict(linear=True, tile=(32, 32), compression="zlib", predictor=3),
         _count_into_next, "two tiles share the bytes"),
@@ -331,7 +332,7 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
                                         "decodes to 2048 bytes"),
     "image width that needs fewer tiles": (_frame(), dict(tile=(32, 32), compression="zlib"),
                                            lambda p: _patch_raw_tag(p, 256, 1), "12 tiles"),
-    "strip width changed": (_frame(), dict(rowsperstrip=16, compression="lzw"),
+    "strip width changed": (_frame(), dict(rowsperstrip=16, compression="zlib"),
                             lambda p: _patch_raw_tag(p, 256, 93), "decodes to"),
     "strip in the header": (_frame(), {}, lambda p: _patch_raw_tag(p, 273, 2),
                             "lies in the file's header"),
@@ -382,6 +383,19 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
                                                      compression="zlib", predictor=3),
                           None, "1 NaN or infinite samples"),
 }
+
+
+@pytest.mark.parametrize("compression,code", [("lzw", 5), ("packbits", 32773), ("zstd", 50000),
+                                              ("ccitt_rle", 2)])
+def test_a_compression_dng_does_not_allow_is_named(compression, code, tmp_path):
+    """DNG allows Compression 1, 7, 8, 34892 and 52546 for raw data; another one (LZW decoded,
+    CCITT on 16-bit samples gave 0/1 or zeros, exit 0) is refused naming the tag (audit 19 W2)."""
+    path = tmp_path / "other.dng"
+    _write_dng(path, _frame(), rowsperstrip=16,
+               compression=None if code == 2 else compression)
+    if code == 2:  # tifffile writes no CCITT: the tag of an uncompressed file changed
+        _patch_raw_tag(path, 259, code)
+    _assert_refused(path, tmp_path, f"Compression {code}")
 
 
 @pytest.mark.parametrize("name", LYING_HEADERS)

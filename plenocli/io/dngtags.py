@@ -109,8 +109,21 @@ def orientation(path, main_page, raw_page) -> int:
                          "damaged: copy or convert it again") from err
 
 
-def check_layout(path, k: int, page) -> None:
-    """What must hold before a pixel is decoded: tile sizes that fit the image."""
+# Compression values DNG 1.7 allows for raw data: none, lossless JPEG, Deflate, lossy JPEG,
+# JPEG XL. Another (LZW, PackBits, ...) is no DNG's: a damaged tag, or a file no DNG reader reads.
+DNG_COMPRESSIONS = {1: "none", 7: "JPEG", 8: "Deflate", 34892: "lossy JPEG", 52546: "JPEG XL"}
+DNG_VERSION = 50706
+
+
+def check_layout(path, k: int, page, dng: bool = True) -> None:
+    """What must hold before a pixel is decoded: a Compression DNG allows (``dng``: the file
+    says it is one; a TIFF/EP raw follows the TIFF rules), tile sizes that fit the image."""
+    compression = int(page.compression)
+    if dng and compression not in DNG_COMPRESSIONS:
+        allowed = ", ".join(f"{code} {name}" for code, name in DNG_COMPRESSIONS.items())
+        raise InputError(f"{path}: raw IFD {k}: Compression {compression}, which DNG does not "
+                         f"allow for raw data ({allowed}); the DNG is damaged: copy or convert "
+                         "it again")
     if not page.is_tiled:
         return
     rows, cols = page.imagelength, page.imagewidth

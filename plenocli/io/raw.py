@@ -49,7 +49,7 @@ def sniff(path: str | os.PathLike) -> str:
             return "canon-dp"
         try:
             with tiffio.open_tiff(p) as tif:
-                if 50706 in tif.pages[0].tags:  # DNGVersion
+                if 50706 in tif.pages[0].tags or _declares_raw(tif.pages[0]):
                     return "dng"
         except tiffio.READ_ERRORS as err:
             raise InputError(f"{p}: a TIFF header but an unreadable file ({library_words(err)}); "
@@ -58,6 +58,14 @@ def sniff(path: str | os.PathLike) -> str:
     if head[:8] == b"\x89PNG\r\n\x1a\n" or head[:2] == b"BM":
         return "image"
     return "unknown"
+
+
+def _declares_raw(page) -> bool:
+    """A TIFF whose main image declares raw samples (Photometric CFA, as TIFF/EP writes, or
+    LinearRaw) without DNGVersion: its CFARepeatPatternDim, CFAPattern and level tags are the
+    ones DNG took from TIFF/EP, so it is read by the DNG rules (as LibRaw reads it); read as a
+    grey image its mosaic and black level would be lost."""
+    return int(page.photometric) in (PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW)
 
 
 def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[str] | None = None,
@@ -104,9 +112,10 @@ def decode(path: str | os.PathLike, *, camera: str = "auto", frame_names: list[s
         raise OptionError(f"--frames: {path} is {KIND_NAMES[kind]} that names its own frames "
                           f"({','.join(meta['views'])}); other names would relabel which frame "
                           "is which: leave --frames out")
+    tops = meta.pop("sample_top", None)  # a plain TIFF's: not recorded, its white says it
     _apply_user_values(path, frames, meta, frame_names=frame_names, cfa=cfa, black=black,
-                       white=white)
-    _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype,
+                       white=white, tops=tops)
+    _check_levels(path, meta["black_level"], meta["white_level"], frames.dtype, tops=tops,
                   given=tuple(name for name, value in (("--black", black), ("--white", white))
                               if value is not None))
     _check_some_light(path, frames, meta, given=tuple(("--black",) if black is not None else ()))
@@ -150,9 +159,10 @@ def _warn(path, message: str) -> None:
 
 
 def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa, black,
-                       white) -> None:
+                       white, tops=None) -> None:
     """Frame names, CFA and levels given by the user (they win over the file's), and the
-    defaults of a file that has none."""
+    defaults of a file that has none: white the largest level its samples can hold (``tops``,
+    per frame, from a TIFF's BitsPerSample or MaxSampleValue; else the sample type's)."""
     if frame_names:
         if len(set(frame_names)) != len(frame_names) or not all(frame_names):
             raise InputError(f"frame names {','.join(frame_names)!r} must be distinct and "
@@ -171,19 +181,24 @@ def _apply_user_values(path, frames: np.ndarray, meta: dict, *, frame_names, cfa
         meta["white_level"] = [float(white)] * n
     if meta.get("black_level") is None:
         meta["black_level"] = [[0.0] * 4 for _ in range(n)]
+    if meta.get("white_level") is None and tops is not None:
+        meta["white_level"] = [top for top, _ in tops]
     if meta.get("white_level") is None:
         meta["white_level"] = [float(np.iinfo(frames.dtype).max)
                                if frames.dtype.kind in "ui" else float("inf")] * n
 
 
-def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = ()) -> None:
+def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = (),
+                  tops: list | None = None) -> None:
     """Black levels finite and >= 0, white levels above them (+inf: a float image's) and, for
-    integer samples, within their range (a level they cannot reach makes every clipped pixel
-    pass as light; the next stage refuses such a file). ``given``: the options the user gave,
-    named in the message (the file's own levels otherwise)."""
-    top = float(np.iinfo(dtype).max) if np.dtype(dtype).kind in "ui" else np.inf
+    integer samples, within their range (``tops``: per frame, what a TIFF's header says they
+    hold; a level they cannot reach makes every clipped pixel pass as light; the next stage
+    refuses such a file). ``given``: the options the user gave, named in the message (the
+    file's own levels otherwise)."""
+    whole = float(np.iinfo(dtype).max) if np.dtype(dtype).kind in "ui" else np.inf
+    tops = tops or [(whole, f"{np.dtype(dtype)} samples")] * len(whites)
     source = f" ({', '.join(given)})" if given else " (the file's)"
-    for black, white in zip(blacks, whites, strict=True):
+    for black, white, (top, label) in zip(blacks, whites, tops, strict=True):
         if white != white:  # NaN
             raise InputError(f"{path}: no white level for these floating-point samples; give it "
                              "with --white")
@@ -195,7 +210,7 @@ def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = ())
             level = "white" if white > top else "black"
             value = white if white > top else low.max()
             raise InputError(f"{path}: {level} level {value:g}{source} is beyond what its "
-                             f"{np.dtype(dtype)} samples can reach ({top:g}); give a level "
+                             f"{label} can reach ({top:g}); give a level "
                              "within the samples' range")
         if not white > low.max():  # also refuses NaN
             raise InputError(f"{path}: white level {white:g} must be above the black level "
@@ -358,7 +373,7 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
         raise InputError(f"{path}: raw IFD {k} has shape {page.shape}; plenocli reads "
                          "one-sample raw (CFA or mono) DNGs: convert the capture "
                          "to DNG without demosaicing")
-    dngtags.check_layout(path, k, page)
+    dngtags.check_layout(path, k, page, dng=dngtags.DNG_VERSION in page.parent.pages[0].tags)
     top, left = dngtags.areas(path, k, page, page.shape)[0][:2]
     black = dngtags.black_levels(path, k, page, (top, left))
     tiffio.check_segments(path, page)
@@ -372,15 +387,19 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     return data, black, dngtags.white_level(path, k, page, data.dtype, mapped)
 
 
-def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
+def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool, list | None]:
     """The one full-resolution page of a TIFF (reduced-resolution previews beside it are not
     the image), or (pages, rows, cols) when --frames names each of its grey pages (two images
-    of a dual-pixel pair). Several pages otherwise are refused: keeping the first would drop
+    of a dual-pixel pair); and the largest level each frame's samples can hold
+    (``tiffio.sample_tops``). Several pages otherwise are refused: keeping the first would drop
     the others silently, and a plain TIFF does not say which page is which frame."""
     pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
-    same = len({(page.shape, str(page.dtype)) for page in pages}) == 1
+    types = sorted({str(page.dtype) for page in pages})
+    same = len({page.shape for page in pages}) == 1 and len(types) == 1
     if len(pages) > 1 and named == len(pages) and same and len(pages[0].shape) == 2:
-        return np.stack([tiffio.page_levels(p, page) for page in pages]), True
+        tops = [tiffio.sample_tops(p, page) for page in pages]
+        return (np.stack([tiffio.page_levels(p, page) for page in pages]), True,
+                None if None in tops else [top[0] for top in tops])
     if len(pages) > 1:
         shapes = [" x ".join(map(str, page.shape)) for page in pages]
         if len(set(shapes)) > 1:
@@ -388,26 +407,41 @@ def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool]:
                              f"shapes {', '.join(shapes)}) not marked as reduced-resolution "
                              "previews; decode cannot tell which is the sensor image: save it "
                              "as a TIFF of its own")
+        if named == len(pages) and len(types) > 1:
+            raise InputError(f"{p}: its {len(pages)} pages hold samples of different types "
+                             f"({' and '.join(types)}); frames named by --frames are pages of "
+                             "one sensor, of one sample type: save them alike")
         raise InputError(f"{p}: a TIFF of {len(pages)} full-size pages (page shape {shapes[0]}); "
                          "decode reads a sensor image of one page, or grey pages each named by "
                          f"--frames ({len(pages)} names, e.g. --frames A,B for a dual-pixel "
                          "pair)")
     data = tiffio.page_levels(p, pages[0])
-    if pages[0].axes[:1] == "S":   # planar samples (PlanarConfiguration 2): colour last
+    if pages[0].axes[:1] == "S" and data.ndim == 3:  # planar samples: colour last
         data = np.moveaxis(data, 0, -1)
-    return data, False
+    return data, False, tiffio.sample_tops(p, pages[0])
+
+
+def _check_tops(path, frames: np.ndarray, tops: list) -> None:
+    """No sample above the level its header says it can hold (a 16-bit word of a 12-bit
+    TIFF, a MaxSampleValue the samples exceed): the header or the samples are wrong."""
+    for frame, (top, label) in zip(frames, tops, strict=True):
+        largest = int(frame.max()) if frame.size else 0
+        if largest > top:
+            raise InputError(f"{path}: samples up to {largest} where its {label} reach "
+                             f"{top:g} at most; the header or the image is damaged: write it "
+                             "again")
 
 
 def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray, dict]:
     p = Path(path)
-    data, stacked = None, False
+    data, stacked, tops = None, False, None
     if is_tiff(p):   # by its first bytes: a TIFF's kinds are judged by the TIFF rules
         try:
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
                     tiffio.check_light_levels(p, page)
-                data, stacked = _frame_pages(p, tif, named)
+                data, stacked, tops = _frame_pages(p, tif, named)
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({library_words(err)}); "
                                             "the file may be truncated") from err
@@ -424,9 +458,13 @@ def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray,
     else:
         raise InputError(f"{p}: image of shape {data.shape}; decode reads grey or Bayer "
                          "(rows, cols) and RGB or RGBA (rows, cols, 3 or 4) sensor images")
+    if tops is not None:
+        tops = tops[:len(frames)] if not stacked else tops
+        tops = tops if len(tops) == len(frames) else [tops[0]] * len(frames)
+        _check_tops(p, frames, tops)
     rows, cols = frames.shape[1:]
     return np.ascontiguousarray(frames), {
-        "cfa": None, "origin": [0, 0], "black_level": None, "white_level": None,
+        "sample_top": tops, "cfa": None, "origin": [0, 0], "black_level": None, "white_level": None,
         "active_area": [0, 0, rows, cols], "masked_areas": [], "views": views,
         "color": "rgb" if views == ["R", "G", "B"] else "mono",
     }

@@ -56,9 +56,9 @@ def camera_exif(path) -> dict:
             exif = exif if isinstance(exif, dict) else {}  # a damaged EXIF IFD: none
             for name in ("Make", "Model"):
                 if name in tags:
-                    out[name] = str(tags[name].value).strip("\0 ")
+                    out[name] = exif_text(tags[name].value)
             if "Model" not in out and 50708 in tags:  # DNG UniqueCameraModel
-                out["Model"] = str(tags[50708].value).strip("\0 ")
+                out["Model"] = exif_text(tags[50708].value)
     except (tifffile.TiffFileError, ValueError, OSError, IndexError, KeyError, struct.error):
         return out
     for name, key in (("ExposureTime", "ExposureTime"), ("FNumber", "FNumber"),
@@ -71,11 +71,22 @@ def camera_exif(path) -> dict:
         value = exif.get(key)
         if isinstance(value, (tuple, list)):  # ISO may list several values
             value = value[0] if value else None
-        if isinstance(value, bytes):
-            value = value.decode("ascii", "replace").strip("\0 ")
+        value = exif_text(value) if isinstance(value, (str, bytes)) else value
         if value not in (None, ""):
             out[name] = value
     return out
+
+
+def exif_text(value):
+    """A text tag's value as text: ASCII bytes (a writer may type Make or Model BYTE or
+    UNDEFINED) are decoded, NULs and spaces around it stripped. Bytes that are not printable
+    ASCII stay bytes: :func:`clean_exif` drops them with a warning, never as Python's repr."""
+    if isinstance(value, bytes):
+        trimmed = value.strip(b"\0 ")
+        if not (trimmed.isascii() and trimmed.decode("ascii").isprintable()):
+            return value
+        value = trimmed.decode("ascii")
+    return str(value).strip("\0 ")
 
 
 def dng_numbers(values, count: int) -> list[float] | None:
@@ -189,5 +200,7 @@ def _exif_problem(name: str, value) -> str | None:
 
 
 def _shown(value, limit: int = 40) -> str:
+    if isinstance(value, (bytes, bytearray)):  # no b'...' repr: say what it is
+        return f"(a {len(value)}-byte value)"
     text = repr(value)
     return text if len(text) <= limit else text[:limit - 3] + "..."

@@ -44,6 +44,7 @@ from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used 
     check_real_dtype,
     check_segments,
     page_levels,
+    sample_tops,
 )
 from plenocli.io.yamlfile import DocumentError, load_json
 from plenocli.model import orientation

@@ -36,6 +36,11 @@ NOT_LEVELS = {0: "MinIsWhite (inverted)", 4: "transparency-mask",
               8: "CIELab", 9: "ICCLab", 10: "ITULab", 32844: "LogL", 32845: "LogLuv",
               51177: "depth"}
 JPEG = 7
+# Codes defined for bilevel (1-bit) images only: on samples of more bits the header is lying
+CCITT = {2: "CCITT RLE", 3: "CCITT Group 3 fax", 4: "CCITT Group 4 fax", 32771: "CCITT RLEW"}
+MAX_SAMPLE_VALUE = 281
+MINISBLACK = 1
+ALPHA = (1, 2)  # ExtraSamples: associated, unassociated alpha (0, unspecified, is data)
 
 
 def check_page(path: Path, page) -> None:
@@ -54,6 +59,11 @@ def check_page(path: Path, page) -> None:
                          "file is damaged or not a sensor image")
     if int(page.bitspersample) == 1:  # bool to tifffile: the rule of every format names it
         raise samplekind.refusal(path, samplekind.BILEVEL, "TIFF")
+    _check_compression(path, page, compression)
+    if page.dtype is None:
+        raise InputError(f"{path}: BitsPerSample {page.bitspersample} with SampleFormat "
+                         f"{int(page.sampleformat)} is no sample type a TIFF holds; the header "
+                         "is damaged: copy or write it again")
     check_real_dtype(path, page.dtype)
     if page.databytecounts:
         _check_segment_layout(path, page)
@@ -65,6 +75,22 @@ def check_page(path: Path, page) -> None:
                              f"{end}, the file has {size} bytes); copy or write it again")
         if compression == COMPRESSION_NONE:
             _check_uncompressed_size(path, page)
+
+
+def _check_compression(path, page, compression: int) -> None:
+    """A Compression this reader knows and that fits the samples: a CCITT code (1-bit images
+    only) on wider samples decodes to 0/1 or zeros without an error."""
+    import tifffile
+
+    bits = int(page.bitspersample)
+    if compression in CCITT:
+        raise InputError(f"{path}: Compression {compression} ({CCITT[compression]}, a code for "
+                         f"1-bit images) on {bits}-bit samples; the header is damaged (a wrong "
+                         "Compression tag): copy or write the file again")
+    if compression != COMPRESSION_NONE and compression not in tifffile.TIFF.DECOMPRESSORS:
+        raise InputError(f"{path}: Compression {compression}, a code no TIFF reader knows; the "
+                         "file is damaged or written by a program of its own: save it "
+                         "uncompressed")
 
 
 def _check_segment_layout(path, page) -> None:
@@ -259,8 +285,34 @@ def check_light_levels(path, page) -> None:
 
 def page_levels(path, page) -> np.ndarray:
     """A page's samples as light levels: a palette of grey entries read through its table
-    (checked by :func:`check_light_levels`), any other page as stored."""
+    (checked by :func:`check_light_levels`), a grey page whose extra samples are alpha as its
+    grey (as a grey + alpha PNG is read), any other page as stored."""
     data = page.asarray()
     if int(page.photometric) == PALETTE:
         return samplekind.tiff_grey_table(path, page.colormap)[data]
+    if (int(page.photometric) == MINISBLACK and "S" in page.axes and page.extrasamples
+            and all(int(kind) in ALPHA for kind in page.extrasamples)):
+        return np.take(data, 0, axis=page.axes.index("S"))
     return data
+
+
+def sample_tops(path, page) -> list[tuple[float, str]] | None:
+    """The largest level each sample of an integer page can hold, and what says so: its
+    MaxSampleValue (tag 281), else 2^BitsPerSample - 1 (a 12-bit TIFF stores 0-4095 in 16-bit
+    words: its white is 4095, as a DNG's without WhiteLevel); None for floats and palettes
+    (their levels are the table's). A MaxSampleValue beyond the bits is damage."""
+    if page.dtype is None or page.dtype.kind not in "ui" or int(page.photometric) == PALETTE:
+        return None
+    bits, count = int(page.bitspersample), int(page.samplesperpixel)
+    full = float(2 ** bits - 1)
+    tag = page.tags.get(MAX_SAMPLE_VALUE)
+    if tag is None:
+        said = page.dtype if bits == 8 * page.dtype.itemsize else f"{bits}-bit"
+        return [(full, f"{said} samples")] * count
+    values = [float(v) for v in np.ravel(tag.value)]
+    values = values * count if len(values) == 1 else values
+    if len(values) != count or not all(0 < v <= full for v in values):
+        raise InputError(f"{path}: MaxSampleValue {', '.join(f'{v:g}' for v in values)} for "
+                         f"{count} samples of {bits} bits (each in 1 to {full:g}); the header "
+                         "is damaged: copy or write it again")
+    return [(v, f"samples (MaxSampleValue {v:g})") for v in values]
