@@ -181,6 +181,16 @@ def test_quad_pixel_pages_whose_parallax_runs_the_other_way_are_refused(how):
     assert np.isfinite(dx.disparity).mean() > 0.5
 
 
+@pytest.mark.parametrize("order", [[1, 0, 3, 2], [2, 3, 0, 1]])
+def test_a_mirrored_quad_pixel_set_is_refused_as_mirrored(order):
+    """audit 19 M1: a set mirrored left-right (S00 <-> S01, S10 <-> S11) or up-down negates
+    one baseline's parallax: x and y disagreed on every pixel, all were dropped, and the
+    views were refused as sharing no texture (try a wider --max-disparity)."""
+    views, _, _ = disparity_views((160, 320), [-2.0, -1.0, 0.6, 1.3, 2.0], quad=True, seed=3)
+    with pytest.raises(ValueError, match="agree in size but not in sign .*a mirrored set"):
+        quad_disparity(np.ascontiguousarray(views[order]))
+
+
 @pytest.mark.parametrize("name, d", [("astronaut", 1.7), ("camera", 1.2)])
 def test_opposite_slow_gain_ramps_across_the_views_do_not_move_the_match(name, d):
     """audit 18 W5: A x (1 + V/2 - V x/W), B x (1 - V/2 + V x/W) (the A/S split, V = 0.5) put
