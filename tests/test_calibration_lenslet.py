@@ -168,3 +168,29 @@ def test_regions_contradict_a_border_lattice_off_the_lenses():
         why = _regions_contradict(flat, grid)
         assert bool(why) == contradicted, (scale, why)
     assert "regions' mean micro-images" in why and "0.30 pitch" in why
+
+
+def test_few_round_regions_still_check_a_border_lattice():
+    """Audit 18 W1, second round: where fewer than 12 of the 4 x 4 regions show a round mean
+    micro-image, the regions' lattice is not formed and a border lattice 1-1.6 % off was
+    written (real Fujita2 and Boys2 crops, +-0.02-0.08 px claimed). The round regions, however
+    few, measure its scale and turn: here the top half holds no lenses (8 round regions), the
+    true lattice passes, one 1 % short is contradicted."""
+    import cv2
+
+    from plenocli.calibration import _regions_contradict
+    from plenocli.calibration.fit import regional_lattice
+
+    angle = 0.3
+    image, truth = lenslet_scene((600, 600), pitch_px=23.2, angle_rad=angle, seed=5)
+    texture = cv2.resize(np.random.default_rng(1).uniform(0.2, 1.0, (30, 30)).astype(np.float32),
+                         (600, 600), interpolation=cv2.INTER_CUBIC)
+    image[:300] = texture[:300] * image.mean() / texture.mean()
+    flat = calibration.flatten(image, scale_px=1.5 * 23.2)
+    for scale, contradicted in ((1.0, False), (0.99, True)):
+        grid = LensGrid(23.2 * scale, angle, tuple(truth["offset_xy"]), "hex",
+                        image_shape=image.shape)
+        why = _regions_contradict(flat, grid)
+        assert bool(why) == contradicted, (scale, why)
+    assert regional_lattice(flat, grid) is None   # the earlier rule cannot run
+    assert "corner lenses 4.3 +- 0.3 px (0.19 pitch)" in why, why

@@ -94,9 +94,11 @@ def _symmetry_centres(values, cx, cy, radius, n_iter):  # pragma: no cover - com
 def _asymmetries(values, cx, cy, radius, inner):  # pragma: no cover - compiled
     """sum w (I(x_k) - I(2c - x_k))^2 over the pixels within ``inner`` x ``radius`` of each
     centre c / (2 sum w (I(x_k) - mean)^2) over the disc of ``radius`` (w and I(2c - x_k) as
-    in _symmetry_centres); NaN where the disc or its mirror leaves the image."""
+    in _symmetry_centres), and that denominator; NaN where the disc or its mirror leaves the
+    image."""
     rows, cols = values.shape
     out = np.full(cx.shape[0], np.nan)
+    spreads = np.full(cx.shape[0], np.nan)
     r2 = radius * radius
     for k in numba.prange(cx.shape[0]):
         x, y = cx[k], cy[k]
@@ -128,9 +130,10 @@ def _asymmetries(values, cx, cy, radius, inner):  # pragma: no cover - compiled
                 if dx * dx + dy * dy <= inner * inner * r2:
                     swe += w * e * e
         spread = swvv - swv * swv / sw if sw > 0 else 0.0
+        spreads[k] = 2 * spread
         if spread > 0:
             out[k] = swe / (2 * spread)
-    return out
+    return out, spreads
 
 
 def asymmetries(flat: np.ndarray, centres: np.ndarray, radius: float, *,
@@ -140,6 +143,13 @@ def asymmetries(flat: np.ndarray, centres: np.ndarray, radius: float, *,
     variance within ``radius`` (the rim, which carries most of a white's variance, sets the
     scale, and the inside, where a scene's content lies, is compared): 0 round, about 1
     uncorrelated with its mirror image; NaN at the border."""
+    return asymmetry_parts(flat, centres, radius, inner=inner)[0]
+
+
+def asymmetry_parts(flat: np.ndarray, centres: np.ndarray, radius: float, *,
+                    inner: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`asymmetries` and each one's denominator (twice the micro-image's variance
+    within ``radius``, weighted): their product is the squared difference itself."""
     return _asymmetries(np.ascontiguousarray(flat, np.float32),
                         np.ascontiguousarray(centres[:, 0], np.float64),
                         np.ascontiguousarray(centres[:, 1], np.float64), float(radius),

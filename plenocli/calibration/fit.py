@@ -6,7 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plenocli.calibration.centres import asymmetries, refine_centres, regional_shifts
+from plenocli.calibration.centres import (
+    asymmetries,
+    asymmetry_parts,
+    refine_centres,
+    regional_shifts,
+)
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import FIELD_DEGREE, FIELD_MAX, LATTICES, LensGrid, fit_lattice
 
@@ -80,6 +85,7 @@ class LatticeFit:
     centres_refined: bool   # False: scene content moved the centres; they are the lattice's
     pitch_se_px: float = 0.0
     angle_se_rad: float = 0.0
+    not_round: int = 0      # measured centres not written: the micro-image is not round about it
 
 
 # median asymmetry (centres.asymmetries over the inner SCENE_INNER of a SYMMETRY_WINDOW
@@ -92,6 +98,12 @@ SCENE_ASYMMETRY = 0.004
 SCENE_SAMPLING = 0.5
 SCENE_INNER = 0.6
 SYMMETRY_WINDOW = 0.6   # radius (pitches) of the disc each centre is the symmetry centre of
+# a white's micro-image whose asymmetry about its own symmetry centre (``_not_round``) exceeds
+# this many times the frame's median is not round about it: cut by a mask, a dead row or a
+# hot column, its symmetry centre is not its lens's (audit 18 W6: up to 1.6 px off). Whole
+# micro-images of simulated whites, with noise, vignetting or jitter, stay within 2.3 x the
+# median (99.9th percentile; the tests' lens jittered 2.6 px off, 2-3.5 x); cut ones 4-3000 x
+NOT_ROUND_RATIO = 4.0
 CORE_PITCHES = 12.0     # the first fit uses lenses within this many pitches of the middle
 
 
@@ -140,29 +152,55 @@ def fit_grid(flat: np.ndarray, guess: LensGrid, *,
         ideal = ideal + smooth_field(*regional_shifts(flat, grid), ideal, (rows, cols),
                                      grid.pitch_px)
     # every measured centre is written, also those the lattice fit left out as far from the
-    # lattice (a lens set off by 2.6 px was written at its lattice place)
-    final, measured = _on_grid(grid, idx_out, ideal, centres, refined)
+    # lattice (a lens set off by 2.6 px was written at its lattice place), but not one about
+    # which its micro-image is not round (a jittered lens's is: it keeps its own centre)
+    cut = np.zeros_like(refined) if scene else _not_round(flat, centres, refined,
+                                                           grid.pitch_px)
+    final, measured = _on_grid(grid, idx_out, ideal, centres, refined & ~cut)
     resid = np.linalg.norm(final - ideal, axis=1)[measured]
     report = LatticeFit(lenses_total=len(idx_out), lenses_refined=int(refined.sum()),
                         outliers=int((refined & ~use).sum()),
                         residual_rms_px=float(np.sqrt(np.mean(resid ** 2))),
-                        residual_max_px=float(resid.max()), centres_refined=not scene,
-                        pitch_se_px=se[0], angle_se_rad=se[1])
+                        residual_max_px=float(resid.max(initial=0.0)),
+                        centres_refined=not scene, pitch_se_px=se[0], angle_se_rad=se[1],
+                        not_round=int(cut.sum()))
     return LensGrid(grid.pitch_px, grid.angle_rad, grid.offset_xy, grid.lattice,
                     image_shape=(rows, cols), centres_xy=ideal if scene else final,
                     indices=idx_out), report
 
 
+def _not_round(flat: np.ndarray, centres: np.ndarray, refined: np.ndarray,
+               pitch: float) -> np.ndarray:
+    """(K,) which refined centres their micro-image is not round about: its squared
+    difference from its mirror image within SCENE_INNER of the disc (its own micro-image:
+    farther out, the rims of a jittered lens's neighbours come in unevenly), over its own
+    variance or over the frame's typical one (a hot column inflates its own), above
+    NOT_ROUND_RATIO x the frame's median; or a disc with under 1 / NOT_ROUND_RATIO of the
+    typical variance (a lens mostly in the dark), or none measured."""
+    if not refined.any():
+        return refined
+    own, spread = asymmetry_parts(flat, centres[refined], SYMMETRY_WINDOW * pitch,
+                                  inner=SCENE_INNER)
+    typical = float(np.nanmedian(spread))
+    out = ~(spread >= typical / NOT_ROUND_RATIO)
+    for asym in (own, own * spread / typical):
+        out |= ~(asym <= NOT_ROUND_RATIO * np.nanmedian(asym))
+    cut = np.zeros_like(refined)
+    cut[refined] = out
+    return cut
+
+
 REGION_TILES = 4       # regions per side whose mean micro-images place the lattice
 
 
-def regional_lattice(flat: np.ndarray, grid: LensGrid) -> tuple | None:
+def regional_lattice(flat: np.ndarray, grid: LensGrid, measured: tuple | None = None
+                     ) -> tuple | None:
     """Pitch, angle, offset and their standard errors (pitch px, angle rad) of the lattice
     through the lens centres of the mean micro-images of REGION_TILES x REGION_TILES regions
     (:func:`regional_shifts`: scene content averaged over each region's lenses), robustly
     (regions beyond 4 robust sigma dropped once); None when fewer than FIELD_REGIONS regions
-    show a round mean micro-image."""
-    middles, shifts = regional_shifts(flat, grid, tiles=REGION_TILES)
+    show a round mean micro-image. ``measured``: the regions' (middles, shifts) when known."""
+    middles, shifts = measured or regional_shifts(flat, grid, tiles=REGION_TILES)
     if len(shifts) < FIELD_REGIONS:
         return None
     i, j = grid.nearest_index(middles[:, 0] + shifts[:, 0], middles[:, 1] + shifts[:, 1])
@@ -178,6 +216,38 @@ def regional_lattice(flat: np.ndarray, grid: LensGrid) -> tuple | None:
         if use.sum() < FIELD_REGIONS:
             return None
     return pitch, angle, offset, se
+
+
+MISFIT_REGIONS = 3     # round regions that measure a scale and a turn (6 values, 4 unknowns)
+REGION_SCATTER = 0.01  # pitches: no region's centre is placed better than this
+
+
+def regions_misfit(flat: np.ndarray, grid: LensGrid, tiles: int, measured: tuple | None = None
+                   ) -> tuple[float, float] | None:
+    """How far (px) the round mean micro-images of ``tiles`` x ``tiles`` regions
+    (:func:`regional_shifts`) put the frame's corner lenses from where ``grid``'s pitch and
+    rotation put them, and its standard error (px); None when fewer than MISFIT_REGIONS
+    regions are round. Each region's shift from ``grid`` is fitted as a common shift plus a
+    scale e and a turn d about the grid's offset lens; the corners then move by (|e| + |d|)
+    x the half-diagonal, as a pitch and angle error move them (``_corner_error``). The
+    standard error comes from the regions' scatter about that fit, at least REGION_SCATTER.
+    ``measured``: the regions' (middles, shifts) when known."""
+    middles, shifts = measured or regional_shifts(flat, grid, tiles=tiles)
+    if len(shifts) < MISFIT_REGIONS:
+        return None
+    m = middles - np.asarray(grid.offset_xy)
+    design = np.zeros((2 * len(m), 4))
+    design[0::2, 0] = design[1::2, 1] = 1.0
+    design[0::2, 2], design[1::2, 2] = m[:, 0], m[:, 1]      # scale
+    design[0::2, 3], design[1::2, 3] = -m[:, 1], m[:, 0]     # turn
+    values = shifts.reshape(-1)
+    coef = np.linalg.lstsq(design, values, rcond=None)[0]
+    scatter2 = max(float(np.sum((values - design @ coef) ** 2)) / (len(values) - 4),
+                   (REGION_SCATTER * grid.pitch_px) ** 2)
+    se = np.sqrt(np.diag(scatter2 * np.linalg.pinv(design.T @ design)))
+    half_diagonal = float(np.hypot(*flat.shape)) / 2
+    return (half_diagonal * (abs(coef[2]) + abs(coef[3])),
+            half_diagonal * float(np.hypot(se[2], se[3])))
 
 
 FIELD_REGIONS = 12     # regions (of 16) that must show a round mean micro-image
