@@ -28,6 +28,20 @@ def _true_transform(truth: dict) -> dict:
             "view_to_reference": [np.asarray(m).tolist() for m in truth["relative"]]}
 
 
+def _dualpixel_pair(focal_mm: float | None = None, *, swapped: bool = False):
+    """A simulated dual-pixel + prism pair (views (2, 3, rows, cols), A then B, or B then A)
+    and the rig of its camera (``focal_mm``: another focal length)."""
+    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
+    pair = (b, a) if swapped else (a, b)
+    views = np.stack([np.moveaxis(v, -1, 0) for v in pair])
+    cam = truth["camera"]
+    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
+    rig = PrismRig(cam["focal_mm"] if focal_mm is None else focal_mm, cam["sensor_mm"],
+                   cam["prism_n"], cam["prism_apex_deg"], optics, cam["aperture_mm"],
+                   cam["object_distance_mm"])
+    return views, rig
+
+
 @pytest.mark.parametrize("overlap", [0.1, 0.3])  # 0.1: a 24 px seam, too narrow for the report
 def test_the_residual_of_a_transform_off_by_a_known_shift_is_that_shift(overlap):
     views, _, truth = make_rig(view_shape=(160, 240), overlap=overlap, vignetting=0.1,
@@ -67,13 +81,8 @@ def test_a_textureless_stretch_of_the_seam_measures_nothing_and_is_left_out():
 
 
 def test_a_rig_with_the_wrong_focal_length_is_refused():
-    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
-    views = np.stack([np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)])
-    cam = truth["camera"]
-    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
-    for focal, refused in ((cam["focal_mm"], False), (8.0, True)):
-        rig = PrismRig(focal, cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"], optics,
-                       cam["aperture_mm"], cam["object_distance_mm"])
+    for focal, refused in ((None, False), (8.0, True)):
+        views, rig = _dualpixel_pair(focal)
         if refused:
             # audit 18 M1: "register without it" alone looped with the registration's "pass
             # the rig" on prism views: the message says the rig is not this capture's
@@ -157,12 +166,7 @@ def test_a_rig_refused_under_a_users_distortion_names_the_distortion():
     views without it."""
     from plenocli.pipeline.stages.stitch import _claim
 
-    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
-    views = np.stack([np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)])
-    cam = truth["camera"]
-    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
-    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
-                   optics, cam["aperture_mm"], cam["object_distance_mm"])
+    views, rig = _dualpixel_pair()
     with pytest.raises(ValueError, match=r"the rig r.yaml on views with --distortion 0.05 "
                                          r"removed does not describe these views.*check "
                                          r"--distortion, or leave it out"):
@@ -220,11 +224,6 @@ def test_a_seam_without_texture_cannot_vouch_for_a_transform():
 def test_views_in_another_order_than_the_rigs_are_told_so():
     """audit 18 M4: the right rig with the views swapped was refused as "no reliable overlap
     ... or the overlap has no texture" alone, though the pair overlaps and is textured."""
-    a, b, truth = render_dualpixel(pixels=384, seed=3, camera=Camera(prism_apex_deg=30.0))
-    views = np.stack([np.moveaxis(b, -1, 0), np.moveaxis(a, -1, 0)])
-    cam = truth["camera"]
-    optics = (ViewOptics((1, 0), (1, 0)), ViewOptics((-1, 0), None))
-    rig = PrismRig(cam["focal_mm"], cam["sensor_mm"], cam["prism_n"], cam["prism_apex_deg"],
-                   optics, cam["aperture_mm"], cam["object_distance_mm"])
+    views, rig = _dualpixel_pair(swapped=True)
     with pytest.raises(ValueError, match="not in the rig's order"):
         stitch(views, rig=rig)
