@@ -46,6 +46,16 @@ def test_white_of_a_tiff_is_its_bits_and_white_beyond_them_is_refused(tmp_path, 
     assert raw.decode(tmp_path / "c.tif", white=top - 10)[1]["white_level"] == [top - 10.0]
 
 
+@pytest.mark.parametrize("dtype", [np.int16, np.int32])
+def test_the_white_of_signed_samples_is_the_largest_they_hold(tmp_path, dtype):
+    """audit 20 W1: int16 samples got white 65535 (2^16 - 1), which they cannot reach: their
+    clipped 32767s passed as light and bias called decode's own output damaged."""
+    frame = np.full((40, 50), 1000, dtype)
+    frame[3:6, 4:8] = np.iinfo(dtype).max
+    tifffile.imwrite(tmp_path / "s.tif", frame, photometric="minisblack")
+    assert raw.decode(tmp_path / "s.tif")[1]["white_level"] == [float(np.iinfo(dtype).max)]
+
+
 def test_max_sample_value_is_the_white_and_samples_past_it_are_refused(tmp_path):
     frame = np.random.default_rng(2).integers(0, 16384, (40, 50)).astype(np.uint16)
     tifffile.imwrite(tmp_path / "m.tif", frame, photometric="minisblack",

@@ -304,7 +304,8 @@ def sample_tops(path, page) -> list[tuple[float, str]] | None:
     if page.dtype is None or page.dtype.kind not in "ui" or int(page.photometric) == PALETTE:
         return None
     bits, count = int(page.bitspersample), int(page.samplesperpixel)
-    full = float(2 ** bits - 1)
+    # a signed sample spends one bit on the sign: int16 reaches 32767
+    full = float(2 ** (bits - (page.dtype.kind == "i")) - 1)
     tag = page.tags.get(MAX_SAMPLE_VALUE)
     if tag is None:
         said = page.dtype if bits == 8 * page.dtype.itemsize else f"{bits}-bit"
