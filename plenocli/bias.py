@@ -58,7 +58,11 @@ def _clipped_mean(strip: np.ndarray, *, k: float = 4.0) -> np.ndarray:
     med = np.median(x, axis=1, keepdims=True)
     sigma = 1.4826 * np.median(np.abs(x - med))
     keep = np.abs(x - med) <= max(k * sigma, 0.5)
-    return np.sum(np.where(keep, x, 0.0), axis=1) / np.maximum(keep.sum(axis=1), 1)
+    count = keep.sum(axis=1)
+    # a row whose samples all lie beyond the cut (two that disagree: each is half the gap from
+    # their median) keeps its median, not a level of 0 (the whole black left in)
+    return np.where(count > 0, np.sum(np.where(keep, x, 0.0), axis=1) / np.maximum(count, 1),
+                    med[:, 0])
 
 
 def column_levels(frame: np.ndarray, rows: tuple[int, int], *, period: int = 2,

@@ -24,6 +24,17 @@ def test_row_levels_absolute_phase_with_odd_start():
     np.testing.assert_array_equal(row_levels(frame, (1, 9)), truth)
 
 
+def test_a_row_whose_few_overscan_samples_disagree_keeps_their_median():
+    """audit 20 W2: with two over-scan samples of a colour per row (503, 519; here 500, 522) both lay beyond
+    the outlier cut, and the row's level was 0: its whole black (~512 DN) left in, exit 0."""
+    rng = np.random.default_rng(3)
+    frame = 512 + rng.normal(0, 2, (40, 4))
+    frame[12, 1], frame[12, 3] = 500.0, 522.0
+    levels = row_levels(frame, (0, 4))
+    assert levels[12, 1] == pytest.approx(511.0)
+    assert np.all(np.abs(levels - 512) < 10)
+
+
 def test_column_levels_is_row_levels_transposed():
     frame, _ = frame_with_bias()
     np.testing.assert_array_equal(column_levels(frame.T, (0, 10)), row_levels(frame, (0, 10)).T)
