@@ -25,8 +25,9 @@ def test_row_levels_absolute_phase_with_odd_start():
 
 
 def test_a_row_whose_few_overscan_samples_disagree_keeps_their_median():
-    """audit 20 W2: with two over-scan samples of a colour per row (503, 519; here 500, 522) both lay beyond
-    the outlier cut, and the row's level was 0: its whole black (~512 DN) left in, exit 0."""
+    """audit 20 W2: with two over-scan samples of a colour per row (503, 519; here 500, 522)
+    both lay beyond the outlier cut, and the row's level was 0: its whole black (~512 DN)
+    left in, exit 0."""
     rng = np.random.default_rng(3)
     frame = 512 + rng.normal(0, 2, (40, 4))
     frame[12, 1], frame[12, 3] = 500.0, 522.0
