@@ -108,3 +108,13 @@ def test_a_white_without_red_and_nan_in_a_white_are_said_as_such():
     gains[0, 9, 9] = np.nan
     assert _masked_words(7, white, gains) == (
         "7 pixels masked: 6 NaN in the white, 1 below the floor")
+
+
+@pytest.mark.parametrize("suffix", ["png", "bmp"])
+def test_a_pixel_past_its_palette_is_refused(tmp_path, suffix):
+    """audit 20 W3: indices 8-15 over an 8-entry grey table were read as black light."""
+    image = Image.fromarray((np.arange(20 * 30).reshape(20, 30) % 16).astype(np.uint8), "P")
+    image.putpalette([v for i in range(8) for v in (17 * i,) * 3])
+    image.save(tmp_path / f"short.{suffix}")
+    with pytest.raises(InputError, match="index 15, past its 8-entry table"):
+        raw.decode(tmp_path / f"short.{suffix}")

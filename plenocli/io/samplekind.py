@@ -74,6 +74,9 @@ def declared_kind(path) -> str | None:
             with Image.open(path) as image:
                 mode, fmt = image.mode, image.format or "image"
                 table = image.getpalette() if mode in ("P", "PA") else None
+                indices = None if table is None else np.asarray(image)
+                top = None if indices is None else int(
+                    (indices if indices.ndim == 2 else indices[..., 0]).max())
     except Exception:  # noqa: BLE001 (any decoding error: OpenCV reads the file and says why)
         return None
     if mode == "1":
@@ -81,6 +84,9 @@ def declared_kind(path) -> str | None:
     if mode in PILLOW_NOT_LEVELS:
         raise refusal(path, PILLOW_NOT_LEVELS[mode], fmt)
     if table is not None:
-        grey_table(path, np.asarray(table, np.uint8), fmt)
+        entries = len(grey_table(path, np.asarray(table, np.uint8), fmt))
+        if top >= entries:  # decoders read such an index as black: no light level
+            raise InputError(f"{path}: a palette {fmt} with a pixel of index {top}, past its "
+                             f"{entries}-entry table: the file is damaged; write it again")
         return "grey"
     return "grey" if mode in ("L", "LA", "La", "I", "I;16", "I;16B", "I;16L", "F") else None
