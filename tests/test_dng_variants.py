@@ -268,7 +268,8 @@ def test_multi_sample_raw_is_refused(samples, options, tmp_path):
     path = tmp_path / "samples.dng"
     _write_dng(path, data, linear=True, **options)  # tifffile refuses a multi-sample CFA page
     _patch_raw_tag(path, 262, 32803)
-    _assert_refused(path, tmp_path, "one-sample raw", "without demosaicing")
+    _assert_refused(path, tmp_path, f"holds {samples} samples per pixel",
+                    "one sample per pixel")
 
 
 def test_cut_jpeg_strip_in_a_sensor_tiff_is_refused(tmp_path):

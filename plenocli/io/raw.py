@@ -370,9 +370,11 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
     decoded and linearised, its black levels per 2 x 2 position and its white level."""
     tiffio.check_page(Path(path), page)  # SubIFDs too, before any pixel is read
     if len(page.shape) != 2:  # from the header: refused before decoding
-        raise InputError(f"{path}: raw IFD {k} has shape {page.shape}; plenocli reads "
-                         "one-sample raw (CFA or mono) DNGs: convert the capture "
-                         "to DNG without demosaicing")
+        raise InputError(f"{path}: raw image {k} holds {int(page.samplesperpixel)} samples "
+                         "per pixel (a "
+                         "demosaiced LinearRaw); plenocli reads raws of one sample per pixel "
+                         "(CFA or mono): give the capture as the camera recorded it, or its "
+                         "colours as a plain RGB TIFF")
     dngtags.check_layout(path, k, page, dng=dngtags.DNG_VERSION in page.parent.pages[0].tags)
     top, left = dngtags.areas(path, k, page, page.shape)[0][:2]
     black = dngtags.black_levels(path, k, page, (top, left))
