@@ -24,7 +24,7 @@ def test_every_generator_parameter_is_declared():
     ("dualpixel-prism", {"crosstalk": 1.0}, "crosstalk must be in [0, 1)"),
     ("raytrix-scene", {"s": 0.0}, "s must be in (0, 1]"),
     ("stereo-rig", {"view_shape": [200, 8]}, "view_shape must be >= 32"),
-    ("dualpixel", {"seed": -1}, "seed must be in [0, 4.29497e+09)"),
+    ("dualpixel", {"seed": -1}, "seed must be in [0, 4294967296)"),
     ("dualpixel", {"noise": "loud"}, "noise = 'loud' is not a finite number (its default is 2.0)"),
     ("hexgrid-white", {"size": "0x64"},
      "size = '0x64' is not a whole number (its default is 1024)"),

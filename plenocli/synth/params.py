@@ -39,10 +39,17 @@ class Param:
         return above and below
 
     def describe(self) -> str:
+        low, high = _exact(self.low), _exact(self.high)
         if self.high == INF:
-            return f"{'>' if self.open_low else '>='} {self.low:g}"
-        return (f"in {'(' if self.open_low else '['}{self.low:g}, {self.high:g}"
+            return f"{'>' if self.open_low else '>='} {low}"
+        return (f"in {'(' if self.open_low else '['}{low}, {high}"
                 f"{')' if self.open_high else ']'}")
+
+
+def _exact(bound: float) -> str:
+    """A bound as written, whole numbers in all their digits: %g's 4.29497e+09 for 2^32 read as
+    a bound below the value it refused."""
+    return str(int(bound)) if float(bound).is_integer() else f"{bound:g}"
 
 
 _FRACTION = {"low": 0.0, "high": 1.0, "open_high": True}
