@@ -192,9 +192,11 @@ def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int
         if mode in (side, "both") and not areas[side]:
             if bare[side]:
                 width = _width(bare[side], side)
-                raise ValueError(f"guard {guard} leaves no over-scan pixel in the {width} "
-                                 f"{across} of the {side} over-scan; use --guard "
-                                 f"{max((width - 4) // 2, 0)} or less")
+                # a level needs 4 (two of each colour) between the guards; bare holds 4
+                raise ValueError(f"guard {guard} leaves {max(width - 2 * guard, 0)} of the "
+                                 f"{width} {across} of the {side} over-scan, fewer than the 4 "
+                                 f"(two of each colour) a level needs; use --guard "
+                                 f"{(width - 4) // 2} or less")
             other = "top" if side == "left" else "left"
             where = "left of" if side == "left" else "above"
             raise ValueError(f"no usable over-scan {across} {where} the active area "

@@ -103,8 +103,13 @@ AREAS = dict(active_area=[6, 10, 40, 60], masked_areas=[[6, 0, 40, 10], [0, 10, 
 
 
 @pytest.mark.parametrize("options,words", [
-    (dict(guard=99999), "guard 99999 leaves no over-scan pixel"),
-    (dict(guard=4, overscan="left"), "use --guard 3 or less"),
+    (dict(guard=99999), "guard 99999 leaves 0 of the 10 columns of the left over-scan"),
+    # audit 20 M1: 'leaves no over-scan pixel' where 2 were left, and 'use --guard 0 or less'
+    (dict(guard=4, overscan="left"), "leaves 2 of the 10 columns of the left over-scan, fewer "
+                                     "than the 4"),
+    (dict(guard=4, overscan="left"), "a level needs; use --guard 3 or less"),
+    (dict(guard=2, overscan="top"), "leaves 2 of the 6 rows of the top over-scan, fewer than "
+                                    "the 4 .* use --guard 1 or less"),
     (dict(smooth=100000), "smooth 100000 is longer than the 17 rows"),
     (dict(smooth=-1), "smooth must be a whole number"),
     (dict(guard=1.5), "guard must be a whole number"),
