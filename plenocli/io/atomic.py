@@ -346,7 +346,10 @@ def _device_full(folder: Path, margin: int = 1 << 20) -> bool:
 
 
 def _same_path(a: Path, b: Path) -> bool:
-    return os.path.abspath(a) == os.path.abspath(b) or _same_file(a, b)
+    """One file by two names: the same spelling, a link to one folder (the file need not exist
+    yet: ``realpath`` follows the links of the folders), or one file already."""
+    return (os.path.abspath(a) == os.path.abspath(b)
+            or os.path.realpath(a) == os.path.realpath(b) or _same_file(a, b))
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -53,6 +53,16 @@ def test_two_outputs_on_one_path_are_refused_before_any_work(tmp_path, frames):
     assert sorted(p.name for p in tmp_path.iterdir()) == FRAMES_ONLY
 
 
+def test_two_outputs_one_file_through_a_linked_folder_are_refused(tmp_path, frames):
+    """audit 20 W4: -o real/g.tif --save-gain link/g.tif (link -> real) wrote both, one lost."""
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    result = invoke("flat", frames, "--white", frames, "-o", tmp_path / "real" / "g.tif",
+                    "--save-gain", tmp_path / "link" / "g.tif")
+    assert result.exit_code == 1 and "given for two outputs" in one_line(result)
+    assert not list((tmp_path / "real").iterdir())
+
+
 def test_an_output_that_is_an_input_is_refused(tmp_path, frames):
     before = digest(frames)
     result = invoke("flat", frames, "--white", tmp_path / "w.tif", "-o", tmp_path / "b.tif",
