@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.errors import InputError
-from plenocli.io import tiffio
+from plenocli.io import raw, tiffio
 
 ROWS, COLS = 75, 101  # not a multiple of any tile or strip below
 LINEAR_RAW = 34892
@@ -296,11 +296,15 @@ def test_linearization_table_maps_the_stored_codes(entries, tmp_path):
                                   truth.reshape(codes.shape))
 
 
-def test_float_raw_without_white_level_asks_for_it(tmp_path):
+def test_float_raw_without_white_level_takes_the_dng_default(tmp_path):
+    """audit 20 F2: refused as having 'no white level; give it with --white', and --white then
+    refused for a raw: the DNG spec's default for floating-point samples is 1.0."""
     path = tmp_path / "float.dng"
-    _write_dng(path, _frame(np.float32), linear=True, white=None, tile=(32, 32),
-               compression="zlib", predictor=3)
-    _assert_refused(path, tmp_path, "no white level", "--white")
+    frame = _frame(np.float32) / np.float32(4000)
+    _write_dng(path, frame, linear=True, white=None, tile=(32, 32), compression="zlib",
+               predictor=3)
+    got, meta = raw.decode(path)
+    assert meta["white_level"] == [1.0] and np.array_equal(got[0], frame)
 
 
 def _patch_raw_bytes(path: Path, code: int, values: bytes) -> None:

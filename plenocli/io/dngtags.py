@@ -203,14 +203,14 @@ def black_levels(path, k: int, page, corner: tuple[int, int] = (0, 0)) -> list[f
 
 def white_level(path, k: int, page, dtype: np.dtype, linearized: bool) -> float:
     """WhiteLevel, within what the decoded samples (or the LinearizationTable's levels) can
-    reach. Missing, it is 2^BitsPerSample - 1 (the DNG default) for integers; floats have no
-    default (NaN asks for --white)."""
+    reach. Missing, it is the DNG default: 2^BitsPerSample - 1 for integers, 1.0 for
+    floating-point samples."""
     bits = int(page.bitspersample)
     values = numbers(path, k, page, WHITE_LEVEL, "WhiteLevel")
     if values is None:
         if linearized:
             return 65535.0
-        return float(2 ** bits - 1) if dtype.kind in "ui" else float("nan")
+        return float(2 ** bits - 1) if dtype.kind in "ui" else 1.0
     # BitsPerSample is no bound here: writers label lossless-JPEG raws of 14-bit data 12 bits
     top = 65535 if linearized else (np.iinfo(dtype).max if dtype.kind in "ui" else np.inf)
     if values.size != 1 or not 0 < values[0] <= top:
