@@ -234,3 +234,18 @@ def test_wb_from_a_dual_pixel_white_takes_its_sum_view_for_a_panorama(tmp_path):
     lin, _ = read_image(tmp_path / "lin.tif")
     means = lin.reshape(3, -1).mean(axis=1)
     np.testing.assert_allclose(means / means[1], 1.0, atol=1e-4)   # neutral after S's gains
+
+
+def test_a_float_raws_decode_output_is_taken_above_its_black():
+    """audit 20 W5: develop took integer decode output above its black level but a float DNG's
+    as if black were 0 (512 DN of 16383 left in: a colour cast, exit 0)."""
+    from plenocli.pipeline.stages.develop import _levels
+
+    frames = np.full((1, 4, 4), 0.5, np.float32)
+    frames[0, 0, 0] = 1.0
+    meta = {"black_level": [[0.03125] * 4], "white_level": [1.0],
+            "provenance": {"stage": "decode"}}
+    out = _levels(frames, meta)
+    assert np.isnan(out[0, 0, 0]) and np.allclose(out[0, 1:], 0.5 - 0.03125)
+    views = dict(meta, provenance={"stage": "bias"})  # processed views: as they are
+    assert np.array_equal(_levels(frames, views), frames)

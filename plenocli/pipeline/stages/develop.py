@@ -108,9 +108,10 @@ def _read(path: str) -> tuple[np.ndarray, dict, str | None, list[str]]:
 
 
 def _levels(data: np.ndarray, meta: dict) -> np.ndarray:
-    """Raw integer frames (decode output) as DN above black, NaN where they reached the white
-    level; processed (float) views are returned as they are."""
-    if data.dtype.kind not in "ui":
+    """Raw frames (decode output: integers, or a float DNG's samples) as DN above black, NaN
+    where they reached the white level; processed (float) views are returned as they are."""
+    made = (meta.get("provenance") or {}).get("stage")
+    if data.dtype.kind not in "ui" and made != "decode":
         return data
     out = data.astype(np.float32)
     blacks = meta.get("black_level") or [[0.0] * 4] * len(data)
