@@ -1,7 +1,7 @@
 import click
 
 from plenocli.cli import options
-from plenocli.pipeline.validators import FiniteFloat, InputFile, OutputFolder
+from plenocli.pipeline.validators import MAX_TIMEOUT_S, FiniteFloat, InputFile, OutputFolder
 
 
 @click.command(short_help="Run a pipeline template over many captures, in parallel.")
@@ -20,9 +20,10 @@ from plenocli.pipeline.validators import FiniteFloat, InputFile, OutputFolder
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Send the captures to this dask.distributed scheduler (tcp://host:8786) "
                    "instead of local processes; needs pip install 'plenocli[dask]'.")
-@click.option("--timeout", type=options.Declared(FiniteFloat(min=0, min_open=True)),
+@click.option("--timeout", type=options.Declared(FiniteFloat(min=0, max=MAX_TIMEOUT_S,
+                                                            min_open=True, max_open=True)),
               default=None, metavar="SECONDS", help="Stop a capture that runs longer than "
-              "this in its worker and report it as failed.")
+              "this in its worker and report it as failed (under 10000000 s).")
 @options.stage_command
 def batch(config, patterns, jobs, out, force, dry_run, overrides, scheduler, timeout):
     """Run the pipeline template CONFIG over many captures.

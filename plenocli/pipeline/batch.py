@@ -35,6 +35,7 @@ from plenocli.errors import ConfigError, InputError, OptionError, PlenocliError,
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
+from plenocli.pipeline.validators import MAX_TIMEOUT_S
 from plenocli.progress import log, progress
 
 # Each worker gets one thread: the parallelism is across captures (no oversubscription).
@@ -135,8 +136,9 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     """
     if jobs < 1:
         raise ConfigError(f"--jobs {jobs}: give 1 or more worker processes")
-    if timeout is not None and not (0 < timeout < 1e7):  # also refuses NaN
-        raise ConfigError(f"--timeout {timeout}: give a positive number of seconds")
+    if timeout is not None and not (0 < timeout < MAX_TIMEOUT_S):  # also refuses NaN
+        raise OptionError(f"--timeout {timeout:g}: give a number of seconds above 0 and under "
+                          f"{MAX_TIMEOUT_S:.0f}")
     if timeout is not None and scheduler:
         raise OptionError("--timeout limits local worker processes; with --scheduler set the "
                           "Dask workers' own limits instead")

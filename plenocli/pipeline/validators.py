@@ -127,6 +127,10 @@ class Int(Validator):
         return number
 
 
+# batch --timeout: under 115 days, far past any capture and within what waits can be told
+MAX_TIMEOUT_S = 1e7
+
+
 class FiniteFloat(Validator):
     """A finite number, optionally bounded; ``min_open``/``max_open`` make a bound exclusive,
     e.g. ``FiniteFloat(min=0, min_open=True)`` for a strictly positive value. NaN and the

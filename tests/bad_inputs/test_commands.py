@@ -421,6 +421,9 @@ CASES = [
     ("batch-timeout-with-scheduler", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
                                       "--scheduler", "tcp://127.0.0.1:1", "--timeout", "5"], 2,
      ("--timeout limits local worker processes",)),
+    # audit 20 E1: 1e7 s and up were exit 1, "give a positive number of seconds"
+    ("batch-timeout-huge", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "--timeout",
+                            "1e7"], 2, ("'--timeout'", "x<1e+07")),
     ("batch-scheduler-malformed", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
                                    "--scheduler", "nonsense"], 1, ("tcp://HOST:PORT",)),
     ("batch-scheduler-not-there", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
