@@ -158,3 +158,22 @@ def test_pages_of_two_sample_types_name_their_types(tmp_path):
         writer.write(GREY, photometric="minisblack")
     with pytest.raises(InputError, match=r"different types \(uint16 and uint8\)"):
         raw.decode(tmp_path / "mix.tif", frame_names=["A", "B"])
+
+
+class _Page:
+    """A TIFF page of the tags given (code -> value), as rawmeta reads them."""
+
+    def __init__(self, tags: dict):
+        self.tags = {code: type("Tag", (), {"value": value})() for code, value in tags.items()}
+
+
+def test_colour_tags_of_the_wrong_count_are_dropped_with_a_warning():
+    """audit 20 M3: an AsShotNeutral of 4 values or a ColorMatrix1 of 6 was dropped without
+    the warning README promises (develop later said there was no as-shot white balance)."""
+    pairs = (1000, 2225, 1, 1, 1000, 1261, 1, 1)  # 4 rationals
+    matrix6 = tuple(v for x in (6446, -366, -864, -4436, 12204, 2513) for v in (x, 10000))
+    said = []
+    page = _Page({50728: pairs, 50721: matrix6, 50778: 21})
+    rawmeta.clean_colour(rawmeta.dng_colour(page, page), said.append)
+    assert any("as-shot white balance" in s and "dropped" in s for s in said)
+    assert any("colour matrix" in s and "dropped" in s for s in said)

@@ -90,13 +90,15 @@ def exif_text(value):
 
 
 def dng_numbers(values, count: int) -> list[float] | None:
-    """A (S)RATIONAL tag as floats (tifffile gives numerator, denominator pairs)."""
+    """A (S)RATIONAL tag of ``count`` values as floats (tifffile gives numerator, denominator
+    pairs); one of another count is given as it is, for :func:`clean_colour` to drop with a
+    warning naming it (a ColorMatrix of 6 values, an AsShotNeutral of 4)."""
     if values is None:
         return None
     flat = [float(v) for v in np.ravel(values)]
-    if len(flat) == 2 * count:
+    if len(flat) != count and len(flat) % 2 == 0:
         flat = [n / d if d else float("nan") for n, d in zip(flat[::2], flat[1::2], strict=True)]
-    return flat if len(flat) == count else None
+    return flat
 
 
 def dng_colour(raw_page, main_page) -> dict:
@@ -106,14 +108,16 @@ def dng_colour(raw_page, main_page) -> dict:
     if neutral is not None:  # checked by clean_colour: a zero or negative neutral is dropped
         with np.errstate(divide="ignore", invalid="ignore"):
             wb = (np.float64(neutral[1]) / np.asarray(neutral, np.float64)).tolist()
-    matrix = None
+    matrix = bad = None
     for code, illuminant in ((50721, 50778), (50722, 50779)):  # ColorMatrix1, 2
         values = dng_numbers(_tag(raw_page, code, _tag(main_page, code, None)), 9)
-        if values is not None:
+        if values is not None and len(values) != 9:
+            bad = values  # said and dropped by clean_colour when no other matrix is right
+        elif values is not None:
             matrix = np.asarray(values, np.float64).reshape(3, 3).tolist()
             if _tag(raw_page, illuminant, _tag(main_page, illuminant, 0)) == 21:  # D65
                 break
-    return {"as_shot_wb": wb, "xyz_to_camera": matrix}
+    return {"as_shot_wb": wb, "xyz_to_camera": matrix if matrix is not None else bad}
 
 
 def _finite_numbers(value, count: int) -> list[float] | None:
