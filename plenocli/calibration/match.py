@@ -190,8 +190,8 @@ def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
     return offset, confidence, rivals
 
 
-def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float, *,
-              radius: float | None = None) -> tuple[float, float, float]:
+def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
+              ) -> tuple[float, float, float]:
     """Where the match peaks around ``lattice``: per axis (relative pitch change, angle change
     in rad) the midpoint of the two points where the confidence falls through half its drop
     (peak to the higher of the two ends), from steps that move the image's corners by up to
@@ -199,10 +199,8 @@ def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float, *,
     lattice far off the peak, or a flat match). The top of the curve is flat over about
     two thirds of a pitch at the corners and may lean, so a parabola through it follows the
     lean; the falls are steep and symmetric about the lattice. Also the step that moves the
-    corners by CORNER_SHARE of a pitch. ``radius``: the corners' distance (px) from the middle
-    these shares are of (default the image's; the crop's to measure the peak as finely as the
-    crop can, on an image much larger than the crop)."""
-    step = CORNER_SHARE * lattice.pitch_px / (radius or matcher.image_radius)
+    corners by CORNER_SHARE of a pitch."""
+    step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
     at = np.linspace(-1.0, 1.0, 2 * PEAK_SAMPLES + 1) * PEAK_REACH / CORNER_SHARE * step
     out = []
     for move in (lambda d: lattice.scaled(1 + d), lambda d: lattice.scaled(1.0, d)):
@@ -276,30 +274,3 @@ def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lat
             return replace(found, measured=True)
         first = first or found
     return first or MatchVerdict(None, None, 0.0, reason="no lattice near the hint")
-
-
-@dataclass(frozen=True)
-class MatchPeak:
-    """Where the match peaks around a lattice: the lens centre (full-image px) and the median
-    lens confidence there, the pitch (relative change) and angle (rad) of the peak from the
-    lattice's (+-inf: beyond PEAK_REACH of a pitch at the crop's corners, or a flat match),
-    and the step: the relative change that moves the crop's corners by CORNER_SHARE of a pitch
-    (how finely the peak is placed)."""
-
-    offset_xy: tuple[float, float]
-    confidence: float
-    pitch: float
-    angle: float
-    step: float
-
-
-def match_peak(image: np.ndarray, lattice: Lattice) -> MatchPeak:
-    """Where the micro-images of the central crop of ``image`` repeat each other's content
-    best around ``lattice`` (a grid's, to check it: what :func:`match_judge` asks of a start
-    grid), its lens centre among the lattice's symmetry points as calibrate finds it."""
-    matcher = Matcher(image)
-    offset, confidence, _ = _centred(matcher, lattice)
-    matcher.settle_sign(lattice, offset)
-    pitch, angle, step = _vertices(matcher, lattice, offset, confidence,
-                                   radius=matcher.radius)
-    return MatchPeak(offset, confidence, pitch, angle, step)

@@ -112,58 +112,6 @@ def _vector_error(own, found) -> float:
     return float(abs(ratio * np.exp(1j * turn) - 1))
 
 
-def match_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False) -> str | None:
-    """How the frame's micro-images contradict ``grid`` where no lattice shows for the fold
-    (no vignetting: the simulator's scenes, a devignetted capture), else None: the match
-    judge calibrate confirms a start grid with (:func:`plenocli.calibration.match.match_peak`,
-    on the central crop) places the lens centre and the pitch and angle at which neighbouring
-    micro-images repeat each other's content best. The lattice it finds and the grid's may
-    part by MAX_DRIFT of a pitch anywhere in the frame (refocus), and (``for_depth``) their
-    lattice vectors by MAX_DEPTH_ERROR, or by what the peak can tell on the crop when that is
-    coarser (a relative change moving the crop's corners by a twentieth of a pitch: 0.25 % on
-    the simulator's 480 x 640). Measured on that frame (pitch 20.2 px), grids 0.5 % / 1 % off
-    peak 0.47-0.57 % / 0.81-1.53 % away, the true grid 0.05 %; at 1 % off a plane at g = 4
-    read > 0.5 wrong on 17-35 % of its pixels and refocus correlated 0.76 with the true
-    grid's. A match too weak to peak is left to the stages' confidence rule."""
-    from plenocli.calibration.candidates import Lattice
-    from plenocli.calibration.match import MIN_CONFIDENCE, match_peak
-
-    own = Lattice(grid.lattice, grid.pitch_px, grid.angle_rad)
-    peak = match_peak(np.nan_to_num(np.asarray(frame, np.float32)), own)
-    if peak.confidence < MIN_CONFIDENCE:
-        return None
-    if not (np.isfinite(peak.pitch) and np.isfinite(peak.angle)):
-        what = "pitch" if not np.isfinite(peak.pitch) else "angle"
-        return (f"its micro-images repeat each other's content best at a {what} nowhere near "
-                f"the grid's {own.describe()}")
-    found = own.scaled(1 + peak.pitch, peak.angle)
-    error = _vector_error(own, found)
-    drift = _corner_drift(frame.shape, grid, 1 + peak.pitch, peak.angle, peak.offset_xy)
-    shows = (f"its micro-images repeat each other's content best on a {found.describe()} "
-             f"lattice, the grid says {own.describe()}")
-    if drift > MAX_DRIFT:
-        return f"{shows} ({drift:.2f} pitches apart in the frame; at most {MAX_DRIFT:g})"
-    if for_depth and error > max(MAX_DEPTH_ERROR, peak.step):
-        return (f"{shows} (lattice vectors {100 * error:.2f} % apart; depth needs <= "
-                f"{100 * max(MAX_DEPTH_ERROR, peak.step):.2g} %)")
-    return None
-
-
-def _corner_drift(shape, grid: LensGrid, scale: float, turn: float, offset_xy) -> float:
-    """Largest distance (pitches) between the grid's lenses and those of its lattice scaled and
-    turned through the lens at ``offset_xy``, at the frame's corners and that lens."""
-    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
-    b_found = scale * grid.basis() @ rotation.T
-    i0, j0 = (float(v) for v in grid.nearest_index(*offset_xy))
-    rows, cols = shape
-    worst = 0.0
-    for x, y in ((0, 0), (cols - 1, 0), (0, rows - 1), (cols - 1, rows - 1), offset_xy):
-        i, j = (float(v) for v in grid.nearest_index(x, y))
-        there = np.asarray(offset_xy) + (i - i0) * b_found[0] + (j - j0) * b_found[1]
-        worst = max(worst, float(np.hypot(*(grid.lattice_xy(i, j) - there))))
-    return worst / grid.pitch_px
-
-
 def centred(frame: np.ndarray, grid: LensGrid, *, refit: bool = False
             ) -> tuple[LensGrid, tuple[float, float] | None]:
     """``grid`` moved onto the lens centres the frame (rows, cols; grey) shows, and the move

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plenocli.depth.gridcheck import centred, lattice_misfit, match_misfit
+from plenocli.depth.gridcheck import centred, lattice_misfit
 from plenocli.errors import InputError
 from plenocli.io.gridfile import measured_on
 from plenocli.model.provenance import sha256_file
@@ -17,17 +17,13 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
     (docs/depth.md, "Grid check"); depth and refocus call it before using a grid. Returns
     whether the grid is checked: the frame shows its lattice, or the grid was calibrated on the
     file ``frames_path`` itself; else the stage says so (:func:`warn_unchecked`) and records
-    it. Where no lattice shows, the grid is still refused when the frames' micro-images
-    repeat each other's content best on another lattice (:func:`match_misfit`, the judge
-    calibrate confirms a start grid with)."""
+    it."""
     shows, misfit = lattice_misfit(frame, grid, for_depth=for_depth)
-    if not shows and frames_path is not None:
-        shows = sha256_file(frames_path) in measured_on(grid_path)
-    if not shows and not misfit:
-        misfit = match_misfit(frame, grid, for_depth=for_depth)
     if misfit:
         raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
                          "`plenocli calibrate` on a white image (or these frames)")
+    if not shows and frames_path is not None:
+        shows = sha256_file(frames_path) in measured_on(grid_path)
     return shows
 
 
