@@ -108,18 +108,14 @@ def rebuild_partly_clipped(rgb: np.ndarray, frame: np.ndarray, pattern: str, gai
              / np.maximum(np.where(known, ratios, 0).sum(axis=1), 1e-12))
     darkest = np.where(known, values * gains, np.inf).min(axis=1, keepdims=True) / gains
     floor = np.maximum(floor[partly], darkest)
-    # two unknowns from one measurement: the surroundings' colour where it explains the
-    # clipping (both clipped channels at or above their floors: an orange surface whose red and
-    # green clipped over its measured blue), else grey at the measured level, the clipped
-    # channels at one white-balanced floor (each at its own, they are as unequal as the gains:
-    # pink where red and green clipped)
+    # two unknowns from one measurement: grey at the measured level, the clipped channels at
+    # one white-balanced floor, the highest of theirs (each at its own, they are as unequal as
+    # the gains: pink where red and green clipped over blue)
     alone = known.sum(axis=1) == 1
-    explained = (np.where(known, np.inf, scale[:, None] * ratios) >= floor).all(axis=1)
-    grey = alone & ~explained
-    ratios[grey] = 1.0 / gains
-    scale[grey] = np.where(known[grey], values[grey] * gains, 0).sum(axis=1)
+    ratios[alone] = 1.0 / gains
+    scale[alone] = np.where(known[alone], values[alone] * gains, 0).sum(axis=1)
     shared = np.where(known, 0, floor * gains).max(axis=1, keepdims=True) / gains
-    floor = np.where(known | ~grey[:, None], floor, np.maximum(floor, shared))
+    floor = np.where(known | ~alone[:, None], floor, np.maximum(floor, shared))
     rebuilt = np.where(known, values, np.maximum(scale[:, None] * ratios, floor))
     region[where[0][partly], where[1][partly]] = rebuilt
     if estimated is not None:
