@@ -50,7 +50,7 @@ def run(input: str, output: str, *, overscan: str = "auto", smooth: int = 0, gua
     origin = [origin0[0] + top + row0, origin0[1] + left + col0]
     # where the sensor's active area starts: an ideal N x N sensor's micro-image (0, 0), which
     # sai needs to know once --crop has moved the origin into the micro-images
-    active_origin = meta.get("active_origin") or [origin0[0] + top, origin0[1] + left]
+    active_origin = [origin0[0] + top, origin0[1] + left]  # bias reads decode's frames only
     new_cfa = shift_pattern(cfa, top + row0, left + col0)
     params = dict(overscan=overscan, smooth=smooth, guard=guard, crop=crop)
     record = stage_record("bias", params, {"input": input})
