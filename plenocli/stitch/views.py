@@ -221,12 +221,13 @@ def highpass(image: np.ndarray) -> np.ndarray:
     return np.where(valid, img - blur, 0).astype(np.float32)
 
 
-def erode(mask: np.ndarray, iterations: int) -> np.ndarray:
-    """``scipy.ndimage.binary_erosion(mask, iterations=...)`` (the 4-neighbour cross, outside
-    the array False), by OpenCV: the same pixels, ten times faster."""
+def erode(mask: np.ndarray, iterations: int, *, outside: bool = False) -> np.ndarray:
+    """``scipy.ndimage.binary_erosion(mask, iterations=..., border_value=outside)`` (the
+    4-neighbour cross; ``outside``: whether the pixels beyond the array count as True), by
+    OpenCV: the same pixels, ten times faster."""
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     return cv2.erode(np.ascontiguousarray(mask).view(np.uint8), cross, iterations=iterations,
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
+                     borderType=cv2.BORDER_CONSTANT, borderValue=int(outside)).view(bool)
 
 
 def valid_eroded(view: np.ndarray) -> np.ndarray:
