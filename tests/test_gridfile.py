@@ -192,3 +192,26 @@ def test_lens_rows_must_be_calibrates_own(listed):
                                           listed_grid.offset_xy, centres_xy=rows[listed],
                                           indices=idx))
     assert (found is None) == (listed != "moved"), found
+
+
+def test_a_record_vouches_only_for_the_lens_grid_its_stage_wrote(tmp_path):
+    """audit 19 W2: where the frames show no lattice, a grid is used only as calibrate or
+    simulate wrote it (its record's sha256 of the lens_grid section). A pitch scaled by 1 %
+    and saved again, a record of no measuring stage, or an XML is not vouched for; the
+    residuals beside the grid and line ends (CRLF) may change."""
+    path = tmp_path / "grid.yaml"
+    gridfile.write_grid(path, _grid(), {"stage": "calibrate"}, extra={"residuals": {"n": 1}})
+    assert gridfile.vouched_by(path) == ("calibrate", "")
+    text = path.read_text()
+    (tmp_path / "crlf.yaml").write_bytes(
+        text.replace("n: 1", "n: 2").replace("\n", "\r\n").encode())
+    assert gridfile.vouched_by(tmp_path / "crlf.yaml")[0] == "calibrate"
+    doc = yaml.safe_load(text)
+    doc["lens_grid"]["pitch_px"] *= 1.01
+    (tmp_path / "scaled.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    stage, why = gridfile.vouched_by(tmp_path / "scaled.yaml")
+    assert stage is None and "changed since `plenocli calibrate` wrote it" in why
+    gridfile.write_grid(tmp_path / "made.yaml", _grid(), {"stage": "refocus"})
+    assert gridfile.vouched_by(tmp_path / "made.yaml")[0] is None
+    (tmp_path / "g.xml").write_text("<RayCalibData></RayCalibData>\n")
+    assert "XML" in gridfile.vouched_by(tmp_path / "g.xml")[1]

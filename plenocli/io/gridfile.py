@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from pathlib import Path
@@ -21,7 +22,8 @@ _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
                extra: dict | None = None, protect: tuple = ()) -> None:
-    """Write ``grid`` as YAML; ``extra`` (e.g. residuals) is stored beside it."""
+    """Write ``grid`` as YAML; ``extra`` (e.g. residuals) is stored beside it. The record holds
+    the sha256 of the ``lens_grid`` section as written (:func:`vouched_by`)."""
     lens_grid = grid.to_dict(lens_rows=False)
     text = _dump({"lens_grid": lens_grid})
     if grid.centres_xy is not None:
@@ -31,8 +33,9 @@ def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
             f"    - [{i}, {j}, {x:.5f}, {y:.5f}]\n"
             for (i, j), (x, y) in zip(np.asarray(grid.indices).tolist(),
                                       np.asarray(grid.centres_xy).tolist(), strict=True))
+    record = {**provenance, GRID_SHA256: _section_sha256(text)}
     # numpy scalars from the calibration (a float64 pitch) as plain numbers: YAML-safe dump
-    text += _dump(json_safe({**(extra or {}), "provenance": provenance}))
+    text += _dump(json_safe({**(extra or {}), "provenance": record}))
     write_text(path, text, protect=protect)
 
 
@@ -92,21 +95,59 @@ def measured_on(path: str | os.PathLike) -> set[str]:
     """The sha256 of the images a YAML grid was calibrated on (its record's inputs), empty for
     an XML or a grid of no record: a grid measured on the very frames it is used on is checked
     by construction."""
-    try:
-        text = read_text(Path(path))
-    except (OSError, InputError):
-        return set()
-    start = text.find("\nprovenance:")
-    if start < 0:
-        return set()
-    try:
-        record = load_yaml(text[start:]).get("provenance") or {}
-    except (DocumentError, AttributeError):
-        return set()
-    if not isinstance(record, dict) or record.get("stage") != "calibrate":
+    _, record = _record(path)
+    if record.get("stage") != "calibrate":
         return set()
     return {str(i.get("sha256")) for i in record.get("inputs") or []
             if isinstance(i, dict) and i.get("sha256")}
+
+
+# The record's checksum of the lens_grid section, and the stages whose grids are measured
+# (calibrate, on a white or the frames) or true by construction (simulate, its own lattice).
+GRID_SHA256 = "lens_grid_sha256"
+VOUCHING_STAGES = ("calibrate", "simulate")
+_TOP_KEY = re.compile(r"\n(?=[^\s#])")
+
+
+def _section_sha256(text: str) -> str:
+    return hashlib.sha256(text.replace("\r\n", "\n").encode()).hexdigest()
+
+
+def vouched_by(path: str | os.PathLike) -> tuple[str | None, str]:
+    """(the stage whose record vouches for the YAML grid at ``path``, None when none does; why
+    not). A record vouches when a stage that measures grids or knows them (VOUCHING_STAGES)
+    wrote it and the ``lens_grid`` section is byte for byte what it wrote: its sha256 is the
+    one the record holds. An XML, a hand-made grid, or one edited since (a pitch scaled by 1 %)
+    has no record that vouches for it."""
+    text, record = _record(path)
+    if text is None or text.lstrip().startswith("<"):
+        return None, "a Raytrix XML carries no plenocli record"
+    stage = record.get("stage")
+    if stage not in VOUCHING_STAGES:
+        return None, ("its record names no stage that measured it (plenocli calibrate or "
+                      "simulate)" if record else "it has no plenocli record")
+    text = text.replace("\r\n", "\n")
+    end = _TOP_KEY.search(text, 1) if text.startswith("lens_grid:") else None
+    if end is None or record.get(GRID_SHA256) != _section_sha256(text[:end.start() + 1]):
+        return None, f"its lens_grid was changed since `plenocli {stage}` wrote it"
+    return stage, ""
+
+
+def _record(path: str | os.PathLike) -> tuple[str | None, dict]:
+    """(the text of a YAML grid, its provenance record or {}); (None, {}) for a file that is
+    not one."""
+    try:
+        text = read_text(Path(path))
+    except (OSError, InputError):
+        return None, {}
+    start = text.find("\nprovenance:")
+    if start < 0:
+        return text, {}
+    try:
+        record = load_yaml(text[start:]).get("provenance") or {}
+    except (DocumentError, AttributeError):
+        return text, {}
+    return text, record if isinstance(record, dict) else {}
 
 
 def read_grid(path: str | os.PathLike, *,

@@ -373,7 +373,7 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     used unchecked, which refocus says and records; depth and refocus vouch for it by the
     matches (its own grid: median lens confidence 0.98) and refuse a grid turned by 2 deg or
     4 % off in pitch (0.3-0.4; audit 18 W2: refocus wrote an image at correlation 0.48 with
-    the scene)."""
+    the scene) even when a record vouches for it (calibrated on another camera's white)."""
     from dataclasses import replace
 
     from plenocli.io.gridfile import read_grid, write_grid
@@ -381,9 +381,11 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     simulate("raytrix-scene", tmp_path / "sim", seed=3, rows=240, cols=320, g_true=4.5)
     frames, grid_path = tmp_path / "sim" / "frames.tif", tmp_path / "sim" / "grid.yaml"
     grid = read_grid(grid_path)
+    other_camera = {"stage": "calibrate"}
     write_grid(tmp_path / "turned.yaml", replace(grid, angle_rad=grid.angle_rad + np.radians(2)),
-               {})
-    write_grid(tmp_path / "scaled.yaml", replace(grid, pitch_px=grid.pitch_px * 1.04), {})
+               other_camera)
+    write_grid(tmp_path / "scaled.yaml", replace(grid, pitch_px=grid.pitch_px * 1.04),
+               other_camera)
     with plenocli_messages() as said:
         result = invoke("refocus", frames, "--grid", grid_path, "-o", tmp_path / "r.tif")
     assert result.exit_code == 0, result.output
@@ -401,6 +403,44 @@ def test_a_grid_the_frames_cannot_check_is_said_unchecked_and_a_wrong_one_refuse
     own = invoke("depth", frames, "--grid", grid_path, "-o", tmp_path / "d.tif")
     assert own.exit_code == 0, own.output
     assert tiffio.read_meta(tmp_path / "d.tif")["depth"]["grid_checked"] is False
+
+
+def test_a_grid_the_frames_cannot_check_is_used_only_as_calibrate_or_simulate_wrote_it(tmp_path):
+    """audit 19 W2: on frames that show no lattice (no vignetting) a grid 1 % off in pitch was
+    used: depth > 0.5 wrong in g on 17-35 % of a plane at g = 4, refocus at correlation 0.76
+    with the true grid's; its micro-images match their neighbours about as clearly as on the
+    true grid. Such a grid is used only as the stage that measured or made it wrote it: scaled
+    by 0.5-2 % or turned 0.5 deg and saved again, it is refused in one line, by both commands
+    and by `run`; the file as simulate wrote it is used."""
+    import yaml
+
+    simulate("raytrix-scene", tmp_path / "sim", seed=3, rows=240, cols=320, g_true=4.5)
+    frames, grid_path = tmp_path / "sim" / "frames.tif", tmp_path / "sim" / "grid.yaml"
+    edits = {f"pitch{scale}": ("pitch_px", scale) for scale in (0.995, 1.01, 0.985, 1.02)}
+    edits["turned"] = ("angle_rad", None)
+    for name, (key, scale) in edits.items():
+        doc = yaml.safe_load(grid_path.read_text())
+        lens_grid = doc["lens_grid"]
+        lens_grid[key] = (lens_grid[key] * scale if scale else
+                          lens_grid[key] + float(np.radians(0.5)))
+        lens_grid.pop("angle_deg", None)
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    out = tmp_path / "d.tif"
+    for name in edits:
+        for command in ("depth", "refocus"):
+            refused = invoke(command, frames, "--grid", tmp_path / f"{name}.yaml", "-o", out)
+            assert refused.exit_code == 1, (name, command, refused.output)
+            assert "show no micro-image lattice to check" in refused.output, refused.output
+            assert "changed since `plenocli simulate` wrote it" in refused.output
+            assert len(refused.output.strip().splitlines()) == 1 and not out.exists()
+    config = tmp_path / "run.yaml"
+    config.write_text(yaml.safe_dump({"steps": {"refocus": {
+        "input": str(frames), "grid": str(tmp_path / "pitch1.01.yaml"), "g": 4.5,
+        "output": str(out)}}}))
+    refused = invoke("run", config)
+    assert refused.exit_code == 1 and "nothing vouches for it" in refused.output
+    assert not out.exists()
+    assert invoke("depth", frames, "--grid", grid_path, "-o", out).exit_code == 0
 
 
 @pytest.mark.parametrize("kind, views, what", [

@@ -230,7 +230,7 @@ def test_frames_with_margins_are_cropped_to_the_grid_image(scene, tmp_path):
     on_sensor = LensGrid(pitch_px=grid.pitch_px, angle_rad=grid.angle_rad,
                          offset_xy=grid.offset_xy, image_shape=grid.image_shape,
                          sensor_origin=(top, left))
-    write_grid(tmp_path / "grid.yaml", on_sensor, {})
+    write_grid(tmp_path / "grid.yaml", on_sensor, {"stage": "simulate"})  # the truth, moved
     tiffio.write_image(tmp_path / "padded.tif", padded,
                        {**meta, "origin": [0, 0],
                         "active_area": [top, left, top + frames.shape[1], left + frames.shape[2]]})

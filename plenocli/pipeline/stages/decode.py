@@ -57,4 +57,4 @@ def _check_calib(calib: str, data, meta: dict) -> None:
 
     framing = frame_grid(calib, meta, data.shape[1:])
     check_fits(sensor_grey(framing.crop(data[:1]).astype("float32"), mosaic=bool(framing.cfa)),
-               framing.grid, calib)
+               framing.grid, calib, stored_only=True)
