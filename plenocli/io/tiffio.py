@@ -242,7 +242,8 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     if whites and data.dtype.kind in "ui" and None in whites:  # null: a float image's only
         raise InputError(f"{p}: white_level {whites!r} names no level for integer samples; the "
                          "file was edited or damaged: decode the capture again")
-    if whites and data.dtype.kind in "ui" and max(whites) > np.iinfo(data.dtype).max:
+    # compared as stored (a float64): 2^64 - 1 is 2^64 there, as decode recorded it
+    if whites and data.dtype.kind in "ui" and max(whites) > float(np.iinfo(data.dtype).max):
         raise InputError(f"{p}: white level {max(whites):g} is beyond what its {data.dtype} "
                          "samples can reach, so clipped pixels would pass as light; the file was "
                          "edited or damaged: decode the capture again")
