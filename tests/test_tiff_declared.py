@@ -87,6 +87,14 @@ def test_the_white_of_wide_samples_survives_decode_bias_and_flat(tmp_path, dtype
     np.testing.assert_array_equal(biased[10:], frame[10:].astype(np.float64) - 100)
 
 
+def test_a_white_beyond_32_bit_samples_is_refused_in_all_its_digits(tmp_path):
+    """audit 20 M2's class: 'white level 4.29497e+09 is beyond what its uint32 samples can
+    reach (4.29497e+09)' contradicted itself."""
+    tifffile.imwrite(tmp_path / "u.tif", np.full((8, 8), 7, np.uint32), photometric="minisblack")
+    with pytest.raises(InputError, match=r"white level 4294967296 .*can reach \(4294967295\)"):
+        raw.decode(tmp_path / "u.tif", white=2.0 ** 32)
+
+
 def test_max_sample_value_is_the_white_and_samples_past_it_are_refused(tmp_path):
     frame = np.random.default_rng(2).integers(0, 16384, (40, 50)).astype(np.uint16)
     tifffile.imwrite(tmp_path / "m.tif", frame, photometric="minisblack",
