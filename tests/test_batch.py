@@ -311,6 +311,19 @@ def test_a_capture_is_named_as_given_and_a_file_by_two_names_runs_once(shoot, tm
     assert len(said) == 1 and "b.dng" in said[0] and "c.dng" in said[0] and "'a'" in said[0]
 
 
+def test_a_capture_in_a_link_loop_is_said_in_one_line(shoot, tmp_path):
+    """A capture that is a symbolic-link loop was an 'internal error: RuntimeError' (a loop in
+    its folder stopped the batch so); now its step says so, or the batch before any work."""
+    _, config, _ = shoot
+    (tmp_path / "loop.dng").symlink_to("loop.dng")
+    report = run_batch(config, [tmp_path / "loop.dng"], out=tmp_path / "o", dry_run=True)
+    assert "a symbolic link loop" in report.results[0].detail
+    (tmp_path / "la").symlink_to("lb")
+    (tmp_path / "lb").symlink_to("la")
+    with pytest.raises(InputError, match="its folder is a symbolic-link loop"):
+        expand_inputs([str(tmp_path / "la" / "x.dng")])
+
+
 def test_a_glob_that_matches_the_batchs_own_outputs_leaves_them_out(tmp_path):
     # audit 8 E12: the second run took the first run's outputs under --out for captures
     config, captures = make_shoot(tmp_path, 2, corrupt=None)

@@ -86,7 +86,11 @@ def capture_path(path: str | Path) -> Path:
     """``path`` with its folder's real path and its own name as given: ``{name}`` is the file
     name the user gave (a link's, not its target's), and a worker elsewhere finds the folder."""
     path = Path(path)
-    return path.parent.resolve() / path.name
+    try:
+        return path.parent.resolve() / path.name
+    except RuntimeError as err:  # Python 3.11 says a symbolic-link loop so
+        raise InputError(f"capture {path}: its folder is a symbolic-link loop; give the "
+                         "capture's real folder") from err
 
 
 def _one_name_per_file(paths: Sequence[Path]) -> list[Path]:
