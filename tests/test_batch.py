@@ -284,6 +284,46 @@ def test_expand_inputs(tmp_path):
         expand_inputs([str(tmp_path / "a.dng"), str(tmp_path / "sub" / "a.dng")])
 
 
+def test_a_capture_is_named_as_given_and_a_file_by_two_names_runs_once(shoot, tmp_path,
+                                                                        caplog):
+    """audit 20 M4: a capture given through a link took its target's {name}, and a link in the
+    glob of its target vanished without a word (a hard link ran twice)."""
+    folder, config, captures = shoot
+    keep = tmp_path / "keepers"
+    keep.mkdir()
+    (keep / "best.dng").symlink_to(captures[0])
+    got = expand_inputs([str(keep / "*.dng")])
+    assert got == [keep.resolve() / "best.dng"]
+    report = run_batch(config, got, out=tmp_path / "o", dry_run=True)
+    assert [r.name for r in report.results] == ["best"]
+    steps = read_template(config).steps(capture=got[0], out=tmp_path / "o", only="per-capture")
+    assert steps[-1].params["output"] == str((tmp_path / "o" / "best" / "views.tif").resolve())
+    shoot2 = tmp_path / "shoot2"
+    shoot2.mkdir()
+    (shoot2 / "a.dng").write_bytes(captures[0].read_bytes())
+    (shoot2 / "b.dng").symlink_to("a.dng")
+    os.link(shoot2 / "a.dng", shoot2 / "c.dng")
+    (shoot2 / "d.dng").write_bytes(captures[0].read_bytes())  # a copy is a capture of its own
+    with caplog.at_level("WARNING", logger="plenocli"):
+        got = expand_inputs([str(shoot2 / "*.dng"), str(keep / "best.dng")])
+    assert [p.name for p in got] == ["a.dng", "d.dng", "best.dng"]
+    said = [r.getMessage() for r in caplog.records if "same file" in r.getMessage()]
+    assert len(said) == 1 and "b.dng" in said[0] and "c.dng" in said[0] and "'a'" in said[0]
+
+
+def test_a_capture_in_a_link_loop_is_said_in_one_line(shoot, tmp_path):
+    """A capture that is a symbolic-link loop was an 'internal error: RuntimeError' (a loop in
+    its folder stopped the batch so); now its step says so, or the batch before any work."""
+    _, config, _ = shoot
+    (tmp_path / "loop.dng").symlink_to("loop.dng")
+    report = run_batch(config, [tmp_path / "loop.dng"], out=tmp_path / "o", dry_run=True)
+    assert "a symbolic link loop" in report.results[0].detail
+    (tmp_path / "la").symlink_to("lb")
+    (tmp_path / "lb").symlink_to("la")
+    with pytest.raises(InputError, match="its folder is a symbolic-link loop"):
+        expand_inputs([str(tmp_path / "la" / "x.dng")])
+
+
 def test_a_glob_that_matches_the_batchs_own_outputs_leaves_them_out(tmp_path):
     # audit 8 E12: the second run took the first run's outputs under --out for captures
     config, captures = make_shoot(tmp_path, 2, corrupt=None)

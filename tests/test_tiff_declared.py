@@ -56,6 +56,45 @@ def test_the_white_of_signed_samples_is_the_largest_they_hold(tmp_path, dtype):
     assert raw.decode(tmp_path / "s.tif")[1]["white_level"] == [float(np.iinfo(dtype).max)]
 
 
+@pytest.mark.parametrize("dtype", [np.uint64, np.int64, np.uint32, np.int32])
+def test_the_white_of_wide_samples_survives_decode_bias_and_flat(tmp_path, dtype):
+    """audit 20 W1: decode recorded a uint64 TIFF's white 2^64 - 1 as the float 2^64 (int64:
+    2^63) and bias refused decode's own output as 'edited or damaged'. The white is compared
+    as it is stored, and the clipped samples still read as clipped at every stage."""
+    from click.testing import CliRunner
+
+    from plenocli.cli.main import cli
+    from plenocli.io.tiffio import read_image
+
+    frame = (np.arange(40 * 50).reshape(40, 50) % 3000 + 1000).astype(dtype)
+    frame[3:6, 4:8] = np.iinfo(dtype).max
+    tifffile.imwrite(tmp_path / "s.tif", frame, photometric="minisblack")
+    tifffile.imwrite(tmp_path / "w.tif", np.full((40, 50), 20000, dtype), photometric="minisblack")
+    for name in ("s", "w"):
+        for args in (["decode", f"{name}.tif", "--cfa", "RGGB", "--black", "100",
+                      "-o", f"d{name}.tif"],
+                     ["bias", f"d{name}.tif", "--overscan", "none", "-o", f"b{name}.tif"]):
+            done = CliRunner().invoke(cli, [str(tmp_path / a) if a.endswith(".tif") else a
+                                            for a in args])
+            assert done.exit_code == 0, done.output
+    done = CliRunner().invoke(cli, ["flat", str(tmp_path / "bs.tif"), "--white",
+                                    str(tmp_path / "bw.tif"), "-o", str(tmp_path / "f.tif")])
+    assert done.exit_code == 0, done.output
+    for out in ("bs.tif", "f.tif"):
+        data = read_image(tmp_path / out)[0][0]
+        assert np.isnan(data).sum() == 12  # the clipped samples, and only they
+    biased = read_image(tmp_path / "bs.tif")[0][0]
+    np.testing.assert_array_equal(biased[10:], frame[10:].astype(np.float64) - 100)
+
+
+def test_a_white_beyond_32_bit_samples_is_refused_in_all_its_digits(tmp_path):
+    """audit 20 M2's class: 'white level 4.29497e+09 is beyond what its uint32 samples can
+    reach (4.29497e+09)' contradicted itself."""
+    tifffile.imwrite(tmp_path / "u.tif", np.full((8, 8), 7, np.uint32), photometric="minisblack")
+    with pytest.raises(InputError, match=r"white level 4294967296 .*can reach \(4294967295\)"):
+        raw.decode(tmp_path / "u.tif", white=2.0 ** 32)
+
+
 def test_max_sample_value_is_the_white_and_samples_past_it_are_refused(tmp_path):
     frame = np.random.default_rng(2).integers(0, 16384, (40, 50)).astype(np.uint16)
     tifffile.imwrite(tmp_path / "m.tif", frame, photometric="minisblack",

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from plenocli.errors import InputError, OptionError, library_words, not_a_file
+from plenocli.errors import InputError, OptionError, library_words, not_a_file, numbers
 from plenocli.io import dngtags, rawmeta, tiffio
 from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_image
 from plenocli.model import orientation as turns
@@ -206,15 +206,15 @@ def _check_levels(path, blacks: list, whites: list, dtype, *, given: tuple = (),
         if not (np.all(np.isfinite(low)) and np.all(low >= 0)):
             raise InputError(f"{path}: black level {black} must be finite and >= 0 DN "
                              "(--black)")
-        if white > top or low.max() >= top:
-            level = "white" if white > top else "black"
-            value = white if white > top else low.max()
-            raise InputError(f"{path}: {level} level {value:g}{source} is beyond what its "
-                             f"{label} can reach ({top:g}); give a level "
+        if white > top or low.max() >= top:  # a black at the top leaves no light above it
+            level, value, where = (("white", white, "beyond") if white > top else
+                                   ("black", low.max(), "not below"))
+            raise InputError(f"{path}: {level} level {numbers([value])}{source} is {where} what "
+                             f"its {label} can reach ({numbers([top])}); give a level "
                              "within the samples' range")
         if not white > low.max():  # also refuses NaN
-            raise InputError(f"{path}: white level {white:g} must be above the black level "
-                             f"{low.max():g} DN{source}")
+            raise InputError(f"{path}: white level {numbers([white])} must be above the black "
+                             f"level {numbers([low.max()])} DN{source}")
 
 
 def _check_some_light(path, frames: np.ndarray, meta: dict, *, given: tuple = ()) -> None:

@@ -35,7 +35,7 @@ import numpy as np
 import tifffile
 
 from plenocli import __version__
-from plenocli.errors import InputError, library_words, not_a_file, plain_words
+from plenocli.errors import InputError, library_words, not_a_file, numbers, plain_words
 from plenocli.io.atomic import atomic_path
 from plenocli.io.tiffsegments import (  # noqa: F401 (the readers' checks, used via tiffio)
     MAX_PAGE_PIXELS,
@@ -242,10 +242,11 @@ def read_image(path: str | os.PathLike) -> tuple[np.ndarray, dict]:
     if whites and data.dtype.kind in "ui" and None in whites:  # null: a float image's only
         raise InputError(f"{p}: white_level {whites!r} names no level for integer samples; the "
                          "file was edited or damaged: decode the capture again")
-    if whites and data.dtype.kind in "ui" and max(whites) > np.iinfo(data.dtype).max:
-        raise InputError(f"{p}: white level {max(whites):g} is beyond what its {data.dtype} "
-                         "samples can reach, so clipped pixels would pass as light; the file was "
-                         "edited or damaged: decode the capture again")
+    # compared as stored (a float64): 2^64 - 1 is 2^64 there, as decode recorded it
+    if whites and data.dtype.kind in "ui" and max(whites) > float(np.iinfo(data.dtype).max):
+        raise InputError(f"{p}: white level {numbers([max(whites)])} is beyond what its "
+                         f"{data.dtype} samples can reach, so clipped pixels would pass as light; "
+                         "the file was edited or damaged: decode the capture again")
     check_no_infinity(p, data, meta.get("views"))
     return data, _camera_metadata(p, meta)
 

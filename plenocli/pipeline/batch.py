@@ -33,6 +33,7 @@ from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, OptionError, PlenocliError, raise_terminated
 from plenocli.io.atomic import process_alive
+from plenocli.pipeline.captures import capture_path
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
 from plenocli.pipeline.validators import MAX_TIMEOUT_S
@@ -153,7 +154,7 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
         raise InputError("no captures given; pass --inputs 'FOLDER/*.dng'")
     # where this process runs: a Dask worker runs in its own folder, perhaps on another machine
     config = str(Path(config).resolve())
-    captures = [str(Path(c).resolve()) for c in captures]
+    captures = [str(capture_path(c)) for c in captures]  # a link's name, not its target's
     out = None if out is None else str(Path(out).resolve())
     template.steps(capture=captures[0], out=out)  # config errors once, not once per capture
     template.check_captures_apart(captures, out=out)

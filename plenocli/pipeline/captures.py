@@ -38,7 +38,8 @@ def expand_inputs(patterns: Sequence[str], *,
                   out: str | None = None) -> list[Path]:
     """Capture paths from glob patterns, plain paths and ``@LIST`` files (one path a line).
 
-    Order is kept (globs sorted), duplicates dropped; a pattern that matches nothing is an error.
+    Order is kept (globs sorted), duplicates dropped (a file reached by two names, through a
+    link, with a warning); a pattern that matches nothing is an error.
     With the batch's ``template`` (and its ``out`` root), a glob's matches that the batch writes
     (a shared step's output, or a capture's output, in or under its folder) are left out; a
     function giving the template is called only when a glob matched (the config is read then).
@@ -70,7 +71,8 @@ def expand_inputs(patterns: Sequence[str], *,
     if template is not None and any(is_glob for _, _, is_glob in found):
         found = _without_outputs(found, template if isinstance(template, Template)
                                  else template(), out)
-    unique = list(dict.fromkeys(p.resolve() for _, files, _ in found for p in files))
+    unique = _one_name_per_file(dict.fromkeys(capture_path(p) for _, files, _ in found
+                                              for p in files))
     stems: dict[str, Path] = {}
     for p in unique:
         if p.stem in stems:
@@ -80,11 +82,54 @@ def expand_inputs(patterns: Sequence[str], *,
     return unique
 
 
+def capture_path(path: str | Path) -> Path:
+    """``path`` with its folder's real path and its own name as given: ``{name}`` is the file
+    name the user gave (a link's, not its target's), and a worker elsewhere finds the folder."""
+    path = Path(path)
+    try:
+        return path.parent.resolve() / path.name
+    except RuntimeError as err:  # Python 3.11 says a symbolic-link loop so
+        raise InputError(f"capture {path}: its folder is a symbolic-link loop; give the "
+                         "capture's real folder") from err
+
+
+def _one_name_per_file(paths: Sequence[Path]) -> list[Path]:
+    """``paths`` with a file reached by several names (a symbolic or hard link beside its
+    target) kept once, under its first name, with a warning naming the others: processing it
+    twice would give the same results twice under two names."""
+    first: dict[object, Path] = {}
+    twins: dict[Path, list[Path]] = {}
+    for path in paths:
+        try:
+            info = path.stat()
+        except OSError:  # missing or unreadable: its decode step says so, under its own name
+            key: object = path
+        else:
+            key = (info.st_dev, info.st_ino)
+        if key in first:
+            twins.setdefault(first[key], []).append(path)
+        else:
+            first[key] = path
+    for kept, others in twins.items():
+        log.warning("captures %s are the same file as %s (linked): processed once, as %r",
+                    ", ".join(_as_given(p) for p in others), _as_given(kept), kept.stem)
+    return list(first.values())
+
+
+def _as_given(path: Path) -> str:
+    """``path`` relative to the working folder when inside it, its links not followed."""
+    try:
+        return str(path.relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
 def _without_outputs(found: list[tuple[str, list[Path], bool]], template: Template,
                      out: str | None) -> list[tuple[str, list[Path], bool]]:
     """``found`` with the files this batch writes for the captures found left out of the
     globs' matches; a glob that matches only files a batch of any captures writes is refused."""
-    candidates = list(dict.fromkeys(str(p.resolve()) for _, files, _ in found for p in files))
+    candidates = list(dict.fromkeys(str(capture_path(p)) for _, files, _ in found
+                                    for p in files))
     made = template.outputs_of(candidates, out=out)
     written = template.written_by(out=out)
 

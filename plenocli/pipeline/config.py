@@ -132,7 +132,6 @@ class Template:
         _check_files(self.path, steps)
         return steps
 
-
     def _values(self, capture: str | Path | None, out: str | Path | None) -> dict[str, str]:
         """What the placeholders stand for."""
         values = {}
@@ -141,7 +140,8 @@ class Template:
             if name in ("", ".", ".."):  # {out}/{name}/x would leave {out}, onto another file
                 raise InputError(f"capture {capture}: its name {name!r} cannot name a folder; "
                                  "rename the file")
-            values = {"capture": str(Path(capture).resolve()), "name": name}
+            values = {"capture": str(Path(capture).parent.resolve() / Path(capture).name),
+                      "name": name}  # the folder resolved (for workers), the name as given
         base = self.path.resolve().parent
         root = out if out is not None else (str(base / self.out) if self.out else None)
         if root is not None:

@@ -10,6 +10,7 @@ without a readable record (made by another program, or by an older plenocli) rer
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -57,6 +58,8 @@ def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
     for step in steps:
         for p in step.input_paths():
             if not p.exists() and not _within(p, made):
+                if os.path.islink(p):  # a loop, or a link to nothing: say where it leads
+                    raise ConfigError(f"step {step.name!r}: {not_a_file(p)}")
                 raise ConfigError(f"step {step.name!r}: input {p} does not exist and no earlier "
                                   "step makes it")
             if p.exists() and not (p.is_file() or p.is_dir()) and not _within(p, made):
@@ -73,7 +76,10 @@ def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
 
 def _within(path: Path, made: set[Path]) -> bool:
     """Whether ``path`` is one of ``made`` or inside one of them (a folder output)."""
-    resolved = path.resolve()
+    try:
+        resolved = path.resolve()
+    except (OSError, RuntimeError):  # a symbolic-link loop: nothing a step makes
+        return False
     return resolved in made or any(parent in made for parent in resolved.parents)
 
 
