@@ -20,6 +20,10 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
     when its record vouches for it (:func:`unvouched`), else refused; then the stage says it
     is used unchecked (:func:`warn_unchecked`) and records it. ``stored_only``: the grid is
     only stored with the frames, not used (decode --calib): nothing to vouch for."""
+    if not stored_only and not np.isfinite(frame).any():
+        # nothing under the grid to check it with, or to use it on: the frames are the fault
+        raise InputError(f"{frames_path or 'the frames'}: no valid pixel under the grid (all "
+                         "NaN: masked or clipped); check how the frames were made")
     shows, misfit = lattice_misfit(frame, grid, for_depth=for_depth)
     if misfit:
         raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
