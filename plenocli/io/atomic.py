@@ -310,11 +310,41 @@ def _temporary_prefix(dest: Path) -> str:
     return f".{short_name(dest.name)}.{_HOST}-"
 
 
+def check_names_fit(out: Path) -> None:
+    """InputError when a name in the path ``out`` (or the temporary plenocli writes beside it)
+    is longer than the file system takes: what :func:`check_outputs` says before any work,
+    checked alone where the outputs are only planned (``--dry-run``, ``--print-make``)."""
+    out = Path(out)
+    folder = out.parent
+    while len(os.fsencode(folder.name)) <= NAME_MAX and not _exists(folder):
+        if folder == folder.parent:
+            break
+        folder = folder.parent
+    _check_name_lengths(out, folder, str(out))
+
+
+def _exists(path: Path) -> bool:
+    try:
+        return path.exists()
+    except OSError:  # a name too long to look up: nothing by that name exists
+        return False
+
+
+def _check_name_lengths(out: Path, folder: Path, shown: str) -> None:
+    name_max = NAME_MAX
+    with contextlib.suppress(OSError, ValueError):
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+    temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
+    names = [*out.parent.parts, out.name, temporary]
+    if any(len(os.fsencode(p)) > name_max for p in names):
+        raise InputError(f"cannot write {shown}: a name in it is longer than this file system "
+                         f"takes ({name_max} bytes); shorten it")
+
+
 def _check_folder(out: Path, *, shown: str | None = None) -> None:
     shown = shown or str(out)
-    name_max = NAME_MAX
     folder = out.parent
-    while not folder.exists():
+    while not _exists(folder):
         if folder.is_symlink():
             raise InputError(f"cannot write {shown}: folder {folder} is a symbolic link to "
                              f"{os.readlink(folder)}, which does not exist; make that folder "
@@ -324,13 +354,7 @@ def _check_folder(out: Path, *, shown: str | None = None) -> None:
         folder = folder.parent
     if folder.exists() and not folder.is_dir():
         raise InputError(f"cannot write {shown}: {folder} is a file, not a folder")
-    with contextlib.suppress(OSError, ValueError):
-        name_max = os.pathconf(folder, "PC_NAME_MAX")
-    temporary = f"{_temporary_prefix(out)}{os.getpid()}.xxxxxxxx.part"
-    names = [*out.parent.parts, out.name, temporary]
-    if any(len(os.fsencode(p)) > name_max for p in names):
-        raise InputError(f"cannot write {shown}: a name in it is longer than this file system "
-                         f"takes ({name_max} bytes); shorten it")
+    _check_name_lengths(out, folder, shown)
     if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(f"cannot write {shown}: folder {folder} is not writable "
                          "(permission or a read-only file system); choose another folder")

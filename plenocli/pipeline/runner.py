@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from plenocli.errors import ConfigError, InputError, PlenocliError, not_a_file, os_error_message
-from plenocli.io.atomic import check_outputs
+from plenocli.io.atomic import check_names_fit, check_outputs
 from plenocli.io.folderlock import folders_locked
 from plenocli.pipeline.config import Step
 from plenocli.pipeline.kinds import Planned, check_kinds, planned_outputs
@@ -69,6 +69,11 @@ def check_inputs(steps: list[Step], upstream: Iterable[Path] = ()) -> None:
             check_kinds(step.stage.name, inputs, planned)
         except InputError as err:
             raise ConfigError(f"step {step.name!r}: {err}") from err
+        for out in step.output_paths():
+            try:
+                check_names_fit(out)
+            except InputError as err:
+                raise ConfigError(f"step {step.name!r}: {err}") from err
         made.update(p.resolve() for p in step.output_paths())
         planned.update(planned_outputs(step.stage.name, step.stage.by_role(
             step.params, step.stage.outputs), inputs, planned))

@@ -532,6 +532,28 @@ def test_an_output_name_of_255_bytes_is_written_with_its_record(inputs, tmp_path
     assert_one_line(too_long, 1, ("too long",))
 
 
+def test_a_name_too_long_is_refused_alike_by_run_dry_run_print_make_and_batch(inputs, tmp_path):
+    """Audit 21 I1/M2: run refused a step output whose name the file system cannot take, but
+    --dry-run and --print-make passed it (exit 0) and batch failed the capture as 'internal
+    error: OSError: File name too long' (its up-to-date check looked the name up)."""
+    out = tmp_path / "out"
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  bias:\n    input: {inputs / 'frames.tif'}\n"
+                      f"    output: {out / ('n' * 252 + '.tif')}\n")
+    for mode in ([], ["--dry-run"], ["--print-make"]):
+        result = run_bad(inputs, out, ["run", str(config), *mode])
+        assert_one_line(result, 1, ("shorten it",))
+    template = tmp_path / "b.yaml"
+    template.write_text('steps:\n  bias: {input: "{capture}", output: "{out}/{name}/b.tif"}\n')
+    for mode in (["--dry-run"], ["-j", "1"]):
+        result = CliRunner().invoke(cli, ["batch", str(template), "--inputs",
+                                          str(inputs / "frames.tif"), "--out",
+                                          str(tmp_path / ("x" * 256)), *mode])
+        assert result.exit_code == 1, result.output
+        assert "shorten it" in result.output
+        assert "internal error" not in result.output
+
+
 def test_a_check_that_reads_an_input_an_earlier_step_makes_holds_on_the_first_run(tmp_path):
     """develop --method on colour pages is refused from what INPUT holds. Loaded before the
     run, the check could not see a file that an earlier step makes: the first run developed
