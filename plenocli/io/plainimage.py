@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.io import samplekind
+from plenocli.io import samplebits, samplekind
 from plenocli.progress import log
 
 MAX_SAID = 4096  # bytes of a codec's messages kept
@@ -29,12 +29,29 @@ PIXELS_LOST = ("premature end", "corrupt jpeg data")
 
 
 def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
-    """The pixels of a plain image as OpenCV decodes them, colour channels in RGB(A) order, a
-    grey image (or a palette of grey entries) as one plane; InputError in one line for a file
-    it cannot decode or whose samples are no light levels (``samplekind``)."""
+    """The light levels of a plain image (``read_plain_levels``) without their whites."""
+    return read_plain_levels(path, max_pixels)[0]
+
+
+def read_plain_levels(path: str | os.PathLike, max_pixels: int
+                      ) -> tuple[np.ndarray, list[tuple[float, str]] | None]:
+    """The light levels of a plain image, colour channels in RGB(A) order, a grey image (or a
+    palette of grey entries) as one plane, and the white of each of its frames where the file
+    declares fewer bits than its word holds (``samplebits``: a PNG's sBIT, a BMP's bit masks;
+    None: the word's). InputError in one line for a file that cannot be decoded or whose
+    samples are no light levels (``samplekind``)."""
+    masked = samplebits.bmp_masked(path, max_pixels)
+    if masked is not None:
+        return masked
+    data, grey = _decoded(Path(path), max_pixels)
+    return samplebits.png_levels(path, data, grey)
+
+
+def _decoded(p: Path, max_pixels: int) -> tuple[np.ndarray, bool]:
+    """The pixels as OpenCV decodes them (RGB(A) order, a grey as one plane) and whether the
+    file declares grey samples."""
     import cv2
 
-    p = Path(path)
     grey = samplekind.declared_kind(p) == "grey"
     cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
     with _codec_messages() as said:
@@ -56,10 +73,10 @@ def read_plain_image(path: str | os.PathLike, max_pixels: int) -> np.ndarray:
     for line in said:
         log.debug("%s: %s", p, line)
     if grey and data.ndim == 3:
-        return data[..., 0]  # OpenCV spreads a grey (or a grey table's entries) over B, G, R
+        return data[..., 0], grey  # OpenCV spreads a grey (or a grey table's) over B, G, R
     if data.ndim == 3 and data.shape[2] >= 3:
         data = np.concatenate([data[..., 2::-1], data[..., 3:]], axis=2)  # BGR(A) -> RGB(A)
-    return data
+    return data, grey
 
 
 def is_tiff(path: str | os.PathLike) -> bool:

@@ -23,7 +23,7 @@ import tifffile
 
 from plenocli.errors import InputError, OptionError, library_words, not_a_file, numbers
 from plenocli.io import dngtags, rawmeta, tiffio
-from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_image
+from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_levels
 from plenocli.model import orientation as turns
 from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
 from plenocli.progress import log
@@ -448,7 +448,7 @@ def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray,
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({library_words(err)}); "
                                             "the file may be truncated") from err
     else:
-        data = read_plain_image(p, tiffio.MAX_PAGE_PIXELS)
+        data, tops = read_plain_levels(p, tiffio.MAX_PAGE_PIXELS)
     if stacked:  # pages named by --frames (renamed by _apply_user_values)
         frames, views = data, [f"page{k}" for k in range(len(data))]
     elif data.ndim == 2:

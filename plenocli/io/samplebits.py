@@ -1,0 +1,163 @@
+"""How many bits of a plain image's samples carry light, as the file declares it: one rule with
+a TIFF's BitsPerSample (``tiffsegments.sample_tops``). The light levels are the samples as the
+sensor side wrote them and the white level is 2^bits - 1 (a 12-bit image: 4095), whatever
+the word the format stores them in.
+
+- PNG: the sBIT chunk gives the significant bits of each channel. The PNG standard has a writer
+  scale such samples up to the word (12-bit 4095 -> 65535, by a shift, bit replication or a
+  linear map) and a reader recover them by shifting right: every sample one of those scalings
+  writes is read shifted back. Writers that store the 12 bits as they are (0-4095 in 16-bit
+  words, as a 12-bit TIFF does) are known by a sample no scaling writes, every sample fitting
+  in its bits; the samples are then read as stored. Either way the white is 2^sBIT - 1. Samples
+  that fit neither are refused: the header and the image disagree. (A very dark image whose
+  samples fit both readings, every sample below 2^(2 sBIT - word) and a multiple of the
+  scaling, is read the standard's way.)
+- BMP: 16-bit pixels (5-5-5, or the bit masks of BI_BITFIELDS) and 32-bit pixels with bit
+  masks are read here, each channel its mask's bits (5-6-5: white 31, 63, 31; 10-10-10: 1023).
+  OpenCV shifts 5-bit samples into bytes (white 248, not 255) and reads 32-bit masks it does
+  not know as bytes; other BMPs (palettes, 24-bit, 32-bit BGRA) it reads as they are.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from plenocli.errors import InputError
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+PNG_CHANNELS = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}  # colour type -> sBIT bytes (grey, RGB, palette..)
+MAX_CHUNKS = 10_000   # sBIT precedes PLTE and IDAT: a file with more chunks before them is junk
+BI_RGB, BI_BITFIELDS, BI_ALPHABITFIELDS = 0, 3, 6
+Tops = list[tuple[float, str]]
+
+
+def png_significant_bits(path) -> tuple[list[int], int] | None:
+    """The sBIT of a PNG (one entry a channel, in the file's channel order) and its IHDR bit
+    depth; None without sBIT (or for a file whose chunks OpenCV's errors will describe)."""
+    with open(path, "rb") as fh:
+        if fh.read(8) != PNG_MAGIC:
+            return None
+        depth = colour = None
+        for _ in range(MAX_CHUNKS):
+            head = fh.read(8)
+            if len(head) < 8:
+                return None
+            length, kind = struct.unpack(">I4s", head)
+            if kind in (b"PLTE", b"IDAT", b"IEND"):
+                return None
+            body = fh.read(length) if kind in (b"IHDR", b"sBIT") else fh.seek(length, 1)
+            fh.seek(4, 1)  # CRC: libpng checks it when OpenCV decodes
+            if kind == b"IHDR" and len(body) >= 10:
+                depth, colour = body[8], body[9]
+            elif kind == b"sBIT" and depth is not None:
+                return list(body), (8 if colour == 3 else depth)
+    return None
+
+
+def png_levels(path, data: np.ndarray, grey: bool) -> tuple[np.ndarray, Tops | None]:
+    """The light levels of a PNG as OpenCV decoded it (channels last, RGB order; ``grey``: one
+    plane) and each frame's white, by its sBIT (module docstring); tops None without sBIT."""
+    found = png_significant_bits(path)
+    if found is None:
+        return data, None
+    bits, depth = found
+    word = 8 * data.dtype.itemsize
+    planes = 1 if data.ndim == 2 else min(data.shape[2], 3)
+    if not bits or any(not 0 < b <= depth for b in bits):
+        raise InputError(f"{path}: its sBIT chunk declares {', '.join(map(str, bits))} "
+                         f"significant bits for {depth}-bit samples (each in 1 to {depth}); the "
+                         "file is damaged: write it again")
+    # a grey table's entries carry the bits of R, G and B alike: its greys have the most
+    bits = [max(bits[:3])] if grey and len(bits) >= 3 else bits[:planes]
+    if len(bits) < planes or all(b == word for b in bits):
+        return data, None
+    stack = data[..., np.newaxis] if data.ndim == 2 else data[..., :planes]
+    scaled = all(_scaled_form(stack[..., c], b, word) for c, b in enumerate(bits))
+    fits = all(int(stack[..., c].max(initial=0)) < 2 ** b for c, b in enumerate(bits))
+    if not (scaled or fits):
+        raise InputError(f"{path}: samples that are neither {'/'.join(map(str, bits))}-bit "
+                         f"values nor such values scaled to {word} bits as its sBIT chunk "
+                         "declares; the header or the image is damaged: write it again")
+    if scaled:  # the standard's way: shift the scaling out
+        out = np.empty(stack.shape, data.dtype)
+        for c, b in enumerate(bits):
+            np.right_shift(stack[..., c], word - b, out=out[..., c])
+        data = out[..., 0] if data.ndim == 2 else out
+    return data, [(float(2 ** b - 1), f"{b}-bit samples (PNG sBIT {b})") for b in bits]
+
+
+def _scaled_form(plane: np.ndarray, bits: int, word: int) -> bool:
+    """Every sample one that scaling ``bits``-bit values up to ``word`` bits writes: by a shift,
+    by bit replication, or the linear map round(v (2^word - 1) / (2^bits - 1))."""
+    if bits == word:
+        return True
+    shift = word - bits
+    plane = plane.astype(np.int64)
+    original = plane >> shift
+    if np.array_equal(plane, original << shift):
+        return True
+    copied = original << shift
+    step = shift - bits
+    while step > 0:
+        copied |= original << step
+        step -= bits
+    copied |= original >> -step
+    linear = np.floor(original * ((2 ** word - 1) / (2 ** bits - 1)) + 0.5).astype(np.int64)
+    return bool(np.all((plane == copied) | (plane == linear)))
+
+
+def bmp_masked(path, max_pixels: int) -> tuple[np.ndarray, Tops] | None:
+    """A 16-bit or bit-mask BMP read by its masks: (rows, cols, 3) samples in RGB order and each
+    channel's white (2^bits - 1); None for another BMP (OpenCV reads it right)."""
+    p = Path(path)
+    with open(p, "rb") as fh:
+        head = fh.read(14 + 124 + 16)
+    if head[:2] != b"BM" or len(head) < 14 + 40:
+        return None
+    offset, size = struct.unpack_from("<II", head, 10)
+    width, height, _, bpp, compression = struct.unpack_from("<iiHHI", head, 18)
+    if not ((bpp == 16 and compression == BI_RGB)
+            or (bpp in (16, 32) and compression in (BI_BITFIELDS, BI_ALPHABITFIELDS))):
+        return None
+    if compression == BI_RGB:
+        masks = (0x7C00, 0x3E0, 0x1F)   # the format's 16-bit default: 5-5-5
+    else:
+        at = 14 + size if size < 52 else 14 + 40   # masks after a 40-byte header, else inside
+        if len(head) < at + 12:
+            raise _damaged(p, "its bit masks are cut off")
+        masks = struct.unpack_from("<III", head, at)
+    bits = [_mask_bits(p, m, bpp) for m in masks]
+    rows, cols = abs(height), width
+    if cols <= 0 or rows == 0 or rows * cols > max_pixels:
+        raise _damaged(p, f"a {width} x {height} header")
+    stride = (cols * bpp // 8 + 3) // 4 * 4
+    raw = np.fromfile(p, np.uint8, count=stride * rows, offset=offset)
+    if raw.size < stride * rows:
+        raise _damaged(p, f"{raw.size} bytes of pixels where {stride * rows} are needed")
+    words = raw.reshape(rows, stride)[:, :cols * bpp // 8].copy().view(f"<u{bpp // 8}")
+    if height > 0:   # bottom-up, as BMP stores rows unless the height is negative
+        words = words[::-1]
+    dtype = np.uint8 if max(bits) <= 8 else np.uint16
+    data = np.stack([((words & m) >> _low_bit(m)).astype(dtype) for m in masks], axis=-1)
+    return data, [(float(2 ** b - 1), f"{b}-bit samples (BMP bit mask {m:#x})")
+                  for b, m in zip(bits, masks, strict=True)]
+
+
+def _low_bit(mask: int) -> int:
+    return (mask & -mask).bit_length() - 1
+
+
+def _mask_bits(path, mask: int, bpp: int) -> int:
+    """The bits of one channel's mask: contiguous, non-empty, within the pixel."""
+    bits = mask.bit_count()
+    if not mask or mask >= 2 ** bpp or (mask >> _low_bit(mask)) != 2 ** bits - 1 or bits > 16:
+        raise _damaged(path, f"a bit mask {mask:#x} that is not one run of 1 to 16 bits "
+                       f"inside its {bpp}-bit pixels")
+    return bits
+
+
+def _damaged(path, what: str) -> InputError:
+    return InputError(f"{path}: a BMP with {what}; the file is damaged: write it again")
