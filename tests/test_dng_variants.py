@@ -381,6 +381,14 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
     "ActiveArea covering MaskedAreas": (_frame(), _with_tags(
         (50829, "I", 4, (0, 0, ROWS, COLS), True), (50830, "I", 4, (0, 0, ROWS, 8), True)),
         None, "overlaps ActiveArea"),
+    # audit 21 M1: named by the tag, not told to "decode the capture again"
+    "ActiveArea beyond the image": (_frame(), _with_tags(
+        (50829, "I", 4, (4, 8, ROWS + 6, COLS), True)), None,
+        f"ActiveArea [4, 8, {ROWS + 6}, {COLS}] is not a [top, left, bottom, right] rectangle "
+        f"inside the {COLS} x {ROWS} raw image; the DNG is damaged"),
+    "MaskedAreas empty": (_frame(), _with_tags((50829, "I", 4, (0, 8, ROWS, COLS), True),
+                                               (50830, "I", 4, (0, 0, 0, 8), True)),
+                          None, "MaskedAreas [0, 0, 0, 8] is not a [top, left, bottom, right]"),
     "float samples NaN": (_float_with(np.nan), dict(linear=True, white=1, tile=(32, 32),
                                                     compression="zlib", predictor=3),
                           None, "1 NaN or infinite samples"),

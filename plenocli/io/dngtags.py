@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import InputError
-from plenocli.io.tiffio import rects_overlap
+from plenocli.io.tiffio import inside, rects_overlap
 from plenocli.model import orientation as turns
 from plenocli.model.cfa import is_bayer
 
@@ -262,6 +262,12 @@ def areas(path, k: int, page, shape: tuple[int, int]) -> tuple[list[int], list[l
     active_list = [0, 0, *shape] if active is None else [int(v) for v in active]
     flat = [] if masked is None else [int(v) for v in masked]
     rects = [flat[i:i + 4] for i in range(0, len(flat), 4)]
+    # named by their tags here: the metadata's own check speaks of a damaged plenocli TIFF
+    for name, rect in [("ActiveArea", active_list)] + [("MaskedAreas", r) for r in rects]:
+        if not inside(rect, shape):
+            raise InputError(f"{path}: raw IFD {k}: {name} {rect} is not a [top, left, bottom, "
+                             f"right] rectangle inside the {shape[1]} x {shape[0]} raw image; "
+                             "the DNG is damaged")
     for rect in rects:
         if rects_overlap(rect, active_list):
             raise InputError(f"{path}: raw IFD {k}: MaskedAreas {rect} overlaps ActiveArea "

@@ -316,7 +316,7 @@ def check_geometry(path, meta: dict, shape: tuple[int, ...]) -> None:
     for what, area in areas:
         if area is None and what == "active_area":
             continue
-        if not _inside(area, shape[-2:]):
+        if not inside(area, shape[-2:]):
             raise InputError(f"{path}: {what} {area} is not a [top, left, bottom, right] "
                              f"rectangle inside the {shape[-1]} x {shape[-2]} image; the file "
                              "was edited or damaged: decode the capture again")
@@ -394,7 +394,9 @@ def _finite(value) -> bool:
     return _number(value) and abs(value) < float("inf")
 
 
-def _inside(area, shape) -> bool:
+def inside(area, shape) -> bool:
+    """Whether ``area`` is a [top, left, bottom, right] rectangle of whole numbers inside an
+    image of (rows, cols) ``shape``."""
     if not (isinstance(area, (list, tuple)) and len(area) == 4
             and all(isinstance(v, int) and not isinstance(v, bool) for v in area)):
         return False
