@@ -62,6 +62,9 @@ def test_relative_paths_resolve_against_the_config_folder(project, monkeypatch, 
     ("steps:\n  x:\n    stage: biass\n    input: a\n    output: b\n",
      "unknown stage 'biass' (did you mean 'bias'?)"),
     ("step:\n  bias: {}\n", "a config needs a 'steps:' mapping"),
+    # audit 21 M3: an empty mapping and an empty name were told "needs a mapping", "quote it"
+    ("steps: {}\n", "its 'steps:' mapping is empty"),
+    ('steps: {"": {stage: bias, input: a, output: b}}\n', "step name '' must not be empty"),
     ("steps:\n  bias:\n    output: b.tif\n", "missing input"),
     ("steps: [unclosed\n", "not valid YAML"),
 ])

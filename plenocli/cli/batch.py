@@ -1,14 +1,15 @@
 import click
 
 from plenocli.cli import options
-from plenocli.pipeline.validators import MAX_TIMEOUT_S, FiniteFloat, InputFile, OutputFolder
+from plenocli.pipeline.validators import MAX_TIMEOUT_S, FiniteFloat, InputFile, Int, OutputFolder
 
 
 @click.command(short_help="Run a pipeline template over many captures, in parallel.")
 @click.argument("config", type=options.Declared(InputFile()))
 @click.option("--inputs", "patterns", multiple=True, required=True, metavar="GLOB|FILE|@LIST",
               help="Captures: a quoted glob, a file, or @list.txt (one path a line); repeatable.")
-@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
+@click.option("-j", "--jobs", cls=options.DeclaredOption, type=options.Declared(Int(min=1)),
+              default=None,
               help="Worker processes on this machine [default: number of CPUs]; not with "
                    "--scheduler.")
 @click.option("--out", type=options.Declared(OutputFolder()), default=None,

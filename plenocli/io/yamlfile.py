@@ -199,6 +199,18 @@ def comment_in(text: str) -> str | None:
     return rest.strip() or None
 
 
+def comment_advice(target: str, value: str, comment: str) -> str:
+    """What to say of a shell word ``target=value`` whose end YAML reads as a ``comment``: quote
+    the value to keep it, or, when it was quoted already (quoting it again is no YAML), leave
+    the comment out or put it inside the quotes."""
+    kept = value.strip()[:-len(comment)].rstrip()
+    if kept[:1] in ("'", '"'):
+        return (f"YAML reads {comment!r} after the quoted value as a comment; leave it out "
+                f"(--set '{target}={kept}') or put it inside the quotes")
+    return (f"YAML reads {comment!r} as a comment, not as part of the value; quote the value "
+            f"to keep it (--set '{target}=\"{value}\"')")
+
+
 def _unique_pairs(pairs: list) -> dict:
     doc = {}
     for key, value in pairs:

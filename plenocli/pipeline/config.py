@@ -8,11 +8,8 @@
         stage: decode          # may be left out when the step name is a stage name
         input: white.CR2       # relative paths resolve against this file's folder
         output: out/white_frames.tif
-      bias_white:
-        stage: bias
-        input: out/white_frames.tif
-        smooth: 9
-        output: out/white_biased.tif
+      bias_white: {stage: bias, input: out/white_frames.tif, smooth: 9,
+                   output: out/white_biased.tif}
 
 The keys of a step are its stage's long option names (``mask-width`` or ``mask_width``). Unknown
 keys are errors that name the closest valid key.
@@ -43,9 +40,9 @@ from typing import Any
 
 from plenocli.errors import ConfigError, InputError, OptionError, value_words
 from plenocli.io.atomic import check_distinct
-from plenocli.io.yamlfile import DocumentError, comment_in, load_yaml
+from plenocli.io.yamlfile import DocumentError, comment_advice, comment_in, load_yaml
 from plenocli.pipeline.registry import Stage, get_stages
-from plenocli.pipeline.validators import shell_text
+from plenocli.pipeline.validators import FiniteFloat, Int, shell_text
 
 TOP_KEYS = ("description", "steps", "out")
 PER_CAPTURE = ("capture", "name")  # placeholders that make a step run once per capture
@@ -230,8 +227,10 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
         hint = ("; quote values that start with a placeholder, e.g. \"{out}/x.tif\""
                 if _PLACEHOLDER.search(text) else "")
         raise ConfigError(f"{p}: not valid YAML ({err}){hint}") from err
-    if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict) or not doc["steps"]:
+    if not isinstance(doc, dict) or not isinstance(doc.get("steps"), dict):
         raise ConfigError(f"{p}: a config needs a 'steps:' mapping of step names to stages")
+    if not doc["steps"]:
+        raise ConfigError(f"{p}: its 'steps:' mapping is empty; give it one step at least")
     for key in doc:
         if key not in TOP_KEYS:
             raise ConfigError(f"{p}: unknown top-level key {key!r}{closest(key, TOP_KEYS)}")
@@ -241,8 +240,8 @@ def read_template(path: str | Path, overrides: list[str] = ()) -> Template:
                           f"{value_words(doc['description'])}")
     for name, body in doc["steps"].items():
         if not isinstance(name, str) or not name:
-            raise ConfigError(f"{p}: step name {value_words(name)} must be text (quote it), "
-                              "e.g. 'bias2'")
+            what = "must not be empty" if isinstance(name, str) else "must be text (quote it)"
+            raise ConfigError(f"{p}: step name {value_words(name)} {what}, e.g. 'bias2'")
         if not (body is None or isinstance(body, dict)):
             raise ConfigError(f"{p}: step {name!r} must be a mapping of parameters "
                               f"(e.g. input: ..., output: ...), got {value_words(body)}")
@@ -412,9 +411,7 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
         if isinstance(parsed, Mapping):  # 'g= 2 : 8' reads as YAML's {2: 8}: no shell word
             parsed = value
         elif value != "" and (comment := comment_in(value)) is not None:
-            raise OptionError(f"--set {item!r}: YAML reads {comment!r} as a comment, not as "
-                              "part of the value; quote the value to keep it "
-                              f"(--set '{target}=\"{value}\"')")
+            raise OptionError(f"--set {item!r}: {comment_advice(target, value, comment)}")
         _check_set_value(f"--set {item!r}: step {step!r}", path, steps[step].get("stage", step),
                          norm, parsed)
         steps[step][param] = parsed
@@ -423,8 +420,8 @@ def _apply_overrides(path: Path, steps: dict, overrides) -> None:
 def _check_set_value(said: str, path: Path, stage_name: str, name: str, value: Any) -> None:
     """A --set key and value get their parameter's check now, as a flag would: a key the stage
     does not take, or a value wrong by itself, is a usage error (OptionError). Values with
-    placeholders wait to be filled per capture; a step of an unknown stage is the config's to
-    refuse."""
+    placeholders wait to be filled per capture (a number's are refused now); a step of an
+    unknown stage is the config's to refuse."""
     from plenocli.pipeline.params import convert
 
     stage = get_stages().get(stage_name)
@@ -436,6 +433,9 @@ def _check_set_value(said: str, path: Path, stage_name: str, name: str, value: A
                           f"{name.replace('_', '-')!r}{closest(name.replace('_', '-'), options)}")
     param = {p.name: p for p in stage.params}.get(name)
     if param is None or _placeholders(value):
+        if param is not None and isinstance(param.type, (Int, FiniteFloat)):  # never a number
+            raise OptionError(f"{said}: {name.replace('_', '-')} takes a number, not a capture's"
+                              " path, name or folder ({capture}, {name}, {out})")
         return
     if value is None:  # the shell has no word for "no value": null would mean the default
         raise OptionError(f"{said}: {name.replace('_', '-')} has no value (null or "

@@ -418,6 +418,12 @@ CASES = [
     ("batch-jobs-with-scheduler", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
                                    "--scheduler", "tcp://127.0.0.1:1", "-j", "2"], 2,
      ("-j/--jobs", "leave -j out")),
+    # audit 21 M3: click's "'2.0' is not a valid integer range" where every other whole number
+    # option says how to write it
+    ("batch-jobs-decimal", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "-j", "2.0"], 2,
+     ("'-j' / '--jobs'", "'2.0' is not a valid integer (a whole number is written in digits: 2)")),
+    ("batch-jobs-zero", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng", "-j", "0"], 2,
+     ("'-j' / '--jobs'", "0 is not in the range x>=1")),
     ("batch-timeout-with-scheduler", ["batch", "{i}/none.yaml", "--inputs", "{i}/dp.dng",
                                       "--scheduler", "tcp://127.0.0.1:1", "--timeout", "5"], 2,
      ("--timeout limits local worker processes",)),

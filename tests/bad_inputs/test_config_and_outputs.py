@@ -212,6 +212,8 @@ def test_set_reaches_a_step_whose_name_has_a_dot(inputs, tmp_path):
     # audit 18 W1: YAML read ' # c' as a comment and ran with 2:4 (another file, for a path)
     ("2:4 # c", 2, ("--set 'depth.g=2:4 # c'", "'# c' as a comment", "quote the value")),
     ("#2:4", 2, ("'#2:4' as a comment",)),
+    # audit 21 M3: quoted already, it was told to quote it again (--set 'depth.g=""2:4" # c"')
+    ('"2:4" # c', 2, ("after the quoted value", "leave it out (--set 'depth.g=\"2:4\"')")),
 ])
 def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words, inputs,
                                                                 tmp_path):
@@ -226,6 +228,17 @@ def test_a_set_value_is_the_word_and_its_refusal_a_usage_error(word, code, words
         assert step.params["g"].replace(" ", "") == "2:4"
     else:
         assert_one_line(result, code, words)
+
+
+@pytest.mark.parametrize("param", ["s", "min-confidence"])
+def test_a_placeholder_in_a_number_is_a_usage_error_of_the_set(param, inputs, tmp_path):
+    """Audit 21 M3: filled per capture, it failed each capture naming the config (exit 1)."""
+    config = tmp_path / "c.yaml"
+    config.write_text(f"steps:\n  depth:\n    input: {inputs}/rt/frames.tif\n"
+                      f"    grid: {inputs}/rt/grid.yaml\n    output: {tmp_path}/d.tif\n")
+    result = run_bad(inputs, tmp_path / "out", ["run", str(config), "--dry-run", "--set",
+                                                f"depth.{param}={{{{name}}}}"])  # run_bad formats
+    assert_one_line(result, 2, (f"--set 'depth.{param}={{name}}'", "takes a number"))
 
 
 # ---- issue 21, class 8: unreadable inputs, lists for one path, empty values, cycles, long names
