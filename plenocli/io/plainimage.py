@@ -37,12 +37,10 @@ def read_plain_levels(path: str | os.PathLike, max_pixels: int
                       ) -> tuple[np.ndarray, list[tuple[float, str]] | None]:
     """The light levels of a plain image, colour channels in RGB(A) order, a grey image (or a
     palette of grey entries) as one plane, and the white of each of its frames where the file
-    declares fewer bits than its word holds (``samplebits``: a PNG's sBIT, a BMP's bit masks;
-    None: the word's). InputError in one line for a file that cannot be decoded or whose
+    declares fewer bits than its word holds (``samplebits``: a PNG's sBIT; None: the word's; a
+    BMP of bit masks is refused). InputError in one line for a file that cannot be decoded or whose
     samples are no light levels (``samplekind``)."""
-    masked = samplebits.bmp_masked(path, max_pixels)
-    if masked is not None:
-        return masked
+    samplebits.refuse_masked_bmp(path)
     data, grey = _decoded(Path(path), max_pixels)
     return samplebits.png_levels(path, data, grey)
 

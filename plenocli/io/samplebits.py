@@ -12,10 +12,9 @@ the word the format stores them in.
   that fit neither are refused: the header and the image disagree. (A very dark image whose
   samples fit both readings, every sample below 2^(2 sBIT - word) and a multiple of the
   scaling, is read the standard's way.)
-- BMP: 16-bit pixels (5-5-5, or the bit masks of BI_BITFIELDS) and 32-bit pixels with bit
-  masks are read here, each channel its mask's bits (5-6-5: white 31, 63, 31; 10-10-10: 1023).
-  OpenCV shifts 5-bit samples into bytes (white 248, not 255) and reads 32-bit masks it does
-  not know as bytes; other BMPs (palettes, 24-bit, 32-bit BGRA) it reads as they are.
+- BMP: 16-bit pixels (5-5-5, 5-6-5) and pixels given by bit masks are refused
+  (:func:`refuse_masked_bmp`); other BMPs (palettes, 24-bit, 32-bit BGRA) OpenCV reads as
+  they are, every sample its byte.
 """
 
 from __future__ import annotations
@@ -30,7 +29,7 @@ from plenocli.errors import InputError
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 PNG_CHANNELS = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}  # colour type -> sBIT bytes (grey, RGB, palette..)
 MAX_CHUNKS = 10_000   # sBIT precedes PLTE and IDAT: a file with more chunks before them is junk
-BI_RGB, BI_BITFIELDS, BI_ALPHABITFIELDS = 0, 3, 6
+BI_BITFIELDS, BI_ALPHABITFIELDS = 3, 6
 Tops = list[tuple[float, str]]
 
 
@@ -109,55 +108,17 @@ def _scaled_form(plane: np.ndarray, bits: int, word: int) -> bool:
     return bool(np.all((plane == copied) | (plane == linear)))
 
 
-def bmp_masked(path, max_pixels: int) -> tuple[np.ndarray, Tops] | None:
-    """A 16-bit or bit-mask BMP read by its masks: (rows, cols, 3) samples in RGB order and each
-    channel's white (2^bits - 1); None for another BMP (OpenCV reads it right)."""
-    p = Path(path)
-    with open(p, "rb") as fh:
-        head = fh.read(14 + 124 + 16)
+def refuse_masked_bmp(path) -> None:
+    """InputError for a BMP of 16-bit pixels or of bit masks (BI_BITFIELDS): OpenCV, which reads
+    plenocli's BMPs, shifts 5-bit samples into bytes (a white of 248 under 255) and reads masks
+    it does not know as bytes (wrong colours), so their light levels cannot be vouched for.
+    Such BMPs hold screen colours, not sensor data: refused, not decoded by hand."""
+    with open(path, "rb") as fh:
+        head = fh.read(14 + 40)
     if head[:2] != b"BM" or len(head) < 14 + 40:
-        return None
-    offset, size = struct.unpack_from("<II", head, 10)
-    width, height, _, bpp, compression = struct.unpack_from("<iiHHI", head, 18)
-    if not ((bpp == 16 and compression == BI_RGB)
-            or (bpp in (16, 32) and compression in (BI_BITFIELDS, BI_ALPHABITFIELDS))):
-        return None
-    if compression == BI_RGB:
-        masks = (0x7C00, 0x3E0, 0x1F)   # the format's 16-bit default: 5-5-5
-    else:
-        at = 14 + size if size < 52 else 14 + 40   # masks after a 40-byte header, else inside
-        if len(head) < at + 12:
-            raise _damaged(p, "its bit masks are cut off")
-        masks = struct.unpack_from("<III", head, at)
-    bits = [_mask_bits(p, m, bpp) for m in masks]
-    rows, cols = abs(height), width
-    if cols <= 0 or rows == 0 or rows * cols > max_pixels:
-        raise _damaged(p, f"a {width} x {height} header")
-    stride = (cols * bpp // 8 + 3) // 4 * 4
-    raw = np.fromfile(p, np.uint8, count=stride * rows, offset=offset)
-    if raw.size < stride * rows:
-        raise _damaged(p, f"{raw.size} bytes of pixels where {stride * rows} are needed")
-    words = raw.reshape(rows, stride)[:, :cols * bpp // 8].copy().view(f"<u{bpp // 8}")
-    if height > 0:   # bottom-up, as BMP stores rows unless the height is negative
-        words = words[::-1]
-    dtype = np.uint8 if max(bits) <= 8 else np.uint16
-    data = np.stack([((words & m) >> _low_bit(m)).astype(dtype) for m in masks], axis=-1)
-    return data, [(float(2 ** b - 1), f"{b}-bit samples (BMP bit mask {m:#x})")
-                  for b, m in zip(bits, masks, strict=True)]
-
-
-def _low_bit(mask: int) -> int:
-    return (mask & -mask).bit_length() - 1
-
-
-def _mask_bits(path, mask: int, bpp: int) -> int:
-    """The bits of one channel's mask: contiguous, non-empty, within the pixel."""
-    bits = mask.bit_count()
-    if not mask or mask >= 2 ** bpp or (mask >> _low_bit(mask)) != 2 ** bits - 1 or bits > 16:
-        raise _damaged(path, f"a bit mask {mask:#x} that is not one run of 1 to 16 bits "
-                       f"inside its {bpp}-bit pixels")
-    return bits
-
-
-def _damaged(path, what: str) -> InputError:
-    return InputError(f"{path}: a BMP with {what}; the file is damaged: write it again")
+        return
+    bpp, compression = struct.unpack_from("<HI", head, 28)
+    if bpp == 16 or compression in (BI_BITFIELDS, BI_ALPHABITFIELDS):
+        what = "16-bit pixels" if bpp == 16 else "pixels given by bit masks"
+        raise InputError(f"{path}: a BMP of {what}, whose samples OpenCV does not read as "
+                         "stored; write the image as a 16-bit PNG or TIFF")
