@@ -20,7 +20,6 @@ the word the format stores them in.
 from __future__ import annotations
 
 import struct
-from pathlib import Path
 
 import numpy as np
 
