@@ -25,12 +25,10 @@ import cv2
 import numpy as np
 
 from plenocli.depth import MAX_DISPARITY
+from plenocli.depth.level import FLAT_SIGMA, level  # noqa: F401  (FLAT_SIGMA: the stage)
 from plenocli.depth.searchkernel import search_step
 
-FLAT_SIGMA = 24.0
-FLAT_SHRINK = 8
 PRE_BLUR = 1.0
-LOG_FLOOR = 0.02  # of a view's median: the darkest level its log low-pass takes (_level)
 # share of a window's pixels with data in both views below which its pixel is unknown
 MIN_DATA = 0.5
 WINDOW = 15
@@ -85,55 +83,19 @@ class Disparity:
     no_data: np.ndarray | None = None
 
 
-def prepare(view: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """(the view divided by its level (``_level``) and smoothed by PRE_BLUR; where it has
+def prepare(view: np.ndarray, shared: np.ndarray | None = None
+            ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(the view divided by its level (``level``) and smoothed by PRE_BLUR; where it has
     data, None when every pixel has). Pixels without data (NaN) are filled from their
     neighbours for the smoothing and the warps (``data`` says to leave them out of every
-    sum)."""
+    sum). ``shared``: where every view matched against this one has data, the pixels its
+    level is taken from (the views' levels must see the same pixels: ``disparity_x``)."""
     v = np.asarray(view, np.float32)
     data = np.isfinite(v)
     v = np.where(data, v, 0.0).astype(np.float32)
-    out = v / _level(v, data)
+    out = v / level(v, data if shared is None else data & shared)
     weight = None if data.all() else data.astype(np.float32)
     return _blur(out, weight, PRE_BLUR), None if weight is None else data
-
-
-def _level(v: np.ndarray, data: np.ndarray) -> np.ndarray:
-    """The view's slow level: the geometric mean over a Gaussian of sigma FLAT_SIGMA (the
-    exponential of the low-pass of its log), over the pixels with data.
-    Of the log, not of the view: a gain is a factor. A view g t (g slow) has log g + log t,
-    whose low-pass is log g + LP(log t) wherever log g is linear within the Gaussian, so g
-    comes out whatever the scene; the low-pass of g t itself is g LP(t) + sigma^2 g' LP(t)',
-    a few % of the level where the scene's own low-pass slopes, which a slow gain ramp (the
-    A/S split) leaves as an offset between the views that moves the match: opposite ramps
-    across A and B put 1.4-12 % of natural pictures' known pixels > 1 px off at confidence
-    0.93 (audit 18 W5). Pixels darker than LOG_FLOOR of the view's median (noise about the
-    black level) count as that floor here only."""
-    sample = v[::7, ::7][data[::7, ::7]]
-    typical = float(np.median(sample)) if sample.size else 0.0
-    if not typical > 0:
-        typical = float(np.max(np.abs(sample))) if sample.size else 1.0
-    logs = np.where(data, np.log(np.maximum(v, LOG_FLOOR * max(typical, 1e-30))), 0.0)
-    return np.exp(_low_pass(logs.astype(np.float32), data.astype(np.float32)))
-
-
-def _extend(img: np.ndarray, pad: int, band: int) -> np.ndarray:
-    """``img`` extended by ``pad`` columns either side, each row along the straight line
-    fitted (least squares) to its ``band`` columns nearest that edge: a ramp stays a ramp,
-    and the line is not swayed by the one column at the edge as an odd reflection about it
-    is (a view's edge column holds what the other view does not see)."""
-    band = min(band, img.shape[1])
-    if band < 2:
-        return np.pad(img, ((0, 0), (pad, pad)), mode="edge")
-    x = np.arange(band, dtype=np.float64) - (band - 1) / 2
-    steps = np.arange(1, pad + 1, dtype=np.float64)
-    sides = []
-    for part, outward in ((img[:, :band], -1.0), (img[:, -band:], 1.0)):
-        mean = part.mean(axis=1, keepdims=True)
-        slope = ((part - mean) * x).sum(axis=1, keepdims=True) / (x * x).sum()
-        edge = (band - 1) / 2
-        sides.append(mean + slope * outward * (edge + steps[None, :]))
-    return np.concatenate([sides[0][:, ::-1], img, sides[1]], axis=1)
 
 
 def _blur(img: np.ndarray, weight: np.ndarray | None, sigma: float) -> np.ndarray:
@@ -145,33 +107,6 @@ def _blur(img: np.ndarray, weight: np.ndarray | None, sigma: float) -> np.ndarra
     num = cv2.GaussianBlur(img * weight, (0, 0), sigma)
     den = cv2.GaussianBlur(weight, (0, 0), sigma)
     return np.where(den > 1e-3, num / np.maximum(den, 1e-3), 1.0).astype(np.float32)
-
-
-def _low_pass(img: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Gaussian of sigma FLAT_SIGMA of ``img`` over the pixels of ``weight`` 1, computed on
-    an image shrunk by FLAT_SHRINK (the result is smooth on that scale, so nothing is lost,
-    and 30 Mpx take a fraction of a second). Past the frame's edges the shrunk image is
-    extended along lines (``_extend``), which keeps a linear field linear: a reflection
-    folds a gain ramp back at the edges, and the views' opposite ramps then differed within
-    48 px of the left and right edges (most of the pixels still > 1 px off after the log)."""
-    rows, cols = img.shape
-    size = (max(1, cols // FLAT_SHRINK), max(1, rows // FLAT_SHRINK))
-    num, den = (cv2.resize(x, size, interpolation=cv2.INTER_AREA) for x in (img, weight))
-    sigma = FLAT_SIGMA / FLAT_SHRINK
-    ok = den > 1e-3
-    small = np.where(ok, num / np.maximum(den, 1e-3), 0.0).astype(np.float32)
-    if not ok.all():  # cells without data take their neighbours' mean
-        small = _blur(small, ok.astype(np.float32), 2 * sigma)
-    pad = int(np.ceil(3 * sigma))
-    # the line through about one sigma of cells (4, 32 px): over 9 cells (72 px) the scene's
-    # own curvature bent it (2-4 % of a natural picture's known pixels > 1 px off, 0 at 4);
-    # an odd reflection about the edge cell put 0.6 % of a periodic texture's wrong
-    band = int(np.ceil(sigma)) + 1
-    big = _extend(_extend(small, pad, band).T, pad, band).T
-    small = cv2.GaussianBlur(np.ascontiguousarray(big, np.float32), (0, 0), sigma,
-                             borderType=cv2.BORDER_REFLECT)[pad:-pad, pad:-pad]
-    return cv2.resize(np.ascontiguousarray(small), (cols, rows),
-                      interpolation=cv2.INTER_LINEAR)
 
 
 def _shift_x(img: np.ndarray, dx: np.ndarray, grid_x: np.ndarray, grid_y: np.ndarray,
@@ -210,7 +145,11 @@ def disparity_x(a: np.ndarray, b: np.ndarray, *, max_disparity: float = 4.0,
                          f"small for {WINDOW} px windows")
     if not (np.isfinite(max_disparity) and 0.5 <= max_disparity <= MAX_DISPARITY):
         raise ValueError(f"max_disparity must be 0.5 to {MAX_DISPARITY:g} px, got {max_disparity}")
-    (pa, ma), (pb, mb) = prepare(a), prepare(b)
+    # both levels over the pixels both views have: a hole in one view only (a clipped
+    # highlight) took its content out of that view's level alone, some 72 px around
+    shared = np.isfinite(a) & np.isfinite(b)
+    shared = None if shared.all() else shared
+    (pa, ma), (pb, mb) = prepare(a, shared), prepare(b, shared)
     masks = None if ma is None and mb is None else \
         tuple(np.ones(a.shape, np.float32) if m is None else m.astype(np.float32)
               for m in (ma, mb))
