@@ -333,6 +333,7 @@ NEGATIVE_SIGMA = 5.0  # Gaussian noise goes below -5 sigma once in 3.5 million p
 MIXING_TOLERANCE = 0.02  # of the brightest view's level: 4 x the target error of a measured M
 NEGATIVE_BLOCK = 32  # px (even: a Bayer block holds every colour)
 NOISE_BINS = 8  # level bins of the noise model
+NOISE_BLOCKS = 2000  # blocks sampled for the noise model (40 per level bin at least)
 NOISE_QUANTILE = 20  # per cent: the blocks of a level bin that set its noise (the flat ones)
 
 
@@ -382,15 +383,15 @@ def _block_noise(obs, j, y0, y1, x0, x1, vals):
 
 
 @numba.njit(cache=True, parallel=True)
-def _block_stats(obs, block, level, noise):
-    """Median level and robust noise of every input view in every block (numba, one block row
-    per parallel task)."""
+def _block_stats(obs, block, step, level, noise):
+    """Median level and robust noise of every input view in every ``step``-th block along each
+    axis (numba, one block row per parallel task)."""
     rows, cols = obs.shape[1], obs.shape[2]
     for by in numba.prange(level.shape[1]):
         vals = np.empty(block * block)
-        y0, y1 = by * block, min(rows, (by + 1) * block)
+        y0, y1 = by * step * block, min(rows, (by * step + 1) * block)
         for bx in range(level.shape[2]):
-            x0, x1 = bx * block, min(cols, (bx + 1) * block)
+            x0, x1 = bx * step * block, min(cols, (bx * step + 1) * block)
             for j in range(obs.shape[0]):
                 level[j, by, bx], noise[j, by, bx] = _block_noise(obs, j, y0, y1, x0, x1, vals)
 
@@ -435,9 +436,10 @@ def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     bin (quantiles of the blocks' levels) the NOISE_QUANTILE-th percentile of the blocks'
     noise, made non-decreasing with level (shot noise grows with it)."""
     n_br, n_bc = -(-obs.shape[1] // block), -(-obs.shape[2] // block)
-    level = np.full((obs.shape[0], n_br, n_bc), np.nan)
+    step = max(1, int(np.sqrt(n_br * n_bc / NOISE_BLOCKS)))  # a sample of blocks suffices
+    level = np.full((obs.shape[0], -(-n_br // step), -(-n_bc // step)), np.nan)
     noise = np.full_like(level, np.nan)
-    _block_stats(obs, block, level, noise)
+    _block_stats(obs, block, step, level, noise)
     xp = np.zeros((obs.shape[0], NOISE_BINS))
     fp = np.zeros_like(xp)
     for j in range(obs.shape[0]):
