@@ -317,3 +317,166 @@ def predicted_noise_gain(mixing: MixingField, *, regularise: float = 0.0) -> np.
     mt = np.swapaxes(m, -1, -2)
     a = np.linalg.solve(mt @ m + regularise ** 2 * eye, mt) if regularise else np.linalg.inv(m)
     return np.moveaxis(np.sqrt((a ** 2).sum(axis=-1)), -1, 1)
+
+
+# ---------------------------------------------------------------------------------------------
+# Light cannot be negative. A mixing that over-states the cross-talk (measured on another rig,
+# or r too high) subtracts more of the other views than they gave: the clean views go below
+# zero where a view is dark and the others bright, far beyond what noise explains. The noise of
+# each input view is modelled from its level (the lower envelope, over blocks, of a robust
+# noise measure: texture only raises a block's figure, so flat blocks of each level set it),
+# carried to each output by its noise gain, and a tolerance of the mixing's own error (a share
+# of the light it redistributes) is added. Where an input view is itself below zero (a bias
+# or refocus residue) the pixel is no light and is not judged.
+
+NEGATIVE_SIGMA = 5.0  # Gaussian noise goes below -5 sigma once in 3.5 million pixels
+MIXING_TOLERANCE = 0.02  # of the brightest view's level: 4 x the target error of a measured M
+NEGATIVE_BLOCK = 32  # px (even: a Bayer block holds every colour)
+NOISE_BINS = 8  # level bins of the noise model
+NOISE_BLOCKS = 2000  # blocks sampled for the noise model (40 per level bin at least)
+NOISE_QUANTILE = 20  # per cent: the blocks of a level bin that set its noise (the flat ones)
+
+
+@dataclass(frozen=True)
+class NegativeLight:
+    """Per output view: ``known`` finite pixels, ``below`` pixels negative beyond noise and
+    tolerance, ``worst_block`` the largest share of such pixels in one block (of the block's
+    known pixels), ``minimum`` the lowest value."""
+
+    known: np.ndarray
+    below: np.ndarray
+    worst_block: np.ndarray
+    minimum: np.ndarray
+
+
+@numba.njit(cache=True)
+def _block_noise(obs, j, y0, y1, x0, x1, vals):
+    """(median level, robust noise) of input view j in a block: 1.4826 x the median absolute
+    second difference between pixels 2 apart (same Bayer colour) / sqrt(1.5), the lesser of
+    the two directions; NaN when the block has too few finite pixels."""
+    rows, cols = obs.shape[1], obs.shape[2]
+    best = np.inf
+    for axis in range(2):
+        m = 0
+        for y in range(y0, y1):
+            for x in range(x0, x1):
+                if axis == 0 and 2 <= x < cols - 2:
+                    d = obs[j, y, x] - 0.5 * (obs[j, y, x - 2] + obs[j, y, x + 2])
+                elif axis == 1 and 2 <= y < rows - 2:
+                    d = obs[j, y, x] - 0.5 * (obs[j, y - 2, x] + obs[j, y + 2, x])
+                else:
+                    continue
+                if np.isfinite(d):
+                    vals[m] = abs(d)
+                    m += 1
+        if m >= 16:
+            best = min(best, 1.4826 * np.median(vals[:m]) / np.sqrt(1.5))
+    m = 0
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            if np.isfinite(obs[j, y, x]):
+                vals[m] = obs[j, y, x]
+                m += 1
+    if m < 16 or not np.isfinite(best):
+        return np.nan, np.nan
+    return np.median(vals[:m]), best
+
+
+@numba.njit(cache=True, parallel=True)
+def _block_stats(obs, block, step, level, noise):
+    """Median level and robust noise of every input view in every ``step``-th block along each
+    axis (numba, one block row per parallel task)."""
+    rows, cols = obs.shape[1], obs.shape[2]
+    for by in numba.prange(level.shape[1]):
+        vals = np.empty(block * block)
+        y0, y1 = by * step * block, min(rows, (by * step + 1) * block)
+        for bx in range(level.shape[2]):
+            x0, x1 = bx * step * block, min(cols, (bx * step + 1) * block)
+            for j in range(obs.shape[0]):
+                level[j, by, bx], noise[j, by, bx] = _block_noise(obs, j, y0, y1, x0, x1, vals)
+
+
+@numba.njit(cache=True, parallel=True)
+def _negative_kernel(out, obs, gain, block, k_sigma, tol, xp, fp, below, known):
+    """Per block and output view: known pixels and those below -(k g sigma + tol L), with L
+    the brightest input view at the pixel and sigma the largest of the input views' modelled
+    noise (``xp``, ``fp``: level -> noise per input view); with ``k_sigma`` < 0 the bound is
+    -tol L alone (the cheap pass). Numba kernel, one block row per parallel task."""
+    v_out, rows, cols = out.shape
+    for by in numba.prange(below.shape[1]):
+        y0, y1 = by * block, min(rows, (by + 1) * block)
+        for bx in range(below.shape[2]):
+            x0, x1 = bx * block, min(cols, (bx + 1) * block)
+            for k in range(v_out):
+                count, seen = 0, 0
+                for y in range(y0, y1):
+                    for x in range(x0, x1):
+                        t = out[k, y, x]
+                        if not np.isfinite(t):
+                            continue
+                        seen += 1
+                        level, least, sigma = 0.0, np.inf, 0.0
+                        for j in range(obs.shape[0]):
+                            level = max(level, obs[j, y, x])
+                            least = min(least, obs[j, y, x])
+                        if least < 0.0 or t >= -tol * level:  # an input below 0 is no light
+                            continue
+                        if k_sigma >= 0.0:
+                            for j in range(obs.shape[0]):
+                                sigma = max(sigma, np.interp(obs[j, y, x], xp[j], fp[j]))
+                            if t >= -(k_sigma * gain[k, y, x] * sigma + tol * level):
+                                continue
+                        count += 1
+                below[k, by, bx] = count
+                known[k, by, bx] = seen
+
+
+def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
+    """Noise against level per input view, (V, NOISE_BINS) levels and noises: in each level
+    bin (quantiles of the blocks' levels) the NOISE_QUANTILE-th percentile of the blocks'
+    noise, made non-decreasing with level (shot noise grows with it)."""
+    n_br, n_bc = -(-obs.shape[1] // block), -(-obs.shape[2] // block)
+    step = max(1, int(np.sqrt(n_br * n_bc / NOISE_BLOCKS)))  # a sample of blocks suffices
+    level = np.full((obs.shape[0], -(-n_br // step), -(-n_bc // step)), np.nan)
+    noise = np.full_like(level, np.nan)
+    _block_stats(obs, block, step, level, noise)
+    xp = np.zeros((obs.shape[0], NOISE_BINS))
+    fp = np.zeros_like(xp)
+    for j in range(obs.shape[0]):
+        ok = np.isfinite(level[j]) & np.isfinite(noise[j])
+        lv, nz = level[j][ok], noise[j][ok]
+        if lv.size == 0:
+            continue
+        edges = np.quantile(lv, np.linspace(0, 1, NOISE_BINS + 1))
+        idx = np.clip(np.searchsorted(edges, lv, side="right") - 1, 0, NOISE_BINS - 1)
+        for b in range(NOISE_BINS):
+            sel = idx == b
+            xp[j, b] = np.median(lv[sel]) if sel.any() else edges[b]
+            fp[j, b] = np.percentile(nz[sel], NOISE_QUANTILE) if sel.any() else 0.0
+        order = np.argsort(xp[j], kind="stable")
+        xp[j], fp[j] = xp[j][order], np.maximum.accumulate(fp[j][order])
+    return xp, fp
+
+
+def negative_light(solved: np.ndarray, observed: np.ndarray, gain: np.ndarray, *,
+                   block: int = NEGATIVE_BLOCK, k_sigma: float = NEGATIVE_SIGMA,
+                   tolerance: float = MIXING_TOLERANCE) -> NegativeLight:
+    """How far the unmixed views go below zero beyond what noise and the mixing's tolerance
+    explain. ``solved``, ``observed``, ``gain``: (V, rows, cols) outputs, inputs and noise gain
+    of one solve (the views in the mixing's order)."""
+    out = np.ascontiguousarray(solved, np.float32)
+    obs = np.ascontiguousarray(observed, np.float32)
+    g = np.ascontiguousarray(gain, np.float32)
+    n_br, n_bc = -(-out.shape[1] // block), -(-out.shape[2] // block)
+    below = np.zeros((out.shape[0], n_br, n_bc), np.int64)
+    known = np.zeros_like(below)
+    xp = np.zeros((obs.shape[0], 2))
+    _negative_kernel(out, obs, g, block, -1.0, tolerance, xp, xp, below, known)
+    if below.any():  # the noise model only where a pixel is below the tolerance alone
+        xp, fp = _noise_model(obs, block)
+        _negative_kernel(out, obs, g, block, k_sigma, tolerance, xp, fp, below, known)
+    with np.errstate(invalid="ignore"):
+        share = below / np.maximum(known, 1)
+    minimum = np.array([np.nanmin(o) if np.isfinite(o).any() else np.nan for o in out])
+    return NegativeLight(known.sum(axis=(1, 2)), below.sum(axis=(1, 2)),
+                         share.max(axis=(1, 2)), minimum)

@@ -181,3 +181,43 @@ def test_quadpixel_with_and_without_cross_mask():
             clean = sim["clean"][..., c]
             err = np.sqrt(np.mean((res.views - clean) ** 2)) / np.sqrt(np.mean(clean ** 2))
             assert err < 0.005
+
+
+def _two_scenes(shape=(96, 128), seed=3):
+    """Two views of unrelated scenes with dark patches (light >= 0), as a prism rig sees."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:shape[0], :shape[1]]
+    a = 0.5 + 0.4 * np.sin(xx / 7.0) * np.cos(yy / 11.0)
+    b = 0.6 + 0.3 * np.cos(xx / 5.0 + yy / 9.0)
+    a[20:60, 30:80] = 0.01   # A dark where B is lit: where an over-stated M shows
+    b[50:90, 70:120] = 0.02
+    return np.stack([a, b]) * rng.uniform(0.97, 1.03, (2, *shape))
+
+
+def _mono_field(shape, r, seed=1):
+    full = sim_mixing.mixing_field(shape, n_views=2, r=r, colours=("L",), seed=seed)
+    return full
+
+
+@pytest.mark.parametrize("scale,noise", [(4000.0, 0.0), (4000.0, 20.0), (30.0, 8.0)])
+def test_negative_light_tells_an_over_stated_mixing(scale, noise):
+    """audit 21b W1: a mixing of r 65 % on a capture of r 50 % left the clean views down to
+    -2954 DN on a ~4000 DN signal with exit 0. The right mixing, bright or dark and noisy,
+    leaves no pixel below zero beyond noise and tolerance; the over-stated one leaves many."""
+    from plenocli.unmix import negative_light
+    shape = (96, 128)
+    clean = _two_scenes(shape) * scale
+    true_field = _mono_field(shape, 0.5)
+    rng = np.random.default_rng(5)
+    obs = sim_mixing.apply_mixing(clean, true_field) + rng.normal(0, noise, (2, *shape))
+    rows, cols = np.arange(shape[0]) + 0.0, np.arange(shape[1]) + 0.0
+    shares = {}
+    for r in (0.5, 0.65):
+        nodes = _mono_field(shape, r)[:, :, :, ::8, ::8]
+        field = MixingField(nodes, rows[::8], cols[::8], shape, ("A", "B"), ("L",))
+        res = unmix(obs, field, noise_gain=True)
+        found = negative_light(res.views, obs, res.noise_gain)
+        shares[r] = found.below / found.known
+    assert shares[0.5].max() == 0
+    if scale > 100:  # a dark, noisy capture hides an over-statement in its noise
+        assert shares[0.65].max() > 0.02

@@ -300,3 +300,26 @@ def test_colour_views_given_one_file_each_are_unmixed(tmp_path):
     out, meta = tiffio.read_image(tmp_path / "clean.tif")
     assert meta["views"] == ["left.R", "left.G", "left.B", "right.R", "right.G", "right.B"]
     np.testing.assert_allclose(out.reshape(2, 3, 32, 32), clean, rtol=1e-4)
+
+
+def test_a_mixing_that_removes_more_light_than_there_is_is_refused(rig):
+    """audit 21b W1: a mixing measured on a rig of r 65 % applied to a capture of r 50 % gave
+    clean views 14-19 % RMS wrong, down to -2954 DN on ~4000 DN, exit 0. Here the rig's mixing
+    (r 50 %) is applied to views ghosted at r 30 % with dark patches: refused in one line."""
+    paths, _, _, tmp = rig
+    yy, xx = np.mgrid[:SHAPE[0], :SHAPE[1]]
+    clean = np.stack([0.5 + 0.4 * np.sin(xx / 5.0), 0.6 + 0.3 * np.cos(yy / 4.0)])
+    clean[0, 10:40, 20:60] = 0.005
+    colours = sim_mixing.colour_index(SHAPE, "RGGB")
+    field = sim_mixing.mixing_field(SHAPE, n_views=2, r=0.3, colours=("R", "G", "B"), seed=1)
+    views = sim_mixing.apply_mixing(clean, field, colours)
+    path = tmp / "r30.tif"
+    tiffio.write_image(path, np.concatenate([views, views.sum(axis=0, keepdims=True)]).astype(
+        np.float32), {"views": ["A", "B", "S"], "cfa": "RGGB", "active_area": [0, 0, *SHAPE]})
+    out = tmp / "out.tif"
+    res = _invoke("unmix", path, "--mixing", paths["mixing"], "-o", out)
+    assert res.exit_code == 1, res.output
+    assert "removes more light than" in res.output and "view A's pixels" in res.output
+    assert len(res.output.strip().splitlines()) == 1 and not out.exists()
+    res = _invoke("unmix", paths["views"], "--mixing", paths["mixing"], "-o", out)
+    assert res.exit_code == 0, res.output  # its own capture (pixel-scale texture) passes

@@ -137,6 +137,31 @@ def _check_condition(field, mixing: str, regularise: float) -> np.ndarray:
     return cond
 
 
+NEGATIVE_SHARE = 0.005  # of a view's pixels: far more than hot pixels' ghosts or stray outliers
+NEGATIVE_BLOCK_SHARE = 0.25  # of one block's pixels: an over-correction confined to a region
+
+
+def _check_light(res, observed: np.ndarray, names: list[str], mixing: str,
+                 inputs: list[str]) -> None:
+    """Light cannot be negative: unmixed views below zero beyond their noise (and the
+    mixing's tolerance) over a share of the frame, or of one block, mean the mixing removes
+    more light than the other views gave (``unmix_lib.negative_light``)."""
+    found = unmix_lib.negative_light(res.views, observed, res.noise_gain)
+    share = found.below / np.maximum(found.known, 1)
+    bad = (share > NEGATIVE_SHARE) | (found.worst_block > NEGATIVE_BLOCK_SHARE)
+    if not bad.any():
+        return
+    k = int(np.argmax(np.where(bad, share + found.worst_block, -1.0)))
+    level = float(np.nanmedian(observed))
+    raise CalibrationError(
+        f"{mixing} removes more light than {', '.join(inputs)} holds: {share[k]:.1%} of view "
+        f"{names[k]}'s pixels (up to {found.worst_block[k]:.0%} of a {unmix_lib.NEGATIVE_BLOCK} "
+        f"px block) come out below zero beyond their noise, down to {found.minimum[k]:.4g} "
+        f"(median level {level:.4g}); the mixing does not describe this capture (measured on "
+        "another rig, or its cross-talk r too high): measure it on masked whites of this rig, "
+        "processed as these views")
+
+
 def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
         regularise: float = 0.0, noise_map: str | None = None,
         preview: str | None = None) -> None:
@@ -167,6 +192,9 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
         framing.crop(out)[group] = res.views
         gains[c * len(group):(c + 1) * len(group)] = res.noise_gain
         singular += res.singular_pixels
+        if not res.singular_pixels:
+            _check_light(res, framing.crop(pages[group]), [names[k] for k in group], mixing,
+                         inputs)
     if singular:
         raise CalibrationError(f"{mixing}: the mixing matrix cannot be inverted at {singular} "
                                "pixels; re-measure it, or pass --regularise (e.g. 0.05)")
