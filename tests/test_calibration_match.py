@@ -64,3 +64,49 @@ def test_a_pitch_hint_on_a_borderless_scene_is_measured_where_the_match_falls():
     assert calibration.compare_grids(grid, truth, SHAPE)["max_px"] <= 0.05 * 14.5
     with pytest.raises(CalibrationError, match="best at a pitch -0.[1-4]"):
         calibration.calibrate(image, start=replace(truth, pitch_px=14.5379))
+
+
+def test_the_match_judge_sees_no_mosaic_and_nothing_moved():
+    """A Bayer mosaic repeats at every even shift, so it matches on any lattice (audit 21b F1:
+    the RGGB Raytrix scene, 0.61 on its lattice against 0.71 on the half-pitch relative, with
+    its own grid as --start). The judge's view keeps no 2 px pattern and moves no spot (a
+    2 x 2 box would move every lens centre by half a pixel)."""
+    from plenocli.calibration.match import without_mosaic
+
+    rows, cols = np.mgrid[0:96, 0:128].astype(np.float32)
+    spot = np.exp(-((cols - 61.0) ** 2 + (rows - 45.0) ** 2) / 50.0)
+    gains = np.array([[2.0, 1.0], [1.0, 0.5]], np.float32)   # RGGB of a warm light
+    mosaic = (1.0 + spot) * np.tile(gains, (48, 64))
+    seen = without_mosaic(mosaic, "RGGB")[8:-8, 8:-8]
+    for wave in ((-1.0) ** cols, (-1.0) ** rows, (-1.0) ** (rows + cols)):   # the 2 px periods
+        assert abs(np.mean(seen * wave[8:-8, 8:-8])) < 1e-3 * np.mean(seen)   # mosaic: 0.2-0.4
+    near = (slice(35, 56), slice(51, 72))   # the spot's centroid (a 2 x 2 box: +0.42 px)
+    weights = without_mosaic(mosaic, "RGGB")[near]
+    weights = weights - weights.min()
+    centroid = [float((weights * axis[near]).sum() / weights.sum()) for axis in (cols, rows)]
+    assert np.allclose(centroid, (61.0, 45.0), atol=0.02), centroid
+    assert without_mosaic(mosaic, None) is mosaic
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_an_exact_pitch_hint_finds_the_lattice_no_hypothesis_comes_near(cfa):
+    """Audit 21b F1: the Raytrix scene simulator at hex 19.4 px, 640 x 480, --pitch 19.4 was
+    refused ("its micro-images do not repeat each other's content (median confidence 0.17)")
+    while --start confirmed its grid at 0.97: the hint only moved the image's own hypotheses
+    (square 18.17 px at -39.7 deg, ...), none near 19.4 px at 0 deg. Both lattice kinds at the
+    hint, every rotation, are now scanned on a small crop: hex 19.406 px, every lens within
+    0.22 px (RGGB: 0.14 px); the RGGB frame's --start is confirmed too (was refused: 0.03 px)."""
+    from plenocli.synth.focused import raytrix_scene
+
+    kw = {"cfa": cfa} if cfa else {}
+    image, truth, _, _ = raytrix_scene(seed=0, pitch_px=19.4, g_true=3.3, **kw)
+    grid, report = calibration.calibrate(image, pitch_hint=19.4, cfa=cfa)
+    assert report.decision.judge == "match" and grid.lattice == "hex"
+    assert calibration.compare_grids(grid, truth, SHAPE)["max_px"] <= 0.05 * 19.4
+    if cfa:
+        grid, report = calibration.calibrate(image, start=truth, cfa=cfa)
+        assert calibration.compare_grids(grid, truth, SHAPE)["max_px"] <= 0.05 * 19.4
+    else:   # a hint near no lattice says so, not that the micro-images repeat nothing
+        with pytest.raises(CalibrationError, match="on no lattice of either kind near it"):
+            calibration.calibrate(image, pitch_hint=12.0)

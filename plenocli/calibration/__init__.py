@@ -124,7 +124,7 @@ def calibrate(image: np.ndarray, *, lattice: str = "auto", cfa: str | None = Non
     image = _checked(image, lattice, black_level, pitch_hint)
     all_views = views(image, cfa)
     try:
-        decision = decide(image, all_views, pitch_hint=pitch_hint, start=start)
+        decision = decide(image, all_views, pitch_hint=pitch_hint, start=start, cfa=cfa)
         grid, report = _grid(image, cfa, decision, all_views, pitch_hint, start)
         # what the image shows is named only once its lens centres are found too
         if lattice != "auto" and decision.lattice.kind != lattice:

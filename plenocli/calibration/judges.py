@@ -21,7 +21,7 @@ import numpy as np
 
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.fold import Folds, FoldVerdict, fold_judge, nested_pairs, settle_fold
-from plenocli.calibration.match import MatchVerdict, match_judge, match_measure
+from plenocli.calibration.match import MatchVerdict, match_judge, match_measure, without_mosaic
 from plenocli.calibration.search import (
     border_lattice,
     find_lattice,
@@ -76,7 +76,7 @@ class Decision:
 
 
 def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = None,
-           start: LensGrid | None = None) -> Decision:
+           start: LensGrid | None = None, cfa: str | None = None) -> Decision:
     """The lattice the judges choose on ``image`` (its views built by ``search.views``), or
     CalibrationError saying why none can be vouched for. Whether it contradicts a hint is
     :func:`check_hints`'s to say, once its lens centres are found too: a lattice refused
@@ -98,7 +98,8 @@ def decide(image: np.ndarray, all_views: dict, *, pitch_hint: float | None = Non
         except CalibrationError as err:
             if own is None and pitch_hint is None:
                 raise
-            decision = _match_decision(image, verdict, own, pitch_hint, str(err))
+            decision = _match_decision(without_mosaic(image, cfa), verdict, own, pitch_hint,
+                                       str(err))
     else:   # the fold judge checks the border judge's choice among nested relatives
         decision = cross_checked(image, decision, all_views) or decision
     return decision
@@ -167,10 +168,8 @@ def _match_decision(image, verdict: Verdict, own: Lattice | None, pitch_hint: fl
     else:
         near = [lat for lat in ranked
                 if 1 / HINT_RANGE <= lat.pitch_px / pitch_hint <= HINT_RANGE]
-        if not near:
-            raise CalibrationError(reason)
         others = [lat for lat in ranked[:FOLD_CANDIDATES] if lat not in near]
-        found = match_measure(image, near, others)
+        found = match_measure(image, pitch_hint, near, others)
         what = f"a lattice near the hinted pitch ({pitch_hint:g} px)"
     if found.lattice is None:
         raise CalibrationError(f"{reason}; nor does the match judge confirm {what}: "

@@ -35,7 +35,7 @@ import numpy as np
 from plenocli.calibration.candidates import Lattice
 from plenocli.calibration.centres import lens_centre
 from plenocli.calibration.flatten import border_signal, flatten
-from plenocli.model.lensgrid import LensGrid
+from plenocli.model.lensgrid import LATTICES, LensGrid
 
 MATCH_SIDE_PX = 1024   # side of the central crop matched (full-image px)
 MATCH_PITCH_PX = 16.0  # the crop is reduced to at most this pitch (g is scale-free)
@@ -47,6 +47,11 @@ PEAK_REACH = 0.5       # the peak is placed from steps moving the corners by up 
 #                        of a pitch (the detuned rivals' distance: the match has fallen there)
 PEAK_SAMPLES = 4       # steps either side
 G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
+SCAN_SIDE = 8.0        # a pitch hint's rotation scan matches a central crop this many pitches
+#                        wide (about 50 lenses: enough for a median, few for the cost)
+SCAN_STEP = 0.5        # its rotation step moves that crop's corners by this share of a pitch
+#                        (the match falls by half 0.4-0.5 pitch out, by 0.1-0.3 at 0.25)
+SCAN_KEPT = 2          # lattices of the scan moved to their peak and judged, at most
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,20 @@ class MatchVerdict:
         return {"confidence": round(self.confidence, 4), "refused": self.reason,
                 "rivals": [{"lattice": name, "confidence": round(c, 4)}
                            for name, c in self.rivals]}
+
+
+def without_mosaic(image: np.ndarray, cfa: str | None) -> np.ndarray:
+    """What the match judge looks at: ``image`` itself, or a Bayer mosaic's four phases each
+    divided by its blurred self (their colour balance) and then smoothed by [1 2 1] / 4 along
+    both axes, whose response is zero at the 2 px period: the mosaic's pattern, which repeats
+    at every even shift and so matches on any lattice (the Raytrix scene simulator's RGGB
+    frame: 0.61 on its lattice, 0.71 on the half-pitch relative), goes. A symmetric kernel
+    moves nothing (a 2 x 2 box would move every lens centre by half a pixel)."""
+    if not cfa:
+        return image
+    kernel = np.array([0.25, 0.5, 0.25], np.float32)
+    return cv2.sepFilter2D(flatten(image, cfa=cfa), cv2.CV_32F, kernel, kernel,
+                           borderType=cv2.BORDER_REFLECT)
 
 
 class Matcher:
@@ -248,17 +267,68 @@ def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> 
     return None
 
 
-def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lattice]
-                  ) -> MatchVerdict:
-    """The match judge where only a pitch is hinted: each candidate lattice (near the hint)
-    is moved to where the match peaks (pitch and angle to :func:`_vertices`; where the peak
-    lies beyond their reach, half of it towards the higher end, and once again), then judged
-    as a start would be (:func:`match_judge`); the first confirmed, else the first
-    candidate's refusal."""
-    matcher = Matcher(image)
-    first = None
-    for lattice in candidates[:3]:
-        matcher.ranges = G_RANGES
+def match_measure(image: np.ndarray, pitch_hint: float, near: list[Lattice],
+                  others: list[Lattice]) -> MatchVerdict:
+    """The match judge where only a pitch is hinted: every rotation of both lattice kinds at
+    the hint, and the hypotheses ``near`` it, scored on a small central crop
+    (:func:`_scan`); the best that repeat their neighbours' content there (MIN_CONFIDENCE)
+    are moved to where the match peaks on crops twice as wide each time (:func:`_to_peak`),
+    then judged as a start would be (:func:`match_judge`); the first confirmed, else why
+    none is."""
+    scored = _scan(image, pitch_hint, near)
+    if not scored or scored[0][1] < MIN_CONFIDENCE:
+        best = (f" (best {scored[0][0].describe()}: median confidence {scored[0][1]:.2f})"
+                if scored else "")
+        return MatchVerdict(None, None, scored[0][1] if scored else 0.0, reason=(
+            "on no lattice of either kind near it, at any rotation, do the micro-images repeat "
+            f"each other's content{best}"))
+    matcher, first = Matcher(image), None
+    for lattice, _ in [t for t in scored if t[1] >= MIN_CONFIDENCE][:SCAN_KEPT]:
+        lattice, ranges = _to_peak(image, lattice)
+        matcher.ranges = ranges
+        found = match_judge(image, lattice, others, matcher=matcher)
+        if found.lattice is not None:
+            return replace(found, measured=True)
+        first = first or replace(found, reason=f"on {lattice.describe()} {found.reason}")
+    return first
+
+
+def _crop(image: np.ndarray, side: int) -> np.ndarray:
+    rows, cols = image.shape
+    r0, c0 = max(0, (rows - side) // 2), max(0, (cols - side) // 2)
+    return image[r0:r0 + side, c0:c0 + side]
+
+
+def _scan(image: np.ndarray, pitch: float, near: list[Lattice]) -> list[tuple[Lattice, float]]:
+    """(lattice, median confidence) on a central crop SCAN_SIDE pitches wide, best first: the
+    best rotation of each kind at ``pitch`` (steps that move the crop's corners by SCAN_STEP of
+    a pitch: within the match's peak, which falls by half only half a pitch out) and each of
+    ``near``. A small crop is what makes the scan affordable: its corners move little, so few
+    rotations cover a lattice period, and few lenses are matched per rotation."""
+    matcher = Matcher(_crop(image, int(max(SCAN_SIDE * pitch, 64))))
+    step = SCAN_STEP * pitch / matcher.image_radius
+    scored = []
+    for kind, period in LATTICES.items():
+        count = int(np.ceil(period / step))
+        tried = [(lat, _centred(matcher, lat)[1]) for lat in
+                 (Lattice(kind, pitch, turn) for turn in np.arange(count) * period / count)]
+        scored.append(max(tried, key=lambda t: t[1]))
+    scored += [(lat, _centred(matcher, lat)[1]) for lat in near[:3]]
+    return sorted(scored, key=lambda t: -t[1])
+
+
+def _to_peak(image: np.ndarray, lattice: Lattice) -> tuple[Lattice, tuple]:
+    """``lattice`` moved to where the match peaks (pitch and angle to :func:`_vertices`;
+    where the peak lies beyond their reach, half of it towards the higher end, and once
+    again) on central crops each about twice as wide as the one before, from the scan's to
+    the whole image: each crop's peak lies within the next one's reach. Also the g range
+    settled."""
+    sides, side = [max(image.shape)], max(image.shape) / 2
+    while side > 1.5 * max(SCAN_SIDE * lattice.pitch_px, 64):   # not the scan's crop again
+        sides.insert(0, side)
+        side /= 2
+    for side in sides:
+        matcher = Matcher(_crop(image, int(side)))
         for _ in range(2):
             offset, confidence, _ = _centred(matcher, lattice)
             matcher.settle_sign(lattice, offset)
@@ -269,8 +339,4 @@ def match_measure(image: np.ndarray, candidates: list[Lattice], others: list[Lat
             lattice = lattice.scaled(1 + pitch_move, angle_move)
             if np.isfinite(pitch) and np.isfinite(angle):
                 break
-        found = match_judge(image, lattice, others, matcher=matcher)
-        if found.lattice is not None:
-            return replace(found, measured=True)
-        first = first or found
-    return first or MatchVerdict(None, None, 0.0, reason="no lattice near the hint")
+    return lattice, matcher.ranges
