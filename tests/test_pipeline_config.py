@@ -50,11 +50,12 @@ def test_a_yaml_merge_key_is_yaml_not_a_duplicate(tmp_path):
         load_config(twice)
 
 
-@pytest.mark.parametrize("name", ["~", "5", "''"])
-def test_a_step_name_must_be_text(tmp_path, name):
+@pytest.mark.parametrize("name, words", [("~", "must be text"), ("5", "must be text"),
+                                         ("''", "must not be empty")])
+def test_a_step_name_must_be_text(tmp_path, name, words):
     config = write(tmp_path, f"steps:\n  {name}:\n    stage: decode\n    input: {{W}}\n"
                              "    output: w.tif\n")
-    with pytest.raises(ConfigError, match="must be text"):
+    with pytest.raises(ConfigError, match=words):
         load_config(config)
 
 
