@@ -54,6 +54,17 @@ def clear_terminated() -> None:
     _terminated[0] = False
 
 
+def note_interrupt(interrupt: KeyboardInterrupt, words: str) -> None:
+    """Add what the command could not undo to an interruption (Ctrl-C or :class:`Terminated`):
+    the command edge says it after "no partial output was kept"."""
+    interrupt.plenocli_note = words  # type: ignore[attr-defined]
+
+
+def interrupt_note(interrupt: KeyboardInterrupt) -> str | None:
+    """The words :func:`note_interrupt` added, if any."""
+    return getattr(interrupt, "plenocli_note", None)
+
+
 _OS_HINTS = {
     errno.EACCES: "permission denied; choose a folder you can write to",
     errno.EPERM: "operation not permitted; choose a folder you can write to",

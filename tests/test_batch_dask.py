@@ -71,3 +71,29 @@ def test_relative_paths_are_resolved_where_the_batch_runs(tmp_path, cluster, mon
         for name in ("frames.tif", "biased.tif", "views.tif"):
             np.testing.assert_array_equal(pixels(tmp_path / "dask" / c.stem / name),
                                           pixels(tmp_path / "local" / c.stem / name))
+
+
+def test_an_interruption_names_the_captures_the_cluster_still_runs(tmp_path, cluster,
+                                                                   monkeypatch):
+    """audit 22c M1: Dask cannot stop a running task; the command said "no partial output was
+    kept" and exited while the workers went on writing those captures' outputs."""
+    import time
+
+    config, captures = make_shoot(tmp_path, 4, corrupt=None)
+
+    def interrupted(futures, *args, **kwargs):  # Ctrl-C while the batch waits for results
+        with distributed.Client(cluster.scheduler_address, set_as_default=False) as watcher:
+            deadline = time.monotonic() + 30
+            while not any(watcher.processing().values()) and time.monotonic() < deadline:
+                time.sleep(0.005)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(distributed, "as_completed", interrupted)
+    result = CliRunner().invoke(cli, ["batch", str(config), "--inputs",
+                                      str(tmp_path / "captures" / "*.dng"), "--out",
+                                      str(tmp_path / "o"), "--scheduler",
+                                      cluster.scheduler_address])
+    assert result.exit_code == 130, result.output
+    said = result.stderr.strip().splitlines()[-1]
+    assert said.startswith("plenocli: interrupted; no partial output was kept; but shot")
+    assert "had started on the Dask cluster" in said and "rerun the batch" in said

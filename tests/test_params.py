@@ -187,6 +187,39 @@ def test_a_yaml_flag_and_a_repeated_option_resolve_as_the_shell_gives_them(tmp_p
     assert step.params["param"] == ("noise=0",) and step.params["no_prisms"] is False
 
 
+# (stage, parameter, as typed, as resolved): a value parsed from text is recorded as what it
+# stands for, so the same value from the shell, YAML or --set makes one record (audit 22c M2)
+TYPED_AND_RESOLVED = [
+    ("refocus", "g", " 2 : 6 : 0.5 ", "2:6:0.5"),
+    ("refocus", "g", " 2 , 3.0 , 4 ", "2,3,4"),
+    ("refocus", "g", "4.0", "4"),
+    ("refocus", "g", 4, "4"),
+    ("depth", "g", " 2 : 8 ", "2:8"),
+    ("depth", "g", "2.1234567:8", "2.1234567:8"),  # every digit: the stage reads this text
+    ("crosstalk", "mask_widths", " 0, 1.0 ,2 ", "0,1,2"),
+    ("crosstalk", "views", " A , B ", "A,B"),
+    ("crosstalk", "intended", " A , B ", "A,B"),
+    ("stitch", "views", "A, B,", "A,B"),
+    ("simulate", "param", [" noise-x = 0 "], ("noise_x=0",)),
+    ("bias", "crop", " 20 X 30 ", "20x30"),
+    ("develop", "wb", " 2.1, 1 ,1.6 ", "2.1,1.0,1.6"),
+]
+
+
+@pytest.mark.parametrize("stage, name, typed, resolved", TYPED_AND_RESOLVED)
+def test_a_value_parsed_from_text_is_kept_as_resolved(stage, name, typed, resolved):
+    from plenocli.pipeline.params import convert
+
+    param = next(p for p in get_stages()[stage].params if p.name == name)
+    assert convert(param, typed) == resolved
+    assert convert(param, resolved) == resolved   # resolving again changes nothing
+
+
+def test_a_view_list_naming_no_view_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="names no view"):
+        load_config(_config(tmp_path, "stitch", "    views: ' , '\n"))
+
+
 def test_develops_output_names_are_the_formats_it_writes():
     # own-3 (round 10): develop -o x.webp was refused only when writing (exit 1), other
     # outputs' wrong suffixes are usage errors

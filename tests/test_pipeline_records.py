@@ -177,3 +177,24 @@ def test_a_record_leaves_out_the_parameters_the_provenance_leaves_out(built):
     assert set(recorded) <= set(provenance)
     photo = json.loads((views.parent / ".S.jpg.plenocli.json").read_text())["parameters"]
     assert "wb" not in photo  # --wb-from gives the white balance
+
+
+def test_a_record_of_a_value_as_typed_compares_as_the_value_it_stands_for(tmp_path):
+    # audit 22c M2: an older record holds refocus --g as typed ('2 : 6 : 0.5'); the same g
+    # resolved now ('2:6:0.5') is the same parameter, not a change that reruns the step
+    from plenocli.pipeline import records
+    from plenocli.pipeline.registry import get_stages
+
+    stage = get_stages()["refocus"]
+    for name in ("in.tif", "g.yaml", "out.tif"):
+        (tmp_path / name).write_bytes(name.encode())
+    params = stage.resolve({"input": str(tmp_path / "in.tif"), "grid": str(tmp_path / "g.yaml"),
+                            "output": str(tmp_path / "out.tif"), "g": " 2 : 6 : 0.5 "})
+    assert params["g"] == "2:6:0.5"
+    inputs, outputs = stage.by_role(params, stage.inputs), stage.by_role(params, stage.outputs)
+    out = tmp_path / "out.tif"
+    records.write_records("refocus", {**stage.recorded(params), "g": "2 : 6 : 0.5"}, inputs,
+                          outputs, records.input_states(inputs), [(out, out)])
+    assert stage.why_stale(params) is None
+    changed = stage.resolve({**{k: params[k] for k in ("input", "grid", "output")}, "g": "2:6:1"})
+    assert "parameter g changed ('2:6:0.5' -> '2:6:1')" in stage.why_stale(changed)

@@ -17,6 +17,7 @@ from plenocli.errors import (
     Terminated,
     check_terminated,
     clear_terminated,
+    interrupt_note,
     os_error_message,
     raise_terminated,
 )
@@ -124,7 +125,9 @@ def stage_command(func):
             raise click.ClickException(" ".join(str(err).split())) from err  # one line
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM as Terminated
             what = "terminated" if isinstance(err, Terminated) else "interrupted"
-            click.echo(f"plenocli: {what}; no partial output was kept", err=True)
+            note = interrupt_note(err)
+            click.echo(f"plenocli: {what}; no partial output was kept"
+                       + (f"; but {note}" if note else ""), err=True)
             sys.exit(143 if isinstance(err, Terminated) else 130)
         except MemoryError as err:
             if debug:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from plenocli.model.numbers import decimal
+from plenocli.model.numbers import decimal, number_word
 from plenocli.model.views import g_label
 
 KERNELS = {"bilinear": 1, "lanczos2": 2, "lanczos3": 3, "lanczos4": 4}
@@ -50,6 +50,16 @@ def parse_g(text: str | float) -> list[float]:
                          f"(@g{twice}: a page names its g to 6 significant digits); give g "
                          "values that differ within their first 6 digits")
     return values
+
+
+def g_words(text: str | float) -> str:
+    """The resolved spelling of a valid g (:func:`parse_g`): each number as the shortest word
+    that reads back as itself, no spaces; a range stays a range (``' 2 : 6 : 0.5 '`` is
+    ``2:6:0.5``, ``'2, 3.0'`` is ``2,3``), so one g gives one record however it was typed."""
+    parse_g(text)
+    spec = str(text).strip()
+    sep = ":" if ":" in spec else ","
+    return sep.join(number_word(decimal(p)) for p in spec.split(sep))
 
 
 def _g_values(spec: str, text) -> list[float]:

@@ -35,3 +35,10 @@ def whole(word: str) -> int:
 def is_count(word: str) -> bool:
     """Whether a word is ASCII digits alone (a page number, a size)."""
     return bool(re.fullmatch(r"\d+", word, re.ASCII))
+
+
+def number_word(value: float) -> str:
+    """The shortest decimal word that reads back as exactly ``value`` ('2' for 2.0, '0.5',
+    '1e-05'): how a resolved number is recorded (``:g`` would keep 6 digits and change it)."""
+    text = repr(float(value))
+    return text[:-2] if text.endswith(".0") else text

@@ -31,7 +31,14 @@ from dataclasses import dataclass
 from multiprocessing import connection
 from pathlib import Path
 
-from plenocli.errors import ConfigError, InputError, OptionError, PlenocliError, raise_terminated
+from plenocli.errors import (
+    ConfigError,
+    InputError,
+    OptionError,
+    PlenocliError,
+    note_interrupt,
+    raise_terminated,
+)
 from plenocli.io.atomic import process_alive
 from plenocli.pipeline.captures import capture_path
 from plenocli.pipeline.config import Template, read_template
@@ -163,14 +170,24 @@ def run_batch(config: str | Path, captures: Sequence[str | Path], *,
     upstream = [str(p) for d in shared if d.run for p in d.step.output_paths()]
     kwargs = dict(overrides=list(overrides), out=out, force=force, dry_run=dry_run,
                   upstream=upstream)
+    elsewhere: list[str] = []  # on an interruption: captures the Dask cluster still runs
     if scheduler:
-        results = _dask_results(scheduler, config, captures, kwargs)
+        results = _dask_results(scheduler, config, captures, kwargs, elsewhere)
     elif (jobs == 1 or len(captures) == 1) and timeout is None:
         results = (run_capture(config, c, **kwargs) for c in captures)
     else:
         results = _pool_results(min(jobs, len(captures)), config, captures, kwargs,
                                 timeout)
-    by_capture = _collect(results, len(captures))
+    try:
+        by_capture = _collect(results, len(captures))
+    except KeyboardInterrupt as interrupt:
+        if elsewhere:
+            note_interrupt(interrupt, f"{', '.join(elsewhere)} had started on the Dask "
+                           "cluster, which does not stop a running task: they finish there "
+                           "and their outputs land, whole, after this exit (the pending "
+                           "captures were cancelled); rerun the batch once they are done: it "
+                           "skips them")
+        raise
     return BatchReport(shared, [by_capture[c] for c in captures])
 
 
@@ -400,8 +417,11 @@ def check_scheduler(address: str) -> None:
                             "runs") from err
 
 
-def _dask_results(address: str, config: str, captures: list[str],
-                  kwargs: dict) -> Iterator[CaptureResult]:
+def _dask_results(address: str, config: str, captures: list[str], kwargs: dict,
+                  elsewhere: list[str]) -> Iterator[CaptureResult]:
+    """Each capture a Dask task. Stopped before the end (an interruption), the pending tasks
+    are cancelled; a running one cannot be (Dask does not stop a task's thread, and its
+    worker may serve others), so its capture's name goes to ``elsewhere``: it still lands."""
     _require_dask()
     from distributed import Client, as_completed
 
@@ -410,7 +430,7 @@ def _dask_results(address: str, config: str, captures: list[str],
     except (OSError, TimeoutError, ValueError) as err:
         raise PlenocliError(f"cannot reach the Dask scheduler at {address!r} ({err}); "
                             "check the address (e.g. tcp://host:8786) and that it runs") from err
-    futures = []
+    futures, capture_of = [], {}
     try:
         futures = [client.submit(run_capture, config, c, **kwargs, pure=False,
                                  key=f"plenocli-{Path(c).stem}-{os.getpid()}-{k}")
@@ -424,9 +444,28 @@ def _dask_results(address: str, config: str, captures: list[str],
                 yield CaptureResult(capture, Path(capture).stem, "failed",
                                     f"Dask: {type(err).__name__}: {err}")
     finally:
-        if futures:
-            client.cancel(futures)
+        left = [f for f in futures if not f.done()]
+        if left:
+            client.cancel(left)  # first: a task that starts after the question still runs
+            elsewhere.extend(_still_running(client, left, capture_of))
         client.close()
+
+
+def _still_running(client, futures: list, capture_of: dict[str, str]) -> list[str]:
+    """The names of the captures whose tasks a worker is executing (cancelled ones included:
+    a cancelled task that had started runs to its end)."""
+    try:
+        executing = {key for keys in client.run(_executing_keys).values() for key in keys}
+        unsure = ""
+    except Exception:  # noqa: BLE001 - no answer (a worker of another plenocli): any may run
+        executing, unsure = {f.key for f in futures}, " (perhaps)"
+    return [Path(capture_of[f.key]).stem + unsure for f in futures
+            if f.key in executing and f.key in capture_of]
+
+
+def _executing_keys(dask_worker) -> list[str]:
+    """On a Dask worker: the keys of the tasks its threads are running."""
+    return [str(task.key) for task in dask_worker.state.executing]
 
 
 # ---------------------------------------------------------------- report

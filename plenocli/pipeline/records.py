@@ -103,8 +103,12 @@ def with_digests(states: dict[str, list], inputs: Roles) -> dict[str, list]:
 
 def values(params: dict[str, Any], paths: Roles) -> dict[str, Any]:
     """The parameters that are not file paths, as JSON values (what a record compares)."""
-    kept = {k: v for k, v in params.items() if k not in paths}
-    return json.loads(json.dumps(json_safe(kept), default=str))
+    return as_json({k: v for k, v in params.items() if k not in paths})
+
+
+def as_json(value: Any) -> Any:
+    """``value`` as a record holds it (tuples as lists, numpy numbers as Python's)."""
+    return json.loads(json.dumps(json_safe(value), default=str))
 
 
 def write_records(stage: str, params: dict[str, Any], inputs: Roles, outputs: Roles,
@@ -164,28 +168,32 @@ def remove_replaced(folder: Path, earlier: dict | None, landed: list[tuple[Path,
 
 
 def why_stale(stage: str, params: dict[str, Any], inputs: Roles,
-              outputs: Roles) -> str | None:
+              outputs: Roles, resolved=None) -> str | None:
     """Why the existing ``outputs`` cannot stand for a run of ``stage`` with ``params`` and
-    ``inputs`` now (None when every one has a record that matches)."""
+    ``inputs`` now (None when every one has a record that matches). ``resolved(name, value)``:
+    a recorded value as the parameter's validator resolves it now, so that a record written
+    before a value was resolved (``'2 : 6 : 0.5'``) compares as the value it stands for."""
     current = values(params, {**inputs, **outputs})
     states = input_states(inputs)
     for role, paths in outputs.items():
         for output in paths:
-            reason = _mismatch(stage, role, Path(output), current, states, inputs)
+            reason = _mismatch(stage, role, Path(output), current, states, inputs,
+                               resolved or (lambda _name, value: value))
             if reason:
                 return reason
     return None
 
 
 def _mismatch(stage: str, role: str, output: Path, current: dict, states: dict,
-              inputs: Roles) -> str | None:
+              inputs: Roles, resolved) -> str | None:
     name = output.name
     record = read_record(output)
     if record is None:
         return f"no record of how {name} was made"
     if (record["stage"], record["role"]) != (stage, role):
         return f"{name} was made as {record['stage']} {record['role']}"
-    recorded = record["parameters"]
+    recorded = {key: as_json(resolved(key, value))
+                for key, value in record["parameters"].items()}
     for key in dict.fromkeys([*current, *recorded]):
         if recorded.get(key) != current.get(key):
             return f"parameter {key} changed ({recorded.get(key)!r} -> {current.get(key)!r})"

@@ -30,7 +30,7 @@ from plenocli.io.folderlock import folders_locked
 from plenocli.model.provenance import RESOLVED, UNUSED, hash_ahead
 from plenocli.pipeline import records
 from plenocli.pipeline.kinds import check_kinds
-from plenocli.pipeline.params import Param, names_by_role, resolve, unused_in
+from plenocli.pipeline.params import Param, convert, names_by_role, resolve, unused_in
 from plenocli.progress import log
 
 # every stage, in pipeline order; each has stages/<name>.py and schema/<name>.py
@@ -183,7 +183,19 @@ class Stage:
         records, :mod:`plenocli.pipeline.records`); None when they can."""
         return records.why_stale(self.name, self.recorded(params),
                                  self.by_role(params, self.inputs),
-                                 self.by_role(params, self.outputs))
+                                 self.by_role(params, self.outputs), self._resolved)
+
+    def _resolved(self, name: str, value: Any) -> Any:
+        """A recorded value of a declared plain parameter as its validator resolves it now
+        (one an older plenocli kept as typed compares as what it stands for); any other, or
+        one the validator refuses now, as recorded."""
+        param = next((p for p in self.params if p.name == name and p.role == "value"), None)
+        if param is None or value is None:
+            return value
+        try:
+            return convert(param, value)
+        except ConfigError:
+            return value
 
 
 def _without(params: dict[str, Any], names: frozenset) -> dict[str, Any]:

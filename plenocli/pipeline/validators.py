@@ -71,15 +71,28 @@ class PageNames(Validator):
 
 class ViewList(Validator):
     """Views to read, by name or page number, comma separated: each named once (a view
-    stacked twice is no second view). Whether they are in the file is the stage's check."""
+    stacked twice is no second view), kept as read (``' A, B '`` is ``A,B``: the stages strip
+    the names, and a record compares the resolved text). Whether they are in the file is the
+    stage's check."""
 
     def convert(self, value: Any) -> str:
         text = Text().convert(value)
         names = [n.strip() for n in text.split(",") if n.strip()]
+        if not names:
+            raise ValueError(f"{text!r} names no view; give names like A,B or leave the "
+                             "option out for all views")
         twice = next((n for n in names if names.count(n) > 1), None)
         if twice is not None:
             raise ValueError(f"view {twice!r} is named twice in {text!r}; name each view once")
-        return text
+        return ",".join(names)
+
+
+class NameList(Validator):
+    """One name or several, comma separated (kept as read: each name without the spaces
+    around it, one per comma, so the count the stage checks is the count given)."""
+
+    def convert(self, value: Any) -> str:
+        return ",".join(n.strip() for n in Text().convert(value).split(","))
 
 
 class Flag(Validator):

@@ -4,14 +4,15 @@ from collections.abc import Collection
 
 from plenocli.errors import OptionError
 from plenocli.model.focus import MAX_S
+from plenocli.model.numbers import number_word
 from plenocli.pipeline.params import PREVIEW, Param, inputs_arg, output_param, refuse_unused
 from plenocli.pipeline.validators import (
     TIFF,
     FiniteFloat,
     InputFile,
     Int,
+    NameList,
     OutputFile,
-    Text,
     Validator,
     ViewList,
     shell_text,
@@ -19,16 +20,15 @@ from plenocli.pipeline.validators import (
 
 
 class MaskWidths(Validator):
-    """W,W,...: the mask widths of the sweep, checked by the stage's own parser (kept as that
-    text)."""
+    """W,W,...: the mask widths of the sweep, checked by the stage's own parser (kept as its
+    resolved text: ' 0, 1.0 ' is 0,1)."""
 
     name = "W,W,..."
 
     def convert(self, value) -> str:
         from plenocli.pipeline.stages.crosstalk import parse_mask_widths
 
-        parse_mask_widths(shell_text(value))
-        return shell_text(value).strip()
+        return ",".join(number_word(w) for w in parse_mask_widths(shell_text(value)))
 
 
 PARAMS = (
@@ -36,7 +36,7 @@ PARAMS = (
     output_param(".json"),
     Param("views", ViewList(), "Views to compare, by name or page number, e.g. A,B (leaves out the "
           "sum view S that bias writes); default: all pages."),
-    Param("intended", Text(), "Name of the view whose pupil part was open (one, or one per "
+    Param("intended", NameList(), "Name of the view whose pupil part was open (one, or one per "
           "input, comma separated); default: the brightest view. With --mask-widths: "
           "left|right."),
     Param("tile", Int(min=2, parity="even"), "Tile side (px, even) of the cross-talk map.",

@@ -4,12 +4,13 @@ from collections.abc import Collection
 
 from plenocli.depth import MAX_DISPARITY
 from plenocli.model.focus import MAX_S
+from plenocli.model.numbers import number_word
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import FiniteFloat, InputFile, Validator, shell_text
 
 
 class GRange(Validator):
-    """MIN:MAX of the g search, checked by the stage's own parser (kept as that text)."""
+    """MIN:MAX of the g search, checked by the stage's own parser (kept as its resolved text)."""
 
     name = "MIN:MAX"
 
@@ -17,7 +18,8 @@ class GRange(Validator):
         from plenocli.pipeline.stages.depth import parse_range
 
         lo, hi = parse_range(shell_text(value))
-        return f"{lo:g}:{hi:g}"   # as resolved: ' 2 : 8 ' and full-width digits are 2:8
+        # as resolved: ' 2 : 8 ' is 2:8; every digit kept (:g would make 2.1234567 2.12346)
+        return f"{number_word(lo)}:{number_word(hi)}"
 
 
 PARAMS = (

@@ -2,20 +2,19 @@
 
 from collections.abc import Collection
 
-from plenocli.model.focus import KERNELS, MAX_S, VIEWS, parse_g
+from plenocli.model.focus import KERNELS, MAX_S, VIEWS, g_words
 from plenocli.pipeline.params import OUTPUT, PREVIEW, Param, input_arg, refuse_unused
 from plenocli.pipeline.validators import Choice, FiniteFloat, InputFile, Validator, shell_text
 
 
 class GValues(Validator):
-    """One g, a list 2,3,4 or a range 2:6:0.5, checked by the library's own parser (kept as
-    that text: the stage parses it again)."""
+    """One g, a list 2,3,4 or a range 2:6:0.5, checked by the library's own parser and kept
+    as its resolved text (the stage parses it again; records compare it)."""
 
     name = "G"
 
     def convert(self, value) -> str:
-        parse_g(shell_text(value))
-        return shell_text(value).strip()
+        return g_words(shell_text(value))
 
 
 PARAMS = (

@@ -13,16 +13,17 @@ from plenocli.synth import KIND_NAMES
 
 
 class KeyValue(Validator):
-    """``KEY=VALUE``, the value read as YAML (kept as that text)."""
+    """``KEY=VALUE``, the value read as YAML (kept as that text, resolved as the generator
+    reads it: ``' noise-x = 0 '`` is ``noise_x=0``)."""
 
     name = "KEY=VALUE"
 
     def convert(self, value: Any) -> str:
         text = super().convert(value)
-        key, sep, _ = text.partition("=")
+        key, sep, rest = text.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"{text!r}: expected KEY=VALUE, e.g. noise=0")
-        return text
+        return f"{key.strip().replace('-', '_')}={rest.strip()}"
 
 
 PARAMS = (
