@@ -24,15 +24,18 @@ def _chunk(kind: bytes, body: bytes) -> bytes:
             + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF))
 
 
-def _png(path, samples: np.ndarray, sbit: list[int], depth: int = 16) -> None:
-    """A grey (rows, cols) or RGB (rows, cols, 3) PNG with an sBIT chunk, written by hand."""
-    colour = 0 if samples.ndim == 2 else 2
+def _png(path, samples: np.ndarray, sbit: list[int], depth: int = 16,
+         colour: int | None = None, before: bytes = b"") -> None:
+    """A grey (rows, cols) or RGB (rows, cols, 3) PNG (``colour``: another IHDR colour type for
+    those samples) with an sBIT chunk after the chunks ``before``, written by hand."""
+    colour = (0 if samples.ndim == 2 else 2) if colour is None else colour
     rows, cols = samples.shape[:2]
     word = ">u2" if depth == 16 else "u1"
     body = b"".join(b"\x00" + samples[r].astype(word).tobytes() for r in range(rows))
     path.write_bytes(b"\x89PNG\r\n\x1a\n"
                      + _chunk(b"IHDR", struct.pack(">IIBBBBB", cols, rows, depth, colour, 0, 0, 0))
-                     + _chunk(b"sBIT", bytes(sbit)) + _chunk(b"IDAT", zlib.compress(body))
+                     + before + _chunk(b"sBIT", bytes(sbit))
+                     + _chunk(b"IDAT", zlib.compress(body))
                      + _chunk(b"IEND", b""))
 
 
@@ -107,3 +110,24 @@ def test_bmp_of_16_bit_or_masked_pixels_is_refused(tmp_path):
          (ten[0] << 20) | (ten[1] << 10) | ten[2])
     with pytest.raises(InputError, match="pixels given by bit masks"):
         raw.decode(tmp_path / "10.bmp")
+    plain = rng.integers(0, 256, (12, 10))
+    _bmp(tmp_path / "888.bmp", 32, (0xFF0000, 0xFF00, 0xFF), (plain << 16) | (plain << 8) | plain)
+    frames, meta = raw.decode(tmp_path / "888.bmp")   # audit 23 F1: the plain layout is read
+    assert np.array_equal(frames[0], plain)
+
+
+def test_grey_alpha_png_of_16_bits_is_its_grey_and_an_sbit_after_the_palette_is_refused(
+        tmp_path):
+    """Audit 23 W2/W3: Pillow calls a 16-bit grey + alpha PNG "RGBA", so it was read as R, G, B
+    pages of white 65535 (its sBIT 12 dropped); an sBIT after the palette (libpng ignores it)
+    left a grey-palette PNG at white 255 where its grey PNG has 63."""
+    grey = np.random.default_rng(4).integers(0, 4096, (8, 6))
+    alpha = np.full_like(grey, 65535)
+    _png(tmp_path / "ga.png", np.stack([grey, alpha], -1), [12, 16], colour=4)
+    frames, meta = raw.decode(tmp_path / "ga.png")
+    assert frames.shape == (1, 8, 6) and meta["white_level"] == [4095.0]
+    assert np.array_equal(frames[0], grey)
+    table = _chunk(b"PLTE", bytes(i // 3 for i in range(3 * 256)))
+    _png(tmp_path / "late.png", grey % 64, [6, 6, 6], depth=8, colour=3, before=table)
+    with pytest.raises(InputError, match="sBIT chunk comes after its palette"):
+        raw.decode(tmp_path / "late.png")

@@ -29,6 +29,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 PNG_CHANNELS = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}  # colour type -> sBIT bytes (grey, RGB, palette..)
 MAX_CHUNKS = 10_000   # sBIT precedes PLTE and IDAT: a file with more chunks before them is junk
 BI_BITFIELDS, BI_ALPHABITFIELDS = 3, 6
+PLAIN_MASKS_32 = (0xFF0000, 0xFF00, 0xFF)  # red, green, blue: the bytes of a BI_RGB pixel
 Tops = list[tuple[float, str]]
 
 
@@ -39,13 +40,19 @@ def png_significant_bits(path) -> tuple[list[int], int] | None:
         if fh.read(8) != PNG_MAGIC:
             return None
         depth = colour = None
+        palette_seen = False
         for _ in range(MAX_CHUNKS):
             head = fh.read(8)
             if len(head) < 8:
                 return None
             length, kind = struct.unpack(">I4s", head)
-            if kind in (b"PLTE", b"IDAT", b"IEND"):
+            if kind in (b"IDAT", b"IEND"):
                 return None
+            if kind == b"sBIT" and palette_seen:  # libpng drops it: the levels are unknown
+                raise InputError(f"{path}: its sBIT chunk comes after its palette, where the "
+                                 "PNG standard does not allow it (readers ignore it); the file "
+                                 "is damaged: write it again")
+            palette_seen = palette_seen or kind == b"PLTE"
             body = fh.read(length) if kind in (b"IHDR", b"sBIT") else fh.seek(length, 1)
             fh.seek(4, 1)  # CRC: libpng checks it when OpenCV decodes
             if kind == b"IHDR" and len(body) >= 10:
@@ -111,13 +118,19 @@ def refuse_masked_bmp(path) -> None:
     """InputError for a BMP of 16-bit pixels or of bit masks (BI_BITFIELDS): OpenCV, which reads
     plenocli's BMPs, shifts 5-bit samples into bytes (a white of 248 under 255) and reads masks
     it does not know as bytes (wrong colours), so their light levels cannot be vouched for.
-    Such BMPs hold screen colours, not sensor data: refused, not decoded by hand."""
+    Such BMPs hold screen colours, not sensor data: refused, not decoded by hand. A 32-bit BMP
+    whose masks are the plain layout (8 bits a colour at bits 16, 8, 0, as GIMP and Windows
+    write them) OpenCV reads as stored: it is read."""
     with open(path, "rb") as fh:
-        head = fh.read(14 + 40)
+        head = fh.read(14 + 40 + 12)
     if head[:2] != b"BM" or len(head) < 14 + 40:
         return
     bpp, compression = struct.unpack_from("<HI", head, 28)
+    # the masks follow a 40-byte header, and sit at the same place inside a longer one
+    masks = struct.unpack_from("<III", head, 54) if len(head) >= 66 else None
+    if bpp == 32 and masks == PLAIN_MASKS_32:
+        return
     if bpp == 16 or compression in (BI_BITFIELDS, BI_ALPHABITFIELDS):
         what = "16-bit pixels" if bpp == 16 else "pixels given by bit masks"
         raise InputError(f"{path}: a BMP of {what}, whose samples OpenCV does not read as "
-                         "stored; write the image as a 16-bit PNG or TIFF")
+                         "stored; write the image as a PNG or TIFF")
