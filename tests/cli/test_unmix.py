@@ -323,3 +323,28 @@ def test_a_mixing_that_removes_more_light_than_there_is_is_refused(rig):
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
     res = _invoke("unmix", paths["views"], "--mixing", paths["mixing"], "-o", out)
     assert res.exit_code == 0, res.output  # its own capture (pixel-scale texture) passes
+
+
+def test_a_mixing_too_strong_in_one_bayer_colour_is_refused_wherever_the_object_falls():
+    """Audit 23 W1/W4: one colour over-corrected in a dark patch darkens exactly a quarter of
+    each 32 px block (never more than the block rule's quarter), and an object across four
+    blocks had a fifth of each: both passed with exit 0. Mosaics are judged colour by colour,
+    blocks on two grids half a block apart."""
+    from types import SimpleNamespace
+
+    from plenocli.errors import CalibrationError
+    from plenocli.pipeline.stages.unmix import _check_light
+
+    observed = np.full((2, 512, 512), 4000.0, np.float32)
+    views = observed.copy()
+    views[0, 150:206:2, 200:256:2] = -1400.0  # the red sites of a 56 x 56 patch
+    observed[0, 150:206, 200:256] = 0.0
+    res = SimpleNamespace(views=views, noise_gain=np.ones_like(views))
+    _check_light(res, observed, ["A", "B"], "m.tif", ["v.tif"], mosaic=False)  # 0.3 %: passes
+    with pytest.raises(CalibrationError, match="below zero"):
+        _check_light(res, observed, ["A", "B"], "m.tif", ["v.tif"], mosaic=True)
+    views = observed.copy()
+    views[0, 146:174, 146:174] = -1330.0  # across the corner of four blocks, a fifth of each
+    res = SimpleNamespace(views=views, noise_gain=np.ones_like(views))
+    with pytest.raises(CalibrationError, match="below zero"):
+        _check_light(res, observed, ["A", "B"], "m.tif", ["v.tif"], mosaic=False)
