@@ -339,12 +339,12 @@ NOISE_QUANTILE = 20  # per cent: the blocks of a level bin that set its noise (t
 
 @dataclass(frozen=True)
 class NegativeLight:
-    """Per output view: ``known`` finite pixels, ``below`` pixels negative beyond noise and
-    tolerance, ``worst_block`` the largest share of such pixels in one block (of the block's
-    known pixels), ``minimum`` the lowest value."""
+    """Per output view: ``share``, the largest share of one colour's known pixels (of all
+    pixels for a view that is no mosaic) negative beyond noise and tolerance;
+    ``worst_block``, the largest such share in one block, on either grid; ``minimum``, the
+    lowest value."""
 
-    known: np.ndarray
-    below: np.ndarray
+    share: np.ndarray
     worst_block: np.ndarray
     minimum: np.ndarray
 
@@ -397,24 +397,27 @@ def _block_stats(obs, block, step, level, noise):
 
 
 @numba.njit(cache=True, parallel=True)
-def _negative_kernel(out, obs, gain, block, k_sigma, tol, xp, fp, below, known):
-    """Per block and output view: known pixels and those below -(k g sigma + tol L), with L
-    the brightest input view at the pixel and sigma the largest of the input views' modelled
-    noise (``xp``, ``fp``: level -> noise per input view); with ``k_sigma`` < 0 the bound is
-    -tol L alone (the cheap pass). Numba kernel, one block row per parallel task."""
+def _negative_kernel(out, obs, gain, block, offset, k_sigma, tol, xp, fp, below, known):
+    """Per output view, colour and block: known pixels and those below -(k g sigma + tol L),
+    with L the brightest input view at the pixel and sigma the largest of the input views'
+    modelled noise (``xp``, ``fp``: level -> noise per input view); with ``k_sigma`` < 0 the
+    bound is -tol L alone (the cheap pass). The blocks start ``offset`` px before the frame;
+    ``below``, ``known``: (V, colours, block rows, block cols), colours 4 for a 2 x 2 mosaic
+    (counted by the pixel's place in it), else 1. One block row per parallel task."""
     v_out, rows, cols = out.shape
-    for by in numba.prange(below.shape[1]):
-        y0, y1 = by * block, min(rows, (by + 1) * block)
-        for bx in range(below.shape[2]):
-            x0, x1 = bx * block, min(cols, (bx + 1) * block)
+    mosaic = below.shape[1] == 4
+    for by in numba.prange(below.shape[2]):
+        y0, y1 = max(0, by * block - offset), min(rows, (by + 1) * block - offset)
+        for bx in range(below.shape[3]):
+            x0, x1 = max(0, bx * block - offset), min(cols, (bx + 1) * block - offset)
             for k in range(v_out):
-                count, seen = 0, 0
                 for y in range(y0, y1):
                     for x in range(x0, x1):
                         t = out[k, y, x]
                         if not np.isfinite(t):
                             continue
-                        seen += 1
+                        c = (y % 2) * 2 + x % 2 if mosaic else 0
+                        known[k, c, by, bx] += 1
                         level, least, sigma = 0.0, np.inf, 0.0
                         for j in range(obs.shape[0]):
                             level = max(level, obs[j, y, x])
@@ -426,9 +429,7 @@ def _negative_kernel(out, obs, gain, block, k_sigma, tol, xp, fp, below, known):
                                 sigma = max(sigma, np.interp(obs[j, y, x], xp[j], fp[j]))
                             if t >= -(k_sigma * gain[k, y, x] * sigma + tol * level):
                                 continue
-                        count += 1
-                below[k, by, bx] = count
-                known[k, by, bx] = seen
+                        below[k, c, by, bx] += 1
 
 
 def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
@@ -459,24 +460,38 @@ def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def negative_light(solved: np.ndarray, observed: np.ndarray, gain: np.ndarray, *,
-                   block: int = NEGATIVE_BLOCK, k_sigma: float = NEGATIVE_SIGMA,
+                   mosaic: bool = False, block: int = NEGATIVE_BLOCK,
+                   k_sigma: float = NEGATIVE_SIGMA,
                    tolerance: float = MIXING_TOLERANCE) -> NegativeLight:
     """How far the unmixed views go below zero beyond what noise and the mixing's tolerance
     explain. ``solved``, ``observed``, ``gain``: (V, rows, cols) outputs, inputs and noise gain
-    of one solve (the views in the mixing's order)."""
+    of one solve (the views in the mixing's order). A ``mosaic`` is counted colour by colour
+    (a mixing too strong in one colour darkens a quarter of the pixels, never more than a
+    quarter of a block), and the blocks on two grids half a block apart (an object across
+    four blocks of one grid is inside one of the other's)."""
     out = np.ascontiguousarray(solved, np.float32)
     obs = np.ascontiguousarray(observed, np.float32)
     g = np.ascontiguousarray(gain, np.float32)
-    n_br, n_bc = -(-out.shape[1] // block), -(-out.shape[2] // block)
-    below = np.zeros((out.shape[0], n_br, n_bc), np.int64)
-    known = np.zeros_like(below)
+    grids = []
+    for offset in (0, block // 2):
+        n_br, n_bc = -(-(out.shape[1] + offset) // block), -(-(out.shape[2] + offset) // block)
+        grids.append((offset, np.zeros((out.shape[0], 4 if mosaic else 1, n_br, n_bc),
+                                       np.int64)))
     xp = np.zeros((obs.shape[0], 2))
-    _negative_kernel(out, obs, g, block, -1.0, tolerance, xp, xp, below, known)
-    if below.any():  # the noise model only where a pixel is below the tolerance alone
+    counts = []
+    for offset, shape_of in grids:
+        below, known = np.zeros_like(shape_of), np.zeros_like(shape_of)
+        _negative_kernel(out, obs, g, block, offset, -1.0, tolerance, xp, xp, below, known)
+        counts.append((offset, below, known))
+    if any(below.any() for _, below, _ in counts):  # the noise model only where one is below
         xp, fp = _noise_model(obs, block)
-        _negative_kernel(out, obs, g, block, k_sigma, tolerance, xp, fp, below, known)
-    with np.errstate(invalid="ignore"):
-        share = below / np.maximum(known, 1)
+        for offset, below, known in counts:
+            below[:] = 0
+            known[:] = 0
+            _negative_kernel(out, obs, g, block, offset, k_sigma, tolerance, xp, fp, below,
+                             known)
+    below, known = counts[0][1], counts[0][2]  # the view's shares: one grid counts each pixel
+    share = (below.sum(axis=(2, 3)) / np.maximum(known.sum(axis=(2, 3)), 1)).max(axis=1)
+    worst = np.max([(b / np.maximum(k, 1)).max(axis=(1, 2, 3)) for _, b, k in counts], axis=0)
     minimum = np.array([np.nanmin(o) if np.isfinite(o).any() else np.nan for o in out])
-    return NegativeLight(known.sum(axis=(1, 2)), below.sum(axis=(1, 2)),
-                         share.max(axis=(1, 2)), minimum)
+    return NegativeLight(share, worst, minimum)

@@ -217,7 +217,7 @@ def test_negative_light_tells_an_over_stated_mixing(scale, noise):
         field = MixingField(nodes, rows[::8], cols[::8], shape, ("A", "B"), ("L",))
         res = unmix(obs, field, noise_gain=True)
         found = negative_light(res.views, obs, res.noise_gain)
-        shares[r] = found.below / found.known
+        shares[r] = found.share
     assert shares[0.5].max() == 0
     if scale > 100:  # a dark, noisy capture hides an over-statement in its noise
         assert shares[0.65].max() > 0.02

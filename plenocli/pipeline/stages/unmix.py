@@ -145,34 +145,21 @@ def _check_light(res, observed: np.ndarray, names: list[str], mixing: str,
                  inputs: list[str], *, mosaic: bool) -> None:
     """Light cannot be negative: unmixed views below zero beyond their noise (and the
     mixing's tolerance) over a share of the frame, or of one block, mean the mixing removes
-    more light than the other views gave (``unmix_lib.negative_light``). A mosaic is judged
-    colour by colour (a mixing too strong in one colour darkens a quarter of its pixels, never
-    more than a quarter of a block), and the blocks on two grids half a block apart (a dark
-    object across four blocks is then inside one)."""
-    half = unmix_lib.NEGATIVE_BLOCK // 2
-    phases = [(i, j) for i in (0, 1) for j in (0, 1)] if mosaic else [(0, 0)]
-    step = 2 if mosaic else 1
-    share = worst = 0.0
-    minimum = np.inf
-    for (i, j), offset in ((p, o) for p in phases for o in (0, half)):
-        cut = (slice(None), slice(i + offset, None, step), slice(j + offset, None, step))
-        found = unmix_lib.negative_light(res.views[cut], observed[cut], res.noise_gain[cut],
-                                         block=unmix_lib.NEGATIVE_BLOCK // step)
-        share = np.maximum(share, found.below / np.maximum(found.known, 1))
-        worst = np.maximum(worst, found.worst_block)
-        minimum = np.fmin(minimum, found.minimum)
-    bad = (share > NEGATIVE_SHARE) | (worst > NEGATIVE_BLOCK_SHARE)
+    more light than the other views gave (``unmix_lib.negative_light``)."""
+    found = unmix_lib.negative_light(res.views, observed, res.noise_gain, mosaic=mosaic)
+    bad = (found.share > NEGATIVE_SHARE) | (found.worst_block > NEGATIVE_BLOCK_SHARE)
     if not bad.any():
         return
-    k = int(np.argmax(np.where(bad, share + worst, -1.0)))
+    k = int(np.argmax(np.where(bad, found.share + found.worst_block, -1.0)))
     level = float(np.nanmedian(observed))
     raise CalibrationError(
-        f"{mixing} removes more light than {', '.join(inputs)} holds: {share[k]:.1%} of view "
-        f"{names[k]}'s pixels (up to {worst[k]:.0%} of a {unmix_lib.NEGATIVE_BLOCK} "
-        f"px block) come out below zero beyond their noise, down to {minimum[k]:.4g} "
-        f"(median level {level:.4g}); the mixing does not describe this capture (measured on "
-        "another rig, or its cross-talk r too high): measure it on masked whites of this rig, "
-        "processed as these views")
+        f"{mixing} removes more light than {', '.join(inputs)} holds: {found.share[k]:.1%} of "
+        f"view {names[k]}'s pixels{' of one colour' if mosaic else ''} (up to "
+        f"{found.worst_block[k]:.0%} of a {unmix_lib.NEGATIVE_BLOCK} px block) come out below "
+        f"zero beyond their noise, down to {found.minimum[k]:.4g} (median level {level:.4g}); "
+        "the mixing does not describe this capture (measured on another rig, or its "
+        "cross-talk r too high): measure it on masked whites of this rig, processed as these "
+        "views")
 
 
 def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
