@@ -33,6 +33,19 @@ PLAIN_MASKS_32 = (0xFF0000, 0xFF00, 0xFF)  # red, green, blue: the bytes of a BI
 Tops = list[tuple[float, str]]
 
 
+def png_colour_type(path) -> int | None:
+    """A PNG's colour type from its IHDR, the first chunk (0 grey, 4 grey + alpha); None for
+    another file."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(26)
+    except OSError:
+        return None
+    if len(head) < 26 or head[:8] != PNG_MAGIC or head[12:16] != b"IHDR":
+        return None
+    return head[25]
+
+
 def png_significant_bits(path) -> tuple[list[int], int] | None:
     """The sBIT of a PNG (one entry a channel, in the file's channel order) and its IHDR bit
     depth; None without sBIT (or for a file whose chunks OpenCV's errors will describe)."""

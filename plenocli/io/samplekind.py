@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import InputError
+from plenocli.io.samplebits import png_colour_type
 
 WHAT_TO_DO = "save the sensor image as grey or RGB"
 BILEVEL = "1-bit (two-level)"
@@ -59,19 +60,6 @@ def tiff_grey_table(path, colormap: np.ndarray) -> np.ndarray:
     return greys
 
 
-def _png_colour_type(path) -> int | None:
-    """A PNG's colour type from its IHDR, the first chunk (0 grey, 4 grey + alpha); None for
-    another file."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(26)
-    except OSError:
-        return None
-    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        return None
-    return head[25]
-
-
 def declared_kind(path) -> str | None:
     """What a non-TIFF image's header declares: ``"grey"`` for grey samples or a palette of grey
     entries (OpenCV decodes either through the table and may spread it over three channels),
@@ -81,7 +69,7 @@ def declared_kind(path) -> str | None:
 
     from PIL import Image
 
-    if _png_colour_type(path) == 4:  # Pillow calls a 16-bit grey + alpha PNG "RGBA"
+    if png_colour_type(path) == 4:  # Pillow calls a 16-bit grey + alpha PNG "RGBA"
         return "grey"
     try:
         with warnings.catch_warnings():
