@@ -316,9 +316,7 @@ def check_names_fit(out: Path) -> None:
     checked alone where the outputs are only planned (``--dry-run``, ``--print-make``)."""
     out = Path(out)
     folder = out.parent
-    while len(os.fsencode(folder.name)) <= NAME_MAX and not _exists(folder):
-        if folder == folder.parent:
-            break
+    while not _exists(folder) and folder != folder.parent:  # the file system it lands on
         folder = folder.parent
     _check_name_lengths(out, folder, str(out))
 
