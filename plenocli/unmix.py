@@ -341,12 +341,10 @@ NOISE_QUANTILE = 20  # per cent: the blocks of a level bin that set its noise (t
 class NegativeLight:
     """Per output view: ``share``, the largest share of one colour's known pixels (of all
     pixels for a view that is no mosaic) negative beyond noise and tolerance;
-    ``worst_block``, the largest such share in one block, on either grid; ``minimum``, the
-    lowest value."""
+    ``worst_block``, the largest such share in one block, on either grid."""
 
     share: np.ndarray
     worst_block: np.ndarray
-    minimum: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -397,19 +395,19 @@ def _block_stats(obs, block, step, level, noise):
 
 
 @numba.njit(cache=True, parallel=True)
-def _negative_kernel(out, obs, gain, block, offset, k_sigma, tol, xp, fp, below, known):
+def _negative_kernel(out, obs, gain, block, k_sigma, tol, xp, fp, below, known):
     """Per output view, colour and block: known pixels and those below -(k g sigma + tol L),
     with L the brightest input view at the pixel and sigma the largest of the input views'
     modelled noise (``xp``, ``fp``: level -> noise per input view); with ``k_sigma`` < 0 the
-    bound is -tol L alone (the cheap pass). The blocks start ``offset`` px before the frame;
+    bound is -tol L alone (the cheap pass).
     ``below``, ``known``: (V, colours, block rows, block cols), colours 4 for a 2 x 2 mosaic
     (counted by the pixel's place in it), else 1. One block row per parallel task."""
     v_out, rows, cols = out.shape
     mosaic = below.shape[1] == 4
     for by in numba.prange(below.shape[2]):
-        y0, y1 = max(0, by * block - offset), min(rows, (by + 1) * block - offset)
+        y0, y1 = by * block, min(rows, (by + 1) * block)
         for bx in range(below.shape[3]):
-            x0, x1 = max(0, bx * block - offset), min(cols, (bx + 1) * block - offset)
+            x0, x1 = bx * block, min(cols, (bx + 1) * block)
             for k in range(v_out):
                 for y in range(y0, y1):
                     for x in range(x0, x1):
@@ -472,26 +470,27 @@ def negative_light(solved: np.ndarray, observed: np.ndarray, gain: np.ndarray, *
     out = np.ascontiguousarray(solved, np.float32)
     obs = np.ascontiguousarray(observed, np.float32)
     g = np.ascontiguousarray(gain, np.float32)
-    grids = []
-    for offset in (0, block // 2):
-        n_br, n_bc = -(-(out.shape[1] + offset) // block), -(-(out.shape[2] + offset) // block)
-        grids.append((offset, np.zeros((out.shape[0], 4 if mosaic else 1, n_br, n_bc),
-                                       np.int64)))
+    # one pass counts cells of half a block; both grids' blocks are sums of 2 x 2 cells
+    cell = block // 2
+    shape = (out.shape[0], 4 if mosaic else 1, -(-out.shape[1] // cell), -(-out.shape[2] // cell))
+    below, known = np.zeros(shape, np.int64), np.zeros(shape, np.int64)
     xp = np.zeros((obs.shape[0], 2))
-    counts = []
-    for offset, shape_of in grids:
-        below, known = np.zeros_like(shape_of), np.zeros_like(shape_of)
-        _negative_kernel(out, obs, g, block, offset, -1.0, tolerance, xp, xp, below, known)
-        counts.append((offset, below, known))
-    if any(below.any() for _, below, _ in counts):  # the noise model only where one is below
+    _negative_kernel(out, obs, g, cell, -1.0, tolerance, xp, xp, below, known)
+    if below.any():  # the noise model only where a pixel is below the tolerance alone
         xp, fp = _noise_model(obs, block)
-        for offset, below, known in counts:
-            below[:] = 0
-            known[:] = 0
-            _negative_kernel(out, obs, g, block, offset, k_sigma, tolerance, xp, fp, below,
-                             known)
-    below, known = counts[0][1], counts[0][2]  # the view's shares: one grid counts each pixel
+        below[:], known[:] = 0, 0
+        _negative_kernel(out, obs, g, cell, k_sigma, tolerance, xp, fp, below, known)
     share = (below.sum(axis=(2, 3)) / np.maximum(known.sum(axis=(2, 3)), 1)).max(axis=1)
-    worst = np.max([(b / np.maximum(k, 1)).max(axis=(1, 2, 3)) for _, b, k in counts], axis=0)
-    minimum = np.array([np.nanmin(o) if np.isfinite(o).any() else np.nan for o in out])
-    return NegativeLight(share, worst, minimum)
+    worst = np.max([(b / np.maximum(k, 1)).max(axis=(1, 2, 3)) for b, k in
+                    ((_blocks(below, shifted), _blocks(known, shifted))
+                     for shifted in (False, True))], axis=0)
+    return NegativeLight(share, worst)
+
+
+def _blocks(cells: np.ndarray, shifted: bool) -> np.ndarray:
+    """Counts per block of 2 x 2 cells (the last two axes), the grid starting a cell before the
+    frame when ``shifted``."""
+    pad = [(0, 0), (0, 0)] + [(int(shifted), (n + int(shifted)) % 2) for n in cells.shape[2:]]
+    cells = np.pad(cells, pad)
+    return cells[..., 0::2, 0::2] + cells[..., 1::2, 0::2] + cells[..., 0::2, 1::2] + \
+        cells[..., 1::2, 1::2]

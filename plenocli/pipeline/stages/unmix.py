@@ -156,7 +156,8 @@ def _check_light(res, observed: np.ndarray, names: list[str], mixing: str,
         f"{mixing} removes more light than {', '.join(inputs)} holds: {found.share[k]:.1%} of "
         f"view {names[k]}'s pixels{' of one colour' if mosaic else ''} (up to "
         f"{found.worst_block[k]:.0%} of a {unmix_lib.NEGATIVE_BLOCK} px block) come out below "
-        f"zero beyond their noise, down to {found.minimum[k]:.4g} (median level {level:.4g}); "
+        f"zero beyond their noise, down to {np.nanmin(res.views[k]):.4g} (median level "
+        f"{level:.4g}); "
         "the mixing does not describe this capture (measured on another rig, or its "
         "cross-talk r too high): measure it on masked whites of this rig, processed as these "
         "views")
