@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pytest
 import yaml
@@ -215,3 +217,23 @@ def test_a_record_vouches_only_for_the_lens_grid_its_stage_wrote(tmp_path):
     assert gridfile.vouched_by(tmp_path / "made.yaml")[0] is None
     (tmp_path / "g.xml").write_text("<RayCalibData></RayCalibData>\n")
     assert "XML" in gridfile.vouched_by(tmp_path / "g.xml")[1]
+
+
+def test_a_grid_re_saved_unchanged_by_another_writer_is_still_vouched_for(tmp_path):
+    """audit 23 M2: the record's checksum is of the grid as read (every field and lens row),
+    not of its text: PyYAML's re-save (keys sorted, rows in block style, the record first) is
+    the same grid; one lens moved by 0.01 px is not. A record of the earlier text checksum
+    still vouches for the text it was written with."""
+    gridfile.write_grid(tmp_path / "grid.yaml", _grid(), {"stage": "simulate"})
+    doc = yaml.safe_load((tmp_path / "grid.yaml").read_text())
+    (tmp_path / "resaved.yaml").write_text(yaml.safe_dump(doc))
+    assert gridfile.vouched_by(tmp_path / "resaved.yaml") == ("simulate", "")
+    doc["lens_grid"]["lenses"]["rows"][7][2] += 0.01
+    (tmp_path / "moved.yaml").write_text(yaml.safe_dump(doc))
+    assert gridfile.vouched_by(tmp_path / "moved.yaml")[0] is None
+    text = (tmp_path / "grid.yaml").read_text()
+    section = text[:text.index("\nprovenance:") + 1]
+    earlier = text.replace(doc["provenance"]["lens_grid_sha256"],
+                           hashlib.sha256(section.encode()).hexdigest())
+    (tmp_path / "earlier.yaml").write_text(earlier)
+    assert gridfile.vouched_by(tmp_path / "earlier.yaml") == ("simulate", "")

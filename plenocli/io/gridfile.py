@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import re
 from pathlib import Path
@@ -23,7 +24,7 @@ _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
                extra: dict | None = None, protect: tuple = ()) -> None:
     """Write ``grid`` as YAML; ``extra`` (e.g. residuals) is stored beside it. The record holds
-    the sha256 of the ``lens_grid`` section as written (:func:`vouched_by`)."""
+    the sha256 of the grid as it reads back (:func:`vouched_by`)."""
     lens_grid = grid.to_dict(lens_rows=False)
     text = _dump({"lens_grid": lens_grid})
     if grid.centres_xy is not None:
@@ -33,7 +34,7 @@ def write_grid(path: str | os.PathLike, grid: LensGrid, provenance: dict, *,
             f"    - [{i}, {j}, {x:.5f}, {y:.5f}]\n"
             for (i, j), (x, y) in zip(np.asarray(grid.indices).tolist(),
                                       np.asarray(grid.centres_xy).tolist(), strict=True))
-    record = {**provenance, GRID_SHA256: _section_sha256(text)}
+    record = {**provenance, GRID_SHA256: _grid_sha256(_fast_load(text) or load_yaml(text))}
     # numpy scalars from the calibration (a float64 pitch) as plain numbers: YAML-safe dump
     text += _dump(json_safe({**(extra or {}), "provenance": record}))
     write_text(path, text, protect=protect)
@@ -102,23 +103,43 @@ def measured_on(path: str | os.PathLike) -> set[str]:
             if isinstance(i, dict) and i.get("sha256")}
 
 
-# The record's checksum of the lens_grid section, and the stages whose grids are measured
+# The record's checksum of the grid, and the stages whose grids are measured
 # (calibrate, on a white or the frames) or true by construction (simulate, its own lattice).
 GRID_SHA256 = "lens_grid_sha256"
 VOUCHING_STAGES = ("calibrate", "simulate")
 _TOP_KEY = re.compile(r"\n(?=[^\s#])")
 
 
-def _section_sha256(text: str) -> str:
-    return hashlib.sha256(text.replace("\r\n", "\n").encode()).hexdigest()
+def _grid_sha256(doc) -> str | None:
+    """sha256 of the grid a YAML document describes, as the stages read it (its fields in
+    canonical JSON, its lens rows as numbers), not of its text: a grid re-saved by another YAML
+    writer (key order, quoting, flow or block rows) is the same grid. None for a document that
+    holds none."""
+    try:
+        grid = LensGrid.from_dict(doc["lens_grid"])
+    except (TypeError, KeyError, ValueError):
+        return None
+    digest = hashlib.sha256(json.dumps(grid.to_dict(lens_rows=False), sort_keys=True).encode())
+    if grid.centres_xy is not None:
+        digest.update(np.ascontiguousarray(grid.indices, "<i8").tobytes())
+        digest.update(np.ascontiguousarray(grid.centres_xy, "<f8").tobytes())
+    return digest.hexdigest()
+
+
+def _text_sha256(text: str) -> str | None:
+    """The checksum earlier records hold: of the lens_grid section's text as written (a grid
+    re-saved unchanged by another writer fails it, hence ``_grid_sha256`` now)."""
+    text = text.replace("\r\n", "\n")
+    end = _TOP_KEY.search(text, 1) if text.startswith("lens_grid:") else None
+    return None if end is None else hashlib.sha256(text[:end.start() + 1].encode()).hexdigest()
 
 
 def vouched_by(path: str | os.PathLike) -> tuple[str | None, str]:
     """(the stage whose record vouches for the YAML grid at ``path``, None when none does; why
     not). A record vouches when a stage that measures grids or knows them (VOUCHING_STAGES)
-    wrote it and the ``lens_grid`` section is byte for byte what it wrote: its sha256 is the
-    one the record holds. An XML, a hand-made grid, or one edited since (a pitch scaled by 1 %)
-    has no record that vouches for it."""
+    wrote it and the grid read is the one it wrote: its sha256 is the one the record holds. An
+    XML, a hand-made grid, or one edited since (a pitch scaled by 1 %) has no record that
+    vouches for it."""
     text, record = _record(path)
     if text is None or text.lstrip().startswith("<"):
         return None, "a Raytrix XML carries no plenocli record"
@@ -126,9 +147,11 @@ def vouched_by(path: str | os.PathLike) -> tuple[str | None, str]:
     if stage not in VOUCHING_STAGES:
         return None, ("its record names no stage that measured it (plenocli calibrate or "
                       "simulate)" if record else "it has no plenocli record")
-    text = text.replace("\r\n", "\n")
-    end = _TOP_KEY.search(text, 1) if text.startswith("lens_grid:") else None
-    if end is None or record.get(GRID_SHA256) != _section_sha256(text[:end.start() + 1]):
+    try:
+        doc = _fast_load(text) or load_yaml(text)
+    except DocumentError:
+        doc = None
+    if record.get(GRID_SHA256) not in {_grid_sha256(doc), _text_sha256(text)} - {None}:
         return None, f"its lens_grid was changed since `plenocli {stage}` wrote it"
     return stage, ""
 
