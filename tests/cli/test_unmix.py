@@ -220,6 +220,23 @@ def test_one_file_per_view_like_raytrix_left_right(tmp_path):
     res = _invoke("crosstalk", *files[:3], "--views", "left,right", "-o", tmp_path / "c2.json",
                   "--mixing-out", tmp_path / "m2.tif")
     assert res.exit_code == 1 and "give that many files per masked white" in res.output
+    # audit 23 F2: files named otherwise (capture_left.tif) are named by --views, as crosstalk's
+    for k, view in enumerate(("left", "right")):
+        (tmp_path / f"{view}.tif").rename(tmp_path / f"capture_{view}.tif")
+    named = [tmp_path / f"capture_{view}.tif" for view in ("right", "left")]
+    res = _invoke("unmix", *named, "--mixing", tmp_path / "m.tif", "-o", tmp_path / "c3.tif")
+    assert res.exit_code == 1 and "or by --views (e.g. --views left,right)" in res.output
+    res = _invoke("unmix", *named, "--views", "right,left", "--mixing", tmp_path / "m.tif",
+                  "-o", tmp_path / "c3.tif")
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(tmp_path / "c3.tif")
+    assert meta["views"] == ["right", "left"]
+    assert meta["provenance"]["parameters"]["views"] == "right,left"
+    np.testing.assert_allclose(data, clean[::-1], rtol=1e-3)
+    for views in ("left", "left,left", "left,right,x"):
+        res = _invoke("unmix", *named, "--views", views, "--mixing", tmp_path / "m.tif",
+                      "-o", tmp_path / "c4.tif")
+        assert res.exit_code == 2 and "--views" in res.output and not (tmp_path / "c4.tif").exists()
 
 
 def test_non_finite_mixing_is_refused(rig):

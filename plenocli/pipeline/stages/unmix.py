@@ -6,8 +6,8 @@ at r = 0.5). Where it is A + B (bias writes B = S - A) it is made again from the
 (NaN where either is); after ``flat`` it is not (each view divided by its own white), nothing
 here can make it right, and it is left out (the log says so). Any other page is copied
 unchanged, so the output keeps the input's metadata and ``stitch`` takes it as it is. A file
-that holds a single view (a left or right refocused image) names it after the file
-(``left.tif`` -> ``left``), as in stitch.
+that holds a single view (a left or right refocused image) is named by ``--views``, in the
+inputs' order, else after the file (``left.tif`` -> ``left``), as in stitch.
 """
 
 from __future__ import annotations
@@ -30,10 +30,12 @@ from plenocli.progress import log, shown
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
 
 
-def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
-    """All pages of ``inputs`` (P, rows, cols) float32, their names, the first file's meta."""
+def _load(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], dict]:
+    """All pages of ``inputs`` (P, rows, cols) float32, their names, the first file's meta.
+    A file of one view is named by ``views`` (one name per input), else after the file."""
     pages, names, first = [], [], None
-    for path in inputs:
+    given = views.split(",") if views else [Path(p).stem for p in inputs]
+    for path, own_name in zip(inputs, given, strict=True):
         data, meta = tiffio.read_image(path)
         check_black_subtracted(path, meta, "the mixing acts on light: a black level would be "
                                "unmixed as light")
@@ -41,9 +43,12 @@ def _load(inputs: list[str]) -> tuple[np.ndarray, list[str], dict]:
         held = ViewNames.of(meta, data.shape[0])
         own = list(held.pages)
         if len(inputs) > 1 and data.shape[0] == 1:
-            own = [Path(path).stem]
+            own = [own_name]
         elif len(inputs) > 1 and held.is_rgb:   # the colours of one view, named after the file
-            own = [colour_page(Path(path).stem, c) for c in own]
+            own = [colour_page(own_name, c) for c in own]
+        elif views:
+            raise InputError(f"{path} holds views {','.join(own)}, not one: --views names the "
+                             "views of files of one view each; leave it out")
         if pages and data.shape[1:] != pages[0].shape[1:]:
             raise InputError(f"{path} is {data.shape[2]} x {data.shape[1]} but {inputs[0]} is "
                              f"{pages[0].shape[2]} x {pages[0].shape[1]}; unmix views of one "
@@ -67,22 +72,27 @@ def _check_parts(names: list[str], info: dict, mixing: str, inputs: list[str]) -
                          "(crosstalk --mixing-out with all of them)")
 
 
-def _plan(names: list[str], info: dict, inputs: list[str]) -> list[list[int]]:
+def _plan(names: list[str], info: dict, inputs: list[str], views: str | None
+          ) -> list[list[int]]:
     """Page indices to solve together: one list (in the mixing's view order) per colour plane
     (channels layout) or a single list (cfa / mono)."""
-    views = info["views"]
-    wanted = ([[colour_page(v, c) for v in views] for c in info["colours"]]
-              if info["layout"] == "channels" else [views])
+    expected = info["views"]
+    wanted = ([[colour_page(v, c) for v in expected] for c in info["colours"]]
+              if info["layout"] == "channels" else [expected])
     for group in wanted:
         missing = [n for n in group if n not in names]
         if missing:
             colour = info["layout"] != "channels" and colour_page(missing[0], "R") in names
+            unnamed = len(inputs) == len(expected) > 1 and not views
             raise InputError(f"{', '.join(inputs)} has no view {missing[0]!r} (views: "
-                             f"{','.join(names)}); the mixing expects {','.join(views)}"
+                             f"{','.join(names)}); the mixing expects {','.join(expected)}"
                              + (" per channel (VIEW.R, VIEW.G, VIEW.B)"
                                 if info["layout"] == "channels" else "")
                              + (" of one plane, measured on masked whites without colour "
-                                "pages: measure it on colour ones" if colour else ""))
+                                "pages: measure it on colour ones" if colour else "")
+                             + ("; files of one view each are named after the files, or by "
+                                f"--views (e.g. --views {','.join(expected)})"
+                                if unnamed else ""))
     return [[names.index(n) for n in group] for group in wanted]
 
 
@@ -164,7 +174,7 @@ def _check_light(res, observed: np.ndarray, names: list[str], mixing: str,
 
 
 def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
-        regularise: float = 0.0, noise_map: str | None = None,
+        views: str | None = None, regularise: float = 0.0, noise_map: str | None = None,
         preview: str | None = None) -> None:
     """Remove the cross-talk described by ``mixing`` from the views of ``inputs``."""
     inputs = [inputs] if isinstance(inputs, str) else list(inputs)
@@ -172,8 +182,8 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
         raise InputError("no input given; pass the views TIFF (or one TIFF per view)")
     field, mix_meta = read_mixing(mixing)
     info = mix_meta["mixing"]
-    pages, names, meta = _load(inputs)
-    groups = _plan(names, info, inputs)
+    pages, names, meta = _load(inputs, views)
+    groups = _plan(names, info, inputs, views)
     _check_parts(names, info, mixing, inputs)
     framing = active_area(meta, pages.shape[1:])
     _check_geometry(field, info, framing, mixing, inputs)
@@ -204,7 +214,7 @@ def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
     if not np.isfinite(out[solved]).any():
         raise InputError(f"{', '.join(inputs)}: every unmixed pixel is NaN; check the views")
     summary = _summary(gains, [names[k] for k in solved], cond, regularise)
-    params = dict(mixing=mixing, regularise=regularise)
+    params = dict(mixing=mixing, views=views, regularise=regularise)
     record = stage_record("unmix", params, {"inputs": inputs, "mixing": mixing})
     per_view = {key: [meta[key][k] for k in kept] for key in PER_VIEW_KEYS
                 if isinstance(meta.get(key), list) and len(meta[key]) == len(names)}
