@@ -221,7 +221,7 @@ def test_one_file_per_view_like_raytrix_left_right(tmp_path):
                   "--mixing-out", tmp_path / "m2.tif")
     assert res.exit_code == 1 and "give that many files per masked white" in res.output
     # audit 23 F2: files named otherwise (capture_left.tif) are named by --views, as crosstalk's
-    for k, view in enumerate(("left", "right")):
+    for view in ("left", "right"):
         (tmp_path / f"{view}.tif").rename(tmp_path / f"capture_{view}.tif")
     named = [tmp_path / f"capture_{view}.tif" for view in ("right", "left")]
     res = _invoke("unmix", *named, "--mixing", tmp_path / "m.tif", "-o", tmp_path / "c3.tif")
