@@ -337,6 +337,7 @@ def test_a_mixing_that_removes_more_light_than_there_is_is_refused(rig):
     res = _invoke("unmix", path, "--mixing", paths["mixing"], "-o", out)
     assert res.exit_code == 1, res.output
     assert "removes more light than" in res.output and "view A's pixels" in res.output
+    assert "content out of focus" in res.output
     assert len(res.output.strip().splitlines()) == 1 and not out.exists()
     res = _invoke("unmix", paths["views"], "--mixing", paths["mixing"], "-o", out)
     assert res.exit_code == 0, res.output  # its own capture (pixel-scale texture) passes

@@ -168,9 +168,10 @@ def _check_light(res, observed: np.ndarray, names: list[str], mixing: str,
         f"{found.worst_block[k]:.0%} of a {unmix_lib.NEGATIVE_BLOCK} px block) come out below "
         f"zero beyond their noise, down to {np.nanmin(res.views[k]):.4g} (median level "
         f"{level:.4g}); "
-        "the mixing does not describe this capture (measured on another rig, or its "
-        "cross-talk r too high): measure it on masked whites of this rig, processed as these "
-        "views")
+        "the mixing does not describe this capture: measured on another rig or on whites "
+        "too dark (r too high or noisy), or the leaked light forms another image than the "
+        "views' (content out of focus, docs/crosstalk.md); measure it on well-exposed masked "
+        "whites of this rig, processed as these views, and unmix in-focus captures")
 
 
 def run(inputs: tuple[str, ...] | list[str], output: str, *, mixing: str,
