@@ -64,15 +64,16 @@ def region_shape(region: Box) -> tuple[int, int]:
     return region[0].stop - region[0].start, region[1].stop - region[1].start
 
 
-def warp_region(view: np.ndarray, vmap: ViewMap, region: Box,
-                holes=None) -> tuple[np.ndarray, np.ndarray]:
+def warp_region(view: np.ndarray, vmap: ViewMap, region: Box, holes=None, *,
+                interpolation: int = cv2.INTER_LANCZOS4) -> tuple[np.ndarray, np.ndarray]:
     """A view's channels (C, rows, cols; NaN filled) resampled onto a panorama ``region``
-    through its map: (C, h, w) float32 and its feather weight (h, w), 0 where not covered."""
+    through its map (Lanczos-4, or ``interpolation``): (C, h, w) float32 and its feather
+    weight (h, w), 0 where not covered."""
     out = np.empty((len(view),) + region_shape(region), np.float32)
     weight = np.empty(region_shape(region), np.float32)
     for band, mx, my, lost in vmap.bands(region):
         weight[band] = feather(mx, my, vmap.view_shape, lost, holes)
-        out[:, band] = resample(view, mx, my)
+        out[:, band] = resample(view, mx, my, interpolation)
     return out, weight
 
 

@@ -112,10 +112,11 @@ def distort(x: np.ndarray, y: np.ndarray, k1: float, shape: tuple[int, int]):
     return cx + (x - cx) * scale, cy + (y - cy) * scale
 
 
-def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
-    """(C, h, w) float32: the view's channels (C, rows, cols; no NaN) at the maps (Lanczos-4).
-    Channels interleaved in memory (``np.moveaxis(rgb, -1, 0)`` of a (rows, cols, C) image) come
-    out interleaved too."""
+def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray,
+             interpolation: int = cv2.INTER_LANCZOS4) -> np.ndarray:
+    """(C, h, w) float32: the view's channels (C, rows, cols; no NaN) at the maps (Lanczos-4,
+    or ``interpolation``). Channels interleaved in memory (``np.moveaxis(rgb, -1, 0)`` of a
+    (rows, cols, C) image) come out interleaved too."""
     rows, cols = channels.shape[1:]
     # pixels more than a pixel off the view are not covered whatever is resampled there:
     # pointing them 4 px inside (the 8 x 8 kernel's reach) keeps Lanczos-4 off its slow border
@@ -127,11 +128,11 @@ def resample(channels: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray
     if 1 < len(channels) <= 4 and pixels.flags.c_contiguous:
         # channels interleaved in memory (a demosaiced view): one remap for all of them, each
         # pixel's kernel weights computed once (about 0.8 x the time of a remap per plane)
-        out = cv2.remap(pixels, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(pixels, mx, my, interpolation, borderMode=cv2.BORDER_REPLICATE)
         return np.moveaxis(out, -1, 0)
     out = np.empty((len(channels),) + mx.shape, np.float32)
     for c, channel in enumerate(channels):
-        out[c] = cv2.remap(channel, mx, my, cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REPLICATE)
+        out[c] = cv2.remap(channel, mx, my, interpolation, borderMode=cv2.BORDER_REPLICATE)
     return out
 
 
