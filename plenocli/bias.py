@@ -143,7 +143,6 @@ def subtract_overscan(frame: np.ndarray, *, active_area, masked_areas, overscan:
         levels = np.full((frame.shape[0], period), np.nan)
         levels[r0:r1] = row_levels(frame[r0:r1], (left_area[1], left_area[3]), period=period,
                                    smooth_rows=smooth)
-        levels = _fill_edges(levels, r0, r1)
         for p in range(period):  # in place, one column phase at a time: no full-size map
             first = (p - left) % period
             out[:, first::period] -= levels[top:bottom, p, None].astype(np.float32)
@@ -153,11 +152,10 @@ def subtract_overscan(frame: np.ndarray, *, active_area, masked_areas, overscan:
         levels_c = np.full((period, frame.shape[1]), np.nan)
         levels_c[:, c0:c1] = column_levels(frame[:, c0:c1], (top_area[0], top_area[2]),
                                            period=period, smooth_cols=smooth)
-        levels_c = _fill_edges(levels_c.T, c0, c1).T
         if mode == "both":  # only the column pattern: the level comes from the rows
             for p in range(period):
                 for q in range(period):
-                    levels_c[p, q::period] -= np.median(levels_c[p, q::period])
+                    levels_c[p, q::period] -= np.nanmedian(levels_c[p, q::period])
         for p in range(period):
             first = (p - top) % period
             out[first::period, :] -= levels_c[p, None, left:right].astype(np.float32)
@@ -183,11 +181,25 @@ def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int
              for side in ("left", "top")}
     bare = {side: _area_beside(masked_areas, active_area, side=side, guard=0)
             for side in ("left", "top")}
+    # a left over-scan gives the levels of its own rows only (a top one of its columns):
+    # another row's bias is not measured there, so an area that leaves active rows out is no
+    # area for this frame (audit 24 W1: rows past it took the last row's level, 14 DN off)
+    spans = {"left": (top, bottom, 0, 2, "rows"), "top": (left, right, 1, 3, "columns")}
+    short = {side: area for side, area in areas.items() if area and not (
+        area[spans[side][2]] <= spans[side][0] and area[spans[side][3]] >= spans[side][1])}
     mode = overscan
     if mode == "auto":
-        usable = [side for side in ("left", "top") if areas[side]]
-        guarded = [side for side in ("left", "top") if bare[side]]
+        usable = [side for side in ("left", "top") if areas[side] and side not in short]
+        guarded = [side for side in ("left", "top") if bare[side] and side not in short]
         mode = usable[0] if usable else guarded[0] if guarded else "none"
+    for side in short:
+        if mode in (side, "both"):
+            first, stop, lo, hi, what = spans[side]
+            other = "top" if side == "left" else "left"
+            raise ValueError(f"the {side} over-scan covers {what} {short[side][lo]}-"
+                             f"{short[side][hi] - 1} only, but the active area's are {first}-"
+                             f"{stop - 1}: the others' bias is not measured; use --overscan "
+                             f"{other} or none")
     for side, across in (("left", "columns"), ("top", "rows")):
         if mode in (side, "both") and not areas[side]:
             if bare[side]:
@@ -213,16 +225,6 @@ def _choose_areas(shape, active_area, masked_areas, *, overscan: str, guard: int
 
 def _width(area, side: str) -> int:
     return area[3] - area[1] if side == "left" else area[2] - area[0]
-
-
-def _fill_edges(levels: np.ndarray, start: int, stop: int) -> np.ndarray:
-    """Rows outside the over-scan's span take the level of its nearest row of the same phase."""
-    period = levels.shape[1] if levels.ndim == 2 else 1
-    for r in range(0, start):
-        levels[r] = levels[start + (r - start) % period]
-    for r in range(stop, levels.shape[0]):
-        levels[r] = levels[stop - period + (r - stop) % period]
-    return levels
 
 
 def _area_beside(masked_areas, active_area, *, side: str, guard: int):

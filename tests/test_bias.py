@@ -127,3 +127,25 @@ def test_top_overscan_missing_is_named():
     with pytest.raises(ValueError, match="no usable over-scan rows above"):
         subtract_overscan(frame, active_area=AREAS["active_area"],
                           masked_areas=AREAS["masked_areas"][:1], overscan="top")
+
+
+def test_an_overscan_that_leaves_active_rows_out_is_not_used_for_them():
+    """audit 24 W1: a left over-scan of rows 16-29 only gave the rows past it the last
+    measured row's level (14 DN off on the simulator's capture, exit 0). It measures its own
+    rows' bias only: --overscan left is refused, auto takes the top over-scan, else none."""
+    frame, _ = frame_with_bias()
+    partial = [[16, 0, 30, 10], [0, 10, 6, 60]]
+    for mode in ("left", "both"):
+        with pytest.raises(ValueError, match="the left over-scan covers rows 16-29 only, but "
+                                             "the active area's are 6-39"):
+            subtract_overscan(frame, active_area=[6, 10, 40, 60], masked_areas=partial,
+                              overscan=mode, guard=1)
+    _, info = subtract_overscan(frame, active_area=[6, 10, 40, 60], masked_areas=partial,
+                                guard=1)
+    assert info["mode"] == "top"
+    _, info = subtract_overscan(frame, active_area=[6, 10, 40, 60],
+                                masked_areas=partial[:1], black_level=[500] * 4)
+    assert info["mode"] == "none"
+    with pytest.raises(ValueError, match="the top over-scan covers columns 10-39 only"):
+        subtract_overscan(frame, active_area=[6, 10, 40, 60],
+                          masked_areas=[[0, 10, 6, 40]], overscan="top", guard=1)
