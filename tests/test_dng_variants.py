@@ -389,6 +389,12 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
     "MaskedAreas empty": (_frame(), _with_tags((50829, "I", 4, (0, 8, ROWS, COLS), True),
                                                (50830, "I", 4, (0, 0, 0, 8), True)),
                           None, "MaskedAreas [0, 0, 0, 8] is not a [top, left, bottom, right]"),
+    # audit 24 W2: developed as stored (squashed), where LibRaw stretches by pixel aspect
+    "DefaultScale 2 x 1 (pixels not square)": (_frame(), _with_tags(
+        (50718, "2I", 2, (2, 1, 1, 1), True)), None, "DefaultScale 2 x 1: its pixels are not "
+                                                     "square"),
+    "DefaultScale 0 x 1": (_frame(), _with_tags((50718, "2I", 2, (0, 1, 1, 1), True)), None,
+                           "DefaultScale [0.0, 1.0] is not two positive numbers"),
     "float samples NaN": (_float_with(np.nan), dict(linear=True, white=1, tile=(32, 32),
                                                     compression="zlib", predictor=3),
                           None, "1 NaN or infinite samples"),

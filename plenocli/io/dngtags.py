@@ -17,7 +17,7 @@ from plenocli.model.cfa import is_bayer
 
 CFA_REPEAT_DIM, CFA_PATTERN, CFA_PLANE_COLOR, CFA_LAYOUT = 33421, 33422, 50710, 50711
 LINEARIZATION_TABLE, BLACK_REPEAT_DIM, BLACK_LEVEL = 50712, 50713, 50714
-BLACK_DELTA_H, BLACK_DELTA_V, WHITE_LEVEL = 50715, 50716, 50717
+BLACK_DELTA_H, BLACK_DELTA_V, WHITE_LEVEL, DEFAULT_SCALE = 50715, 50716, 50717, 50718
 ACTIVE_AREA, MASKED_AREAS = 50829, 50830
 PLANE_COLOURS = {0: "R", 1: "G", 2: "B"}  # CFAPlaneColor / CFAPattern codes (3.. are C, M, Y..)
 RATIONAL_TYPES = (5, 10)  # RATIONAL, SRATIONAL: numerator, denominator pairs
@@ -124,6 +124,7 @@ def check_layout(path, k: int, page, dng: bool = True) -> None:
         raise InputError(f"{path}: raw IFD {k}: Compression {compression}, which DNG does not "
                          f"allow for raw data ({allowed}); the DNG is damaged: copy or convert "
                          "it again")
+    _check_square_pixels(path, k, page)
     if not page.is_tiled:
         return
     rows, cols = page.imagelength, page.imagewidth
@@ -133,6 +134,21 @@ def check_layout(path, k: int, page, dng: bool = True) -> None:
             raise InputError(f"{path}: raw IFD {k}: {name} {side} for an image of {cols} x "
                              f"{rows} pixels; the header is damaged: copy or convert the DNG "
                              "again")
+
+
+def _check_square_pixels(path, k: int, page) -> None:
+    """DefaultScale other than 1, 1 says the pixels are not square (the picture is that many
+    times wider or taller than stored, as LibRaw's pixel aspect stretches it): every stage
+    measures in pixels (lens pitch, shifts, depth), so such a raw is refused, not squashed."""
+    scale = numbers(path, k, page, DEFAULT_SCALE, "DefaultScale")
+    if scale is None or (scale.size == 2 and np.all(scale == 1)):
+        return
+    if scale.size != 2 or not np.all(scale > 0):
+        raise InputError(f"{path}: raw IFD {k}: DefaultScale {scale.tolist()} is not two "
+                         "positive numbers; the DNG is damaged: copy or convert it again")
+    raise InputError(f"{path}: raw IFD {k}: DefaultScale {scale[0]:g} x {scale[1]:g}: its "
+                     "pixels are not square, and plenocli measures in pixels (lens pitch, "
+                     "shifts, depth); convert the raw to square pixels first")
 
 
 def cfa_pattern(path, k: int, page) -> str:
