@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from plenocli.cli.main import cli
+from plenocli.errors import InputError
 from plenocli.pipeline.config import load_config
 from plenocli.pipeline.runner import plan, run_pipeline
 
@@ -198,3 +199,19 @@ def test_a_record_of_a_value_as_typed_compares_as_the_value_it_stands_for(tmp_pa
     assert stage.why_stale(params) is None
     changed = stage.resolve({**{k: params[k] for k in ("input", "grid", "output")}, "g": "2:6:1"})
     assert "parameter g changed ('2:6:0.5' -> '2:6:1')" in stage.why_stale(changed)
+
+
+def test_a_made_project_on_a_read_only_file_system_is_up_to_date(built, monkeypatch):
+    """audit 24 F1: `run` of a project made and then archived read-only (a snapshot, an NFS
+    export) exited 1 "folder not writable" where `--dry-run` and make said up to date: with
+    nothing to write there is nothing to lock. A step that must run is still refused."""
+    from plenocli.io import atomic
+
+    real_access = os.access
+    outputs = out_dir(built).resolve()
+    monkeypatch.setattr(atomic.os, "access",  # root ignores permission bits: say it is read-only
+                        lambda p, mode: False if Path(p).resolve() == outputs
+                        else real_access(p, mode))
+    assert ran(run_pipeline(load_config(built), locked=True)) == []
+    with pytest.raises(InputError, match="not writable"):
+        run_pipeline(load_config(built, ["develop.exposure=3"]), locked=True)

@@ -94,9 +94,17 @@ def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = Fals
     holding the lock of every folder the steps write into (another run writing there waits,
     then finds what this one made up to date)."""
     if locked and not dry_run:
-        for step in steps:  # what cannot be written is said as each step's guard says it
-            folders = step.stage.paths(step.params, step.stage.folder_outputs)
-            check_outputs([p for p in step.output_paths() if p not in folders], folders=folders)
+        try:
+            for step in steps:  # what cannot be written is said as each step's guard says it
+                folders = step.stage.paths(step.params, step.stage.folder_outputs)
+                check_outputs([p for p in step.output_paths() if p not in folders],
+                              folders=folders)
+        except InputError:
+            # a made project on a read-only file system (an archive, a snapshot) is up to
+            # date, as make says: nothing to write, nothing to lock
+            if any(d.run for d in plan(steps, force=force)):
+                raise
+            return run_pipeline(steps, force=force)
         with folders_locked([p for step in steps for p in step.output_paths()]):
             return run_pipeline(steps, force=force)
     decisions = plan(steps, force=force)
