@@ -163,12 +163,17 @@ def test_a_step_that_writes_no_file_always_runs(tmp_path):
     assert [d.reason for d in plan(load_config(config))] == ["it writes no file"]
 
 
-@pytest.mark.parametrize("name", ["a=b.tif", "~b.tif", "~root/b.tif"])
-def test_print_make_refuses_names_make_misreads(tmp_path, name, monkeypatch):
+@pytest.mark.parametrize("name,shown", [("a=b.tif", "has '='"), ("~b.tif", "has '~'"),
+                                        ("~root/b.tif", "has '~'"),
+                                        ("m\\\\n.tif", "path m\\n.tif has '\\'"),
+                                        ("a b.tif", "has a space")])
+def test_print_make_refuses_names_make_misreads(tmp_path, name, shown, monkeypatch):
+    """The character is named as typed (audit 24 M1: a backslash was shown as Python's '\\\\')."""
     monkeypatch.chdir(tmp_path)
-    config = write(tmp_path, f"steps:\n  decode:\n    input: {{W}}\n    output: '{name}'\n")
+    config = write(tmp_path, f"steps:\n  decode:\n    input: {{W}}\n    output: \"{name}\"\n")
     result = invoke("run", config, "--print-make")
     one_line_error(result, "make or the shell would misread")
+    assert shown in result.output
     assert not result.stdout
 
 

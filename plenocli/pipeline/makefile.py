@@ -103,6 +103,8 @@ def _name(path: Path, root: Path) -> str:
         text = str(resolved)
     bad = _UNSAFE.search(text) or re.match("~", text)  # make reads ~NAME/ as a home folder
     if bad:
-        raise ConfigError(f"path {text!r} has {bad.group()!r}, which make or the shell would "
-                          "misread; rename the file or folder, or use plenocli batch instead")
+        shown = {" ": "a space", "\t": "a tab", "\n": "a line break"}.get(
+            bad.group(), f"'{bad.group()}'")
+        raise ConfigError(f"path {text} has {shown}, which make or the shell would misread; "
+                          "rename the file or folder, or use plenocli batch instead")
     return text
