@@ -102,6 +102,14 @@ def test_a_white_without_red_and_nan_in_a_white_are_said_as_such():
                                          r"black\)") as err:
         balance.gains_from_mosaic(mosaic, "RGGB", centre_fraction=1)
     assert "np." not in str(err.value)
+    # audit 24 W3: red 2 DN above black gave a gain of 3744 (a red photograph, exit 0); a gain
+    # measured past --wb's 100 : 1 is refused as --wb 3744,1,1 is, 100 : 1 itself is taken
+    mosaic[0::2, 0::2] = 2.0
+    with pytest.raises(ValueError, match=r"the white's red sites average 2, under 1/100 of its "
+                                         r"green \(900\)"):
+        balance.gains_from_mosaic(mosaic, "RGGB", centre_fraction=1)
+    mosaic[0::2, 0::2] = 9.0
+    assert balance.gains_from_mosaic(mosaic, "RGGB", centre_fraction=1)[0] == 100
     white = np.ones((1, 10, 10), np.float32)
     white[0, :2, :3] = np.nan
     gains = white.copy()

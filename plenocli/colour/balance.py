@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from plenocli.errors import numbers
-from plenocli.model.colour import gains_from_neutral, normalised_gains
+from plenocli.model.colour import MAX_GAIN_RATIO, gains_from_neutral, normalised_gains
 
 
 def gains_from_mosaic(frame: np.ndarray, cfa: str, *, centre_fraction: float = 0.5
@@ -50,14 +50,22 @@ def gains_from_rgb(rgb: np.ndarray, *, centre_fraction: float = 0.5) -> np.ndarr
 
 def _measured(neutral: np.ndarray) -> np.ndarray:
     """The white's mean per colour, refused in words when a colour holds no light (a mean at or
-    below zero: that colour's sites are at or below black, so no gain can balance it)."""
-    dark = [name for name, value in zip(("red", "green", "blue"), neutral, strict=True)
-            if not value > 0]
+    below zero: that colour's sites are at or below black, so no gain can balance it) or too
+    little to measure a gain by (under 1/MAX_GAIN_RATIO of the brightest colour's: the rule
+    --wb and as-shot gains follow; a red 2 DN above black gave a gain of 3744, exit 0)."""
+    names = ("red", "green", "blue")
+    dark = [name for name, value in zip(names, neutral, strict=True) if not value > 0]
     if dark:
         raise ValueError(f"the white's {' and '.join(dark)} sites average "
                          f"{numbers(v for v in neutral if not v > 0)} (at or below black): it "
                          "holds no light of that colour; use a white lit in every colour, above "
                          "black and not clipped")
+    faint = [k for k, value in enumerate(neutral) if value * MAX_GAIN_RATIO < neutral.max()]
+    if faint:
+        raise ValueError(f"the white's {' and '.join(names[k] for k in faint)} sites average "
+                         f"{numbers(neutral[faint])}, under 1/{MAX_GAIN_RATIO:g} of its "
+                         f"{names[int(np.argmax(neutral))]} ({numbers([neutral.max()])}): a gain "
+                         "measured on so little light is noise; use a white lit in every colour")
     return neutral
 
 
