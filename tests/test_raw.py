@@ -268,6 +268,13 @@ def test_a_reduced_resolution_preview_beside_the_image_is_not_a_page_of_it(tmp_p
         tif.write(image)
     frames, _ = rawio.decode(tmp_path / "one.tif")
     np.testing.assert_array_equal(frames[0], image)
+    # audit 24 F2: nor is a transparency mask (NewSubfileType 4), refused as "a 1-bit TIFF"
+    with tifffile.TiffWriter(tmp_path / "masked.tif") as tif:
+        tif.write(image, photometric="minisblack", metadata=None)
+        tif.write(np.ones(image.shape, bool), photometric="minisblack", subfiletype=4,
+                  metadata=None)
+    frames, _ = rawio.decode(tmp_path / "masked.tif")
+    np.testing.assert_array_equal(frames[0], image)
 
 
 def test_a_camera_the_file_is_not_is_named_not_blamed_on_damage(capture, tmp_path):

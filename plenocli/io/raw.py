@@ -23,6 +23,7 @@ import tifffile
 
 from plenocli.errors import InputError, OptionError, library_words, not_a_file, numbers
 from plenocli.io import dngtags, rawmeta, tiffio
+from plenocli.io.tiffsegments import TRANSPARENCY_MASK
 from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_levels
 from plenocli.model import orientation as turns
 from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
@@ -390,12 +391,15 @@ def _dng_frame(path, k: int, page) -> tuple[np.ndarray, list[float], float]:
 
 
 def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool, list | None]:
-    """The one full-resolution page of a TIFF (reduced-resolution previews beside it are not
-    the image), or (pages, rows, cols) when --frames names each of its grey pages (two images
+    """The one full-resolution page of a TIFF (reduced-resolution previews and transparency
+    masks beside it, NewSubfileType bits 0 and 2, are not the image), or (pages, rows, cols) when --frames names each of its grey pages (two images
     of a dual-pixel pair); and the largest level each frame's samples can hold
     (``tiffio.sample_tops``). Several pages otherwise are refused: keeping the first would drop
     the others silently, and a plain TIFF does not say which page is which frame."""
-    pages = [page for page in tif.pages if not page.subfiletype & 1] or list(tif.pages)
+    images = [page for page in tif.pages if not page.subfiletype & TRANSPARENCY_MASK]
+    pages = [page for page in images if not page.subfiletype & 1] or images
+    if not pages:
+        raise InputError(f"{p}: a TIFF of transparency masks only (NewSubfileType 4), no image")
     types = sorted({str(page.dtype) for page in pages})
     same = len({page.shape for page in pages}) == 1 and len(types) == 1
     if len(pages) > 1 and named == len(pages) and same and len(pages[0].shape) == 2:
@@ -442,7 +446,8 @@ def _decode_image(path, *, cfa: str | None, named: int = 0) -> tuple[np.ndarray,
             with tiffio.open_tiff(p) as tif:
                 for page in tif.pages:
                     tiffio.check_segments(p, page)
-                    tiffio.check_light_levels(p, page)
+                    if not page.subfiletype & TRANSPARENCY_MASK:  # not read: see _frame_pages
+                        tiffio.check_light_levels(p, page)
                 data, stacked, tops = _frame_pages(p, tif, named)
         except tiffio.READ_ERRORS as err:
             raise tiffio.read_error(p, err, f"{p}: unreadable TIFF ({library_words(err)}); "

@@ -40,6 +40,7 @@ JPEG = 7
 CCITT = {2: "CCITT RLE", 3: "CCITT Group 3 fax", 4: "CCITT Group 4 fax", 32771: "CCITT RLEW"}
 MAX_SAMPLE_VALUE = 281
 MINISBLACK = 1
+TRANSPARENCY_MASK = 4  # NewSubfileType bit 2 (bit 0, 1: a reduced-resolution preview)
 ALPHA = (1, 2)  # ExtraSamples: associated, unassociated alpha (0, unspecified, is data)
 
 
@@ -57,6 +58,8 @@ def check_page(path: Path, page) -> None:
         raise InputError(f"{path}: the TIFF header claims an image of {' x '.join(map(str, shape))}"
                          f" samples, more than plenocli reads ({MAX_PAGE_PIXELS} per page); the "
                          "file is damaged or not a sensor image")
+    if int(page.subfiletype) & TRANSPARENCY_MASK:
+        return  # 1-bit beside the image by the TIFF standard; no reader takes it for an image
     if int(page.bitspersample) == 1:  # bool to tifffile: the rule of every format names it
         raise samplekind.refusal(path, samplekind.BILEVEL, "TIFF")
     _check_compression(path, page, compression)
