@@ -23,8 +23,8 @@ import tifffile
 
 from plenocli.errors import InputError, OptionError, library_words, not_a_file, numbers
 from plenocli.io import dngtags, rawmeta, tiffio
-from plenocli.io.tiffsegments import TRANSPARENCY_MASK
 from plenocli.io.plainimage import TIFF_MAGIC, is_tiff, read_plain_levels
+from plenocli.io.tiffsegments import TRANSPARENCY_MASK
 from plenocli.model import orientation as turns
 from plenocli.model.cfa import check_pattern, is_bayer, shift_pattern
 from plenocli.progress import log
