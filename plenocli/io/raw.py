@@ -394,8 +394,9 @@ def _frame_pages(p: Path, tif, named: int = 0) -> tuple[np.ndarray, bool, list |
     """The one full-resolution page of a TIFF (reduced-resolution previews and transparency
     masks beside it, NewSubfileType bits 0 and 2, are not the image), or (pages, rows, cols)
     when --frames names each of its grey pages (two images of a dual-pixel pair); and the
-    largest level each frame's samples can hold (``tiffio.sample_tops``). Several pages otherwise are refused: keeping the first would drop
-    the others silently, and a plain TIFF does not say which page is which frame."""
+    largest level each frame's samples can hold (``tiffio.sample_tops``). Several pages
+    otherwise are refused: keeping the first would drop the others silently, and a plain TIFF
+    does not say which page is which frame."""
     images = [page for page in tif.pages if not page.subfiletype & TRANSPARENCY_MASK]
     pages = [page for page in images if not page.subfiletype & 1] or images
     if not pages:
