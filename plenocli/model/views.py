@@ -10,6 +10,7 @@ number: ``--views 1`` picks the second page whatever its name).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 from plenocli.model.numbers import is_count
 
@@ -52,6 +53,16 @@ def name_problem(name: str) -> str | None:
     if not name.isprintable():  # a newline splits every one-line message naming the page
         return f"{name!r} holds a control character"
     return None
+
+
+def single_view_name(meta: dict, path) -> str:
+    """The name of the one view a file holds: the pupil part refocus made it of (its metadata's
+    ``refocus.view``: a ``left.tif`` made with ``--view right`` is view ``right``), else the
+    file's name without its suffix (``left.tif`` -> ``left``)."""
+    part = (meta.get("refocus") or {}).get("view")
+    if isinstance(part, str) and part != "full" and name_problem(part) is None:
+        return part
+    return Path(path).stem
 
 
 def pupil_views(names: list[str]) -> list[str]:

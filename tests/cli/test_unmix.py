@@ -233,6 +233,20 @@ def test_one_file_per_view_like_raytrix_left_right(tmp_path):
     assert meta["views"] == ["right", "left"]
     assert meta["provenance"]["parameters"]["views"] == "right,left"
     np.testing.assert_allclose(data, clean[::-1], rtol=1e-3)
+    # audit 24c W2: a file's refocus record says which part it holds, whatever its name
+    for k, view in enumerate(("left", "right")):
+        tiffio.write_image(tmp_path / f"{('right', 'left')[k]}.tif",
+                           ghosted[k:k + 1].astype(np.float32),
+                           {"views": ["raw"], "refocus": {"view": view}})
+    swapped = [tmp_path / "right.tif", tmp_path / "left.tif"]
+    res = _invoke("unmix", *swapped, "--mixing", tmp_path / "m.tif", "-o", tmp_path / "c5.tif")
+    assert res.exit_code == 0, res.output
+    data, meta = tiffio.read_image(tmp_path / "c5.tif")
+    assert meta["views"] == ["left", "right"]
+    np.testing.assert_allclose(data, clean, rtol=1e-3)
+    res = _invoke("unmix", *swapped, "--views", "right,left", "--mixing", tmp_path / "m.tif",
+                  "-o", tmp_path / "c6.tif")
+    assert res.exit_code == 1 and "refocus made it of the left part" in res.output
     for views in ("left", "left,left", "left,right,x"):
         res = _invoke("unmix", *named, "--views", views, "--mixing", tmp_path / "m.tif",
                       "-o", tmp_path / "c4.tif")

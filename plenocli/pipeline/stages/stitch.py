@@ -34,7 +34,7 @@ from plenocli.io.transformfile import read_transform, write_transform
 from plenocli.io.views import check_named_once
 from plenocli.model.cfa import shift_pattern
 from plenocli.model.provenance import json_safe, stage_record
-from plenocli.model.views import CHANNELS, ViewNames, view_of
+from plenocli.model.views import CHANNELS, ViewNames, single_view_name, view_of
 from plenocli.progress import log, shown
 from plenocli.stitch import verify
 from plenocli.stitch.views import layout_of_names
@@ -51,13 +51,14 @@ def _page_pattern(meta: dict, page: int, top: int, left: int) -> str | None:
 
 
 def _held_views(inputs: list[str]) -> list[str]:
-    """Every view the inputs hold (a file of one view is named after the file), to say which
+    """Every view the inputs hold (a file of one view: ``single_view_name``), to say which
     --views a saved transform's names could be."""
     held: list[str] = []
     for path in inputs:
-        views = tiffio.read_meta(path).get("views") or []
+        meta = tiffio.read_meta(path)
+        views = meta.get("views") or []
         held += list(dict.fromkeys(view_of(str(v)) for v in views)) if len(views) > 1 \
-            else [Path(path).stem]
+            else [single_view_name(meta, path)]
     return held
 
 
@@ -77,7 +78,8 @@ def load_views(inputs: list[str], views: str | None
             first_meta = meta
         framing = active_area(meta, data.shape[1:])  # the light-sensitive area only
         data, top, left = framing.crop(data), framing.top, framing.left
-        for name, pages in ViewNames.of(meta, data.shape[0]).groups(Path(path).stem):
+        for name, pages in ViewNames.of(meta, data.shape[0]).groups(
+                single_view_name(meta, path)):
             cfa = _page_pattern(meta, pages[0], top, left) if len(pages) == 1 else None
             wb = (meta.get("colour") or {}).get("as_shot_wb")
             found.append((name, (path, data, pages, cfa, wb)))

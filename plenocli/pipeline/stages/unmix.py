@@ -7,12 +7,11 @@ at r = 0.5). Where it is A + B (bias writes B = S - A) it is made again from the
 here can make it right, and it is left out (the log says so). Any other page is copied
 unchanged, so the output keeps the input's metadata and ``stitch`` takes it as it is. A file
 that holds a single view (a left or right refocused image) is named by ``--views``, in the
-inputs' order, else after the file (``left.tif`` -> ``left``), as in stitch.
+inputs' order, else as stitch names it (``single_view_name``: the pupil part refocus made it
+of, else the file's name).
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 
@@ -24,7 +23,7 @@ from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
 from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import processing_of, stage_record
-from plenocli.model.views import ViewNames, colour_page, pupil_views, view_of
+from plenocli.model.views import ViewNames, colour_page, pupil_views, single_view_name, view_of
 from plenocli.progress import log, shown
 
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
@@ -32,16 +31,20 @@ MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regula
 
 def _load(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], dict]:
     """All pages of ``inputs`` (P, rows, cols) float32, their names, the first file's meta.
-    A file of one view is named by ``views`` (one name per input), else after the file."""
+    A file of one view is named by ``views`` (one name per input), else by its record."""
     pages, names, first = [], [], None
-    given = views.split(",") if views else [Path(p).stem for p in inputs]
-    for path, own_name in zip(inputs, given, strict=True):
+    given = views.split(",") if views else [None] * len(inputs)
+    for path, named in zip(inputs, given, strict=True):
         data, meta = tiffio.read_image(path)
         check_black_subtracted(path, meta, "the mixing acts on light: a black level would be "
                                "unmixed as light")
         first = first if first is not None else meta
         held = ViewNames.of(meta, data.shape[0])
-        own = list(held.pages)
+        own, own_name = list(held.pages), named or single_view_name(meta, path)
+        part = (meta.get("refocus") or {}).get("view")
+        if named and part not in (None, "full", named):
+            raise InputError(f"--views names {path} {named}, but refocus made it of the "
+                             f"{part} part of the pupil (--view {part}); name it {part}")
         if len(inputs) > 1 and data.shape[0] == 1:
             own = [own_name]
         elif len(inputs) > 1 and held.is_rgb:   # the colours of one view, named after the file
