@@ -16,6 +16,8 @@ from plenocli.cli.main import cli
 from plenocli.colour.highlights import Estimated
 from plenocli.stitch.errors import StitchError
 from plenocli.stitch.overlaps import Overlap, match_gains
+from plenocli.stitch.panorama import stitch
+from plenocli.synth.rig import make_rig
 from tests.bad_inputs.files import assert_one_line, plenocli_tiff, run_bad
 
 GAINS = (1.05, 0.97, 1.02)  # view B's exposure against view A's, per colour
@@ -105,8 +107,9 @@ def test_a_channel_is_matched_through_the_other_overlaps():
 
     def overlap(a, b, red):
         counts = np.array([red, 5000, 5000])
+        flat = np.stack([means[a] ** 2, means[b] ** 2, means[a] * means[b]]) * counts
         return Overlap(np.stack([means[a], means[b]]) * counts, counts,
-                       np.array([[5000] * 3, [red, 5000, 5000]]), 5000, 5000)
+                       np.array([[5000] * 3, [red, 5000, 5000]]), 5000, 5000, flat)
 
     overlaps = [overlap(0, 1, 0), overlap(2, 3, 5000), overlap(0, 2, 5000),
                 overlap(1, 3, 5000)]
@@ -128,3 +131,24 @@ def test_estimated_channels_are_kept_in_bits():
     for c in (1, 2):
         assert (marks.region(c, slice(0, 70), slice(0, 83)) == truth[c]).all()
         assert (marks.region(c, slice(5, 40), slice(13, 61)) == truth[c, 5:40, 13:61]).all()
+
+
+@pytest.mark.parametrize("offset,gain,refused", [(0.3, 1.0, True), (0.15, 0.5, True),
+                                                 (0.0, 0.7, False), (0.005, 1.0, False)])
+def test_views_that_differ_by_an_offset_are_refused_not_given_a_gain(offset, gain, refused):
+    """audit 24 W1: a view with an offset left in (a black level not subtracted) got a gain
+    (3.07 for views of one exposure, 0.3 of the level apart: the panorama 34 % too bright).
+    A gain leaves many times the residual a gain and an offset do: refused. A gain alone, with
+    vignetting and noise, and an offset too small to move the gain by 2 % are taken."""
+    views, _, truth = make_rig(layout="1x2", view_shape=(300, 400), overlap=0.3,
+                               vignetting=0.1, noise=0.003, seed=3)
+    views = np.array(views)
+    before = stitch(views, layout="1x2")[1].gains[1][0]
+    views[1] = views[1] * gain - offset
+    if refused:
+        with pytest.raises(StitchError, match="views 0 and 1 differ by an offset, not by an "
+                                              "exposure gain"):
+            stitch(views, layout="1x2")
+    else:
+        _, report = stitch(views, layout="1x2")
+        assert abs(report.gains[1][0] * gain / before - 1) < (0.02 if offset else 1e-4)

@@ -44,14 +44,16 @@ class Overlap:
     b's channels over the ``counts`` (C) pixels of the blocks both views cover and both
     measured in that channel (a channel a view's source estimated, e.g. a Bayer view's rebuilt
     clipped channel, is left out: it is a guess, not the view's light); ``measured`` (2, C),
-    the pixels of the ``count`` both cover that each view measured; and ``area``, the pixels
-    both cover in the whole overlap."""
+    the pixels of the ``count`` both cover that each view measured; ``area``, the pixels
+    both cover in the whole overlap; and ``products`` (3, C), the sums of a * a, b * b and
+    a * b over the ``counts`` pixels (:func:`_check_gain_model`)."""
 
     sums: np.ndarray
     counts: np.ndarray
     measured: np.ndarray
     count: int
     area: int
+    products: np.ndarray
 
 
 def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
@@ -72,6 +74,7 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
         n_chan = len(views[a])
         sums, counts, measured, count = (np.zeros((2, n_chan)), np.zeros(n_chan, np.int64),
                                          np.zeros((2, n_chan), np.int64), 0)
+        products = np.zeros((3, n_chan))
         for block in _measure_blocks(region, _long_axis(region)):
             crop_a, weight_a = warp_region(views[a], maps[a], block, holes[a],
                                            interpolation=MEASURE_INTERPOLATION)
@@ -91,10 +94,12 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
                         measured[k, c] -= int((inside & ~known[k][c][box]).sum())
                         use = use & known[k][c][box]
                 counts[c] += int(use.sum())
-                for k, crop in enumerate((crop_a, crop_b)):
-                    sums[k, c] += float(crop[c][box][use].sum(dtype=np.float64))
+                va, vb = (crop[c][box][use].astype(np.float64) for crop in (crop_a, crop_b))
+                sums[:, c] += va.sum(), vb.sum()
+                products[:, c] += np.dot(va, va), np.dot(vb, vb), np.dot(va, vb)
         area = _covered_by_both(maps[a], maps[b], region, holes[a], holes[b])
-        return Overlap(sums, counts, measured + count, count, area) if count else None
+        return (Overlap(sums, counts, measured + count, count, area, products) if count
+                else None)
 
     with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
         return list(pool.map(measure, pairs))
@@ -256,6 +261,7 @@ def match_gains(overlaps: list, pairs: list[tuple[int, int, str]], stack: np.nda
                 continue
             mean_a, mean_b = overlap.sums[:, c] / overlap.counts[c]
             _check_light((mean_a, mean_b), (a, b), c, n_chan)
+            _check_gain_model(overlap, (a, b), c, n_chan)
             rows.append(difference_row(a, b, n_views))
             rhs.append(np.log(mean_a / mean_b))
             used.append((a, b))
@@ -329,6 +335,45 @@ def _check_scaled_levels(stack: np.ndarray, gains: np.ndarray) -> None:
                     f"({tiny:.3g}): its pixels would be stored with fewer bits or as 0; scale "
                     "the views (all by one factor) nearer 1, or stitch without exposure "
                     "matching (--gains none)")
+
+
+# An exposure gain explains an overlap when view b is view a times a factor. Then the residual
+# of b = k a (k the ratio of the means) is within sqrt(2) of the best line's, b = alpha a +
+# beta, whatever the noise or misregistration (errors alike in both views: the line's gain
+# from fitting their noise is at most that). An offset left in one view (a black level not
+# subtracted) leaves the gain's residual many times the line's, and moves k by offset / mean
+# (audit 24 W1: views of one exposure, 0.3 of the level apart, got gains 1 and 3.07; the
+# residuals were 0.193 and 0.028, and 0.0282 and 0.0281 for the right pair).
+OFFSET_RESIDUAL_RATIO = 2.0
+OFFSET_SLOPE_SHARE = 0.02  # the line's slope this far from k at least: a gain error that shows
+
+
+def _check_gain_model(overlap: Overlap, pair: tuple[int, int], channel: int,
+                      n_chan: int) -> None:
+    """Refuse (StitchError) a pair whose overlap a gain does not explain but a gain and an
+    offset do: the views differ by an offset (see OFFSET_RESIDUAL_RATIO)."""
+    n = overlap.counts[channel]
+    mean_a, mean_b = overlap.sums[:, channel] / n
+    aa, bb, ab = overlap.products[:, channel] / n
+    var_a, cov = aa - mean_a * mean_a, ab - mean_a * mean_b
+    if not var_a > 1e-12 * aa:
+        return   # a flat overlap: an offset cannot be told from a gain there
+    k = mean_b / mean_a
+    slope = cov / var_a
+    gain_residual = max(bb - 2 * k * ab + k * k * aa, 0.0)
+    line_residual = max(bb - mean_b * mean_b - cov * slope, 0.0)
+    if (gain_residual <= OFFSET_RESIDUAL_RATIO ** 2 * line_residual + 1e-12 * bb
+            or abs(slope / k - 1) <= OFFSET_SLOPE_SHARE):
+        return
+    a, b = pair
+    where = f" (channel {channel})" if n_chan > 1 else ""
+    offset = float(mean_b - slope * mean_a)
+    raise StitchError(
+        f"views {a} and {b} differ by an offset, not by an exposure gain, in their overlap"
+        f"{where}: view {b} = {slope:.4g} x view {a} {'-' if offset < 0 else '+'} "
+        f"{abs(offset):.4g} leaves {np.sqrt(line_residual / gain_residual):.2g} of the "
+        "residual a gain leaves; subtract the views' black level, or stitch without exposure "
+        "matching (--gains none)")
 
 
 def _check_light(means, pair: tuple[int, int], channel: int, n_chan: int) -> None:
