@@ -8,6 +8,7 @@ from click.testing import CliRunner
 
 from plenocli.cli.main import cli
 from plenocli.io import tiffio
+from plenocli.model.provenance import sha256_file
 from plenocli.pipeline.stages.simulate import simulate
 from tests.logs import plenocli_messages
 
@@ -42,6 +43,19 @@ def test_depth_lies_on_the_refocus_grid_and_feeds_all_in_focus(lenslet, tmp_path
                     "--depth", depth, "-o", aif)
     assert result.exit_code == 0, result.output
     assert tiffio.read_meta(aif)["provenance"]["parameters"]["depth"] == str(depth)
+    # audit 24c W3: the map of another capture was used (each lens splatted at its g); a file
+    # made from these frames shares their source, another capture's frames do not
+    frames, meta = tiffio.read_image(lenslet / "frames.tif")
+    record = {"stage": "bias", "inputs": [{"role": "input",
+                                           "sha256": sha256_file(lenslet / "frames.tif")}]}
+    tiffio.write_image(tmp_path / "made.tif", frames, tiffio.derived_meta(meta, record))
+    tiffio.write_image(tmp_path / "other.tif", frames * np.float32(1.01),
+                       {k: v for k, v in meta.items() if k not in ("provenance", "history")})
+    for frames_path, ok in ((tmp_path / "made.tif", True), (tmp_path / "other.tif", False)):
+        result = invoke("refocus", frames_path, "--grid", lenslet / "grid.yaml", "--depth",
+                        depth, "-o", tmp_path / "aif2.tif")
+        assert (result.exit_code == 0) == ok, result.output
+        assert ok or "made of another capture's frames" in result.output
 
 
 def test_dual_pixel_views_give_disparity(tmp_path):

@@ -9,12 +9,13 @@ import numpy as np
 
 from plenocli import refocus as rf
 from plenocli.depth.lenslet import CLEAR_MATCH, central_match, sensor_grey
+from plenocli.depth.mapcheck import sources
 from plenocli.errors import ConfigError, InputError, OptionError
 from plenocli.io import tiffio
 from plenocli.io.framing import frame_grid
 from plenocli.io.preview import write_png
 from plenocli.io.views import check_black_subtracted
-from plenocli.model.provenance import stage_record
+from plenocli.model.provenance import sha256_file, stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
 from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked, weak_match
 from plenocli.progress import log, shown
@@ -64,7 +65,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         warn_unchecked(grid)
     framing = replace(framing, grid=lens_grid)
     if depth:
-        options = {"lens_g": _lens_g(depth, grid, framing, s)}
+        frames = sources(meta, sha256_file(input))
+        options = {"lens_g": _lens_g(depth, grid, framing, s, frames)}
     else:
         options = {}
     pages = list(ViewNames.of(meta, data.shape[0]).pages)
@@ -238,11 +240,12 @@ def _best_picture(stack: np.ndarray, names: list[str], g_values: list[float],
         return np.nanmean(chunk, axis=0)
 
 
-def _lens_g(depth: str, grid: str, framing, s: float) -> tuple[np.ndarray, int, int]:
-    """Each lens's g from a depth map made on the same grid and s (all-in-focus)."""
+def _lens_g(depth: str, grid: str, framing, s: float, frames: set[str]
+            ) -> tuple[np.ndarray, int, int]:
+    """Each lens's g from a depth map made of the same capture (``frames``: the input's
+    sources) on the same grid and s (all-in-focus)."""
     from plenocli.depth.lenslet import lens_g_table
     from plenocli.depth.mapcheck import depth_misfit
-    from plenocli.model.provenance import sha256_file
 
     data, meta = tiffio.read_image(depth)
     names = list(meta.get("views") or [])
@@ -254,7 +257,7 @@ def _lens_g(depth: str, grid: str, framing, s: float) -> tuple[np.ndarray, int, 
                          f"{s:g} makes {expected[1]} x {expected[0]}; make the depth with the "
                          "same --grid and --s")
     misfit = depth_misfit(data, meta, grid_sha256=sha256_file(grid), s=s,
-                          sensor_origin=framing.sensor_origin)
+                          sensor_origin=framing.sensor_origin, frames=frames)
     if misfit:
         raise InputError(f"{depth} does not fit this refocus: {misfit}")
     try:
