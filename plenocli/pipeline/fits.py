@@ -19,7 +19,7 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
     calibrated on the file ``frames_path`` itself. A grid the frames cannot check is used only
     when its record vouches for it (:func:`unvouched`), else refused; then the stage says it
     is used unchecked (:func:`warn_unchecked`) and records it. ``stored_only``: the grid is
-    only stored with the frames, not used (decode --calib): nothing to vouch for."""
+    stored with the frames as theirs (decode --calib): only a grid the frames check is."""
     if not stored_only and not np.isfinite(frame).any():
         # nothing under the grid to check it with, or to use it on: the frames are the fault
         raise InputError(f"{frames_path or 'the frames'}: no valid pixel under the grid (all "
@@ -30,7 +30,13 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
                          "`plenocli calibrate` on a white image (or these frames)")
     if not shows and frames_path is not None:
         shows = sha256_file(frames_path) in measured_on(grid_path)
-    if not shows and not stored_only:
+    if not shows and stored_only:
+        # kept as the frames' calibration, every later reader would take it for theirs
+        raise InputError(f"{grid_path}: the frames show no micro-image lattice to check it "
+                         "against, so it cannot be stored as their calibration (another "
+                         "camera's would pass unseen); decode without --calib, and calibrate "
+                         "the grid from a white image of the same camera")
+    if not shows:
         unvouched(grid_path)
     return shows
 
