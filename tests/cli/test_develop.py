@@ -125,6 +125,20 @@ def test_highlight_recovery_rebuilds_exactly_the_clipped_s_pixels(tmp_path):
     expected = truth["capture_clipped_S"] & ~truth["capture_clipped_A"]
     assert expected.sum() > 0
     np.testing.assert_array_equal(lin[3] == 1, expected)
+    # audit 24a W5, I1: a white whose split is not the capture's (A at 0.01 S: highlights
+    # 20 x too bright, exit 0) or leaves (0, 1) (A = 1.5 S: "internal error") is refused
+    white, meta = read_image(tmp_path / "white_b.tif")
+    a, b, s = (meta["views"].index(v) for v in "ABS")
+    for scale, words in ((0.01, "is not"), (1.5, "leaves (0, 1)")):
+        edited = white.copy()
+        edited[a] = white[s] * scale
+        edited[b] = white[s] - edited[a]
+        write_image(tmp_path / "edited.tif", edited, meta)
+        result = invoke("develop", tmp_path / "capture_b.tif", "--view", "S", "--wb", "1,1,1",
+                        "--matrix", "none", "--recover-highlights", tmp_path / "edited.tif",
+                        "-o", tmp_path / "out.png")
+        assert result.exit_code == 1 and words in result.output, result.output
+        assert "internal error" not in result.output and not (tmp_path / "out.png").exists()
 
 
 def _refused(result, tmp_path, *words):

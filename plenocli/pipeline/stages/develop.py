@@ -153,14 +153,41 @@ def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: st
         raise InputError(f"--recover-highlights {white_path}: the white image "
                          f"({white.shape[2]}x{white.shape[1]}, CFA {white_cfa}) does not match "
                          f"{path} ({data.shape[2]}x{data.shape[1]}, CFA {cfa}); process both alike")
-    split = dualpixel.highlight_split(white[white_names.index("A")],
-                                      white[white_names.index("S")], cfa=cfa)
+    try:
+        split = dualpixel.highlight_split(white[white_names.index("A")],
+                                          white[white_names.index("S")], cfa=cfa)
+    except ValueError as err:
+        raise InputError(f"--recover-highlights {white_path}: {err}") from err
     ia, ib, is_ = (names.index(v) for v in "ABS")
+    _check_split(data[ia], data[is_], split, white_path, path)
     rebuilt_views, rebuilt = dualpixel.recover_highlights(data[ia], data[is_], split)
     out = data.astype(np.float32, copy=True)
     out[ia], out[ib], out[is_] = rebuilt_views
     log.info("develop: %d clipped S pixels rebuilt from A", int(rebuilt.sum()))
     return out, rebuilt
+
+
+SPLIT_TOLERANCE = 0.1  # the capture's median A/S this far from the white's: another lens
+
+
+def _check_split(a: np.ndarray, s: np.ndarray, split: np.ndarray, white_path: str,
+                 path: str) -> None:
+    """The white's A/S split must be the capture's: its lit, unclipped pixels show their own
+    A/S, which scatters with defocus but centres on the split of this lens and aperture. A
+    white of another lens or aperture (or an edited one: A at 0.01 S rebuilt highlights 20 x
+    too bright, audit 24) puts the median far off."""
+    lit = np.isfinite(a) & np.isfinite(s) & np.isfinite(split)
+    if lit.any():
+        lit &= s > 0.1 * np.nanpercentile(np.where(lit, s, np.nan), 99)
+    if lit.sum() < 1024:
+        return   # too little unclipped light to tell: the split is the white's alone
+    ratio = float(np.median(a[lit] / (s[lit] * split[lit])))
+    if abs(ratio - 1) > SPLIT_TOLERANCE:
+        raise InputError(
+            f"--recover-highlights {white_path}: its A/S split (median "
+            f"{float(np.median(split[lit])):.3g}) is not {path}'s, whose unclipped pixels split "
+            f"{float(np.median(a[lit] / s[lit])):.3g} (median): a white of another lens or "
+            "aperture; use a white of this camera, lens and aperture, processed alike")
 
 
 def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.ColourView:
