@@ -546,3 +546,19 @@ def test_written_dng_keeps_the_pattern_of_its_frames(tmp_path):
     import rawpy
     with rawpy.imread(str(path)) as raw:
         assert "RGBG"[raw.raw_color(1, 1)] == "B"  # RGGB at (0, 0): blue at (1, 1)
+
+
+def test_an_enhanced_image_beside_the_raw_is_not_read(tmp_path):
+    """audit 24 F3: a DNG 1.5 enhanced image (NewSubFileType 16, a demosaiced LinearRaw, as
+    Adobe's Enhance writes it) beside the raw was called damage; it is skipped as a preview is,
+    and the raw decodes as without it."""
+    frame = _frame()
+    _write_dng(tmp_path / "plain.dng", frame)
+    tags = _dng_tags(cfa=True, white=65535)
+    with tifffile.TiffWriter(tmp_path / "enhanced.dng") as writer:
+        writer.write(frame, photometric=32803, subfiletype=0, metadata=None, extratags=tags)
+        writer.write(np.full((*frame.shape, 3), 1000, np.uint16), subfiletype=16,
+                     photometric=34892, metadata=None)
+    plain, _ = raw.decode(tmp_path / "plain.dng")
+    enhanced, _ = raw.decode(tmp_path / "enhanced.dng")
+    np.testing.assert_array_equal(enhanced, plain)

@@ -24,6 +24,7 @@ RATIONAL_TYPES = (5, 10)  # RATIONAL, SRATIONAL: numerator, denominator pairs
 SHORT = 3
 PHOTOMETRIC_CFA, PHOTOMETRIC_LINEAR_RAW = 32803, 34892
 MAIN_IMAGE, REDUCED = 0, 1  # NewSubFileType: the full-resolution image, a preview
+ENHANCED = 16  # DNG 1.5: an enhanced (demosaiced) image beside the raw, not the raw itself
 # Tiles are a few hundred pixels (DNG converters write 256); a side larger than the image
 # (rounded up to the 16 TIFF asks for) is allowed up to this, beyond it the decoder would
 # allocate for pixels that do not exist.
@@ -59,14 +60,16 @@ def numbers(path, k: int, page, code: int, name: str) -> np.ndarray | None:
 
 
 def raw_pages(path, pages: list) -> list:
-    """The raw IFDs (NewSubFileType 0, CFA or LinearRaw) of a DNG's IFDs and SubIFDs. A main
-    image that is not raw, a raw IFD flagged with NewSubFileType bits DNG does not define for
+    """The raw IFDs (NewSubFileType 0, CFA or LinearRaw) of a DNG's IFDs and SubIFDs (an
+    enhanced image, NewSubFileType 16, is not read, as previews are not). A main image that is
+    not raw, a raw IFD flagged with NewSubFileType bits DNG does not define for
     it, or raw IFDs that share bytes (a wrong offset reads another frame) are damage."""
     raws = []
     for k, page in enumerate(pages):
         kind, raw = int(page.subfiletype), int(page.photometric) in (PHOTOMETRIC_CFA,
                                                                      PHOTOMETRIC_LINEAR_RAW)
-        if (kind == MAIN_IMAGE and not raw) or (raw and kind not in (MAIN_IMAGE, REDUCED)):
+        if (kind == MAIN_IMAGE and not raw) or (raw and kind not in (MAIN_IMAGE, REDUCED,
+                                                                      ENHANCED)):
             raise InputError(f"{path}: IFD {k} has NewSubFileType {kind} and Photometric "
                              f"{int(page.photometric)}; a DNG's full-resolution images are CFA "
                              "or LinearRaw raws: the DNG is damaged")
