@@ -248,6 +248,16 @@ def test_wb_from_a_dual_pixel_white_takes_its_sum_view_for_a_panorama(tmp_path):
     lin, _ = read_image(tmp_path / "lin.tif")
     means = lin.reshape(3, -1).mean(axis=1)
     np.testing.assert_allclose(means / means[1], 1.0, atol=1e-4)   # neutral after S's gains
+    # audit 24c W1: a white of another camera (both name their models) is refused
+    for model, code in (("Camera B", 1), ("Camera A", 0)):
+        write_image(tmp_path / "pano_a.tif", pano, {"views": ["R", "G", "B"], "cfa": None,
+                                                    "exif": {"Model": "Camera A"}})
+        write_image(tmp_path / "white_m.tif", np.stack([skewed, skewed, s_white]),
+                    {"views": ["A", "B", "S"], "cfa": "RGGB", "exif": {"Model": model}})
+        result = invoke("develop", tmp_path / "pano_a.tif", "--wb-from",
+                        tmp_path / "white_m.tif", "--matrix", "none", "-o", tmp_path / "q.tif")
+        assert result.exit_code == code, result.output
+        assert code == 0 or "a white of another camera (Model Camera B" in result.output
 
 
 def test_a_float_raws_decode_output_is_taken_above_its_black():

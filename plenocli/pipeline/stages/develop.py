@@ -211,7 +211,7 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
     if wb_from is not None:
         if wb != "as-shot":
             raise ConfigError("give --wb or --wb-from, not both")
-        return _gains_from_white(wb_from, chosen), "white image"
+        return _gains_from_white(wb_from, chosen, meta), "white image"
     if wb != "as-shot":
         try:
             return balance.normalised_gains([float(v) for v in wb.split(",")]), "--wb"
@@ -227,11 +227,19 @@ def _gains(wb: str, wb_from: str | None, meta: dict, chosen: dev.ColourView, pat
     return balance.normalised_gains(as_shot), "as shot"
 
 
-def _gains_from_white(path: str, chosen: dev.ColourView) -> np.ndarray:
+def _gains_from_white(path: str, chosen: dev.ColourView, input_meta: dict) -> np.ndarray:
     """Gains from the white image's view of the same name; for a view the white does not have
     (a panorama or refocused image made from its views), its full-pupil sum S or its only
-    colour view. Gains are per colour, so a Bayer white serves a demosaiced view and back."""
+    colour view. Gains are per colour, so a Bayer white serves a demosaiced view and back. A
+    white of another camera is refused: camera gains are the sensor's response to the light
+    (audit 24: another model's white left red 18 % and blue 13 % off, exit 0)."""
     data, meta, cfa, names = _read(path)
+    for key in ("Make", "Model"):
+        theirs, ours = ((m.get("exif") or {}).get(key) for m in (meta, input_meta))
+        if theirs and ours and theirs != ours:
+            raise InputError(f"--wb-from {path}: a white of another camera ({key} {theirs}; "
+                             f"the input's is {ours}): white-balance gains are the sensor's "
+                             "own; use a white or grey card taken with this camera")
     try:
         views = dev.colour_views(names, cfa=cfa, view_colours=meta.get("view_colours"))
         by_name = {v.name: v for v in views}
