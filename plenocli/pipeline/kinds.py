@@ -37,7 +37,7 @@ ACCEPTS: dict[str, dict[str, tuple[str, ...]]] = {
     "sai": {"input": CAPTURE},
     "refocus": {"input": CAPTURE, "depth": ("depth",)},
     "depth": {"input": (*CAPTURE, "sai")},
-    "develop": {"input": PICTURES, "wb_from": CAPTURE, "recover_highlights": CAPTURE},
+    "develop": {"input": PICTURES, "wb_from": VIEWS, "recover_highlights": CAPTURE},
     "stitch": {"inputs": VIEWS},
 }
 # the maps stages write beside their result (their own stage names): never light levels
