@@ -198,7 +198,7 @@ def test_a_record_of_a_value_as_typed_compares_as_the_value_it_stands_for(tmp_pa
                           outputs, records.input_states(inputs), [(out, out)])
     assert stage.why_stale(params) is None
     changed = stage.resolve({**{k: params[k] for k in ("input", "grid", "output")}, "g": "2:6:1"})
-    assert "parameter g changed ('2:6:0.5' -> '2:6:1')" in stage.why_stale(changed)
+    assert "parameter g changed (2:6:0.5 -> 2:6:1)" in stage.why_stale(changed)
 
 
 def test_a_made_project_on_a_read_only_file_system_is_up_to_date(built, monkeypatch):

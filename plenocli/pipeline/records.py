@@ -184,6 +184,13 @@ def why_stale(stage: str, params: dict[str, Any], inputs: Roles,
     return None
 
 
+def _shown(value) -> str:
+    """A parameter's value as the user wrote it: 4, 2:6:0.5, [1, 2], unset (no Python repr)."""
+    if value is None:
+        return "unset"
+    return value if isinstance(value, str) else json.dumps(value)
+
+
 def _mismatch(stage: str, role: str, output: Path, current: dict, states: dict,
               inputs: Roles, resolved) -> str | None:
     name = output.name
@@ -196,7 +203,8 @@ def _mismatch(stage: str, role: str, output: Path, current: dict, states: dict,
                 for key, value in record["parameters"].items()}
     for key in dict.fromkeys([*current, *recorded]):
         if recorded.get(key) != current.get(key):
-            return f"parameter {key} changed ({recorded.get(key)!r} -> {current.get(key)!r})"
+            return (f"parameter {key} changed ({_shown(recorded.get(key))} -> "
+                    f"{_shown(current.get(key))})")
     for rel, state in record["output"].items():
         if file_state(output / rel if rel != "." else output) != state:
             return f"{name} changed since it was made"
