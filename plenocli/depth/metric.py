@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from plenocli.errors import value_words
+
 FIELDS = {"focal_length_mm": "main-lens focal length F (mm)",
           "focus_distance_m": "object distance imaged onto the micro-lens array (m)",
           "mla_sensor_mm": "distance B from the micro-lenses to the sensor (mm)"}
@@ -51,12 +53,15 @@ def camera_from_dict(doc) -> Camera:
                          + ", ".join(FIELDS))
     values = {}
     for key, what in FIELDS.items():
+        if key not in doc:
+            raise ValueError(f"{key} is missing ({what}); a camera file holds "
+                             + ", ".join(FIELDS))
         value = doc.get(key)
         lo, hi = RANGES[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                 not lo <= value <= hi:    # also false for NaN
             raise ValueError(f"{key} must be a number from {lo:g} to {hi:g}: {what}; got "
-                             f"{value!r}")
+                             f"{value_words(value)}")
         values[key] = float(value)
     if 1000.0 * values["focus_distance_m"] <= values["focal_length_mm"]:
         raise ValueError("focus_distance_m must be beyond the focal length (an object at or "

@@ -317,6 +317,9 @@ def test_textureless_views_are_unknown_not_at_the_bound(tmp_path):
     ("focal_length_mm: 50\nfocus_distance_m: 2000\nmla_sensor_mm: 0.4\n", "focus_distance_m"),
     ("focal_length_mm: 50\nfocus_distance_m: 2\nmla_sensor_mm: 0.4\nfocal_length_m: 0.05\n",
      "focal_length_m"),
+    # audit 24b M1: "got None" for a missing key
+    ("focal_length_mm: 50\nfocus_distance_m: 2\n", "mla_sensor_mm is missing"),
+    ("focal_length_mm: '50'\nfocus_distance_m: 2\nmla_sensor_mm: 0.4\n", "got '50'"),
 ])
 def test_an_implausible_camera_file_is_refused(lenslet, tmp_path, text, field):
     camera, out = tmp_path / "camera.yaml", tmp_path / "d.tif"
