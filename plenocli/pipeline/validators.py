@@ -39,14 +39,15 @@ class Validator:
 
 
 class Text(Validator):
-    """Any text but blank (the stage parses it): an empty value is not the default, as
-    ``--smooth=`` is not (leave the option out for that)."""
+    """Any text but blank (the stage parses it), without the spaces around it, as YAML and
+    --set read a value (``--view ' S'`` is view S from the shell too): an empty value is not
+    the default, as ``--smooth=`` is not (leave the option out for that)."""
 
     def convert(self, value: Any) -> str:
         text = shell_text(value)
         if not text.strip():
             raise ValueError(f"{text!r} is empty; give a value or leave the option out")
-        return text
+        return text.strip()
 
 
 class PageNames(Validator):

@@ -277,14 +277,15 @@ def test_a_float_raws_decode_output_is_taken_above_its_black():
 
 def test_wb_from_takes_a_whites_sub_aperture_views(tmp_path):
     """audit 24c F1: the white's SAIs (sai output) were refused as wb-from, though its view of
-    the same name is what docs/colour.md promises; their gains are the view's."""
+    the same name is what docs/colour.md promises; their gains are the view's. A view named
+    with spaces around is that view, as from YAML (audit 24a M2)."""
     cast = np.array([0.5, 1.0, 0.7], np.float32)
     views = np.ones((6, 16, 16), np.float32) * np.tile(cast, 2)[:, None, None] * 1000
     names = ["S00.R", "S00.G", "S00.B", "S01.R", "S01.G", "S01.B"]
     for name in ("white", "scene"):
         write_image(tmp_path / f"{name}.tif", views, {"views": names, "cfa": None,
                                                       "provenance": {"stage": "sai"}})
-    result = invoke("develop", tmp_path / "scene.tif", "--view", "S01", "--wb-from",
+    result = invoke("develop", tmp_path / "scene.tif", "--view", " S01", "--wb-from",
                     tmp_path / "white.tif", "--matrix", "none", "-o", tmp_path / "p.tif",
                     "--linear", tmp_path / "lin.tif")
     assert result.exit_code == 0, result.output
