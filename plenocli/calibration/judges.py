@@ -146,8 +146,9 @@ def _fold_decision(image, verdict: Verdict, extra, all_views, reason: str) -> De
             and contrast > max(others, default=-np.inf)):
         raise CalibrationError(
             f"{reason}; the fold judge finds {fold.lattice.describe()} (sharpness "
-            f"{fold.sharpness:.4f}) but the micro-image borders do not confirm it (contrast "
-            f"{contrast:.3f}, control {control:.3f})")
+            f"{fold.sharpness:.4f}) but the micro-image borders do not confirm it ("
+            + (f"contrast {contrast:.3f}, control {control:.3f})" if np.isfinite(contrast)
+               else "no border contrast can be measured there)"))
     border = Verdict(fold.lattice, contrast, verdict.rivals, control,
                      considered=verdict.considered)
     return Decision(fold.lattice, "fold", border, fold)
