@@ -515,6 +515,10 @@ def test_a_pattern_repeating_every_5_px_is_refused_as_such_not_read_as_its_copy(
                                          r"below half the repeat \(2\.5\)"):
         depth.run(str(path), str(tmp_path / "d.tif"))
     assert not (tmp_path / "d.tif").exists()
+    # audit 24b M2: below half the repeat already, the advice is not to lower it again
+    repeat, none = np.full((8, 8), 7.0), np.full((8, 8), np.nan)
+    with pytest.raises(InputError, match=r"the parallax comes near half the repeat \(3\.5\)"):
+        depth._refuse_repeats(repeat, none, 3.4)
     lowered = disparity_x(*views, max_disparity=2)
     assert np.isfinite(lowered.disparity).mean() > 0.8   # measured 0.83
     assert abs(np.nanmedian(lowered.disparity) - 1.0) < 0.02   # measured 1.000

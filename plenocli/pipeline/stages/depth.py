@@ -215,12 +215,15 @@ def _refuse_repeats(repeat: np.ndarray, disparity: np.ndarray, max_disparity: fl
     if share < MIN_CLEAR or share <= float(np.isfinite(disparity).mean()):
         return
     apart = float(np.median(repeat[repeat > 0]))
+    # below half the repeat already, the parallax itself reaches the repeat's next match
+    advice = (f"lower --max-disparity below half the repeat ({apart / 2:g}) if the "
+              "disparities are smaller" if max_disparity >= apart / 2 else
+              f"the parallax comes near half the repeat ({apart / 2:g}), where no search "
+              "can tell the shifts apart")
     raise InputError(f"depth: the views' texture repeats within --max-disparity "
                      f"{max_disparity:g} ({100 * share:.0f} % of the pixels match clearly at "
                      f"two shifts or more, {apart:g} px apart: a periodic texture such as "
-                     "stripes), "
-                     "so which shift is the parallax cannot be told: lower --max-disparity "
-                     f"below half the repeat ({apart / 2:g}) if the disparities are smaller; "
+                     f"stripes), so which shift is the parallax cannot be told: {advice}; "
                      "nothing was written")
 
 
