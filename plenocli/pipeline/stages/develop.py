@@ -139,16 +139,16 @@ def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: st
              path: str, meta: dict) -> tuple[np.ndarray, np.ndarray]:
     """Dual-pixel highlight recovery: S (and B) rebuilt from A where only S clipped."""
     white, white_meta, white_cfa, white_names = _read(white_path)
-    if _stages(white_meta) != _stages(meta):
-        raise InputError(f"--recover-highlights {white_path}: the white image went through "
-                         f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
-                         f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
-                         "split must be measured in the same units (process both alike)")
     for label, views_, file in (("views", names, path), ("white image", white_names, white_path)):
         if not {"A", "B", "S"} <= set(views_):
             raise InputError(f"--recover-highlights: {file} ({label}) has views "
                              f"{', '.join(views_) or 'unnamed'}; dual-pixel A, B and S are needed "
                              "(bias output)")
+    if _stages(white_meta) != _stages(meta):
+        raise InputError(f"--recover-highlights {white_path}: the white image went through "
+                         f"{' -> '.join(_stages(white_meta)) or 'no bias/flat'} but {path} "
+                         f"through {' -> '.join(_stages(meta)) or 'no bias/flat'}; the A/S "
+                         "split must be measured in the same units (process both alike)")
     if white.shape[1:] != data.shape[1:] or white_cfa != cfa:
         raise InputError(f"--recover-highlights {white_path}: the white image "
                          f"({white.shape[2]}x{white.shape[1]}, CFA {white_cfa}) does not match "
