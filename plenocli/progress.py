@@ -81,9 +81,20 @@ def configure(verbosity: int) -> None:
     log.setLevel(level)
     if not log.handlers:
         handler = logging.StreamHandler(sys.stderr)
-        handler.setFormatter(logging.Formatter("%(message)s"))
+        handler.setFormatter(_Printable("%(message)s"))
         log.addHandler(handler)
     log.propagate = False
+
+
+def printable(text: str) -> str:
+    """``text`` with the bytes of a file name that are not UTF-8 shown as the replacement
+    character, as a terminal shows them (Python keeps them as surrogates: ``\\udcff``)."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
+class _Printable(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        return printable(super().format(record))
 
 
 def significant(value: float, digits: int = 2) -> str:

@@ -23,7 +23,7 @@ from plenocli.errors import (
 )
 from plenocli.pipeline.params import Param
 from plenocli.pipeline.validators import Validator
-from plenocli.progress import configure, working
+from plenocli.progress import configure, printable, working
 
 
 class Declared(click.ParamType):
@@ -118,11 +118,11 @@ def stage_command(func):
         except OptionError as err:
             if debug:
                 raise
-            raise click.UsageError(str(err)) from err
+            raise click.UsageError(printable(str(err))) from err
         except PlenocliError as err:
             if debug:
                 raise
-            raise click.ClickException(" ".join(str(err).split())) from err  # one line
+            raise click.ClickException(printable(" ".join(str(err).split()))) from err
         except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM as Terminated
             what = "terminated" if isinstance(err, Terminated) else "interrupted"
             note = interrupt_note(err)

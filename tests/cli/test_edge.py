@@ -318,3 +318,12 @@ def test_an_input_that_is_a_loop_or_a_dangling_link_says_so(tmp_path):
     dangling = invoke("info", tmp_path / "d.tif")
     assert dangling.exit_code == 1
     assert "a symbolic link to nowhere.tif, which does not exist" in one_line(dangling)
+
+
+def test_a_file_name_that_is_not_utf8_is_shown_as_a_terminal_shows_it(tmp_path, frames):
+    """audit 24a M1: the bytes of a name that are not UTF-8 were shown as Python's surrogate
+    escape (bad\\udcffname); a terminal's replacement character is what `ls` users see."""
+    name = os.fsdecode(b"bad\xffname.tif")
+    result = invoke("bias", tmp_path / name, "-o", tmp_path / "b.tif")
+    assert result.exit_code == 1 and "bad\ufffdname.tif" in result.output, result.output
+    assert "\\udcff" not in result.output.encode("unicode_escape").decode()
