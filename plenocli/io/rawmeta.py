@@ -16,6 +16,7 @@ import numpy as np
 import tifffile
 
 from plenocli.model.colour import MAX_GAIN_RATIO
+from plenocli.progress import log
 
 # EXIF fields carried to the photograph and what each must be. Text is ASCII (EXIF's type) and
 # short (a JPEG's EXIF block holds 64 KiB);
@@ -105,6 +106,9 @@ def dng_colour(raw_page, main_page) -> dict:
     """DNG AsShotNeutral (as R, G, B gains) and the ColorMatrix for D65 (or the last one)."""
     neutral = dng_numbers(_tag(raw_page, 50728, _tag(main_page, 50728, None)), 3)
     wb = None
+    if neutral is None and _tag(raw_page, 50729, _tag(main_page, 50729, None)) is not None:
+        log.warning("the DNG gives its as-shot white as AsShotWhiteXY, which plenocli does not "
+                    "read (nor does LibRaw): develop needs --wb R,G,B or --wb-from WHITE.tif")
     if neutral is not None:  # checked by clean_colour: a zero or negative neutral is dropped
         with np.errstate(divide="ignore", invalid="ignore"):
             wb = (np.float64(neutral[1]) / np.asarray(neutral, np.float64)).tolist()
