@@ -326,8 +326,10 @@ def predicted_noise_gain(mixing: MixingField, *, regularise: float = 0.0) -> np.
 # each input view is modelled from its level (the lower envelope, over blocks, of a robust
 # noise measure: texture only raises a block's figure, so flat blocks of each level set it),
 # carried to each output by its noise gain, and a tolerance of the mixing's own error (a share
-# of the light it redistributes) is added. Where an input view is itself below zero (a bias
-# or refocus residue) the pixel is no light and is not judged.
+# of the light it redistributes) is added. Noise is measured between the nearest pixels of one
+# colour: sensor noise is alike at any distance, texture (blurred by optics) grows with it (the
+# noise-free quad-pixel chart: 540-1380 DN between neighbours, 1490-3730 DN 2 px apart, on 3e4).
+# Where an input view is itself below zero (a bias or refocus residue: no light) it is not judged.
 
 NEGATIVE_SIGMA = 5.0  # Gaussian noise goes below -5 sigma once in 3.5 million pixels
 MIXING_TOLERANCE = 0.02  # of the brightest view's level: 4 x the target error of a measured M
@@ -348,20 +350,21 @@ class NegativeLight:
 
 
 @numba.njit(cache=True)
-def _block_noise(obs, j, y0, y1, x0, x1, vals):
+def _block_noise(obs, j, y0, y1, x0, x1, lag, vals):
     """(median level, robust noise) of input view j in a block: 1.4826 x the median absolute
-    second difference between pixels 2 apart (same Bayer colour) / sqrt(1.5), the lesser of
-    the two directions; NaN when the block has too few finite pixels."""
+    second difference between pixels ``lag`` apart (the nearest of one colour: 2 in a mosaic,
+    1 in a colour plane) / sqrt(1.5), the lesser of the two directions; NaN when the block has
+    too few finite pixels."""
     rows, cols = obs.shape[1], obs.shape[2]
     best = np.inf
     for axis in range(2):
         m = 0
         for y in range(y0, y1):
             for x in range(x0, x1):
-                if axis == 0 and 2 <= x < cols - 2:
-                    d = obs[j, y, x] - 0.5 * (obs[j, y, x - 2] + obs[j, y, x + 2])
-                elif axis == 1 and 2 <= y < rows - 2:
-                    d = obs[j, y, x] - 0.5 * (obs[j, y - 2, x] + obs[j, y + 2, x])
+                if axis == 0 and lag <= x < cols - lag:
+                    d = obs[j, y, x] - 0.5 * (obs[j, y, x - lag] + obs[j, y, x + lag])
+                elif axis == 1 and lag <= y < rows - lag:
+                    d = obs[j, y, x] - 0.5 * (obs[j, y - lag, x] + obs[j, y + lag, x])
                 else:
                     continue
                 if np.isfinite(d):
@@ -381,7 +384,7 @@ def _block_noise(obs, j, y0, y1, x0, x1, vals):
 
 
 @numba.njit(cache=True, parallel=True)
-def _block_stats(obs, block, step, level, noise):
+def _block_stats(obs, block, step, lag, level, noise):
     """Median level and robust noise of every input view in every ``step``-th block along each
     axis (numba, one block row per parallel task)."""
     rows, cols = obs.shape[1], obs.shape[2]
@@ -391,7 +394,8 @@ def _block_stats(obs, block, step, level, noise):
         for bx in range(level.shape[2]):
             x0, x1 = bx * step * block, min(cols, (bx * step + 1) * block)
             for j in range(obs.shape[0]):
-                level[j, by, bx], noise[j, by, bx] = _block_noise(obs, j, y0, y1, x0, x1, vals)
+                level[j, by, bx], noise[j, by, bx] = _block_noise(obs, j, y0, y1, x0, x1,
+                                                                     lag, vals)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -430,7 +434,7 @@ def _negative_kernel(out, obs, gain, block, k_sigma, tol, xp, fp, below, known):
                         below[k, c, by, bx] += 1
 
 
-def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
+def _noise_model(obs: np.ndarray, block: int, lag: int) -> tuple[np.ndarray, np.ndarray]:
     """Noise against level per input view, (V, NOISE_BINS) levels and noises: in each level
     bin (quantiles of the blocks' levels) the NOISE_QUANTILE-th percentile of the blocks'
     noise, made non-decreasing with level (shot noise grows with it)."""
@@ -438,7 +442,7 @@ def _noise_model(obs: np.ndarray, block: int) -> tuple[np.ndarray, np.ndarray]:
     step = max(1, int(np.sqrt(n_br * n_bc / NOISE_BLOCKS)))  # a sample of blocks suffices
     level = np.full((obs.shape[0], -(-n_br // step), -(-n_bc // step)), np.nan)
     noise = np.full_like(level, np.nan)
-    _block_stats(obs, block, step, level, noise)
+    _block_stats(obs, block, step, lag, level, noise)
     xp = np.zeros((obs.shape[0], NOISE_BINS))
     fp = np.zeros_like(xp)
     for j in range(obs.shape[0]):
@@ -477,7 +481,7 @@ def negative_light(solved: np.ndarray, observed: np.ndarray, gain: np.ndarray, *
     xp = np.zeros((obs.shape[0], 2))
     _negative_kernel(out, obs, g, cell, -1.0, tolerance, xp, xp, below, known)
     if below.any():  # the noise model only where a pixel is below the tolerance alone
-        xp, fp = _noise_model(obs, block)
+        xp, fp = _noise_model(obs, block, 2 if mosaic else 1)
         below[:], known[:] = 0, 0
         _negative_kernel(out, obs, g, cell, k_sigma, tolerance, xp, fp, below, known)
     share = (below.sum(axis=(2, 3)) / np.maximum(known.sum(axis=(2, 3)), 1)).max(axis=1)

@@ -221,3 +221,28 @@ def test_negative_light_tells_an_over_stated_mixing(scale, noise):
     assert shares[0.5].max() == 0
     if scale > 100:  # a dark, noisy capture hides an over-statement in its noise
         assert shares[0.65].max() > 0.02
+
+
+def test_negative_light_on_a_scene_textured_everywhere():
+    """audit 24b W2: on the quad-pixel chart (textured at the pixel scale everywhere) a mixing
+    over-stating r 2.3 x (0.30 measured elsewhere on a capture of r 0.13) left 10-13 % of each
+    G view's pixels far below zero and passed: the noise figure, measured 2 px apart, was the
+    chart's texture. Measured between neighbours in a colour plane it is refused; the right
+    mixing still leaves no pixel below zero beyond noise and tolerance."""
+    from plenocli.unmix import negative_light
+    sim = sim_mixing.render_quadpixel_ghost(pixels=256, seed=0)
+    eye = np.eye(4)[None, :, :, None, None]
+    shares = {}
+    for c in (0, 1):
+        masked = [sim["masked"][n][..., c] for n in sim_mixing.SAI_NAMES]
+        field = measure_mixing(masked, intended=[0, 1, 2, 3], views=sim_mixing.SAI_NAMES,
+                               tile_px=16)
+        obs = (sim["ghosted"][..., c] * 30000.0).astype(np.float32)
+        for scale in (1.0, 2.3):
+            nodes = eye + (1 - eye) * field.nodes * scale
+            over = MixingField(nodes, field.node_rows, field.node_cols, field.shape,
+                               field.views, field.colours)
+            res = unmix(obs, over, noise_gain=True)
+            shares[c, scale] = negative_light(res.views, obs, res.noise_gain).share.max()
+    assert max(shares[c, 1.0] for c in (0, 1)) == 0
+    assert min(shares[c, 2.3] for c in (0, 1)) > 0.02
