@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from plenocli import calibration
+from plenocli.calibration.candidates import Lattice
 from plenocli.errors import CalibrationError
 from plenocli.model.lensgrid import LensGrid
 from plenocli.refocus import output_shape
@@ -110,3 +111,44 @@ def test_an_exact_pitch_hint_finds_the_lattice_no_hypothesis_comes_near(cfa):
     else:   # a hint near no lattice says so, not that the micro-images repeat nothing
         with pytest.raises(CalibrationError, match="on no lattice of either kind near it"):
             calibration.calibrate(image, pitch_hint=12.0)
+
+
+class _Quarters:
+    """A stand-in matcher (``match.Matcher``'s interface) whose 10 x 10 lenses repeat their
+    neighbours' content best at a pitch that differs by quarter (``_group_of``): at
+    ``centres`` x the corner step from 20 px; flat-topped, steep falls, as measured."""
+
+    image_radius = 400.0
+
+    def __init__(self, centres):
+        i, j = np.mgrid[0:10, 0:10]
+        self.index = np.stack([i.ravel(), j.ravel()], axis=1)
+        group = 2 * (self.index[:, 0] % 2) + self.index[:, 1] % 2
+        step = 0.05 * 20.0 / self.image_radius
+        self.centre = np.asarray(centres, float)[group] * step
+
+    def lens_confidences(self, lattice, offset):
+        d = lattice.pitch_px / 20.0 - 1
+        a = (lattice.angle_rad + np.pi / 6) % (np.pi / 3) - np.pi / 6   # in one period
+        fall = ((d - self.centre) / 0.012) ** 4 + (a / 0.012) ** 4
+        return self.index, 0.1 + 0.8 * np.exp(-fall)
+
+    def confidence(self, lattice, offset):
+        return float(np.median(self.lens_confidences(lattice, offset)[1]))
+
+
+def test_a_peak_the_lenses_do_not_agree_on_is_refused():
+    """Audit 24b W3: --pitch 70 on a 600 x 600 crop of Boys2 (about 8 lenses across) was
+    written as 71.04 px (+0.96 %), 0.29 deg turned, corner lenses 7 px off: the match's peak
+    (the midpoint of its falls) lay 0.50 % from it, within the 0.84 % that moves the corners
+    by 0.05 pitch, but the four quarters of its lenses placed it +-0.26 % apart. A peak is
+    taken only when it and two standard errors lie within that step: here the quarters peak
+    at -1.5 .. +1.5 steps while their median peaks on the lattice."""
+    from plenocli.calibration.match import _off_peak
+
+    lattice = Lattice("hex", 20.0, 0.0)
+    agreed = _Quarters([0.0, 0.0, 0.0, 0.0])
+    assert _off_peak(agreed, lattice, (0.0, 0.0), agreed.confidence(lattice, None)) is None
+    split = _Quarters([-1.5, -0.5, 0.5, 1.5])
+    why = _off_peak(split, lattice, (0.0, 0.0), split.confidence(lattice, None))
+    assert why is not None and "does not pin its pitch down" in why, why

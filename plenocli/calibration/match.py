@@ -47,6 +47,7 @@ PEAK_REACH = 0.5       # the peak is placed from steps moving the corners by up 
 #                        of a pitch (the detuned rivals' distance: the match has fallen there)
 PEAK_SAMPLES = 4       # steps either side
 G_RANGES = ((2.0, 12.0), (-12.0, -2.0))   # Keplerian and Galilean: the better one counts
+PEAK_ERRORS = 2.0      # the peak and this many standard errors must lie within CORNER_SHARE
 SCAN_SIDE = 8.0        # a pitch hint's rotation scan matches a central crop this many pitches
 #                        wide (about 50 lenses: enough for a median, few for the cost)
 SCAN_STEP = 0.5        # its rotation step moves that crop's corners by this share of a pitch
@@ -110,7 +111,15 @@ class Matcher:
     def confidence(self, lattice: Lattice, offset_xy: tuple[float, float]) -> float:
         """Median lens confidence of ``lattice`` with a lens at ``offset_xy`` (full-image
         px), the better of a Keplerian and a Galilean search; 0 where nothing can be matched."""
-        from plenocli.depth.lenslet import lens_depth
+        found = self.lens_confidences(lattice, offset_xy)
+        return float(np.median(found[1])) if len(found[1]) else 0.0
+
+    def lens_confidences(self, lattice: Lattice, offset_xy: tuple[float, float]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """(indices (K, 2), confidence (K,)) of every lens of ``lattice`` in the crop (indices
+        from the lens at ``offset_xy``), of the g range whose median is the best; none where
+        nothing can be matched."""
+        from plenocli.depth.lenslet import lens_depth, lens_table
 
         scale = round(min(1.0, MATCH_PITCH_PX / lattice.pitch_px), 4)
         view = self._view(scale)
@@ -118,13 +127,14 @@ class Matcher:
         y = (offset_xy[1] - self.r0 + 0.5) * scale - 0.5
         grid = LensGrid(lattice.pitch_px * scale, lattice.angle_rad, (x, y), lattice.kind,
                         image_shape=view.shape)
-        best = 0.0
+        best = (np.empty((0, 2), np.int64), np.empty(0))
         for bounds in self.ranges:
             try:
                 found = lens_depth(view, grid, g_range=bounds)
             except ValueError:   # too few or too small micro-images on this lattice
                 continue
-            best = max(best, float(np.median(found.confidence)))
+            if not len(best[1]) or np.median(found.confidence) > np.median(best[1]):
+                best = (lens_table(grid, view.shape)[0], found.confidence)
         return best
 
     def settle_sign(self, lattice: Lattice, offset_xy: tuple[float, float]) -> None:
@@ -209,8 +219,8 @@ def _centred(matcher: Matcher, lattice: Lattice) -> tuple[tuple, float, list]:
     return offset, confidence, rivals
 
 
-def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
-              ) -> tuple[float, float, float]:
+def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float, *,
+              split: bool = True) -> tuple[float, float, float, tuple[float, float]]:
     """Where the match peaks around ``lattice``: per axis (relative pitch change, angle change
     in rad) the midpoint of the two points where the confidence falls through half its drop
     (peak to the higher of the two ends), from steps that move the image's corners by up to
@@ -218,15 +228,51 @@ def _vertices(matcher: Matcher, lattice: Lattice, offset, confidence: float
     lattice far off the peak, or a flat match). The top of the curve is flat over about
     two thirds of a pitch at the corners and may lean, so a parabola through it follows the
     lean; the falls are steep and symmetric about the lattice. Also the step that moves the
-    corners by CORNER_SHARE of a pitch."""
+    corners by CORNER_SHARE of a pitch, and per axis the standard error of the midpoint
+    (:func:`_split_error`; NaN unless ``split``)."""
     step = CORNER_SHARE * lattice.pitch_px / matcher.image_radius
     at = np.linspace(-1.0, 1.0, 2 * PEAK_SAMPLES + 1) * PEAK_REACH / CORNER_SHARE * step
-    out = []
+    out, errors = [], []
     for move in (lambda d: lattice.scaled(1 + d), lambda d: lattice.scaled(1.0, d)):
-        def along(d, move=move):
-            return confidence if d == 0 else matcher.confidence(move(d), offset)
+        seen: dict[float, tuple] = {}
+
+        def along(d, group=None, move=move, seen=seen):
+            if d == 0 and group is None:
+                return confidence
+            if d not in seen:
+                seen[d] = matcher.lens_confidences(move(d), offset)
+            index, values = seen[d]
+            if group is not None:
+                values = values[_group_of(index) == group]
+            return float(np.median(values)) if len(values) else 0.0
+
         out.append(_half_drop_midpoint(along, at, [along(d) for d in at]))
-    return out[0], out[1], step
+        errors.append(_split_error(along, at) if split else float("nan"))
+    return out[0], out[1], step, (errors[0], errors[1])
+
+
+SPLIT = 4   # lens groups (the cosets of the index-4 sub-lattice) whose peaks must agree
+
+
+def _group_of(index: np.ndarray) -> np.ndarray:
+    """The coset (0-3) of each lens index (i, j) in the index-4 sub-lattice: four groups
+    spread alike over the image, with the same reach to its corners."""
+    return 2 * (index[:, 0] % 2) + index[:, 1] % 2
+
+
+def _split_error(along, at: np.ndarray) -> float:
+    """Standard error of the peak's midpoint along one axis, from the spread of the
+    midpoints each quarter of the lenses (``_group_of``) places on its own: each holds a
+    quarter of the evidence, so the whole's error is their standard deviation / 2; inf when
+    some quarter shows no peak."""
+    parts = []
+    for group in range(SPLIT):
+        def one(d, group=group):
+            return along(d, group)
+        parts.append(_half_drop_midpoint(one, at, [one(d) for d in at]))
+    if not np.all(np.isfinite(parts)):
+        return float("inf")
+    return float(np.std(parts, ddof=1) / np.sqrt(SPLIT))
 
 
 def _half_drop_midpoint(confidence, at: np.ndarray, values: list[float]) -> float:
@@ -254,16 +300,25 @@ def _half_drop_midpoint(confidence, at: np.ndarray, values: list[float]) -> floa
 
 
 def _off_peak(matcher: Matcher, lattice: Lattice, offset, confidence: float) -> str | None:
-    """Why the match does not peak at the lattice's pitch and angle (a vertex of
-    :func:`_vertices` beyond CORNER_SHARE of a pitch at the corners), or None."""
-    pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
-    for what, vertex, unit in (("pitch", pitch, "%"), ("rotation", angle, "deg")):
+    """Why the match does not peak at the lattice's pitch and angle, or None: a vertex of
+    :func:`_vertices` beyond CORNER_SHARE of a pitch at the corners, or one that the match
+    does not pin down that well (the vertex and PEAK_ERRORS standard errors beyond it)."""
+    pitch, angle, step, errors = _vertices(matcher, lattice, offset, confidence)
+    moves = (("pitch", pitch, errors[0], "%", 100.0), ("rotation", angle, errors[1], "deg",
+                                                     180 / np.pi))
+    said = f"its micro-images repeat each other's content (confidence {confidence:.2f})"
+    for what, vertex, _, unit, per in moves:
         if not abs(vertex) <= step:
-            value = vertex * (100.0 if unit == "%" else 180 / np.pi)
-            where = (f"{value:+.2f} {unit} from the given one" if np.isfinite(vertex)
+            where = (f"{vertex * per:+.2f} {unit} from the given one" if np.isfinite(vertex)
                      else "nowhere near the given one")
-            return (f"its micro-images repeat each other's content (confidence "
-                    f"{confidence:.2f}), best at a {what} {where}")
+            return f"{said}, best at a {what} {where}"
+    for what, vertex, error, unit, per in moves:
+        if not abs(vertex) + PEAK_ERRORS * error <= step:
+            corners = (abs(vertex) + PEAK_ERRORS * error) / step * CORNER_SHARE
+            return (f"{said}, but the match does not pin its {what} down: its peak lies "
+                    f"{vertex * per:+.2f} +- {error * per:.2f} {unit} away (the spread of "
+                    f"the peaks of the four quarters of the lenses), so the corner lenses "
+                    f"may lie {corners:.2f} pitch off (the tolerance: {CORNER_SHARE:g})")
     return None
 
 
@@ -332,7 +387,8 @@ def _to_peak(image: np.ndarray, lattice: Lattice) -> tuple[Lattice, tuple]:
         for _ in range(2):
             offset, confidence, _ = _centred(matcher, lattice)
             matcher.settle_sign(lattice, offset)
-            pitch, angle, step = _vertices(matcher, lattice, offset, confidence)
+            pitch, angle, step, _ = _vertices(matcher, lattice, offset, confidence,
+                                              split=False)
             half = PEAK_REACH / CORNER_SHARE * step / 2   # towards a peak beyond the reach
             pitch_move, angle_move = (float(np.clip(v, -half, half)) if np.isinf(v) else v
                                       for v in (pitch, angle))
