@@ -58,3 +58,21 @@ def test_a_grid_far_off_is_not_said_to_be_what_the_frame_shows():
     _, misfit = lattice_misfit(frame, _variant(grid, pitch_factor=1.726))
     assert misfit is not None and "do not lie on the grid's" in misfit
     assert "the frame shows" not in misfit
+
+
+def test_another_cameras_fine_grid_on_a_lattice_it_cannot_fold_is_refused():
+    """Audit 24b W6: a hex 6.3 px grid (another camera's) on frames of a 9.7 px white folded to
+    nothing from its own lattice and was used unchecked ("no micro-image lattice"), though
+    calibrate finds 9.7 px there at contrast 2.4: the frames' own lattice refuses it, also
+    when the grid covers only a corner of them (its area: 11 lenses of the frames' pitch)."""
+    from plenocli.model.lensgrid import LensGrid
+    from plenocli.synth.whiteimage import white_image
+
+    frame, _ = white_image((300, 420), pitch_px=9.7, angle_rad=np.radians(13),
+                           offset_xy=(213.6, 148.0), seed=3)
+    frame = frame.astype(np.float64)
+    grid = LensGrid(6.3, np.radians(19), (130.3, 126.7), "hex", image_shape=(256, 256))
+    shows, misfit = lattice_misfit(frame[:256, :256], grid, whole=frame)
+    assert misfit is not None and "hex 9.70 px" in misfit and "hex 6.30 px" in misfit
+    _, own = lattice_misfit(frame, dataclasses.replace(grid, image_shape=frame.shape))
+    assert own is not None and "hex 9.70 px" in own

@@ -39,14 +39,19 @@ MAX_OFFSET = 0.25       # pitches: a grid's centres this far from the micro-imag
 REFIT_PRECISION = 0.05  # px at the corners: a regional lattice this sure replaces the grid's
 DEPTH_CHECK_PITCHES = 10  # lenses across the folded region below which MAX_DEPTH_ERROR is not
 #                           told: 4.7 across folded the true lattice 0.3-0.4 % off, 18 x 24 0.06 %
+OWN_PX = 2048          # side of the central region searched for the frames' own lattice
+OWN_MIN_PX = 48        # calibrate's least image side (calibration.MIN_SIDE_PX)
 DEPTH_PRECISION = "depth precision"   # _disagreement's word for an error over MAX_DEPTH_ERROR
 
 
-def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
-                   ) -> str | None:
-    """None when the frame (rows, cols; grey) shows ``grid``'s lattice, else how it disagrees.
-    Where the fold judge vouches for no lattice (a few lenses, micro-images without
-    vignetting, a crop like the R42's), nothing contradicts the grid and it is used.
+def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False,
+                   whole: np.ndarray | None = None) -> tuple[bool, str | None]:
+    """(whether the frame (rows, cols; grey: the grid's area of the frames) shows ``grid``'s
+    lattice, how it disagrees or None). Where the fold from the grid's lattice vouches for
+    none, the frames are searched for a lattice of their own (:func:`frames_own`, on
+    ``whole``: all of the frames' grey, when the grid covers only a part of them); one that
+    is not the grid's refuses it; where they show none either (a few lenses, micro-images
+    without vignetting, a crop like the R42's), nothing contradicts the grid and it is used.
 
     Refocus needs the lattice right to a fraction of a pitch over the frame; depth reads g
     from the shift between neighbours, so an error e in a lattice vector (over the pitch) is
@@ -69,14 +74,64 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
         turns = [Lattice(own.kind, own.pitch_px, own.angle_rad + k * step / TURN_STARTS)
                  for k in range(1, TURN_STARTS)]
         found = fold_judge(turns, folds).lattice
-    if found is None:   # too few lenses, or micro-images too flat, to vouch for a lattice
-        return False, None
+    if found is None:   # the grid's lattice folds to nothing: what do the frames show?
+        return False, _own_misfit(frame if whole is None else whole, own)
     misfit = _disagreement(frame, own, found, for_depth)
     if misfit == DEPTH_PRECISION and min(centre.shape) < DEPTH_CHECK_PITCHES * own.pitch_px:
         # a fold over a few lenses is not precise to MAX_DEPTH_ERROR: the simulator's own
         # grid on 95 x 95 px (4.7 lenses across) folded 0.39 % off; unchecked, not refused
         return False, None
     return True, (misfit if misfit != DEPTH_PRECISION else _depth_misfit(own, found))
+
+
+def frames_own(frame: np.ndarray):
+    """The lattice the frame (rows, cols; grey) shows on its own, by calibrate's judges on
+    its central OWN_PX (:func:`plenocli.calibration.judges.decide`, no hint) and confirmed by
+    a sharp fold on it, with the judges' account; (None, "") where none is vouched for.
+
+    The grid check's fold starts from the grid's lattice: a lattice far from it (another
+    camera's pitch) is out of its reach, so "nothing folds" says nothing about the frames
+    (audit 24b W6: a 6.3 px grid on frames of a 9.7 px white, which calibrate finds at
+    contrast 2.44, was used unchecked). The search itself proposes its lattices from the
+    frame's spectrum and autocorrelation; the fold (scene content does not fold: it averages
+    out over the micro-images) must confirm the judges' choice before it refuses a grid."""
+    from plenocli.calibration.fold import Folds, fold_judge
+    from plenocli.calibration.judges import decide
+    from plenocli.calibration.search import views
+    from plenocli.errors import CalibrationError
+
+    rows, cols = frame.shape
+    top, left = max(0, (rows - OWN_PX) // 2), max(0, (cols - OWN_PX) // 2)
+    centre = np.nan_to_num(np.asarray(frame[top:top + OWN_PX, left:left + OWN_PX],
+                                      np.float64))
+    if min(centre.shape) < OWN_MIN_PX:
+        return None, ""
+    try:
+        decision = decide(centre, views(centre, None))
+    except CalibrationError:
+        return None, ""
+    fold = fold_judge([decision.lattice], Folds(centre, decision.lattice.pitch_px))
+    if fold.lattice is None:
+        return None, ""
+    return fold.lattice, f"{decision.describe()}; fold sharpness {fold.sharpness:.3f}"
+
+
+def _own_misfit(frame: np.ndarray, own) -> str | None:
+    """How the lattice the frames show on their own (:func:`frames_own`) disagrees with the
+    grid's (``own``): another kind, or vectors apart by more than MAX_DRIFT of a pitch at the
+    frame's corners; None where they show none, the grid's or a relative of it (the fold from
+    the grid's lattice would have settled a relative: nothing says which one is right)."""
+    from plenocli.calibration.verify import nested
+
+    found, account = frames_own(frame)
+    if found is None or nested(own, found) is not None:
+        return None
+    error = _vector_error(own, found) if found.kind == own.kind else np.inf
+    drift = error * float(np.hypot(*frame.shape)) / 2 / own.pitch_px
+    if drift <= MAX_DRIFT:
+        return None
+    return (f"the frames show a {found.describe()} lattice of their own (calibrate's "
+            f"judges on their centre: {account}), the grid says {own.describe()}")
 
 
 def _disagreement(frame: np.ndarray, own, found, for_depth: bool) -> str | None:

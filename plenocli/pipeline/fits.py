@@ -12,19 +12,23 @@ from plenocli.progress import log
 
 
 def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | None = None,
-               for_depth: bool = False, stored_only: bool = False) -> bool:
+               for_depth: bool = False, stored_only: bool = False,
+               whole: np.ndarray | None = None) -> bool:
     """InputError saying how ``grid`` (read from ``grid_path``) disagrees with the frame
     (docs/depth.md, "Grid check"); depth, refocus and crosstalk call it before using a grid.
     Returns whether the grid is checked: the frame shows its lattice, or the grid was
     calibrated on the file ``frames_path`` itself. A grid the frames cannot check is used only
     when its record vouches for it (:func:`unvouched`), else refused; then the stage says it
     is used unchecked (:func:`warn_unchecked`) and records it. ``stored_only``: the grid is
-    stored with the frames as theirs (decode --calib): only a grid the frames check is."""
+    stored with the frames as theirs (decode --calib): only a grid the frames check is.
+    ``whole``: the grey of all of the frames where the grid covers only a part of them
+    (``frame``), searched for the frames' own lattice
+    (:func:`plenocli.depth.gridcheck.frames_own`)."""
     if not stored_only and not np.isfinite(frame).any():
         # nothing under the grid to check it with, or to use it on: the frames are the fault
         raise InputError(f"{frames_path or 'the frames'}: no valid pixel under the grid (all "
                          "NaN: masked or clipped); check how the frames were made")
-    shows, misfit = lattice_misfit(frame, grid, for_depth=for_depth)
+    shows, misfit = lattice_misfit(frame, grid, for_depth=for_depth, whole=whole)
     if misfit:
         raise InputError(f"{grid_path} does not fit the frames: {misfit}; make the grid with "
                          "`plenocli calibrate` on a white image (or these frames)")
@@ -39,6 +43,18 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
     if not shows:
         unvouched(grid_path)
     return shows
+
+
+def beyond_grid(framing, pages: np.ndarray, *, mosaic: bool) -> np.ndarray | None:
+    """The grey of all of ``pages`` (P, rows, cols) where the grid's area (``framing``) is
+    only a part of them (a grid calibrated on a crop), for :func:`check_fits` ``whole``;
+    None where it covers them all. A few lenses of the grid's area may show no lattice that
+    the whole frames show (audit 24b W6: a 256 x 256 grid on a 1001 x 777 origami crop)."""
+    if framing.shape == tuple(pages.shape[-2:]):
+        return None
+    from plenocli.depth.lenslet import sensor_grey
+
+    return sensor_grey(pages, mosaic=mosaic)
 
 
 def unvouched(grid_path: str) -> None:

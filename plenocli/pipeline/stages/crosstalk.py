@@ -20,7 +20,7 @@ from plenocli.model.focus import check_mask_width
 from plenocli.model.numbers import decimal
 from plenocli.model.provenance import json_safe, processing_of, stage_record
 from plenocli.model.views import ViewNames, pupil_views, view_of
-from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked
+from plenocli.pipeline.fits import beyond_grid, centred_on, check_fits, warn_unchecked
 from plenocli.progress import log, shown
 
 
@@ -163,9 +163,11 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
         raise OptionError(f"--mask-widths: {err}") from err
     from plenocli.depth.lenslet import sensor_grey  # with the sweep's numba kernels
 
-    frame = framing.crop(sensor_image(data, meta))
+    image = sensor_image(data, meta)
+    frame = framing.crop(image)
     grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
-    if not check_fits(grey, framing.grid, grid, frames_path=inputs[0]):
+    whole = beyond_grid(framing, image[np.newaxis], mosaic=bool(framing.cfa))
+    if not check_fits(grey, framing.grid, grid, frames_path=inputs[0], whole=whole):
         warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     try:

@@ -14,7 +14,13 @@ from plenocli.io.preview import write_depth_png
 from plenocli.model.numbers import decimal
 from plenocli.model.provenance import stage_record
 from plenocli.model.views import ViewNames, split_colour_page, view_of
-from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked, weak_match
+from plenocli.pipeline.fits import (
+    beyond_grid,
+    centred_on,
+    check_fits,
+    warn_unchecked,
+    weak_match,
+)
 from plenocli.progress import log, shown
 
 DUAL = ["A", "B"]
@@ -135,7 +141,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
     try:
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
-        checked = check_fits(grey, framing.grid, grid_path, frames_path=input, for_depth=True)
+        checked = check_fits(grey, framing.grid, grid_path, frames_path=input, for_depth=True,
+                             whole=beyond_grid(framing, data, mosaic=bool(framing.cfa)))
         lens_grid, moved = centred_on(grey, framing.grid, grid_path, refit=True)
         ranges = _type_ranges(grid_path, framing.grid)
         result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,

@@ -17,7 +17,13 @@ from plenocli.io.preview import write_png
 from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import sha256_file, stage_record
 from plenocli.model.views import CHANNELS, ViewNames, colour_page, split_sweep, sweep_page
-from plenocli.pipeline.fits import centred_on, check_fits, warn_unchecked, weak_match
+from plenocli.pipeline.fits import (
+    beyond_grid,
+    centred_on,
+    check_fits,
+    warn_unchecked,
+    weak_match,
+)
 from plenocli.progress import log, shown
 
 MAX_FALLOFF = 0.10  # micro-images darker at their rims by more: the sweep's score leans low
@@ -58,7 +64,8 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
         raise ConfigError(f"refocus: {err}") from err
     cfa = framing.cfa
     grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
-    checked = check_fits(grey, framing.grid, grid, frames_path=input)
+    checked = check_fits(grey, framing.grid, grid, frames_path=input,
+                         whole=beyond_grid(framing, data[:1], mosaic=bool(cfa)))
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     _check_match(grey, lens_grid, grid, g=None if depth else g_values[0], checked=checked)
     if not checked:
