@@ -395,6 +395,8 @@ LYING_HEADERS = {  # name: (frame, write options, damage or None, words in the m
                                                      "square"),
     "DefaultScale 0 x 1": (_frame(), _with_tags((50718, "2I", 2, (0, 1, 1, 1), True)), None,
                            "DefaultScale [0.0, 1.0] is not two positive numbers"),
+    "DefaultScale 1.5 x 1": (_frame(), _with_tags((50718, "2I", 2, (3, 2, 1, 1), True)), None,
+                             "DefaultScale 1.5 x 1"),
     "float samples NaN": (_float_with(np.nan), dict(linear=True, white=1, tile=(32, 32),
                                                     compression="zlib", predictor=3),
                           None, "1 NaN or infinite samples"),
@@ -546,6 +548,16 @@ def test_written_dng_keeps_the_pattern_of_its_frames(tmp_path):
     import rawpy
     with rawpy.imread(str(path)) as raw:
         assert "RGBG"[raw.raw_color(1, 1)] == "B"  # RGGB at (0, 0): blue at (1, 1)
+
+
+def test_square_pixels_shown_larger_decode_as_stored(tmp_path):
+    """DefaultScale 1.5 x 1.5 scales the picture shown, its pixels square (audit 25: refused
+    as 'not square')."""
+    frame = _frame()
+    _write_dng(tmp_path / "big.dng", frame, extratags=[(50718, "2I", 2, (3, 2, 3, 2), True)])
+    _write_dng(tmp_path / "plain.dng", frame)
+    np.testing.assert_array_equal(raw.decode(tmp_path / "big.dng")[0],
+                                  raw.decode(tmp_path / "plain.dng")[0])
 
 
 def test_an_enhanced_image_beside_the_raw_is_not_read(tmp_path):

@@ -140,15 +140,18 @@ def check_layout(path, k: int, page, dng: bool = True) -> None:
 
 
 def _check_square_pixels(path, k: int, page) -> None:
-    """DefaultScale other than 1, 1 says the pixels are not square (the picture is that many
-    times wider or taller than stored, as LibRaw's pixel aspect stretches it): every stage
-    measures in pixels (lens pitch, shifts, depth), so such a raw is refused, not squashed."""
+    """DefaultScale of two different values says the pixels are not square (the picture is
+    that many times wider or taller than stored, as LibRaw's pixel aspect stretches it): every
+    stage measures in pixels (lens pitch, shifts, depth), so such a raw is refused, not
+    squashed. Equal values only scale the picture shown."""
     scale = numbers(path, k, page, DEFAULT_SCALE, "DefaultScale")
-    if scale is None or (scale.size == 2 and np.all(scale == 1)):
+    if scale is None:
         return
     if scale.size != 2 or not np.all(scale > 0):
         raise InputError(f"{path}: raw IFD {k}: DefaultScale {scale.tolist()} is not two "
                          "positive numbers; the DNG is damaged: copy or convert it again")
+    if scale[0] == scale[1]:
+        return   # square pixels, shown larger or smaller: nothing a measure in pixels sees
     raise InputError(f"{path}: raw IFD {k}: DefaultScale {scale[0]:g} x {scale[1]:g}: its "
                      "pixels are not square, and plenocli measures in pixels (lens pitch, "
                      "shifts, depth); convert the raw to square pixels first")
