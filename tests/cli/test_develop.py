@@ -129,10 +129,13 @@ def test_highlight_recovery_rebuilds_exactly_the_clipped_s_pixels(tmp_path):
     # 20 x too bright, exit 0) or leaves (0, 1) (A = 1.5 S: "internal error") is refused
     white, meta = read_image(tmp_path / "white_b.tif")
     a, b, s = (meta["views"].index(v) for v in "ABS")
-    for scale, words in ((0.01, "is not"), (1.5, "leaves (0, 1)")):
+    for scale, words in ((0.01, "is not"), (1.5, "leaves (0, 1)"), (None, "column strip")):
         edited = white.copy()
-        edited[a] = white[s] * scale
-        edited[b] = white[s] - edited[a]
+        if scale is None:   # A and B swapped: the fall-off mirrored, its median the same
+            edited[a], edited[b] = white[b], white[a]
+        else:
+            edited[a] = white[s] * scale
+            edited[b] = white[s] - edited[a]
         write_image(tmp_path / "edited.tif", edited, meta)
         result = invoke("develop", tmp_path / "capture_b.tif", "--view", "S", "--wb", "1,1,1",
                         "--matrix", "none", "--recover-highlights", tmp_path / "edited.tif",

@@ -168,26 +168,34 @@ def _recover(data: np.ndarray, names: list[str], cfa: str | None, white_path: st
 
 
 SPLIT_TOLERANCE = 0.1  # the capture's median A/S this far from the white's: another lens
+SPLIT_STRIPS = 4  # the split falls off from left to right: judged in this many column strips
 
 
 def _check_split(a: np.ndarray, s: np.ndarray, split: np.ndarray, white_path: str,
                  path: str) -> None:
     """The white's A/S split must be the capture's: its lit, unclipped pixels show their own
-    A/S, which scatters with defocus but centres on the split of this lens and aperture. A
-    white of another lens or aperture (or an edited one: A at 0.01 S rebuilt highlights 20 x
-    too bright, audit 24) puts the median far off."""
+    A/S, which scatters with defocus but centres on the split of this lens and aperture, strip
+    by strip across the frame (the split falls off from left to right). A white of another
+    lens or aperture (or an edited one: A at 0.01 S rebuilt highlights 20 x too bright; A and B
+    swapped, a mirrored fall-off of the same median, 20 % off, audit 24-25) is far off in some
+    strip."""
     lit = np.isfinite(a) & np.isfinite(s) & np.isfinite(split)
     if lit.any():
         lit &= s > 0.1 * np.nanpercentile(np.where(lit, s, np.nan), 99)
-    if lit.sum() < 1024:
-        return   # too little unclipped light to tell: the split is the white's alone
-    ratio = float(np.median(a[lit] / (s[lit] * split[lit])))
-    if abs(ratio - 1) > SPLIT_TOLERANCE:
-        raise InputError(
-            f"--recover-highlights {white_path}: its A/S split (median "
-            f"{float(np.median(split[lit])):.3g}) is not {path}'s, whose unclipped pixels split "
-            f"{float(np.median(a[lit] / s[lit])):.3g} (median): a white of another lens or "
-            "aperture; use a white of this camera, lens and aperture, processed alike")
+    cols = a.shape[1]
+    for k in range(SPLIT_STRIPS):
+        strip = (slice(None), slice(k * cols // SPLIT_STRIPS, (k + 1) * cols // SPLIT_STRIPS))
+        here = lit[strip]
+        if here.sum() < 256:
+            continue   # too little unclipped light there to tell
+        a_k, s_k, split_k = a[strip][here], s[strip][here], split[strip][here]
+        if abs(float(np.median(a_k / (s_k * split_k))) - 1) > SPLIT_TOLERANCE:
+            raise InputError(
+                f"--recover-highlights {white_path}: its A/S split (median "
+                f"{float(np.median(split_k)):.3g} in column strip {k + 1} of {SPLIT_STRIPS}) is "
+                f"not {path}'s, whose unclipped pixels there split "
+                f"{float(np.median(a_k / s_k)):.3g} (median): a white of another lens or "
+                "aperture; use a white of this camera, lens and aperture, processed alike")
 
 
 def _choose(views: list[dev.ColourView], name: str | None, path: str) -> dev.ColourView:
