@@ -20,7 +20,8 @@ import numpy as np
 
 from plenocli.progress import step
 from plenocli.stitch.errors import StitchError
-from plenocli.stitch.kernels import accumulate, normalise
+from plenocli.stitch.kernels import accumulate, accumulate_channels, normalise, normalise_channels
+from plenocli.stitch.nodata import ESTIMATE_WEIGHT, estimate_factors, measured_in
 from plenocli.stitch.views import translation_matrix
 from plenocli.stitch.warp import COVER_EPS_PX, ViewMap, feather, resample
 
@@ -146,7 +147,8 @@ BLEND_BAND_PIXELS = 1 << 22
 
 
 def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: list,
-          gains: np.ndarray, shape: tuple[int, int, int], write_rows) -> np.ndarray:
+          gains: np.ndarray, shape: tuple[int, int, int], write_rows,
+          estimated: Sequence | None = None) -> np.ndarray:
     """Blend the feathered panorama of ``shape`` (C, rows, cols) float32 (NaN where no view
     covers), handing each band of rows to ``write_rows(rows, pixels)`` once it is final (in
     order); returns the pixels some view covers (rows, cols).
@@ -158,32 +160,37 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
     before it (numpy, OpenCV and the compiled kernels release the GIL); the parts are added in
     view order by one compiled pass, so the sums are those of a serial loop. A band is written
     by a thread of its own while the next ones are summed (the write is memory-bound kernel
-    work: 1.4 GB into the page cache costs seconds at the 5D Mark IV's size)."""
+    work: 1.4 GB into the page cache costs seconds at the 5D Mark IV's size).
+
+    ``estimated``: per view, the channels its source estimated (a Bayer view's rebuilt clipped
+    channel, :class:`plenocli.colour.highlights.Estimated`) or None. An estimate is a colour
+    guessed from the pixels around, not the view's light: where another view measured that
+    channel it weighs ESTIMATE_WEIGHT of the view's feather weight there, so the measured value
+    is the panorama's; where no view measured it the estimate is all there is and is kept.
+    A band a view's estimate reaches is summed with a total per channel (C x the one total);
+    every other band as before, one weight for all channels."""
     n_chan, rows, cols = shape
+    estimated = list(estimated) if estimated is not None else [None] * len(views)
     step_rows = max(1, min(rows, BLEND_BAND_PIXELS // cols))
     n_bands = -(-rows // step_rows)
     covered = np.empty((rows, cols), bool)
     # band j is summed in buffers j % 2 while band j - 1 may still be open
-    sums = [np.empty((n_chan, step_rows, cols), np.float32) for _ in range(2)]
-    totals = [np.empty((step_rows, cols), np.float32) for _ in range(2)]
+    buffers = [_BandSums(n_chan, step_rows, cols) for _ in range(2)]
     pending: deque = deque()  # (band number, rows within the band, cols, gain, job)
     open_bands: deque = deque()  # (band number, its rows)
     writes: list = [None, None]  # the write of the band last summed in each buffer
 
     def add_oldest() -> None:
         j, band_rows, band_cols, gain, job = pending.popleft()
-        img, weight = job.result()
-        accumulate(sums[j % 2][:, band_rows, band_cols], totals[j % 2][band_rows, band_cols],
-                   img, weight, gain, bool((gain != 1).any()))
+        buffers[j % 2].add(band_rows, band_cols, *job.result(), gain)
 
     def close_bands(before: int) -> None:
         while open_bands and open_bands[0][0] < before:
             j, band = open_bands.popleft()
             while pending and pending[0][0] <= j:
                 add_oldest()
-            height = band.stop - band.start
-            normalise(sums[j % 2][:, :height], totals[j % 2][:height], covered[band])
-            writes[j % 2] = writer.submit(write_rows, band, sums[j % 2][:, :height])
+            pixels = buffers[j % 2].normalise(covered[band])
+            writes[j % 2] = writer.submit(write_rows, band, pixels)
 
     with ThreadPoolExecutor(max_workers=BLEND_WORKERS) as pool, \
             ThreadPoolExecutor(max_workers=1) as writer:
@@ -192,7 +199,7 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
             if writes[j % 2] is not None:
                 writes[j % 2].result()
             band = slice(j * step_rows, min(rows, (j + 1) * step_rows))
-            totals[j % 2][:] = 0  # the sums are set where a first weight is added
+            buffers[j % 2].start(band.stop - band.start)
             open_bands.append((j, band))
             for k, (view, vmap, box) in enumerate(zip(views, maps, boxes, strict=True)):
                 part = None if box is None else intersect(box, (band, slice(0, cols)))
@@ -201,7 +208,7 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
                 step(f"blending band {j + 1} of {n_bands}, view {k + 1} of {len(views)}")
                 gain = gains[k].astype(np.float32)
                 for piece_rows, piece_cols, job in _resample_part(pool, band, part, view, vmap,
-                                                                  holes[k]):
+                                                                  holes[k], estimated[k]):
                     pending.append((j, piece_rows, piece_cols, gain, job))
                     while len(pending) > BLEND_WORKERS:
                         add_oldest()
@@ -212,9 +219,54 @@ def blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list, holes: 
     return covered
 
 
-def _resample_part(pool, band: slice, part: Box, view: np.ndarray, vmap: ViewMap, hole):
+class _BandSums:
+    """A band's weighted sums (C, rows, cols) and their total weight (rows, cols); once a piece
+    with a share per channel comes (:func:`_band`), a total per channel (C, rows, cols),
+    allocated then: a band no estimate reaches is summed as ever, one weight for all."""
+
+    def __init__(self, n_chan: int, rows: int, cols: int):
+        self.sums = np.empty((n_chan, rows, cols), np.float32)
+        self.total = np.empty((rows, cols), np.float32)
+        self.totals: np.ndarray | None = None
+        self.split = False
+        self.height = rows
+
+    def start(self, height: int) -> None:
+        self.total[:] = 0  # the sums are set where a first weight is added
+        self.split = False
+        self.height = height
+
+    def add(self, rows: slice, cols: slice, img: np.ndarray, weight: np.ndarray,
+            factor: np.ndarray | None, gain: np.ndarray) -> None:
+        scaled = bool((gain != 1).any())
+        if factor is None and not self.split:
+            accumulate(self.sums[:, rows, cols], self.total[rows, cols], img, weight, gain,
+                       scaled)
+            return
+        if not self.split:  # the band's first estimate: what is summed so far, per channel
+            if self.totals is None:
+                self.totals = np.empty(self.sums.shape, np.float32)
+            self.totals[:] = self.total
+            self.split = True
+        accumulate_channels(self.sums[:, rows, cols], self.totals[:, rows, cols], img, weight,
+                            _NO_FACTOR if factor is None else factor, gain, scaled,
+                            factor is None)
+
+    def normalise(self, covered: np.ndarray) -> np.ndarray:
+        """The band's pixels, normalised in place; marks ``covered``."""
+        h = self.height
+        if self.split:
+            normalise_channels(self.sums[:, :h], self.totals[:, :h], covered)
+        else:
+            normalise(self.sums[:, :h], self.total[:h], covered)
+        return self.sums[:, :h]
+
+
+def _resample_part(pool, band: slice, part: Box, view: np.ndarray, vmap: ViewMap, hole,
+                   estimated=None):
     """Queue the resampling of a view's ``part`` of a panorama ``band``, a piece of rows at a
-    time: yields (rows within the band, columns, the job giving the piece and its weight)."""
+    time: yields (rows within the band, columns, the job giving the piece, its weight and its
+    channels' shares of it, see :func:`_band`)."""
     for piece, mx, my, lost in vmap.bands(part):
         span = on_view(mx, my, lost, vmap.view_shape)
         if span is None:
@@ -224,7 +276,7 @@ def _resample_part(pool, band: slice, part: Box, view: np.ndarray, vmap: ViewMap
         first = part[0].start - band.start + piece.start
         yield (slice(first, first + piece.stop - piece.start),
                slice(part[1].start + span.start, part[1].start + span.stop),
-               pool.submit(_band, view, mx, my, lost, vmap.view_shape, hole))
+               pool.submit(_band, view, mx, my, lost, vmap.view_shape, hole, estimated))
 
 
 def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,
@@ -240,17 +292,30 @@ def on_view(mx: np.ndarray, my: np.ndarray, lost: np.ndarray | None,
     return slice(int(found[0]), int(found[-1]) + 1) if found.size else None
 
 
-def _band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape,
-          hole) -> tuple[np.ndarray, np.ndarray]:
-    """A band of a view resampled at its maps, and its feather weight."""
-    return resample(view, mx, my), feather(mx, my, view_shape, lost, hole)
+def _band(view: np.ndarray, mx: np.ndarray, my: np.ndarray, lost, view_shape, hole,
+          estimated=None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """A band of a view resampled at its maps, its feather weight and the share of it each
+    channel takes (:func:`plenocli.stitch.nodata.estimate_factors`; None: all of it)."""
+    return (resample(view, mx, my), feather(mx, my, view_shape, lost, hole),
+            estimate_factors(estimated, mx, my, view_shape, len(view)))
+
+
+_NO_FACTOR = np.empty((0, 0, 0), np.float32)  # accumulate_channels' factor when it reads none
 
 
 def multiband_blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: list[Box],
-                    holes: list, gains: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+                    holes: list, gains: np.ndarray, shape: tuple[int, int],
+                    estimated: Sequence | None = None) -> np.ndarray:
     """Burt-Adelson multi-band blend, channel by channel over the whole canvas (V canvases per
-    channel); each view still resampled once per channel through its map."""
+    channel); each view still resampled once per channel through its map. A channel a view's
+    source estimated weighs ESTIMATE_WEIGHT of its weight there (see :func:`blend`), so the
+    seam masks give it to a view that measured it, where one covers it; and its pixels there
+    are the weighted mean's (the measured value), which its coarse levels reach past the
+    masks."""
     n_chan, n_views = views[0].shape[0], len(views)
+    estimated = list(estimated) if estimated is not None else [None] * n_views
+    known = [measured_in(e, m, b, n_chan) for e, m, b in zip(estimated, maps, boxes,
+                                                             strict=True)]
     panorama = np.full((n_chan,) + shape, np.nan, np.float32)
     for c in range(n_chan):
         images = np.zeros((n_views,) + shape, np.float32)
@@ -258,11 +323,17 @@ def multiband_blend(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: lis
         for k in range(n_views):
             step(f"multi-band: channel {c + 1} of {n_chan}, view {k + 1} of {n_views}")
             img, weight = warp_region(views[k][c:c + 1], maps[k], boxes[k], holes[k])
+            if known[k][c] is not None:
+                weight[~known[k][c]] *= np.float32(ESTIMATE_WEIGHT)
             weights[k][boxes[k]] = weight
             images[k][boxes[k]] = np.where(weight > 0, img[0] * np.float32(gains[k, c]), 0)
         total = weights.sum(axis=0)
         covered = total > 0
         fallback = (images * weights).sum(axis=0) / np.maximum(total, 1e-12)
+        for k in range(n_views):  # the pyramid's coarse levels reach past the seam masks too
+            if known[k][c] is not None:
+                guessed = images[k][boxes[k]]
+                guessed[~known[k][c]] = fallback[boxes[k]][~known[k][c]]
         panorama[c] = np.where(covered, _multiband(images, weights, fallback), np.nan)
     return panorama
 

@@ -72,6 +72,48 @@ def accumulate(sums: np.ndarray, total: np.ndarray, image: np.ndarray, weight: n
                     sums[k, r, c] += v * w
 
 
+@numba.njit("void(f4[:, :, :], f4[:, :, :], f4[:, :, :], f4[:, :], f4[:, :, :], f4[:], b1, b1)",
+            cache=True, nogil=True, fastmath=False)
+def accumulate_channels(sums: np.ndarray, totals: np.ndarray, image: np.ndarray,
+                        weight: np.ndarray, factor: np.ndarray, gain: np.ndarray, scaled: bool,
+                        shared: bool) -> None:
+    """:func:`accumulate` with a weight and a total per channel: ``sums[k] += image[k] * gain[k]
+    * weight * factor[k]`` and ``totals[k] += weight * factor[k]`` (``factor`` read only unless
+    ``shared``: a view that measured every channel, one weight for all)."""
+    for r in range(weight.shape[0]):
+        for c in range(weight.shape[1]):
+            w = weight[r, c]
+            if w == 0:
+                continue
+            for k in range(image.shape[0]):
+                wk = w if shared else w * factor[k, r, c]
+                first = totals[k, r, c] == 0
+                totals[k, r, c] += wk
+                v = image[k, r, c]
+                if scaled:
+                    v = v * gain[k]
+                if first:
+                    sums[k, r, c] = v * wk
+                else:
+                    sums[k, r, c] += v * wk
+
+
+@numba.njit("void(f4[:, :, :], f4[:, :, :], b1[:, :])", cache=True, nogil=True, fastmath=False)
+def normalise_channels(sums: np.ndarray, totals: np.ndarray, covered: np.ndarray) -> None:
+    """:func:`normalise` with a total per channel (:func:`accumulate_channels`); a pixel is
+    covered where its channels' totals are > 0 (all or none are: an estimate's share is > 0)."""
+    tiny = np.float32(1e-12)
+    for r in range(covered.shape[0]):
+        for c in range(covered.shape[1]):
+            covered[r, c] = totals[0, r, c] > 0
+            for k in range(sums.shape[0]):
+                t = totals[k, r, c]
+                if t > 0:
+                    sums[k, r, c] *= np.float32(1.0) / max(t, tiny)
+                else:
+                    sums[k, r, c] = np.nan
+
+
 @numba.njit("void(f4[:, :, :], f4[:, :])", cache=True, nogil=True, fastmath=False)
 def channel_mean(image: np.ndarray, out: np.ndarray) -> None:
     """``out`` = the mean of ``image``'s (C, rows, cols) channels, summed in order (any layout:

@@ -42,6 +42,14 @@ FILL_SIGMA_PX = 1.0  # the estimate's Gaussian weights: the nearest known pixels
 # search mask keeps from them) beyond this fraction holds too little to be placed: a refusal is
 # then said to be the NaN's, not the layout's, the overlap's or the rig's
 MAX_LOST = 0.5
+# a panorama pixel is measured in a channel when its bilinear footprint holds no estimated pixel
+# of that channel (the feather's rule for NaN pixels, :func:`plenocli.stitch.warp.feather`)
+MEASURED_SHARE = 0.999
+# an estimated channel's blend weight, as a share of the view's feather weight: where another
+# view measured that channel it decides (a feather weight is at least ~1 px, the estimate's at
+# most the view's half-size times this: 5e-3 of it at 10000 px); where none did, the estimate is
+# all there is and is kept
+ESTIMATE_WEIGHT = 1e-6
 
 
 class NoData:
@@ -155,3 +163,60 @@ def _fill(view: np.ndarray, valid: np.ndarray, isolated: np.ndarray) -> None:
         known = np.where(valid, channel, np.float32(0))
         channel[isolated] = cv2.GaussianBlur(known, size, FILL_SIGMA_PX,
                                              borderType=cv2.BORDER_CONSTANT)[isolated] / weight
+
+
+def measured_in(estimated, vmap, block: tuple[slice, slice], n_chan: int) -> list:
+    """Per channel, where a view measured it on the panorama ``block`` (bool; None: every
+    pixel): see :func:`measured_at`, band by band of the view's maps."""
+    out: list = [None] * n_chan
+    if estimated is None:
+        return out
+    shape = (block[0].stop - block[0].start, block[1].stop - block[1].start)
+    for band, mx, my, _ in vmap.bands(block):
+        for c, known in enumerate(measured_at(estimated, mx, my, vmap.view_shape, n_chan)):
+            if known is not None:
+                if out[c] is None:
+                    out[c] = np.ones(shape, bool)
+                out[c][band] = known
+    return out
+
+
+def measured_at(estimated, mx: np.ndarray, my: np.ndarray, view_shape: tuple[int, int],
+                n_chan: int) -> list:
+    """Per channel, where a view measured it at its maps (bool; None: everywhere): not where
+    its resampling reaches a pixel whose channel its source estimated (``estimated.region(c,
+    rows, cols)``: bool, or None for a channel never estimated), as the feather leaves out a
+    NaN pixel's footprint."""
+    out: list = [None] * n_chan
+    if estimated is None:
+        return out
+    rows, cols = view_shape
+    on = (mx >= -1) & (mx <= cols) & (my >= -1) & (my <= rows)
+    if not on.any():
+        return out
+    top, left = (max(int(np.floor(v[on].min())) - 1, 0) for v in (my, mx))
+    bottom, right = int(np.ceil(my[on].max())) + 2, int(np.ceil(mx[on].max())) + 2
+    window = (slice(top, min(bottom, rows)), slice(left, min(right, cols)))
+    for c in range(n_chan):
+        guessed = estimated.region(c, *window)
+        if guessed is None or not guessed.any():
+            continue
+        out[c] = cv2.remap((~guessed).astype(np.float32), mx - np.float32(left),
+                           my - np.float32(top), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE) > MEASURED_SHARE
+    return out
+
+
+def estimate_factors(estimated, mx: np.ndarray, my: np.ndarray, view_shape: tuple[int, int],
+                     n_chan: int) -> np.ndarray | None:
+    """The blend's per-channel share of a view's feather weight at its maps, (C, h, w)
+    float32: 1 where it measured the channel, ESTIMATE_WEIGHT where its source estimated it;
+    None where it measured every channel (the common case: one weight for all channels)."""
+    known = measured_at(estimated, mx, my, view_shape, n_chan)
+    if all(k is None for k in known):
+        return None
+    out = np.ones((n_chan,) + np.shape(mx), np.float32)
+    for factor, k in zip(out, known, strict=True):
+        if k is not None:
+            factor[~k] = ESTIMATE_WEIGHT
+    return out

@@ -17,6 +17,7 @@ import numpy as np
 from plenocli.progress import step
 from plenocli.stitch.compose import Box, coverage, intersect, region_shape, warp_region
 from plenocli.stitch.errors import StitchError
+from plenocli.stitch.nodata import measured_in
 from plenocli.stitch.quality import bounding_box
 from plenocli.stitch.registration import difference_row
 from plenocli.stitch.views import level
@@ -33,9 +34,6 @@ MEASURE_THREADS = 2  # neighbour pairs measured at once (the two cores the stitc
 # sums over a million pixels hardly see the kernel: bilinear resampling moves the bench's gains
 # by under 5e-6 (the 2 x 2 of 1500 px, the pair) at a tenth of Lanczos-4's cost
 MEASURE_INTERPOLATION = cv2.INTER_LINEAR
-# a panorama pixel is measured in a channel when its bilinear footprint holds no estimated pixel
-# of that channel (the feather's rule for NaN pixels, :func:`plenocli.stitch.warp.feather`)
-MEASURED_SHARE = 0.999
 
 
 @dataclass(frozen=True)
@@ -60,9 +58,10 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
                      holes: list, pairs: list[tuple[int, int, str]],
                      estimated: Sequence | None = None) -> list[Overlap | None]:
     """Per neighbour pair: its :class:`Overlap`, or None where the views do not overlap.
-    ``estimated``: per view, its estimated channels (see :func:`_measured_in`) or None. The
-    pairs are measured in MEASURE_THREADS threads (OpenCV's remaps and numpy release the GIL);
-    each pair's figures are those of a serial loop."""
+    ``estimated``: per view, its estimated channels (see
+    :func:`plenocli.stitch.nodata.measured_in`) or None. The pairs are measured in
+    MEASURE_THREADS threads (OpenCV's remaps and numpy release the GIL); each pair's figures
+    are those of a serial loop."""
     estimated = estimated or [None] * len(views)
 
     def measure(pair):
@@ -86,7 +85,7 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
                 continue
             inside = both[box]
             count += int(inside.sum())
-            known = [_measured_in(estimated[k], maps[k], block, n_chan) for k in (a, b)]
+            known = [measured_in(estimated[k], maps[k], block, n_chan) for k in (a, b)]
             for c in range(n_chan):
                 use = inside
                 for k in (0, 1):
@@ -103,34 +102,6 @@ def measure_overlaps(views: Sequence[np.ndarray], maps: list[ViewMap], boxes: li
 
     with ThreadPoolExecutor(min(MEASURE_THREADS, len(pairs))) as pool:
         return list(pool.map(measure, pairs))
-
-
-def _measured_in(estimated, vmap: ViewMap, block: Box, n_chan: int) -> list:
-    """Per channel, where a view measured it on the panorama ``block`` (bool; None: every
-    pixel): not where its resampling reaches a pixel whose channel its source estimated
-    (``estimated.region(c, rows, cols)``: bool, or None for a channel never estimated), as the
-    feather leaves out a NaN pixel's footprint."""
-    out: list = [None] * n_chan
-    if estimated is None:
-        return out
-    rows, cols = vmap.view_shape
-    for band, mx, my, _ in vmap.bands(block):
-        on = (mx >= -1) & (mx <= cols) & (my >= -1) & (my <= rows)
-        if not on.any():
-            continue
-        top, left = (max(int(np.floor(v[on].min())) - 1, 0) for v in (my, mx))
-        bottom, right = int(np.ceil(my[on].max())) + 2, int(np.ceil(mx[on].max())) + 2
-        window = (slice(top, min(bottom, rows)), slice(left, min(right, cols)))
-        for c in range(n_chan):
-            guessed = estimated.region(c, *window)
-            if guessed is None or not guessed.any():
-                continue
-            if out[c] is None:
-                out[c] = np.ones(region_shape(block), bool)
-            out[c][band] = cv2.remap((~guessed).astype(np.float32), mx - np.float32(left),
-                                     my - np.float32(top), cv2.INTER_LINEAR,
-                                     borderMode=cv2.BORDER_REPLICATE) > MEASURED_SHARE
-    return out
 
 
 def _covered_by_both(map_a: ViewMap, map_b: ViewMap, region: Box, holes_a, holes_b) -> int:

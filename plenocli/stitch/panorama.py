@@ -412,13 +412,14 @@ def _composite(stack: np.ndarray, frame_to_ref: list[np.ndarray], pairs: list, *
     panorama = None if out else np.empty(pano_shape, np.float32)
     write_rows = out(pano_shape) if out else functools.partial(_write_rows, panorama)
     if blend == "multiband":
-        whole = compose.multiband_blend(filled, maps, boxes, holes, gains, shape)[
+        whole = compose.multiband_blend(filled, maps, boxes, holes, gains, shape,
+                                        nodata.estimated)[
             (slice(None),) + box]
         covered = np.isfinite(whole).all(axis=0)
         write_rows(slice(0, pano_shape[1]), whole)
     else:
         covered = compose.blend(filled, *compose.crop(maps, boxes, box), holes, gains, pano_shape,
-                                write_rows)
+                                write_rows, nodata.estimated)
     return panorama, covered, offset, gains, fits, areas
 
 
