@@ -629,3 +629,15 @@ def test_a_batch_waits_for_another_writing_its_shared_steps(tmp_path):
     _, err = batch.communicate(timeout=120)
     assert batch.returncode == 0, err
     assert "waiting for another run writing into" in err
+
+
+def test_the_summary_shows_a_name_that_is_not_utf8_as_a_terminal_does():
+    """audit 25 M: a capture named with a byte that is not UTF-8 was printed as Python's
+    surrogate escape, its columns out of line."""
+    from plenocli.pipeline.batch import BatchReport, CaptureResult
+
+    name = os.fsdecode(b"c\xffd")
+    report = BatchReport([], [CaptureResult("c.dng", name, "done", "", 1.0),
+                              CaptureResult("e.dng", "efg", "done", "", 1.0)])
+    lines = format_summary(report).splitlines()
+    assert lines[1].startswith("c\ufffdd ") and lines[1].index("done") == lines[2].index("done")

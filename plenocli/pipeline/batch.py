@@ -44,7 +44,7 @@ from plenocli.pipeline.captures import capture_path
 from plenocli.pipeline.config import Template, read_template
 from plenocli.pipeline.runner import Decision, plan, run_pipeline
 from plenocli.pipeline.validators import MAX_TIMEOUT_S
-from plenocli.progress import log, progress
+from plenocli.progress import log, printable, progress
 
 # Each worker gets one thread: the parallelism is across captures (no oversubscription).
 THREAD_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
@@ -473,11 +473,12 @@ def _executing_keys(dask_worker) -> list[str]:
 def format_summary(report: BatchReport, *, width: int = 100) -> str:
     """A plain-text table: one line per capture, then the counts."""
     results = report.results
-    name_w = max([len("capture")] + [len(r.name) for r in results])
+    names = [printable(r.name) for r in results]  # a name's bytes as a terminal shows them
+    name_w = max([len("capture")] + [len(n) for n in names])
     lines = [f"{'capture':<{name_w}}  {'status':<9}  {'time':>7}  detail"]
-    for r in results:
+    for r, name in zip(results, names, strict=True):
         detail = r.detail if len(r.detail) <= width else r.detail[: width - 3] + "..."
-        lines.append(f"{r.name:<{name_w}}  {r.status:<9}  {r.seconds:>5.1f} s  {detail}")
+        lines.append(f"{name:<{name_w}}  {r.status:<9}  {r.seconds:>5.1f} s  {detail}")
     counts = {s: sum(r.status == s for r in results)
               for s in ("done", "would run", "skipped", "failed")}
     tail = (f"{len(results)} capture{'' if len(results) == 1 else 's'}: {counts['done']} done, "
