@@ -95,15 +95,12 @@ def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = Fals
     then finds what this one made up to date)."""
     if locked and not dry_run:
         try:
-            for step in steps:  # what cannot be written is said as each step's guard says it
-                folders = step.stage.paths(step.params, step.stage.folder_outputs)
-                check_outputs([p for p in step.output_paths() if p not in folders],
-                              folders=folders)
+            _check_writable(steps)
         except InputError:
             # a made project on a read-only file system (an archive, a snapshot) is up to
-            # date, as make says: nothing to write, nothing to lock
-            if any(d.run for d in plan(steps, force=force)):
-                raise
+            # date, as make says: nothing to write, nothing to lock; else the steps that must
+            # run say what they cannot write
+            _check_writable([d.step for d in plan(steps, force=force) if d.run])
             return run_pipeline(steps, force=force)
         with folders_locked([p for step in steps for p in step.output_paths()]):
             return run_pipeline(steps, force=force)
@@ -133,6 +130,14 @@ def run_pipeline(steps: list[Step], *, force: bool = False, dry_run: bool = Fals
             raise InputError(f"step {d.step.name!r}: {os_error_message(err)}") from err
         log.debug("         %-16s %.2f s", d.step.name, time.monotonic() - start)
     return decisions
+
+
+def _check_writable(steps: list[Step]) -> None:
+    """InputError for the first output of ``steps`` that cannot be written, as each step's
+    guard says it."""
+    for step in steps:
+        folders = step.stage.paths(step.params, step.stage.folder_outputs)
+        check_outputs([p for p in step.output_paths() if p not in folders], folders=folders)
 
 
 def _stale(step: Step, will_make: set[Path]) -> str | None:
