@@ -72,7 +72,7 @@ def test_another_cameras_fine_grid_on_a_lattice_it_cannot_fold_is_refused():
                            offset_xy=(213.6, 148.0), seed=3)
     frame = frame.astype(np.float64)
     grid = LensGrid(6.3, np.radians(19), (130.3, 126.7), "hex", image_shape=(256, 256))
-    shows, misfit = lattice_misfit(frame[:256, :256], grid, whole=frame)
+    shows, misfit = lattice_misfit(frame[:256, :256], grid, whole=lambda: frame)
     assert misfit is not None and "hex 9.70 px" in misfit and "hex 6.30 px" in misfit
     _, own = lattice_misfit(frame, dataclasses.replace(grid, image_shape=frame.shape))
     assert own is not None and "hex 9.70 px" in own

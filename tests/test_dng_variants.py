@@ -574,3 +574,16 @@ def test_an_enhanced_image_beside_the_raw_is_not_read(tmp_path):
     plain, _ = raw.decode(tmp_path / "plain.dng")
     enhanced, _ = raw.decode(tmp_path / "enhanced.dng")
     np.testing.assert_array_equal(enhanced, plain)
+
+
+def test_an_as_shot_white_given_as_xy_is_said_not_read(tmp_path):
+    """audit 24 F4: a DNG whose as-shot white is AsShotWhiteXY (no AsShotNeutral) decoded
+    without a word, and develop then said the file had no as-shot white."""
+    from tests.logs import plenocli_messages
+
+    _write_dng(tmp_path / "xy.dng", _frame(),
+               extratags=[(50729, "2I", 2, (3127, 10000, 3290, 10000), True)])
+    with plenocli_messages() as said:
+        _, meta = raw.decode(tmp_path / "xy.dng")
+    assert meta["colour"]["as_shot_wb"] is None
+    assert any("AsShotWhiteXY, which plenocli does not read" in m for m in said), said

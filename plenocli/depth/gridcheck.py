@@ -25,6 +25,8 @@ for).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from plenocli.model.lensgrid import LensGrid
@@ -45,11 +47,13 @@ DEPTH_PRECISION = "depth precision"   # _disagreement's word for an error over M
 
 
 def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False,
-                   whole: np.ndarray | None = None) -> tuple[bool, str | None]:
+                   whole: Callable[[], np.ndarray | None] | None = None
+                   ) -> tuple[bool, str | None]:
     """(whether the frame (rows, cols; grey: the grid's area of the frames) shows ``grid``'s
     lattice, how it disagrees or None). Where the fold from the grid's lattice vouches for
-    none, the frames are searched for a lattice of their own (:func:`frames_own`, on
-    ``whole``: all of the frames' grey, when the grid covers only a part of them); one that
+    none, the frames are searched for a lattice of their own (:func:`frames_own`, on what
+    ``whole()`` gives: all of the frames' grey, when the grid covers only a part of them,
+    made only then); one that
     is not the grid's refuses it; where they show none either (a few lenses, micro-images
     without vignetting, a crop like the R42's), nothing contradicts the grid and it is used.
 
@@ -75,7 +79,8 @@ def lattice_misfit(frame: np.ndarray, grid: LensGrid, *, for_depth: bool = False
                  for k in range(1, TURN_STARTS)]
         found = fold_judge(turns, folds).lattice
     if found is None:   # the grid's lattice folds to nothing: what do the frames show?
-        return False, _own_misfit(frame if whole is None else whole, own)
+        larger = whole() if whole is not None else None
+        return False, _own_misfit(frame if larger is None else larger, own)
     misfit = _disagreement(frame, own, found, for_depth)
     if misfit == DEPTH_PRECISION and min(centre.shape) < DEPTH_CHECK_PITCHES * own.pitch_px:
         # a fold over a few lenses is not precise to MAX_DEPTH_ERROR: the simulator's own

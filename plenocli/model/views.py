@@ -55,14 +55,20 @@ def name_problem(name: str) -> str | None:
     return None
 
 
-def single_view_name(meta: dict, path) -> str:
-    """The name of the one view a file holds: the pupil part refocus made it of (its metadata's
-    ``refocus.view``: a ``left.tif`` made with ``--view right`` is view ``right``), else the
-    file's name without its suffix (``left.tif`` -> ``left``)."""
+def refocused_part(meta: dict) -> str | None:
+    """The pupil part a refocused file was made of (its metadata's ``refocus.view``: left,
+    q01, ...), None for the whole pupil or a file refocus did not make."""
     part = (meta.get("refocus") or {}).get("view")
     if isinstance(part, str) and part != "full" and name_problem(part) is None:
         return part
-    return Path(path).stem
+    return None
+
+
+def single_view_name(meta: dict, path) -> str:
+    """The name of the one view a file holds: the pupil part refocus made it of
+    (:func:`refocused_part`: a ``left.tif`` made with ``--view right`` is view ``right``), else
+    the file's name without its suffix (``left.tif`` -> ``left``)."""
+    return refocused_part(meta) or Path(path).stem
 
 
 def pupil_views(names: list[str]) -> list[str]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from plenocli.depth.gridcheck import centred, lattice_misfit
@@ -13,7 +15,7 @@ from plenocli.progress import log
 
 def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | None = None,
                for_depth: bool = False, stored_only: bool = False,
-               whole: np.ndarray | None = None) -> bool:
+               whole: Callable[[], np.ndarray | None] | None = None) -> bool:
     """InputError saying how ``grid`` (read from ``grid_path``) disagrees with the frame
     (docs/depth.md, "Grid check"); depth, refocus and crosstalk call it before using a grid.
     Returns whether the grid is checked: the frame shows its lattice, or the grid was
@@ -21,9 +23,10 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
     when its record vouches for it (:func:`unvouched`), else refused; then the stage says it
     is used unchecked (:func:`warn_unchecked`) and records it. ``stored_only``: the grid is
     stored with the frames as theirs (decode --calib): only a grid the frames check is.
-    ``whole``: the grey of all of the frames where the grid covers only a part of them
+    ``whole``: gives the grey of all of the frames where the grid covers only a part of them
     (``frame``), searched for the frames' own lattice
-    (:func:`plenocli.depth.gridcheck.frames_own`)."""
+    (:func:`plenocli.depth.gridcheck.frames_own`) when the grid's own lattice folds to
+    nothing."""
     if not stored_only and not np.isfinite(frame).any():
         # nothing under the grid to check it with, or to use it on: the frames are the fault
         raise InputError(f"{frames_path or 'the frames'}: no valid pixel under the grid (all "
@@ -47,8 +50,9 @@ def check_fits(frame: np.ndarray, grid, grid_path: str, *, frames_path: str | No
 
 def beyond_grid(framing, pages: np.ndarray, *, mosaic: bool) -> np.ndarray | None:
     """The grey of all of ``pages`` (P, rows, cols) where the grid's area (``framing``) is
-    only a part of them (a grid calibrated on a crop), for :func:`check_fits` ``whole``;
-    None where it covers them all. A few lenses of the grid's area may show no lattice that
+    only a part of them (a grid calibrated on a crop), for :func:`check_fits` ``whole`` (as
+    ``functools.partial(beyond_grid, ...)``: made only when needed); None where it covers
+    them all. A few lenses of the grid's area may show no lattice that
     the whole frames show (audit 24b W6: a 256 x 256 grid on a 1001 x 777 origami crop)."""
     if framing.shape == tuple(pages.shape[-2:]):
         return None

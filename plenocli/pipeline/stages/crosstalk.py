@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -166,7 +167,7 @@ def _run_sweep(inputs: list[str], output: str, *, intended: str | None, tile: in
     image = sensor_image(data, meta)
     frame = framing.crop(image)
     grey = sensor_grey(frame[np.newaxis], mosaic=bool(framing.cfa))
-    whole = beyond_grid(framing, image[np.newaxis], mosaic=bool(framing.cfa))
+    whole = partial(beyond_grid, framing, image[np.newaxis], mosaic=bool(framing.cfa))
     if not check_fits(grey, framing.grid, grid, frames_path=inputs[0], whole=whole):
         warn_unchecked(grid)
     lens_grid, moved = centred_on(grey, framing.grid, grid)

@@ -3,6 +3,8 @@ or dual/quad-pixel views -> disparity and confidence (docs/depth.md)."""
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from plenocli.depth import lenslet, metric, quad, views
@@ -142,7 +144,8 @@ def _lenslet(input, grid_path, data, meta, s, g_range, min_confidence):
         rf.check_output_size(framing.shape, s, pages=2)
         grey = lenslet.sensor_grey(framing.crop(data), mosaic=bool(framing.cfa))
         checked = check_fits(grey, framing.grid, grid_path, frames_path=input, for_depth=True,
-                             whole=beyond_grid(framing, data, mosaic=bool(framing.cfa)))
+                             whole=partial(beyond_grid, framing, data,
+                                           mosaic=bool(framing.cfa)))
         lens_grid, moved = centred_on(grey, framing.grid, grid_path, refit=True)
         ranges = _type_ranges(grid_path, framing.grid)
         result = lenslet.depth_map(grey, lens_grid, s=s, g_range=g_range,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -65,7 +66,7 @@ def run(input: str, output: str, *, grid: str, s: float = 0.2, g: str | float = 
     cfa = framing.cfa
     grey = sensor_grey(framing.crop(data[:1]), mosaic=bool(cfa))
     checked = check_fits(grey, framing.grid, grid, frames_path=input,
-                         whole=beyond_grid(framing, data[:1], mosaic=bool(cfa)))
+                         whole=partial(beyond_grid, framing, data[:1], mosaic=bool(cfa)))
     lens_grid, moved = centred_on(grey, framing.grid, grid)
     _check_match(grey, lens_grid, grid, g=None if depth else g_values[0], checked=checked)
     if not checked:

@@ -23,7 +23,14 @@ from plenocli.io.mixingfile import read_mixing
 from plenocli.io.preview import write_png
 from plenocli.io.views import check_black_subtracted
 from plenocli.model.provenance import processing_of, stage_record
-from plenocli.model.views import ViewNames, colour_page, pupil_views, single_view_name, view_of
+from plenocli.model.views import (
+    ViewNames,
+    colour_page,
+    pupil_views,
+    refocused_part,
+    single_view_name,
+    view_of,
+)
 from plenocli.progress import log, shown
 
 MAX_CONDITION = 1e3  # beyond this M amplifies noise 1000x: refuse unless regularised
@@ -41,8 +48,8 @@ def _load(inputs: list[str], views: str | None) -> tuple[np.ndarray, list[str], 
         first = first if first is not None else meta
         held = ViewNames.of(meta, data.shape[0])
         own, own_name = list(held.pages), named or single_view_name(meta, path)
-        part = (meta.get("refocus") or {}).get("view")
-        if named and part not in (None, "full", named):
+        part = refocused_part(meta)
+        if named and part not in (None, named):
             raise InputError(f"--views names {path} {named}, but refocus made it of the "
                              f"{part} part of the pupil (--view {part}); name it {part}")
         if len(inputs) > 1 and data.shape[0] == 1:
